@@ -1,0 +1,33 @@
+# Two commands on a fresh machine with Python 3.11 and pip:  make demo  and  make test.
+# The first one creates .venv and installs brachycal (editable) with its test tools; later runs
+# reuse it until pyproject.toml changes.
+
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: demo test lint bench clean
+
+demo: $(STAMP)
+	$(BIN)/brachycal demo
+
+test: $(STAMP)
+	$(BIN)/ruff check src tests benchmarks examples urdf
+	$(BIN)/python -m pytest
+
+lint: $(STAMP)
+	$(BIN)/ruff check src tests benchmarks examples urdf
+	$(BIN)/ruff format --check src tests benchmarks examples urdf
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/fk_throughput.py
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+clean:
+	rm -rf $(VENV) demo_output .pytest_cache .hypothesis .ruff_cache

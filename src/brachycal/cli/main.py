@@ -1,0 +1,51 @@
+"""The ``brachycal`` command: one sub-command per job, one-line errors with exit code 2."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from brachycal import __version__
+from brachycal.cli import demo, fk, model
+from brachycal.errors import InputError
+
+DESCRIPTION = """\
+brachycal calibrates an ultrasound-guided dual-arm robot (Yaskawa SDA10F) for prostate
+brachytherapy: the needle tip on the right flange, the probe tip on the left flange and the
+ultrasound image on the probe. Units: metres and radians in files, unless a column name says
+otherwise (u_px, mae_mm).
+
+start here:
+  brachycal demo                      walk through the bundled example
+  brachycal model                     joints, limits and tool frames of the robot model
+  brachycal fk LOG --frames needle_tip,probe_tip --out poses.csv
+                                      tool poses from a joint log (CSV or ROS bag)
+"""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="brachycal", description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--version", action="version", version=f"brachycal {__version__}")
+    sub = parser.add_subparsers(title="commands", metavar="COMMAND", required=True)
+    for module in (demo, model, fk):
+        module.add_parser(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.run(args) or 0)
+    except InputError as exc:
+        print(f"brachycal: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("brachycal: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

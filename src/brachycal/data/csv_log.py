@@ -1,0 +1,96 @@
+"""Joint logs from CSV: ``time,<joint names…>`` (CONVENTIONS.md), any column order.
+
+Extra columns are ignored (``torso_joint_b2`` is checked against ``torso_joint_b1``). The file is
+read in one pass; numbers are converted in bulk by NumPy, and only when that fails is the bad
+field searched for, so that the message can name its row and column.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+from pathlib import Path
+
+import numpy as np
+
+from brachycal.data.joint_log import JointLog, joint_log_from_columns
+from brachycal.errors import InputError
+from brachycal.model.names import MIMIC_JOINTS
+from brachycal.model.robot import Robot
+
+
+def read_table(path: Path, required: list[str]) -> tuple[list[str], list[int], list[list[str]]]:
+    """Header, row numbers and raw fields of a CSV file with one header row.
+
+    Returns ``(header, rows, records)``; ``rows[i]`` is the file row of ``records[i]`` (header =
+    row 1); blank lines are skipped. Checks the header (no duplicates, ``required`` present) and
+    that every row has as many fields as the header.
+    """
+    try:
+        handle = path.open(newline="")
+    except OSError as exc:
+        raise InputError(f"cannot read ({exc.strerror})", file=path) from None
+    with handle:
+        reader = csv.reader(handle)
+        try:
+            header = [h.strip() for h in next(reader, [])]
+            if not header:
+                raise InputError("empty file; expected a header row", file=path)
+            for k, name in enumerate(header):
+                if name in header[:k]:
+                    raise InputError("column appears twice", file=path, row=1, column=name)
+            for name in required:
+                if name not in header:
+                    raise InputError(f"no {name!r} column in the header", file=path, row=1)
+            rows, records = [], []
+            for fields in reader:
+                if not fields or (len(fields) == 1 and not fields[0].strip()):
+                    continue
+                if len(fields) != len(header):
+                    raise InputError(
+                        f"has {len(fields)} fields, the header has {len(header)}", file=path, row=reader.line_num
+                    )
+                rows.append(reader.line_num)
+                records.append(fields)
+        except (csv.Error, UnicodeDecodeError) as exc:
+            raise InputError(f"not a readable CSV file ({exc})", file=path) from None
+    return header, rows, records
+
+
+def to_float(
+    path: Path, header: list[str], rows: list[int], records: list[list[str]], columns: list[str]
+) -> np.ndarray:
+    """``(N, len(columns))`` floats of the named columns; names the row and column of a bad field."""
+    index = [header.index(c) for c in columns]
+    text = [[fields[k] for k in index] for fields in records]
+    try:
+        return np.array(text, dtype=str).astype(float).reshape(len(records), len(columns))
+    except ValueError:
+        for row, fields in zip(rows, text, strict=True):
+            for column, field in zip(columns, fields, strict=True):
+                try:
+                    float(field)
+                except ValueError:
+                    raise InputError(f"{field!r} is not a number", file=path, row=row, column=column) from None
+        raise
+
+
+def read_csv_log(path: str | os.PathLike[str], robot: Robot) -> JointLog:
+    """Read and validate a CSV joint log.
+
+    Args:
+        path: CSV file with a header row ``time,<joint names…>``; time in seconds, joints in
+            radians.
+        robot: the model the joints belong to.
+
+    Returns:
+        the validated :class:`JointLog`; its ``rows`` are file rows (header = row 1).
+
+    Raises:
+        InputError: one line naming the file, row and column of the first problem.
+    """
+    path = Path(path)
+    header, rows, records = read_table(path, ["time"])
+    joints = [name for name in header if name in robot.joint_names or name in MIMIC_JOINTS]
+    data = to_float(path, header, rows, records, ["time", *joints])
+    return joint_log_from_columns(robot, joints, data[:, 0], data[:, 1:], source=str(path), rows=rows)

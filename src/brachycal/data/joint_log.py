@@ -1,0 +1,149 @@
+"""Joint logs: timestamped configurations of the robot, validated and in model joint order.
+
+Every reader (CSV, ROS 1 bag, ROS 2 bag) ends in :func:`joint_log_from_columns`, so the same
+refusals apply whatever the source: a missing joint, a non-finite value, time that does not
+strictly increase, values that look like degrees, values outside the joint limits, and a mimic
+joint (``torso_joint_b2``) that disagrees with the axis it mirrors.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from brachycal.errors import InputError
+from brachycal.model.names import MIMIC_JOINTS
+from brachycal.model.robot import Robot
+from brachycal.se3 import FloatArray
+
+#: Largest |angle| in radians a revolute joint can report; beyond it the log is taken for degrees.
+DEGREES_THRESHOLD = 2.0 * np.pi
+#: Slack on the URDF joint limits (rad): encoders may sit a hair outside a soft limit.
+LIMIT_TOLERANCE = 1e-6
+#: Largest |b2 − b1| (rad) accepted for a mimic joint; more means the log is not what we think.
+MIMIC_TOLERANCE = 1e-3
+
+
+@dataclass(frozen=True)
+class JointLog:
+    """Configurations of a robot over time.
+
+    Attributes:
+        time: ``(N,)`` seconds, strictly increasing (any origin).
+        q: ``(N, nq)`` radians, columns in ``joint_names`` order (the robot's order).
+        joint_names: names of the columns of ``q``.
+        source: file the log came from (for messages).
+        rows: ``(N,)`` where each sample sits in the source (file row or message number).
+        row_label: what ``rows`` counts (``"row"`` or ``"message"``).
+    """
+
+    time: FloatArray
+    q: FloatArray
+    joint_names: tuple[str, ...]
+    source: str
+    rows: np.ndarray
+    row_label: str = "row"
+
+    def __len__(self) -> int:
+        return int(self.time.shape[0])
+
+    def interpolate(self, times: ArrayLike) -> FloatArray:
+        """``(M, nq)`` configurations at ``times`` ``(M,)`` by linear interpolation per joint.
+
+        Used to pair robot poses with ultrasound frames stamped on another clock tick.
+
+        Raises:
+            InputError: a requested time lies outside the log (no extrapolation).
+        """
+        times = np.asarray(times, dtype=float).reshape(-1)
+        if not np.all(np.isfinite(times)):
+            raise InputError("requested times must be finite", file=self.source)
+        outside = (times < self.time[0]) | (times > self.time[-1])
+        if outside.any():
+            t = times[np.argmax(outside)]
+            raise InputError(
+                f"requested time {t:.6f} s is outside the log's span [{self.time[0]:.6f}, {self.time[-1]:.6f}] s",
+                file=self.source,
+            )
+        return np.column_stack([np.interp(times, self.time, self.q[:, k]) for k in range(self.q.shape[1])])
+
+
+def joint_log_from_columns(
+    robot: Robot,
+    names: Sequence[str],
+    time: ArrayLike,
+    values: ArrayLike,
+    *,
+    source: str,
+    rows: ArrayLike | None = None,
+    row_label: str = "row",
+) -> JointLog:
+    """Validate raw columns and reorder them into the robot's joint order.
+
+    Args:
+        robot: the model whose joints (order and limits) the log must match.
+        names: ``(C,)`` names of the columns of ``values``, in the source's order; names the
+            robot does not know are ignored, mimic joints are checked.
+        time: ``(N,)`` seconds.
+        values: ``(N, C)`` joint values in radians.
+        source: file name for messages.
+        rows: ``(N,)`` row or message number of each sample in the source (default 1..N).
+        row_label: what ``rows`` counts.
+
+    Raises:
+        InputError: one line naming the file, the row and the column of the first problem.
+    """
+    time = np.asarray(time, dtype=float).reshape(-1)
+    values = np.asarray(values, dtype=float).reshape(len(time), len(names))
+    rows = np.arange(1, len(time) + 1) if rows is None else np.asarray(rows)
+
+    def fail(message: str, index: int | None = None, column: str | None = None) -> InputError:
+        row = None if index is None else int(rows[index])
+        return InputError(message, file=source, row=row, column=column, row_label=row_label)
+
+    position = {name: k for k, name in enumerate(names)}
+    missing = [j for j in robot.joint_names if j not in position]
+    if missing:
+        raise fail(f"missing joint(s) {', '.join(missing)}")
+    if len(time) == 0:
+        raise fail("the log has no samples")
+    bad_time = ~np.isfinite(time)
+    if bad_time.any():
+        raise fail("time is not a finite number", int(np.argmax(bad_time)), "time")
+    step = np.diff(time)
+    if (step <= 0).any():
+        i = int(np.argmax(step <= 0)) + 1
+        raise fail(f"time {float(time[i])!r} does not increase (previous {float(time[i - 1])!r})", i, "time")
+
+    q = values[:, [position[j] for j in robot.joint_names]]
+    for k, joint in enumerate(robot.joint_names):
+        column = q[:, k]
+        bad = ~np.isfinite(column)
+        if bad.any():
+            raise fail("value is not a finite number", int(np.argmax(bad)), joint)
+    too_big = np.abs(q) > DEGREES_THRESHOLD
+    if too_big.any():
+        i, k = np.unravel_index(int(np.argmax(too_big)), q.shape)
+        raise fail(
+            f"value {q[i, k]:g} looks like degrees (|value| > 2π); joint logs are in radians",
+            int(i),
+            robot.joint_names[k],
+        )
+    outside = (q < robot.lower - LIMIT_TOLERANCE) | (q > robot.upper + LIMIT_TOLERANCE)
+    if outside.any():
+        i, k = np.unravel_index(int(np.argmax(outside)), q.shape)
+        raise fail(
+            f"value {q[i, k]:.6f} rad is outside the joint limits [{robot.lower[k]:.6f}, {robot.upper[k]:.6f}]",
+            int(i),
+            robot.joint_names[k],
+        )
+    for mimic, leader in MIMIC_JOINTS.items():
+        if mimic in position and leader in position and mimic not in robot.joint_names:
+            diff = np.abs(values[:, position[mimic]] - values[:, position[leader]])
+            bad = ~(diff <= MIMIC_TOLERANCE)
+            if bad.any():
+                raise fail(f"{mimic} must equal {leader} (it only mirrors it)", int(np.argmax(bad)), mimic)
+    return JointLog(time=time, q=q, joint_names=robot.joint_names, source=source, rows=rows, row_label=row_label)

@@ -1,0 +1,75 @@
+"""Reading and editing URDF text: tool joints and mesh paths.
+
+The URDF text is the single source of truth of a :class:`~brachycal.model.robot.Robot`; a
+calibrated robot is the same text with new ``<origin>`` values on the tool frames' fixed joints.
+Comments (provenance, the placeholder warning) survive the edit.
+"""
+
+from __future__ import annotations
+
+import os
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+
+from brachycal.errors import InputError
+from brachycal.se3 import FloatArray, from_xyz_rpy, to_xyz_rpy
+
+
+def parse(urdf_xml: str, source: str) -> ET.Element:
+    """Parse URDF text, keeping comments. Raises :class:`InputError` naming ``source``."""
+    parser = ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
+    try:
+        root = ET.fromstring(urdf_xml, parser=parser)
+    except ET.ParseError as exc:
+        raise InputError(f"not valid XML ({exc})", file=source) from None
+    if root.tag != "robot":
+        raise InputError(f"root element is <{root.tag}>, expected <robot>", file=source)
+    return root
+
+
+def _fixed_joint_to(root: ET.Element, child: str, source: str) -> ET.Element:
+    for joint in root.iter("joint"):
+        node = joint.find("child")
+        if node is not None and node.get("link") == child:
+            if joint.get("type") != "fixed":
+                raise InputError(f"frame {child!r} hangs on a moving joint", file=source)
+            return joint
+    raise InputError(f"no fixed joint ends at frame {child!r}", file=source)
+
+
+def fixed_joint_transform(root: ET.Element, child: str, source: str) -> tuple[str, FloatArray]:
+    """``(parent link, T_parent_child (4, 4))`` of the fixed joint whose child is ``child``."""
+    joint = _fixed_joint_to(root, child, source)
+    origin = joint.find("origin")
+    xyz = [0.0, 0.0, 0.0] if origin is None else [float(v) for v in origin.get("xyz", "0 0 0").split()]
+    rpy = [0.0, 0.0, 0.0] if origin is None else [float(v) for v in origin.get("rpy", "0 0 0").split()]
+    return joint.find("parent").get("link"), from_xyz_rpy(xyz, rpy)
+
+
+def set_fixed_joint_transform(root: ET.Element, child: str, T_parent_child: FloatArray, source: str) -> None:
+    """Replace the ``<origin>`` of the fixed joint ending at ``child`` (in place)."""
+    joint = _fixed_joint_to(root, child, source)
+    xyz, rpy = to_xyz_rpy(np.asarray(T_parent_child, dtype=float))
+    origin = joint.find("origin")
+    if origin is None:
+        origin = ET.SubElement(joint, "origin")
+    origin.set("xyz", " ".join(repr(float(v)) for v in xyz))
+    origin.set("rpy", " ".join(repr(float(v)) for v in rpy))
+
+
+def rebase_mesh_paths(root: ET.Element, from_dir: Path, to_dir: Path) -> None:
+    """Rewrite relative mesh paths (and MuJoCo's ``meshdir``), resolved against ``from_dir``,
+    relative to ``to_dir``."""
+    targets = [(mesh, "filename") for mesh in root.iter("mesh")]
+    targets += [(compiler, "meshdir") for compiler in root.iter("compiler") if compiler.get("meshdir")]
+    for element, attribute in targets:
+        path = element.get(attribute, "")
+        if "://" in path or os.path.isabs(path):
+            continue
+        element.set(attribute, os.path.relpath((from_dir / path).resolve(), to_dir.resolve()))
+
+
+def to_text(root: ET.Element) -> str:
+    return '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"

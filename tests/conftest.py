@@ -1,0 +1,32 @@
+"""Shared fixtures: the bundled robot, the vendor's model, random configurations."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from brachycal.model import Robot
+
+DATA = Path(__file__).parent / "data"
+ROOT = Path(__file__).parents[1]
+VENDOR_URDF = DATA / "vendor" / "sda10f_expanded.urdf"
+
+
+@pytest.fixture(scope="session")
+def robot() -> Robot:
+    return Robot.load()
+
+
+@pytest.fixture(scope="session")
+def vendor_model() -> pin.Model:
+    """The vendor URDF as Pinocchio reads it: 16 axes, ``torso_joint_b2`` independent."""
+    return pin.buildModelFromUrdf(str(VENDOR_URDF))
+
+
+def random_configurations(robot: Robot, n: int, seed: int = 0) -> np.ndarray:
+    """``(n, nq)`` configurations drawn uniformly inside the joint limits."""
+    rng = np.random.default_rng(seed)
+    return rng.uniform(robot.lower, robot.upper, size=(n, robot.nq))

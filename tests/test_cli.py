@@ -1,0 +1,116 @@
+"""The ``brachycal`` command: fk pose tables, help, demo, and one-line refusals with exit code 2."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+from conftest import ROOT
+from test_joint_log import write_log
+
+from brachycal.cli.main import main
+from brachycal.data import read_csv_log, read_pose_table
+
+EXAMPLE = ROOT / "examples" / "joint_log.csv"
+CONSOLE = Path(sys.executable).parent / "brachycal"
+
+
+def test_fk_writes_the_pose_table_of_the_conventions(tmp_path, robot, capsys):
+    out = tmp_path / "poses.csv"
+    assert main(["fk", str(EXAMPLE), "--frames", "needle_tip,probe_tip", "--out", str(out)]) == 0
+    assert "wrote 1002 poses (501 samples x 2 frames)" in capsys.readouterr().out
+    lines = out.read_text().splitlines()
+    assert lines[0] == "time,frame,x,y,z,qx,qy,qz,qw"
+    assert lines[1].split(",")[1] == "needle_tip" and lines[2].split(",")[1] == "probe_tip"
+    time, frames, T = read_pose_table(out)
+    log = read_csv_log(EXAMPLE, robot)
+    expected = robot.fk_frames(["needle_tip", "probe_tip"], log.q).transpose(1, 0, 2, 3).reshape(-1, 4, 4)
+    assert np.abs(T[:, :3, 3] - expected[:, :3, 3]).max() < 1e-9  # 9 decimals of a metre
+    assert np.abs(T[:, :3, :3] - expected[:, :3, :3]).max() < 1e-11
+    assert np.array_equal(time[::2], log.time) and frames[:2] == ["needle_tip", "probe_tip"]
+    qw = np.array([float(line.split(",")[8]) for line in lines[1:]])
+    assert (qw >= 0).all()
+
+
+def test_fk_at_requested_times(tmp_path, robot):
+    times = tmp_path / "frames.csv"
+    times.write_text("time,frame_id\n2.5,1\n7.25,2\n")
+    out = tmp_path / "p.csv"
+    assert (
+        main(["fk", str(EXAMPLE), "--frames", "needle_tip", "--out", str(out), "--times", str(times), "--quiet"]) == 0
+    )
+    time, _, T = read_pose_table(out)
+    log = read_csv_log(EXAMPLE, robot)
+    assert time.tolist() == [2.5, 7.25]
+    assert np.allclose(T[1], robot.fk("needle_tip", log.interpolate([7.25])[0]), atol=1e-9)
+
+
+def test_fk_refuses_to_overwrite_without_force(tmp_path, capsys):
+    out = tmp_path / "p.csv"
+    out.write_text("keep me")
+    assert main(["fk", str(EXAMPLE), "--frames", "needle_tip", "--out", str(out)]) == 2
+    assert "already exists; pass --force" in capsys.readouterr().err
+    assert out.read_text() == "keep me"
+    assert main(["fk", str(EXAMPLE), "--frames", "needle_tip", "--out", str(out), "--force", "--quiet"]) == 0
+    assert out.read_text().startswith("time,frame")
+
+
+def one_line_refusal(capsys, argv: list[str]) -> str:
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("brachycal: error: ")
+    return err
+
+
+def test_fk_refusals_are_one_line_with_exit_code_2(tmp_path, robot, capsys):
+    out = str(tmp_path / "o.csv")
+    assert "unknown frame 'needle'" in one_line_refusal(
+        capsys, ["fk", str(EXAMPLE), "--frames", "needle", "--out", out]
+    )
+    bad = write_log(tmp_path / "deg.csv", list(robot.joint_names), np.arange(3.0), np.full((3, 15), 45.0))
+    assert "row 2, column 'torso_joint_b1': value 45 looks like degrees" in one_line_refusal(
+        capsys, ["fk", str(bad), "--frames", "needle_tip", "--out", out]
+    )
+    assert "no such file" in one_line_refusal(
+        capsys, ["fk", str(tmp_path / "x.csv"), "--frames", "needle_tip", "--out", out]
+    )
+    late = tmp_path / "late.csv"
+    late.write_text("time\n99\n")
+    assert "outside the log's span" in one_line_refusal(
+        capsys, ["fk", str(EXAMPLE), "--frames", "needle_tip", "--out", out, "--times", str(late)]
+    )
+    assert not Path(out).exists()
+
+
+def test_model_lists_axes_and_tool_frames(capsys):
+    assert main(["model"]) == 0
+    text = capsys.readouterr().out
+    assert "15 controlled axes" in text and "arm_right_link_tool0 -> needle_tip" in text
+
+
+def test_demo_runs_and_writes_its_outputs(tmp_path, capsys):
+    assert main(["demo", "--out", str(tmp_path)]) == 0
+    text = capsys.readouterr().out
+    assert "0.000 mm from the image plane" in text
+    assert (tmp_path / "poses.csv").exists() and (tmp_path / "sda10f_nominal.urdf").exists()
+
+
+def test_console_script_exits_2_without_traceback(tmp_path):
+    result = subprocess.run(
+        [str(CONSOLE), "fk", str(tmp_path / "missing.csv"), "--frames", "needle_tip", "--out", str(tmp_path / "o.csv")],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert result.returncode == 2
+    assert "Traceback" not in result.stderr and result.stderr.count("\n") == 1
+
+
+def test_help_explains_the_commands():
+    result = subprocess.run([str(CONSOLE), "--help"], capture_output=True, text=True, check=True)
+    for word in ("demo", "fk", "model", "needle tip", "radians"):
+        assert word in result.stdout
+    fk_help = subprocess.run([str(CONSOLE), "fk", "--help"], capture_output=True, text=True, check=True).stdout
+    assert "ROS 2 bag folder" in fk_help and "--times" in fk_help
