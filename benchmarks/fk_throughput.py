@@ -63,10 +63,14 @@ def main(n: int = 100_000) -> None:
     agreement = float(np.abs(poses - reference).max())
 
     print(f"forward kinematics of {len(FRAMES)} frames ({', '.join(FRAMES)}), {n:,} samples, 15 axes")
-    print(f"  brachycal batch path   {n / batch_s:>12,.0f} samples/s   {batch_s * 1e3:8.1f} ms   "
-          f"peak {batch_peak / 2**20:6.1f} MiB")
-    print(f"  Pinocchio per-sample   {n / loop_s:>12,.0f} samples/s   {loop_s * 1e3:8.1f} ms   "
-          f"peak {loop_peak / 2**20:6.1f} MiB")
+    print(
+        f"  brachycal batch path   {n / batch_s:>12,.0f} samples/s   {batch_s * 1e3:8.1f} ms   "
+        f"peak {batch_peak / 2**20:6.1f} MiB"
+    )
+    print(
+        f"  Pinocchio per-sample   {n / loop_s:>12,.0f} samples/s   {loop_s * 1e3:8.1f} ms   "
+        f"peak {loop_peak / 2**20:6.1f} MiB"
+    )
     print(f"  speed-up {loop_s / batch_s:.2f}x; largest difference {agreement:.1e} m")
     print(f"  (the output itself, {len(FRAMES)} x {n:,} 4x4 poses, is {poses.nbytes / 2**20:.1f} MiB)")
 

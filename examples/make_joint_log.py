@@ -5,7 +5,7 @@ Run from the repository root: ``python examples/make_joint_log.py``. Determinist
 Ten seconds at 50 Hz of the SDA10F moving from its home pose (all zeros) to a calibration-like
 pose: the probe held horizontally, pointing forward (+x of base_link), its image plane vertical;
 the needle 35° off the probe axis, its nominal tip in the image plane 60 mm above the probe axis
-and 45 mm deep. Poses are solved with a damped least-squares IK on Pinocchio (an example-making
+and 45 mm deep. Poses are solved with brachycal's damped least-squares IK (an example-making
 tool, not the planner). Motion follows a smooth quintic time law; the torso stays at 0.
 """
 
@@ -14,41 +14,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import pinocchio as pin
 
 from brachycal.model import Robot
+from brachycal.model.ik import solve_ik
 from brachycal.se3 import make_transform, transform_points
 
 SPACING_M = 0.19e-3
-
-
-def solve_ik(robot: Robot, frame: str, T_target: np.ndarray, q0: np.ndarray, joints: list[int]) -> np.ndarray:
-    rng = np.random.default_rng(7)
-    for attempt in range(50):
-        seed = q0.copy()
-        if attempt:
-            seed[joints] = rng.uniform(robot.lower[joints], robot.upper[joints]) * 0.6
-        q = _dls(robot, frame, T_target, seed, joints)
-        if q is not None:
-            return q
-    raise RuntimeError(f"IK for {frame} did not converge")
-
-
-def _dls(robot: Robot, frame: str, T_target: np.ndarray, q0: np.ndarray, joints: list[int]) -> np.ndarray | None:
-    model, data = robot.model, robot.model.createData()
-    fid = robot.frame_id(frame)
-    q = q0.copy()
-    target = pin.SE3(T_target[:3, :3], T_target[:3, 3])
-    for _ in range(300):
-        pin.forwardKinematics(model, data, q)
-        current = pin.updateFramePlacement(model, data, fid)
-        error = pin.log6(current.actInv(target)).vector
-        if np.linalg.norm(error) < 1e-12:
-            return q
-        J = pin.computeFrameJacobian(model, data, q, fid, pin.ReferenceFrame.LOCAL)[:, joints]
-        dq = J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(6), error)
-        q[joints] = np.clip(q[joints] + dq, robot.lower[joints] + 0.05, robot.upper[joints] - 0.05)
-    return None
 
 
 def main() -> None:
@@ -61,7 +32,7 @@ def main() -> None:
     seed = np.zeros(robot.nq)
     seed[left] = [0.3, -1.0, 0.0, -1.3, 0.0, -0.6, 0.0]
     seed[right] = [0.3, -1.0, 0.0, -1.3, 0.0, -0.6, 0.0]
-    q_goal = solve_ik(robot, "probe_tip", T_base_probe, seed, left)
+    q_goal = solve_ik(robot, "probe_tip", T_base_probe, seed, left, margin=0.05, restarts=50, seed=7)
 
     T_base_image = robot.fk("us_image", q_goal)
     u, v = 540 + 60e-3 / SPACING_M, 45e-3 / SPACING_M
@@ -70,7 +41,7 @@ def main() -> None:
     yaw = np.radians(35.0)
     R_yaw = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
     T_base_needle = make_transform(R_yaw @ R_base_probe, p_base_target)
-    q_goal = solve_ik(robot, "needle_tip", T_base_needle, q_goal, right)
+    q_goal = solve_ik(robot, "needle_tip", T_base_needle, q_goal, right, margin=0.05, restarts=50, seed=7)
 
     time = np.linspace(0.0, 10.0, 501)
     s = time / time[-1]

@@ -30,3 +30,26 @@ def random_configurations(robot: Robot, n: int, seed: int = 0) -> np.ndarray:
     """``(n, nq)`` configurations drawn uniformly inside the joint limits."""
     rng = np.random.default_rng(seed)
     return rng.uniform(robot.lower, robot.upper, size=(n, robot.nq))
+
+
+@pytest.fixture(scope="session")
+def truth(robot):
+    from brachycal.simulation import default_truth
+
+    return default_truth(robot)
+
+
+@pytest.fixture(scope="session")
+def exact(robot, truth):
+    """A noise-free 64-sample session hiding ``truth``."""
+    from brachycal.simulation import exact_session
+
+    return exact_session(robot, truth)
+
+
+@pytest.fixture
+def session_dir(tmp_path, exact):
+    """The exact session written to a folder (a fresh copy per test)."""
+    from brachycal.data.session import write_session
+
+    return write_session(exact, tmp_path / "session")

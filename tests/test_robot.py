@@ -175,3 +175,14 @@ def test_pinocchio_model_matches_its_own_frames(robot):
     pin.framesForwardKinematics(robot.model, data, q)
     fid = robot.frame_id("us_image")
     assert np.allclose(robot.fk_frames(["us_image"], q[None])[0, 0], data.oMf[fid].homogeneous, atol=1e-13)
+
+
+def test_written_files_get_the_usual_permissions(robot, tmp_path):
+    import os
+
+    mask = os.umask(0o022)
+    try:
+        path = robot.write_urdf(tmp_path / "p.urdf")
+    finally:
+        os.umask(mask)
+    assert path.stat().st_mode & 0o777 == 0o644

@@ -26,6 +26,7 @@ def atomic_open(path: str | os.PathLike[str], *, force: bool = False) -> Iterato
     if not path.parent.is_dir():
         raise InputError("folder does not exist", file=path.parent)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the file the usual permissions
     try:
         with os.fdopen(fd, "w", newline="") as handle:
             yield handle
@@ -33,6 +34,12 @@ def atomic_open(path: str | os.PathLike[str], *, force: bool = False) -> Iterato
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 def bundled(*parts: str) -> Path:

@@ -88,5 +88,6 @@ def run(args: argparse.Namespace) -> int:
     table = write_pose_table(out / "poses.csv", log.time, frames, poses, force=True)
     urdf = robot.write_urdf(out / "sda10f_nominal.urdf", force=True)
     print(f"wrote      {table} (pose table) and {urdf} (URDF, loadable from there)")
-    print("\nnext: brachycal fk LOG --frames needle_tip,probe_tip --out poses.csv   (brachycal --help)")
+    print("\nnext: brachycal fk LOG --frames needle_tip,probe_tip --out poses.csv")
+    print("      brachycal calibrate examples/session_exact --out result.json   (brachycal --help)")
     return 0

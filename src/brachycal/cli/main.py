@@ -7,7 +7,7 @@ import sys
 from collections.abc import Sequence
 
 from brachycal import __version__
-from brachycal.cli import demo, fk, model
+from brachycal.cli import calibrate, demo, fk, locate, model, pivot
 from brachycal.errors import InputError
 
 DESCRIPTION = """\
@@ -21,6 +21,12 @@ start here:
   brachycal model                     joints, limits and tool frames of the robot model
   brachycal fk LOG --frames needle_tip,probe_tip --out poses.csv
                                       tool poses from a joint log (CSV or ROS bag)
+  brachycal calibrate SESSION --out result.json
+                                      calibrate a session folder (Tables I and II)
+  brachycal locate RESULT JOINTS --uv U,V
+                                      where an image pixel is in base_link
+  brachycal pivot POSES.csv --out pivot.json
+                                      pivot calibration of a tracked tool
 """
 
 
@@ -30,7 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"brachycal {__version__}")
     sub = parser.add_subparsers(title="commands", metavar="COMMAND", required=True)
-    for module in (demo, model, fk):
+    for module in (demo, model, fk, calibrate, pivot, locate):
         module.add_parser(sub)
     return parser
 

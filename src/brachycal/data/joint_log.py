@@ -71,34 +71,34 @@ class JointLog:
         return np.column_stack([np.interp(times, self.time, self.q[:, k]) for k in range(self.q.shape[1])])
 
 
-def joint_log_from_columns(
+def configurations_from_columns(
     robot: Robot,
     names: Sequence[str],
-    time: ArrayLike,
     values: ArrayLike,
     *,
     source: str,
     rows: ArrayLike | None = None,
     row_label: str = "row",
-) -> JointLog:
-    """Validate raw columns and reorder them into the robot's joint order.
+) -> FloatArray:
+    """Validate joint columns and reorder them into the robot's joint order.
 
     Args:
-        robot: the model whose joints (order and limits) the log must match.
+        robot: the model whose joints (order and limits) the values must match.
         names: ``(C,)`` names of the columns of ``values``, in the source's order; names the
-            robot does not know are ignored, mimic joints are checked.
-        time: ``(N,)`` seconds.
+            robot does not know are ignored, mimic joints are checked against their leader.
         values: ``(N, C)`` joint values in radians.
         source: file name for messages.
         rows: ``(N,)`` row or message number of each sample in the source (default 1..N).
         row_label: what ``rows`` counts.
 
+    Returns:
+        ``(N, nq)`` configurations in ``robot.joint_names`` order.
+
     Raises:
         InputError: one line naming the file, the row and the column of the first problem.
     """
-    time = np.asarray(time, dtype=float).reshape(-1)
-    values = np.asarray(values, dtype=float).reshape(len(time), len(names))
-    rows = np.arange(1, len(time) + 1) if rows is None else np.asarray(rows)
+    values = np.asarray(values, dtype=float).reshape(-1, len(names))
+    rows = np.arange(1, len(values) + 1) if rows is None else np.asarray(rows)
 
     def fail(message: str, index: int | None = None, column: str | None = None) -> InputError:
         row = None if index is None else int(rows[index])
@@ -108,27 +108,16 @@ def joint_log_from_columns(
     missing = [j for j in robot.joint_names if j not in position]
     if missing:
         raise fail(f"missing joint(s) {', '.join(missing)}")
-    if len(time) == 0:
-        raise fail("the log has no samples")
-    bad_time = ~np.isfinite(time)
-    if bad_time.any():
-        raise fail("time is not a finite number", int(np.argmax(bad_time)), "time")
-    step = np.diff(time)
-    if (step <= 0).any():
-        i = int(np.argmax(step <= 0)) + 1
-        raise fail(f"time {float(time[i])!r} does not increase (previous {float(time[i - 1])!r})", i, "time")
-
     q = values[:, [position[j] for j in robot.joint_names]]
     for k, joint in enumerate(robot.joint_names):
-        column = q[:, k]
-        bad = ~np.isfinite(column)
+        bad = ~np.isfinite(q[:, k])
         if bad.any():
             raise fail("value is not a finite number", int(np.argmax(bad)), joint)
     too_big = np.abs(q) > DEGREES_THRESHOLD
     if too_big.any():
         i, k = np.unravel_index(int(np.argmax(too_big)), q.shape)
         raise fail(
-            f"value {q[i, k]:g} looks like degrees (|value| > 2π); joint logs are in radians",
+            f"value {q[i, k]:g} looks like degrees (|value| > 2π); joint values are in radians",
             int(i),
             robot.joint_names[k],
         )
@@ -146,4 +135,40 @@ def joint_log_from_columns(
             bad = ~(diff <= MIMIC_TOLERANCE)
             if bad.any():
                 raise fail(f"{mimic} must equal {leader} (it only mirrors it)", int(np.argmax(bad)), mimic)
+    return q
+
+
+def joint_log_from_columns(
+    robot: Robot,
+    names: Sequence[str],
+    time: ArrayLike,
+    values: ArrayLike,
+    *,
+    source: str,
+    rows: ArrayLike | None = None,
+    row_label: str = "row",
+) -> JointLog:
+    """Validate a timed log (see :func:`configurations_from_columns`) and build a :class:`JointLog`.
+
+    Besides the joint checks, time must be finite and strictly increasing and the log non-empty.
+    """
+    time = np.asarray(time, dtype=float).reshape(-1)
+    rows = np.arange(1, len(time) + 1) if rows is None else np.asarray(rows)
+    missing = [j for j in robot.joint_names if j not in names]
+    if missing:
+        raise InputError(f"missing joint(s) {', '.join(missing)}", file=source)
+    if len(time) == 0:
+        raise InputError("the log has no samples", file=source)
+
+    def fail(message: str, index: int) -> InputError:
+        return InputError(message, file=source, row=int(rows[index]), column="time", row_label=row_label)
+
+    bad_time = ~np.isfinite(time)
+    if bad_time.any():
+        raise fail("time is not a finite number", int(np.argmax(bad_time)))
+    step = np.diff(time)
+    if (step <= 0).any():
+        i = int(np.argmax(step <= 0)) + 1
+        raise fail(f"time {float(time[i])!r} does not increase (previous {float(time[i - 1])!r})", i)
+    q = configurations_from_columns(robot, names, values, source=source, rows=rows, row_label=row_label)
     return JointLog(time=time, q=q, joint_names=robot.joint_names, source=source, rows=rows, row_label=row_label)

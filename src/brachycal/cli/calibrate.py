@@ -1,0 +1,65 @@
+"""``brachycal calibrate``: the paper's calibration of a session, Tables I and II, result file."""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+from pathlib import Path
+
+from brachycal.calibration import METHODS, calibrate, write_result
+from brachycal.cli.common import add_urdf_option, load_robot
+from brachycal.data.session import read_session
+from brachycal.errors import InputError
+from brachycal.reporting import table_i, table_ii
+
+HELP = "calibrate a session: tool tips, tool rotations, image-to-probe; prints Tables I and II"
+DESCRIPTION = """\
+Runs the mechanism-image fusion calibration on a session folder (format brachycal-session/1:
+session.toml, touches.csv, axes.csv, samples.csv): reference tips with the top-model, the needle
+and probe tips (Table I, validated at rtip2), the tool rotations from three points, and the
+image-to-probe transform by ICP, Kabsch, Horn ("Landmark"), a similarity fit and a fit with
+separate u/v pixel spacings, each evaluated by leave-one-out cross-validation (Table II).
+
+The result (brachycal-result/1, JSON, metres) is written atomically to --out and never replaces
+an existing file without --force.
+
+example:
+  brachycal calibrate examples/session --out result.json
+"""
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "calibrate", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("session", metavar="SESSION", help="session folder")
+    parser.add_argument("--out", required=True, metavar="JSON", help="result file to write")
+    parser.add_argument(
+        "--methods",
+        default=",".join(METHODS),
+        metavar="A,B",
+        help=f"registration methods (default all: {','.join(METHODS)})",
+    )
+    add_urdf_option(parser)
+    parser.add_argument("--force", action="store_true", help="replace --out if it exists")
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown or not methods:
+        raise InputError(f"unknown method(s) {', '.join(unknown) or '(none)'}; choose from {', '.join(METHODS)}")
+    out = Path(args.out)
+    if out.exists() and not args.force:
+        raise InputError("already exists; pass --force to replace it", file=out)
+    robot = load_robot(args)
+    session = read_session(args.session, robot)
+    result = calibrate(session, robot, methods)
+    print(table_i(result))
+    print()
+    print(table_ii(result))
+    urdf_sha = hashlib.sha256(robot.urdf_xml.encode()).hexdigest()
+    write_result(result, out, force=args.force, robot_source=robot.source, robot_sha256=urdf_sha)
+    print(f"\nwrote {out}")
+    return 0

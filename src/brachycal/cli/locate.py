@@ -1,0 +1,72 @@
+"""``brachycal locate``: where an image point is in base_link, through the calibrated chain."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from brachycal.calibration import read_result
+from brachycal.calibration.sequential import locate
+from brachycal.cli.common import add_urdf_option, load_robot
+from brachycal.data.csv_log import read_table, to_float
+from brachycal.data.joint_log import configurations_from_columns
+from brachycal.errors import InputError
+
+HELP = "map an image pixel to base_link through the calibrated chain (targeting)"
+DESCRIPTION = """\
+Computes p_R = T_R_EL(q) @ T_EL_Ptip @ T_Ptip_I @ (u*s_u, v*s_v, 0): the point of base_link
+that pixel (u, v) shows, with the robot at configuration q. RESULT is a calibration result file
+(brachycal calibrate); JOINTS is a CSV file whose header names the 15 joints (radians), one
+configuration per row (a joint log works; its time column is ignored). Prints one line per row:
+row,x,y,z in metres.
+
+example:
+  brachycal locate result.json joints.csv --uv 540,300
+"""
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "locate", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("result", metavar="RESULT", help="calibration result (JSON)")
+    parser.add_argument("joints", metavar="JOINTS", help="CSV of configurations (joint-name columns, radians)")
+    parser.add_argument("--uv", required=True, metavar="U,V", help="pixel: column u, row v")
+    parser.add_argument("--method", default="kabsch", help="which image calibration of the result (default kabsch)")
+    add_urdf_option(parser)
+    parser.set_defaults(run=run)
+
+
+def _pixel(text: str) -> np.ndarray:
+    try:
+        u, v = (float(x) for x in text.split(","))
+    except ValueError:
+        raise InputError(f"--uv must be two numbers U,V, got {text!r}") from None
+    if not (np.isfinite(u) and np.isfinite(v)):
+        raise InputError(f"--uv must be finite, got {text!r}")
+    return np.array([[u, v]])
+
+
+def run(args: argparse.Namespace) -> int:
+    uv = _pixel(args.uv)
+    stored = read_result(args.result)
+    if args.method not in stored.image:
+        raise InputError(
+            f"the result has no method {args.method!r} (it has {', '.join(stored.image)})", file=args.result
+        )
+    robot = load_robot(args)
+    path = Path(args.joints)
+    header, rows, records = read_table(path, [])
+    names = [h for h in header if h in robot.joint_names or h == "torso_joint_b2"]
+    if not records:
+        raise InputError("no configurations", file=path)
+    Q = configurations_from_columns(
+        robot, names, to_float(path, header, rows, records, names), source=str(path), rows=rows
+    )
+    print("row,x,y,z")
+    for row, q in zip(rows, Q, strict=True):
+        p = locate(robot, q, uv, stored.T_EL_Ptip, stored.image[args.method])[0]
+        print(f"{row},{p[0]:.9f},{p[1]:.9f},{p[2]:.9f}")
+    return 0

@@ -1,0 +1,277 @@
+"""Calibration sessions, format ``brachycal-session/1`` (a folder; CONVENTIONS.md).
+
+- ``session.toml``: format, image spacing and size, the top-model tip on the right flange.
+- ``touches.csv``: ``tool,reference,trial,<15 joints>``; tools ``top_model``, ``needle``,
+  ``probe``; references ``rtip1`` (calibration) and ``rtip2`` (validation).
+- ``axes.csv``: ``tool,point,<15 joints>``; tools ``needle``, ``probe``; points ``p1``–``p3``.
+- ``samples.csv``: ``sample,<15 joints>,u_px,v_px``.
+
+:func:`read_session` validates everything before anything is computed and refuses with one line
+naming the file, row and column. Values are converted to SI on reading (mm → m).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from brachycal.data.csv_log import read_table, to_float
+from brachycal.data.joint_log import configurations_from_columns
+from brachycal.errors import InputError
+from brachycal.files import atomic_open
+from brachycal.model.robot import Robot
+from brachycal.se3 import FloatArray
+
+FORMAT = "brachycal-session/1"
+FILES = ("session.toml", "touches.csv", "axes.csv", "samples.csv")
+TOUCH_TOOLS = ("top_model", "needle", "probe")
+REFERENCES = ("rtip1", "rtip2")
+AXES_TOOLS = ("needle", "probe")
+AXES_POINTS = ("p1", "p2", "p3")
+
+
+@dataclass(frozen=True)
+class Touches:
+    """Touches of one tool on one reference tip: ``trials (T,)`` and configurations ``(T, nq)``."""
+
+    trials: np.ndarray
+    q: FloatArray
+
+
+@dataclass(frozen=True)
+class Session:
+    """A validated calibration session, SI units.
+
+    Attributes:
+        spacing_m: ``(2,)`` nominal pixel spacing ``(s_u, s_v)``, metres per pixel.
+        size_px: ``(2,)`` image ``(width, height)`` in pixels.
+        p_ER_Mtip: ``(3,)`` top-model tip on the right flange, metres.
+        touches: ``(tool, reference)`` → :class:`Touches`, trials sorted.
+        axes: tool → point (``p1``…``p3``) → configuration ``(nq,)``.
+        sample_ids: ``(N,)`` sample names.
+        samples_q: ``(N, nq)`` configurations of the image samples.
+        uv_px: ``(N, 2)`` annotated needle-tip pixels.
+        joint_names: names of the configuration columns.
+        inputs: file name → SHA-256 of its bytes (empty for an in-memory session).
+    """
+
+    spacing_m: FloatArray
+    size_px: np.ndarray
+    p_ER_Mtip: FloatArray
+    touches: Mapping[tuple[str, str], Touches]
+    axes: Mapping[str, Mapping[str, FloatArray]]
+    sample_ids: list[str]
+    samples_q: FloatArray
+    uv_px: FloatArray
+    joint_names: tuple[str, ...]
+    inputs: dict[str, str] = field(default_factory=dict)
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _read_toml(path: Path) -> tuple[FloatArray, np.ndarray, FloatArray]:
+    try:
+        config = tomllib.loads(path.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"not valid TOML ({exc})", file=path) from None
+    if config.get("format") != FORMAT:
+        raise InputError(f"format is {config.get('format')!r}, expected {FORMAT!r}", file=path, column="format")
+
+    def numbers(table: str, key: str, count: int, positive: bool) -> FloatArray:
+        value = config.get(table, {}).get(key) if isinstance(config.get(table), dict) else None
+        name = f"{table}.{key}"
+        if not isinstance(value, list) or len(value) != count:
+            raise InputError(f"expected a list of {count} numbers", file=path, column=name)
+        if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value):
+            raise InputError(f"expected numbers, got {value!r}", file=path, column=name)
+        array = np.array(value, dtype=float)
+        if not np.all(np.isfinite(array)) or (positive and np.any(array <= 0)):
+            raise InputError(
+                f"expected {'positive ' if positive else ''}finite numbers, got {value!r}", file=path, column=name
+            )
+        return array
+
+    spacing_m = numbers("image", "spacing_mm", 2, True) * 1e-3
+    size = numbers("image", "size_px", 2, True)
+    if np.any(size != np.round(size)):
+        raise InputError("image size must be whole pixels", file=path, column="image.size_px")
+    tip_m = numbers("top_model", "tip_in_flange_mm", 3, False) * 1e-3
+    return spacing_m, size.astype(int), tip_m
+
+
+def _labels(
+    path: Path, header: list[str], rows: list[int], records: list[list[str]], column: str, allowed: tuple[str, ...]
+) -> list[str]:
+    k = header.index(column)
+    out = []
+    for row, fields in zip(rows, records, strict=True):
+        value = fields[k].strip()
+        if value not in allowed:
+            raise InputError(
+                f"unknown {column} {value!r} (expected {', '.join(allowed)})", file=path, row=row, column=column
+            )
+        out.append(value)
+    return out
+
+
+def _joints(path: Path, robot: Robot, header: list[str], rows: list[int], records: list[list[str]]) -> FloatArray:
+    names = [h for h in header if h in robot.joint_names or h == "torso_joint_b2"]
+    values = to_float(path, header, rows, records, names)
+    return configurations_from_columns(robot, names, values, source=str(path), rows=rows)
+
+
+def _read_touches(path: Path, robot: Robot) -> dict[tuple[str, str], Touches]:
+    header, rows, records = read_table(path, ["tool", "reference", "trial"])
+    tools = _labels(path, header, rows, records, "tool", TOUCH_TOOLS)
+    references = _labels(path, header, rows, records, "reference", REFERENCES)
+    trials = to_float(path, header, rows, records, ["trial"])[:, 0]
+    for row, trial in zip(rows, trials, strict=True):
+        if not (trial >= 1 and trial == round(trial)):
+            raise InputError(f"trial must be a whole number from 1, got {trial:g}", file=path, row=row, column="trial")
+    q = _joints(path, robot, header, rows, records)
+    seen: dict[tuple[str, str, int], int] = {}
+    for row, key in zip(rows, zip(tools, references, trials.astype(int), strict=True), strict=True):
+        if key in seen:
+            raise InputError(
+                f"{key[0]} at {key[1]} trial {key[2]} appears twice (also row {seen[key]})", file=path, row=row
+            )
+        seen[key] = row
+    touches: dict[tuple[str, str], Touches] = {}
+    for tool in TOUCH_TOOLS:
+        for reference in REFERENCES:
+            mask = np.array([t == tool and r == reference for t, r in zip(tools, references, strict=True)])
+            if not mask.any():
+                raise InputError(f"no touches of {tool} at {reference}", file=path)
+            order = np.argsort(trials[mask])
+            touches[tool, reference] = Touches(trials[mask][order].astype(int), q[mask][order])
+    for reference in REFERENCES:
+        expected = touches["top_model", reference].trials
+        for tool in ("needle", "probe"):
+            got = touches[tool, reference].trials
+            if not np.array_equal(got, expected):
+                raise InputError(
+                    f"unequal trials at {reference}: {tool} has {_list(got)}, top_model has {_list(expected)}; "
+                    "validation pairs them trial by trial",
+                    file=path,
+                )
+    return touches
+
+
+def _list(values: np.ndarray) -> str:
+    return "[" + ", ".join(str(int(v)) for v in values) + "]"
+
+
+def _read_axes(path: Path, robot: Robot) -> dict[str, dict[str, FloatArray]]:
+    header, rows, records = read_table(path, ["tool", "point"])
+    tools = _labels(path, header, rows, records, "tool", AXES_TOOLS)
+    points = _labels(path, header, rows, records, "point", AXES_POINTS)
+    q = _joints(path, robot, header, rows, records)
+    axes: dict[str, dict[str, FloatArray]] = {tool: {} for tool in AXES_TOOLS}
+    for row, tool, point, config in zip(rows, tools, points, q, strict=True):
+        if point in axes[tool]:
+            raise InputError(f"{tool} {point} appears twice", file=path, row=row)
+        axes[tool][point] = config
+    for tool in AXES_TOOLS:
+        for point in AXES_POINTS:
+            if point not in axes[tool]:
+                raise InputError(f"missing axes point {point} for {tool}", file=path)
+    return axes
+
+
+def _read_samples(path: Path, robot: Robot, size_px: np.ndarray) -> tuple[list[str], FloatArray, FloatArray]:
+    header, rows, records = read_table(path, ["sample", "u_px", "v_px"])
+    k = header.index("sample")
+    ids = [fields[k].strip() for fields in records]
+    seen: dict[str, int] = {}
+    for row, sample in zip(rows, ids, strict=True):
+        if not sample:
+            raise InputError("empty sample name", file=path, row=row, column="sample")
+        if sample in seen:
+            raise InputError(
+                f"sample {sample!r} appears twice (also row {seen[sample]})", file=path, row=row, column="sample"
+            )
+        seen[sample] = row
+    uv = to_float(path, header, rows, records, ["u_px", "v_px"])
+    for axis, name in enumerate(("u_px", "v_px")):
+        bad = ~np.isfinite(uv[:, axis]) | (uv[:, axis] < -0.5) | (uv[:, axis] > size_px[axis] - 0.5)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise InputError(
+                f"{uv[i, axis]:g} is outside the image (0..{size_px[axis] - 1} px)", file=path, row=rows[i], column=name
+            )
+    q = _joints(path, robot, header, rows, records)
+    if len(ids) < 3:
+        raise InputError(f"{len(ids)} samples: at least 3 with non-collinear image points are needed", file=path)
+    centred = uv - uv.mean(axis=0)
+    s = np.linalg.svd(centred, compute_uv=False)
+    if s[0] == 0 or s[1] / s[0] < 1e-6:
+        raise InputError("the annotated image points are collinear: the image rotation is undetermined", file=path)
+    return ids, q, uv
+
+
+def read_session(folder: str | os.PathLike[str], robot: Robot) -> Session:
+    """Read and validate a session folder; nothing is computed from a half-valid session."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError("not a session folder (expected a folder with session.toml)", file=folder)
+    for name in FILES:
+        if not (folder / name).is_file():
+            raise InputError("missing session file", file=folder / name)
+    spacing_m, size_px, p_ER_Mtip = _read_toml(folder / "session.toml")
+    touches = _read_touches(folder / "touches.csv", robot)
+    axes = _read_axes(folder / "axes.csv", robot)
+    ids, samples_q, uv = _read_samples(folder / "samples.csv", robot, size_px)
+    return Session(
+        spacing_m=spacing_m,
+        size_px=size_px,
+        p_ER_Mtip=p_ER_Mtip,
+        touches=touches,
+        axes=axes,
+        sample_ids=ids,
+        samples_q=samples_q,
+        uv_px=uv,
+        joint_names=robot.joint_names,
+        inputs={name: _sha256(folder / name) for name in FILES},
+    )
+
+
+def _q_fields(q: FloatArray) -> str:
+    return ",".join(repr(float(x)) for x in q)
+
+
+def write_session(session: Session, folder: str | os.PathLike[str], *, force: bool = False) -> Path:
+    """Write a session folder (each file atomically); the folder is created if needed."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    joints = ",".join(session.joint_names)
+    su, sv = (float(v) for v in session.spacing_m * 1e3)
+    tip = ", ".join(repr(float(v)) for v in session.p_ER_Mtip * 1e3)
+    with atomic_open(folder / "session.toml", force=force) as f:
+        f.write(
+            f'format = "{FORMAT}"\n\n[image]\nspacing_mm = [{su!r}, {sv!r}]     # (s_u, s_v)\n'
+            f"size_px = [{int(session.size_px[0])}, {int(session.size_px[1])}]         # (width, height)\n\n"
+            f"[top_model]\ntip_in_flange_mm = [{tip}]   # p_ER_Mtip\n"
+        )
+    with atomic_open(folder / "touches.csv", force=force) as f:
+        f.write(f"tool,reference,trial,{joints}\n")
+        for (tool, reference), touches in session.touches.items():
+            for trial, q in zip(touches.trials, touches.q, strict=True):
+                f.write(f"{tool},{reference},{int(trial)},{_q_fields(q)}\n")
+    with atomic_open(folder / "axes.csv", force=force) as f:
+        f.write(f"tool,point,{joints}\n")
+        for tool, points in session.axes.items():
+            for point, q in points.items():
+                f.write(f"{tool},{point},{_q_fields(q)}\n")
+    with atomic_open(folder / "samples.csv", force=force) as f:
+        f.write(f"sample,{joints},u_px,v_px\n")
+        for sample, q, (u, v) in zip(session.sample_ids, session.samples_q, session.uv_px, strict=True):
+            f.write(f"{sample},{_q_fields(q)},{float(u)!r},{float(v)!r}\n")
+    return folder

@@ -1,0 +1,95 @@
+"""Damped least-squares inverse kinematics on Pinocchio, for one frame and a subset of joints.
+
+A small, dependable tool to place a frame exactly (to ~1e-12 m) when building example and
+synthetic data. Planning calibration poses under collision and velocity constraints is the
+planner's job (mink); this is not a planner.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import ArrayLike
+
+from brachycal.errors import InputError
+from brachycal.model.robot import Robot
+from brachycal.se3 import FloatArray
+
+
+def solve_ik(
+    robot: Robot,
+    frame: str,
+    T_base_target: ArrayLike,
+    q0: ArrayLike,
+    joints: Sequence[int],
+    *,
+    position_only: bool = False,
+    margin: float = 0.02,
+    restarts: int = 20,
+    seed: int = 0,
+    tol: float = 1e-12,
+) -> FloatArray:
+    """A configuration that puts ``frame`` at ``T_base_target``.
+
+    Args:
+        robot: the model.
+        frame: the frame to place.
+        T_base_target: ``(4, 4)`` target pose in ``base_link`` (only its translation when
+            ``position_only``).
+        q0: ``(nq,)`` start; joints not in ``joints`` keep their values.
+        joints: indices (into the configuration) that may move.
+        position_only: solve for the position only (3 equations).
+        margin: keep joints this far (rad) inside their limits.
+        restarts: random restarts when the start does not converge.
+        seed: seed of the restarts.
+        tol: norm of the remaining error (metres and radians).
+
+    Raises:
+        InputError: no solution found (unreachable target or joint limits).
+    """
+    joints = list(joints)
+    target = np.asarray(T_base_target, dtype=float)
+    rng = np.random.default_rng(seed)
+    start = np.asarray(q0, dtype=float).copy()
+    lo, hi = robot.lower[joints] + margin, robot.upper[joints] - margin
+    for attempt in range(restarts + 1):
+        q = start.copy()
+        if attempt:
+            q[joints] = rng.uniform(lo, hi)
+        solved = _dls(robot, frame, target, q, joints, lo, hi, position_only, tol)
+        if solved is not None:
+            return solved
+    raise InputError(f"no configuration places {frame} at the target (unreachable or outside the joint limits)")
+
+
+def _dls(
+    robot: Robot,
+    frame: str,
+    target: FloatArray,
+    q: FloatArray,
+    joints: list[int],
+    lo: FloatArray,
+    hi: FloatArray,
+    position_only: bool,
+    tol: float,
+) -> FloatArray | None:
+    model, data = robot.model, robot.model.createData()
+    fid = robot.frame_id(frame)
+    goal = pin.SE3(target[:3, :3], target[:3, 3])
+    for _ in range(200):
+        pin.forwardKinematics(model, data, q)
+        current = pin.updateFramePlacement(model, data, fid)
+        if position_only:
+            error = goal.translation - current.translation
+            J = pin.computeFrameJacobian(model, data, q, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)[:3, joints]
+        else:
+            error = pin.log6(current.actInv(goal)).vector
+            J = pin.computeFrameJacobian(model, data, q, fid, pin.ReferenceFrame.LOCAL)[:, joints]
+        if np.linalg.norm(error) < tol:
+            return q
+        damping = 1e-10 if np.linalg.norm(error) < 1e-4 else 1e-6
+        dq = J.T @ np.linalg.solve(J @ J.T + damping * np.eye(len(error)), error)
+        q[joints] = np.clip(q[joints] + dq, lo, hi)
+    return None

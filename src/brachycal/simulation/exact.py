@@ -1,0 +1,182 @@
+"""Noise-free calibration sessions with a known truth, for checking the estimators exactly.
+
+The "physical" robot is the model itself (no kinematic error), the tools sit exactly at the
+truth's transforms, every touch is exact and every annotation is the true pixel. A calibration
+of such a session must return the truth to numerical precision. The digital twin (noise, robot
+errors, planned poses) builds on this.
+
+Geometry, in ``base_link``: the reference tips lie in front of the robot at about waist height;
+tools approach them pointing forward and down, each trial from another direction. Image samples
+sweep a 4×4 grid of pixels over the image for each of several probe poses that step the image
+plane through the needle's workspace, so the needle tips fill a volume.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from brachycal.data.session import Session, Touches
+from brachycal.model.ik import solve_ik
+from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, TOP_MODEL_TIP, US_IMAGE
+from brachycal.model.robot import Robot
+from brachycal.se3 import FloatArray, make_transform, transform_points
+
+LEFT = list(range(1, 8))
+RIGHT = list(range(8, 15))
+
+#: The probe pose of the samples: shaft (z) along +x of base_link, image lateral (x) along +z.
+R_BASE_PROBE = np.column_stack([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]])
+P_BASE_PROBE = np.array([0.80, 0.10, 1.00])
+#: Needle direction for the samples: the probe axis turned 35° about base z (wrists stay apart).
+R_BASE_NEEDLE = Rotation.from_euler("z", 35.0, degrees=True).as_matrix() @ R_BASE_PROBE
+
+
+@dataclass(frozen=True)
+class SessionTruth:
+    """The transforms a calibration must find, and the set-up it runs in (SI units).
+
+    Attributes:
+        T_ER_Ntip, T_EL_Ptip, T_Ptip_I: ``(4, 4)`` tool and image transforms.
+        spacing_m: ``(2,)`` true pixel spacing (may differ from the scanner's nominal one).
+        nominal_spacing_m: ``(2,)`` the spacing written into the session (what the scanner says).
+        p_ER_Mtip: ``(3,)`` top-model tip on the right flange.
+        p_R_Rtip1, p_R_Rtip2: ``(3,)`` the reference tips in ``base_link``.
+        size_px: ``(2,)`` image width and height.
+    """
+
+    T_ER_Ntip: FloatArray
+    T_EL_Ptip: FloatArray
+    T_Ptip_I: FloatArray
+    spacing_m: FloatArray
+    nominal_spacing_m: FloatArray
+    p_ER_Mtip: FloatArray
+    p_R_Rtip1: FloatArray
+    p_R_Rtip2: FloatArray
+    size_px: np.ndarray
+
+    def robot(self, nominal: Robot) -> Robot:
+        """The model with the true tool frames: its FK is where the physical tools are."""
+        robot = nominal.with_tool_transform(NEEDLE_TIP, self.T_ER_Ntip)
+        robot = robot.with_tool_transform(PROBE_TIP, self.T_EL_Ptip)
+        robot = robot.with_tool_transform(US_IMAGE, self.T_Ptip_I)
+        return robot.with_tool_transform(TOP_MODEL_TIP, make_transform(np.eye(3), self.p_ER_Mtip))
+
+
+def _nudge(T: FloatArray, rotvec: list[float], shift_m: list[float]) -> FloatArray:
+    return T @ make_transform(Rotation.from_rotvec(rotvec).as_matrix(), shift_m)
+
+
+def default_truth(robot: Robot, spacing_scale: tuple[float, float] = (1.0, 1.0)) -> SessionTruth:
+    """The URDF's nominal frames moved by a few millimetres and a degree or two (fixed values).
+
+    Args:
+        robot: the nominal model.
+        spacing_scale: true spacing = nominal 0.19 mm/pixel × this, per axis (e.g. 1.04 axially
+            for water at room temperature).
+    """
+    nominal = np.array([0.19e-3, 0.19e-3])
+    return SessionTruth(
+        T_ER_Ntip=_nudge(robot.tool_transform(NEEDLE_TIP)[1], [0.02, -0.015, 0.03], [1.5e-3, -2.0e-3, 3.0e-3]),
+        T_EL_Ptip=_nudge(robot.tool_transform(PROBE_TIP)[1], [-0.01, 0.02, -0.025], [-2.0e-3, 1.0e-3, -1.5e-3]),
+        T_Ptip_I=_nudge(robot.tool_transform(US_IMAGE)[1], [0.015, 0.01, -0.02], [2.5e-3, -1.5e-3, 1.0e-3]),
+        spacing_m=nominal * np.asarray(spacing_scale),
+        nominal_spacing_m=nominal,
+        p_ER_Mtip=np.array([0.0, 0.0, 0.150]),
+        p_R_Rtip1=np.array([0.75, -0.05, 0.85]),
+        p_R_Rtip2=np.array([0.72, 0.08, 0.85]),
+        size_px=np.array([1080, 720]),
+    )
+
+
+def _approach(k: int, n: int) -> FloatArray:
+    """Orientation of a tool approaching a tip, trial ``k`` of ``n``: z forward-down, varied."""
+    base = Rotation.from_euler("y", 135.0, degrees=True)  # z axis points forward and down
+    spin = Rotation.from_euler("z", 360.0 * k / n, degrees=True)
+    tilt = Rotation.from_euler("x", 12.0, degrees=True)
+    return (base * spin * tilt).as_matrix()
+
+
+def exact_session(
+    robot: Robot,
+    truth: SessionTruth,
+    *,
+    trials: int = 3,
+    probe_poses: int = 4,
+    grid: int = 4,
+    seed: int = 0,
+) -> Session:
+    """A noise-free session: ``probe_poses × grid²`` image samples, ``trials`` touches per tip.
+
+    Args:
+        robot: the nominal model (its flanges are the physical robot's).
+        truth: the transforms to hide in the data.
+        trials: repeats per tool and reference tip.
+        probe_poses: probe poses, each stepping the image plane ~5 mm along its normal.
+        grid: pixels per image axis per probe pose.
+        seed: seed of the IK restarts.
+
+    Raises:
+        InputError: a pose of the set-up is unreachable.
+    """
+    physical = truth.robot(robot)
+    q_home = np.zeros(robot.nq)
+    q_home[LEFT] = [0.3, -1.0, 0.0, -1.3, 0.0, -0.6, 0.0]
+    q_home[RIGHT] = [0.3, -1.0, 0.0, -1.3, 0.0, -0.6, 0.0]
+    ik = dict(margin=0.05, restarts=50, seed=seed)
+
+    def touch(frame: str, arm: list[int], p_R: FloatArray, k: int) -> FloatArray:
+        return solve_ik(physical, frame, make_transform(_approach(k, trials), p_R), q_home, arm, **ik)
+
+    touches = {}
+    for reference, p_R in (("rtip1", truth.p_R_Rtip1), ("rtip2", truth.p_R_Rtip2)):
+        for tool, frame, arm in (
+            ("top_model", TOP_MODEL_TIP, RIGHT),
+            ("needle", NEEDLE_TIP, RIGHT),
+            ("probe", PROBE_TIP, LEFT),
+        ):
+            q = np.array([touch(frame, arm, p_R, k) for k in range(trials)])
+            touches[tool, reference] = Touches(np.arange(1, trials + 1), q)
+
+    axes = {}
+    for tool, frame, arm, p1 in (
+        ("needle", NEEDLE_TIP, RIGHT, np.array([0.70, -0.10, 0.95])),
+        ("probe", PROBE_TIP, LEFT, np.array([0.70, 0.15, 0.95])),
+    ):
+        R = _approach(0, 1)
+        points = {"p1": p1, "p2": p1 + 0.02 * R[:, 1], "p3": p1 + 0.02 * R[:, 2]}
+        axes[tool] = {
+            name: solve_ik(physical, frame, make_transform(R, p), q_home, arm, **ik) for name, p in points.items()
+        }
+
+    width, height = truth.size_px
+    us = np.linspace(0.3 * width, 0.75 * width, grid)
+    vs = np.linspace(0.15 * height, 0.85 * height, grid)
+    ids, configs, uv = [], [], []
+    q = q_home.copy()
+    for j in range(probe_poses):
+        offset = (j - (probe_poses - 1) / 2) * 5e-3
+        R_probe = Rotation.from_euler("x", 2.0 * (j - (probe_poses - 1) / 2), degrees=True).as_matrix()
+        T_R_Ptip = make_transform(R_BASE_PROBE @ R_probe, P_BASE_PROBE + offset * R_BASE_PROBE[:, 1])
+        q = solve_ik(physical, PROBE_TIP, T_R_Ptip, q, LEFT, **ik)
+        T_R_I = physical.fk(US_IMAGE, q)
+        for u in us:
+            for v in vs:
+                p_R = transform_points(T_R_I, [u * truth.spacing_m[0], v * truth.spacing_m[1], 0.0])
+                q = solve_ik(physical, NEEDLE_TIP, make_transform(R_BASE_NEEDLE, p_R), q, RIGHT, **ik)
+                ids.append(f"s{len(ids) + 1:03d}")
+                configs.append(q.copy())
+                uv.append((u, v))
+    return Session(
+        spacing_m=truth.nominal_spacing_m.copy(),
+        size_px=truth.size_px.copy(),
+        p_ER_Mtip=truth.p_ER_Mtip.copy(),
+        touches=touches,
+        axes=axes,
+        sample_ids=ids,
+        samples_q=np.array(configs),
+        uv_px=np.array(uv),
+        joint_names=robot.joint_names,
+    )

@@ -1,0 +1,139 @@
+"""Registration (eq. 9): exact recovery, agreement between methods, planar and near-degenerate sets."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+
+from brachycal import InputError
+from brachycal.calibration import registration
+from brachycal.se3 import inverse, is_rigid, make_transform, transform_points
+
+seeds = st.integers(0, 2**32 - 1)
+
+
+def random_pose(rng: np.random.Generator) -> np.ndarray:
+    return make_transform(Rotation.random(random_state=rng.integers(2**32)).as_matrix(), rng.normal(scale=0.2, size=3))
+
+
+def point_set(rng: np.random.Generator, kind: str, n: int) -> np.ndarray:
+    if kind == "general":
+        return rng.normal(scale=0.03, size=(n, 3))
+    if kind == "planar":  # image points: z = 0
+        return np.column_stack([rng.uniform(0, 0.2, size=(n, 2)), np.zeros(n)])
+    if kind == "thin":  # almost collinear: 1e-4 m spread across a 0.1 m line
+        t = rng.uniform(0, 0.1, size=n)
+        return np.column_stack([t, 1e-4 * rng.normal(size=n), np.zeros(n)])
+    raise ValueError(kind)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seeds, st.sampled_from(["general", "planar", "thin"]), st.integers(3, 70))
+def test_kabsch_and_horn_recover_exact_transforms(seed, kind, n):
+    rng = np.random.default_rng(seed)
+    T_true = random_pose(rng)
+    src = point_set(rng, kind, n)
+    dst = transform_points(T_true, src)
+    tolerance = 1e-9 if kind != "thin" else 1e-6  # rotation about the thin axis is ill-conditioned
+    for method in (registration.kabsch, registration.horn):
+        T = method(src, dst)
+        assert is_rigid(T, tol=1e-12) and np.isclose(np.linalg.det(T[:3, :3]), 1.0)
+        assert np.abs(transform_points(T, src) - dst).max() < 1e-9
+        assert np.abs(T - T_true).max() < tolerance
+
+
+@settings(max_examples=60, deadline=None)
+@given(seeds, st.sampled_from(["general", "planar"]), st.integers(3, 70))
+def test_kabsch_horn_and_icp_agree_on_noisy_correspondences(seed, kind, n):
+    rng = np.random.default_rng(seed)
+    T_true = random_pose(rng)
+    src = point_set(rng, kind, n) * 5.0  # points a few cm apart: NN pairing is unambiguous
+    dst = transform_points(T_true, src) + rng.normal(scale=3e-4, size=(n, 3))
+    T_k = registration.kabsch(src, dst)
+    T_h = registration.horn(src, dst)
+    T_init = T_true @ make_transform(Rotation.from_rotvec([0.01, -0.01, 0.005]).as_matrix(), [1e-3, 0, -1e-3])
+    T_i, _, match = registration.icp(src, dst[::-1], T_init)  # ICP gets the targets unordered
+    assert np.array_equal(match, np.arange(n)[::-1])
+    assert np.abs(T_k - T_h).max() < 1e-9
+    assert np.abs(T_k - T_i).max() < 1e-9
+
+
+@settings(max_examples=40, deadline=None)
+@given(seeds, st.integers(3, 40))
+def test_kabsch_matches_scipy_align_vectors(seed, n):
+    # An independent second computation of the optimal rotation.
+    rng = np.random.default_rng(seed)
+    src = point_set(rng, "general", n)
+    dst = transform_points(random_pose(rng), src) + rng.normal(scale=1e-3, size=(n, 3))
+    T = registration.kabsch(src, dst)
+    R_scipy, _ = Rotation.align_vectors(dst - dst.mean(0), src - src.mean(0))
+    assert np.abs(T[:3, :3] - R_scipy.as_matrix()).max() < 1e-9
+
+
+def test_reflection_is_never_returned():
+    # Mirror-image targets: the best orthogonal fit is a reflection; Kabsch must return a rotation.
+    rng = np.random.default_rng(3)
+    src = rng.normal(size=(10, 3))
+    dst = src * [1.0, 1.0, -1.0]
+    for method in (registration.kabsch, registration.horn):
+        assert np.isclose(np.linalg.det(method(src, dst)[:3, :3]), 1.0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seeds, st.floats(0.9, 1.1), st.sampled_from(["general", "planar"]))
+def test_similarity_recovers_scale(seed, scale, kind):
+    rng = np.random.default_rng(seed)
+    T_true = random_pose(rng)
+    src = point_set(rng, kind, 20)
+    dst = transform_points(T_true, scale * src)
+    T, s = registration.similarity(src, dst)
+    assert abs(s - scale) < 1e-12
+    assert np.abs(T - T_true).max() < 1e-9
+
+
+@settings(max_examples=30, deadline=None)
+@given(seeds, st.floats(0.95, 1.05), st.floats(0.95, 1.05))
+def test_scaled_uv_recovers_each_pixel_spacing(seed, k_u, k_v):
+    rng = np.random.default_rng(seed)
+    T_true = random_pose(rng)
+    nominal = np.array([0.19e-3, 0.19e-3])
+    uv = rng.uniform([0, 0], [1080, 720], size=(30, 2))
+    true_spacing = nominal * [k_u, k_v]
+    dst = transform_points(T_true, np.column_stack([uv * true_spacing, np.zeros(30)]))
+    T, spacing = registration.scaled_uv(uv, dst, nominal)
+    assert np.abs(spacing - true_spacing).max() < 1e-15
+    assert np.abs(T - T_true).max() < 1e-9
+
+
+def test_icp_with_correct_correspondences_is_kabsch():
+    rng = np.random.default_rng(5)
+    src = point_set(rng, "planar", 64)
+    T_true = random_pose(rng)
+    dst = transform_points(T_true, src) + rng.normal(scale=5e-4, size=src.shape)
+    T_icp, iterations, _ = registration.icp(src, dst, T_true)
+    assert iterations >= 1
+    assert np.abs(T_icp - registration.kabsch(src, dst)).max() < 1e-12
+
+
+def test_degenerate_point_sets_are_refused():
+    with pytest.raises(InputError, match="at least 3"):
+        registration.kabsch(np.zeros((2, 3)), np.zeros((2, 3)))
+    line = np.outer(np.linspace(0, 1, 5), [1.0, 2.0, 0.0])
+    with pytest.raises(InputError, match="collinear"):
+        registration.horn(line, line)
+    with pytest.raises(InputError, match="NaN"):
+        registration.kabsch(np.full((4, 3), np.nan), np.zeros((4, 3)))
+    with pytest.raises(InputError, match="differ in shape"):
+        registration.kabsch(np.eye(3), np.eye(4)[:, :3])
+
+
+def test_results_are_proper_rigid_transforms():
+    rng = np.random.default_rng(6)
+    src = point_set(rng, "planar", 12)
+    dst = rng.normal(size=(12, 3))  # unrelated points: still a proper rotation
+    for T in (registration.kabsch(src, dst), registration.horn(src, dst), registration.similarity(src, dst)[0]):
+        assert is_rigid(T, tol=1e-12)
+        assert np.allclose(inverse(T) @ T, np.eye(4))

@@ -1,0 +1,117 @@
+"""The paper's calibration end to end on sessions with a known truth."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from brachycal.calibration import METHODS, calibrate, read_result, write_result
+from brachycal.calibration.metrics import ErrorStats
+from brachycal.calibration.sequential import locate
+from brachycal.calibration.tool_rotation import tool_rotation
+from brachycal.se3 import is_rigid, make_transform, transform_points
+from brachycal.simulation import default_truth, exact_session
+
+
+@pytest.fixture(scope="module")
+def result(exact, robot):
+    return calibrate(exact, robot)
+
+
+def test_noise_free_session_recovers_every_transform(result, truth):
+    assert np.abs(result.T_ER_Ntip - truth.T_ER_Ntip).max() < 1e-9
+    assert np.abs(result.T_EL_Ptip - truth.T_EL_Ptip).max() < 1e-9
+    assert np.abs(result.p_R_Rtip["rtip1"] - truth.p_R_Rtip1).max() < 1e-9
+    assert np.abs(result.p_R_Rtip["rtip2"] - truth.p_R_Rtip2).max() < 1e-9
+    for method in METHODS:
+        calibration = result.image[method]
+        assert np.abs(calibration.T_Ptip_I - truth.T_Ptip_I).max() < 1e-9, method
+        assert np.abs(calibration.spacing_m - truth.spacing_m).max() < 1e-15, method
+        assert is_rigid(calibration.T_Ptip_I, tol=1e-12)
+
+
+def test_noise_free_figures_are_zero(result):
+    assert result.needle.validation.max_mm < 1e-6 and result.probe.validation.max_mm < 1e-6
+    assert abs(result.needle.rotation.axes_angle_deg - 90) < 1e-6
+    for method in METHODS:
+        assert result.loocv[method].max_mm < 1e-6
+        assert result.loocv[method].n == 64
+
+
+def test_kabsch_horn_and_icp_agree(result):
+    T = [result.image[m].T_Ptip_I for m in ("kabsch", "horn", "icp")]
+    assert np.abs(T[0] - T[1]).max() < 1e-9 and np.abs(T[0] - T[2]).max() < 1e-9
+
+
+def test_axial_stretch_is_absorbed_only_by_the_two_scale_fit(robot):
+    # Water at room temperature: depths (v) read ~4% long at the scanner's assumed sound speed.
+    truth = default_truth(robot, spacing_scale=(1.0, 1.04))
+    result = calibrate(exact_session(robot, truth, probe_poses=2, grid=3), robot)
+    assert np.abs(result.image["scaled_uv"].spacing_m - truth.spacing_m).max() < 1e-15
+    assert np.abs(result.image["scaled_uv"].T_Ptip_I - truth.T_Ptip_I).max() < 1e-9
+    assert result.loocv["scaled_uv"].max_mm < 1e-6
+    assert result.loocv["kabsch"].mae_mm > 0.5  # the rigid fit cannot absorb a 4% stretch
+
+
+def test_targeting_maps_image_points_to_the_truth(robot, truth, exact, result):
+    physical = truth.robot(robot)
+    q = exact.samples_q[10]
+    uv = np.array([[100.0, 50.0], [900.0, 700.0]])
+    p_true = transform_points(physical.fk("us_image", q), np.column_stack([uv * truth.spacing_m, [0, 0]]))
+    p = locate(robot, q, uv, result.T_EL_Ptip, result.image["kabsch"])
+    assert np.abs(p - p_true).max() < 1e-9
+
+
+def test_metrics_follow_the_errata():
+    stats = ErrorStats.between(np.zeros((4, 3)), [[1e-3, 0, 0], [0, 2e-3, 0], [0, 0, 3e-3], [0, 0, 0]])
+    assert np.isclose(stats.mae_mm, 1.5) and np.isclose(stats.max_mm, 3.0)
+    assert np.isclose(stats.rmse_mm**2, stats.mae_mm**2 + stats.sd_mm**2)
+
+
+def test_rotation_is_orthonormalised_when_moves_are_not_perpendicular():
+    T1 = make_transform(np.eye(3), [0.5, 0.0, 1.0])
+    p_tip = np.array([0.0, 0.0, 0.1])
+    T2 = make_transform(np.eye(3), [0.5, 0.02, 1.0])
+    T3 = make_transform(np.eye(3), [0.5, 0.001, 1.02])  # 2.9° off perpendicular
+    rotation = tool_rotation(T1, T2, T3, p_tip)
+    assert abs(rotation.axes_angle_deg - (90 - np.degrees(np.arctan(0.001 / 0.02)))) < 1e-9
+    R = rotation.R_E_tool
+    assert np.allclose(R.T @ R, np.eye(3), atol=1e-15) and np.isclose(np.linalg.det(R), 1.0)
+    assert np.allclose(R[:, 1], [0, 1, 0])  # y is the measured p1->p2 direction, kept as is
+
+
+def test_result_file_round_trip(tmp_path, result):
+    path = write_result(result, tmp_path / "result.json")
+    raw = json.loads(path.read_text())
+    assert raw["format"] == "brachycal-result/1"
+    assert set(raw["transforms"]["Ptip_T_I"]) == set(METHODS)
+    assert set(raw["loocv"]["kabsch"]) >= {"mae_mm", "rmse_mm", "sd_mm", "max_mm", "errors_mm"}
+    assert len(raw["loocv"]["icp"]["errors_mm"]) == 64
+    stored = read_result(path)
+    assert np.array_equal(stored.T_ER_Ntip, result.T_ER_Ntip)
+    assert np.array_equal(stored.image["horn"].T_Ptip_I, result.image["horn"].T_Ptip_I)
+    assert np.allclose(stored.image["scaled_uv"].spacing_m, result.image["scaled_uv"].spacing_m, rtol=1e-15)
+
+
+def test_committed_example_session_is_reproducible_and_calibrates_to_its_truth(tmp_path, robot):
+    import shutil
+    import subprocess
+    import sys
+
+    from conftest import ROOT
+
+    from brachycal.data.session import read_session
+
+    example = ROOT / "examples" / "session_exact"
+    copy = tmp_path / "examples"
+    shutil.copytree(ROOT / "examples", copy)
+    subprocess.run([sys.executable, str(copy / "make_session.py")], check=True, capture_output=True)
+    for name in ("session.toml", "touches.csv", "axes.csv", "samples.csv", "truth.json"):
+        assert (copy / "session_exact" / name).read_text() == (example / name).read_text(), name
+    truth = json.loads((example / "truth.json").read_text())
+    result = calibrate(read_session(example, robot), robot)
+    assert np.abs(result.T_ER_Ntip - truth["ER_T_Ntip"]).max() < 1e-9
+    assert np.abs(result.T_EL_Ptip - truth["EL_T_Ptip"]).max() < 1e-9
+    assert np.abs(result.image["icp"].T_Ptip_I - truth["Ptip_T_I"]).max() < 1e-9
