@@ -114,3 +114,14 @@ def test_help_explains_the_commands():
         assert word in result.stdout
     fk_help = subprocess.run([str(CONSOLE), "fk", "--help"], capture_output=True, text=True, check=True).stdout
     assert "ROS 2 bag folder" in fk_help and "--times" in fk_help
+
+
+def test_output_into_a_closed_pipe_ends_quietly(tmp_path, robot):
+    result_file = tmp_path / "r.json"
+    assert main(["calibrate", str(ROOT / "examples" / "session_exact"), "--out", str(result_file)]) == 0
+    joints = tmp_path / "q.csv"
+    joints.write_text(",".join(robot.joint_names) + "\n" + ("0," * 14 + "0\n") * 20000)
+    command = f"'{CONSOLE}' locate '{result_file}' '{joints}' --uv 1,2 | head -1"
+    result = subprocess.run(command, shell=True, capture_output=True, text=True, check=False)
+    assert result.stdout == "row,x,y,z\n"
+    assert result.stderr == ""
