@@ -8,21 +8,13 @@ timed separately), and the time per method. The paper's processing took under 1 
 from __future__ import annotations
 
 import tempfile
-import time
+
+from timing import best_of
 
 from brachycal.calibration import METHODS, calibrate
 from brachycal.data.session import read_session, write_session
 from brachycal.model import Robot
 from brachycal.simulation import default_truth, exact_session
-
-
-def best_of(n: int, fn) -> float:
-    times = []
-    for _ in range(n):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return min(times)
 
 
 def main() -> None:

@@ -17,20 +17,12 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
+from timing import best_of
 
 from brachycal.cli.main import main as cli
 from brachycal.model import Robot
 
 FRAMES = ["needle_tip", "probe_tip"]
-
-
-def best_of(repeats: int, fn) -> float:
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return min(times)
 
 
 def pinocchio_loop(robot: Robot, Q: np.ndarray) -> np.ndarray:
