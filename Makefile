@@ -23,6 +23,7 @@ lint: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/fk_throughput.py
 	$(BIN)/python benchmarks/calibrate_speed.py
+	$(BIN)/python benchmarks/plan_speed.py
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)

@@ -8,7 +8,7 @@ import sys
 from collections.abc import Sequence
 
 from brachycal import __version__
-from brachycal.cli import calibrate, demo, fk, locate, model, pivot
+from brachycal.cli import calibrate, demo, fk, locate, model, pivot, plan
 from brachycal.errors import InputError
 
 DESCRIPTION = """\
@@ -22,6 +22,7 @@ start here:
   brachycal model                     joints, limits and tool frames of the robot model
   brachycal fk LOG --frames needle_tip,probe_tip --out poses.csv
                                       tool poses from a joint log (CSV or ROS bag)
+  brachycal plan --out plan.csv        plan the 4x4x4 calibration sample poses
   brachycal calibrate SESSION --out result.json
                                       calibrate a session folder (Tables I and II)
   brachycal locate RESULT JOINTS --uv U,V
@@ -37,7 +38,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"brachycal {__version__}")
     sub = parser.add_subparsers(title="commands", metavar="COMMAND", required=True)
-    for module in (demo, model, fk, calibrate, pivot, locate):
+    for module in (demo, model, fk, plan, calibrate, pivot, locate):
         module.add_parser(sub)
     return parser
 

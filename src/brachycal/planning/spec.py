@@ -1,0 +1,163 @@
+"""What to plan: the sample grid, the insertion direction, the imaging geometry, the tools.
+
+The paper (§III.C) takes 64 needle-tip positions evenly spread in a 40 mm cube covering the
+prostate; for each, the probe moves so that its image shows the needle tip. brachycal aligns the
+cube with the image frame at the reference probe pose: two cube axes lie in the image plane
+(lateral u, depth v) and the third along the plane's normal. A grid point's in-plane offsets
+decide where the tip appears in the image; its offset along the normal is taken up by moving
+the probe along that normal. So each layer of the cube is one probe pose and the image points
+fill a square of the image (Fig. 10 d of the paper), which keeps the registration well posed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from brachycal.errors import InputError
+from brachycal.se3 import FloatArray, inverse, make_transform
+
+
+@dataclass(frozen=True)
+class SectorFOV:
+    """Sector field of view of a convex probe, in image pixels.
+
+    Attributes:
+        apex_px: ``(2,)`` pixel of the sector's apex (the transducer's centre).
+        radius_m: depth of the sector, metres.
+        angle_rad: full opening angle, symmetric about the image's +v (depth) direction.
+    """
+
+    apex_px: tuple[float, float] = (540.0, 0.0)
+    radius_m: float = 0.070
+    angle_rad: float = np.radians(120.0)
+
+    def margin_to_edge(self, uv_px: ArrayLike, spacing_m: ArrayLike) -> FloatArray:
+        """``(N,)`` distance in metres from each pixel to the sector's edge; negative outside."""
+        d = (np.atleast_2d(np.asarray(uv_px, float)) - self.apex_px) * np.asarray(spacing_m)
+        r = np.linalg.norm(d, axis=1)
+        to_arc = self.radius_m - r
+        half = self.angle_rad / 2
+        phi = np.arctan2(np.abs(d[:, 0]), d[:, 1])  # angle from the depth axis
+        to_sides = r * np.sin(half - phi)  # distance to the straight edges (for phi < half + 90°)
+        return np.minimum(to_arc, to_sides)
+
+    def outline_px(self, spacing_m: ArrayLike, n: int = 60) -> FloatArray:
+        """``(M, 2)`` closed outline in pixels, for figures."""
+        half = self.angle_rad / 2
+        phi = np.linspace(-half, half, n)
+        arc = np.column_stack([np.sin(phi), np.cos(phi)]) * self.radius_m / np.asarray(spacing_m) + self.apex_px
+        return np.vstack([self.apex_px, arc, self.apex_px])
+
+
+@dataclass(frozen=True)
+class RectFOV:
+    """Rectangular field of view of a linear probe: ``[u_min, u_max] × [v_min, v_max]`` pixels."""
+
+    u_range_px: tuple[float, float] = (0.0, 1079.0)
+    v_range_px: tuple[float, float] = (0.0, 719.0)
+
+    def margin_to_edge(self, uv_px: ArrayLike, spacing_m: ArrayLike) -> FloatArray:
+        uv = np.atleast_2d(np.asarray(uv_px, float))
+        s = np.asarray(spacing_m)
+        lo = np.array([self.u_range_px[0], self.v_range_px[0]])
+        hi = np.array([self.u_range_px[1], self.v_range_px[1]])
+        return np.min(np.minimum(uv - lo, hi - uv) * s, axis=1)
+
+    def outline_px(self, spacing_m: ArrayLike, n: int = 5) -> FloatArray:
+        (u0, u1), (v0, v1) = self.u_range_px, self.v_range_px
+        return np.array([[u0, v0], [u1, v0], [u1, v1], [u0, v1], [u0, v0]])
+
+
+def _unit(v: ArrayLike, name: str) -> FloatArray:
+    v = np.asarray(v, dtype=float)
+    if v.shape != (3,) or not np.all(np.isfinite(v)) or np.linalg.norm(v) < 1e-9:
+        raise InputError(f"{name} must be a non-zero 3-vector, got {v.tolist()}")
+    return v / np.linalg.norm(v)
+
+
+@dataclass(frozen=True)
+class PlanSpec:
+    """Inputs of the planner (SI units, directions in ``base_link``).
+
+    Attributes:
+        cube_centre_m: ``(3,)`` centre of the sample cube (the prostate), metres.
+        edge_m: cube edge, metres (paper: 0.040).
+        points_per_axis: grid points per cube axis (paper: 4, so 64 samples).
+        insertion_dir: ``(3,)`` needle direction (its tip frame's z axis), unit after normalising.
+        image_depth_dir: ``(3,)`` direction of the image's +v (depth) at the reference probe pose.
+        image_lateral_dir: ``(3,)`` direction of the image's +u (made perpendicular to depth).
+        centre_px: ``(2,)`` pixel at which the cube centre appears.
+        spacing_m: ``(2,)`` pixel spacing, metres.
+        fov: the image's field of view (sector or rectangle).
+        fov_margin_m: grid pixels must lie this far inside the field of view.
+    """
+
+    cube_centre_m: FloatArray = field(default_factory=lambda: np.array([0.80, 0.10, 1.05]))
+    edge_m: float = 0.040
+    points_per_axis: int = 4
+    insertion_dir: FloatArray = field(
+        default_factory=lambda: np.array([np.cos(np.radians(35.0)), np.sin(np.radians(35.0)), 0.0])
+    )
+    image_depth_dir: FloatArray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0]))
+    image_lateral_dir: FloatArray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
+    centre_px: tuple[float, float] = (540.0, 221.0)
+    spacing_m: FloatArray = field(default_factory=lambda: np.array([0.19e-3, 0.19e-3]))
+    fov: SectorFOV | RectFOV = field(default_factory=SectorFOV)
+    fov_margin_m: float = 0.002
+
+    def __post_init__(self) -> None:
+        if not (self.edge_m > 0 and np.isfinite(self.edge_m)):
+            raise InputError(f"cube edge must be positive, got {self.edge_m}")
+        if self.points_per_axis < 2:
+            raise InputError(f"points per axis must be at least 2, got {self.points_per_axis}")
+        if not np.all(np.isfinite(self.cube_centre_m)) or np.shape(self.cube_centre_m) != (3,):
+            raise InputError(f"cube centre must be 3 finite numbers, got {np.asarray(self.cube_centre_m).tolist()}")
+
+    def image_axes(self) -> FloatArray:
+        """``R_base_image (3, 3)`` of the reference probe pose: columns x (u), y (v), z = x × y."""
+        y = _unit(self.image_depth_dir, "image depth direction")
+        x = _unit(self.image_lateral_dir, "image lateral direction")
+        x = x - (x @ y) * y
+        if np.linalg.norm(x) < 1e-6:
+            raise InputError("image lateral and depth directions are parallel")
+        x /= np.linalg.norm(x)
+        return np.column_stack([x, y, np.cross(x, y)])
+
+    def grid(self) -> tuple[np.ndarray, FloatArray, FloatArray, FloatArray]:
+        """The samples: ``(index (N, 3) ints, p_base (N, 3), uv_px (N, 2), normal_offset_m (N,))``.
+
+        Indices ``(i, j, k)`` count along the image's lateral, depth and normal axes.
+        """
+        n = self.points_per_axis
+        steps = (np.arange(n) - (n - 1) / 2) * self.edge_m / (n - 1)
+        index = np.array([(i, j, k) for k in range(n) for j in range(n) for i in range(n)])
+        offsets = steps[index]  # (N, 3) along image x, y, z
+        R = self.image_axes()
+        p_base = self.cube_centre_m + offsets @ R.T
+        uv = np.asarray(self.centre_px) + offsets[:, :2] / self.spacing_m
+        return index, p_base, uv, offsets[:, 2]
+
+    def image_pose(self, normal_offset_m: float) -> FloatArray:
+        """``T_base_image (4, 4)`` for a layer: the cube centre at :attr:`centre_px`, shifted along the normal."""
+        R = self.image_axes()
+        centre_in_image = np.array([self.centre_px[0] * self.spacing_m[0], self.centre_px[1] * self.spacing_m[1], 0.0])
+        origin = self.cube_centre_m + normal_offset_m * R[:, 2] - R @ centre_in_image
+        return make_transform(R, origin)
+
+    def probe_pose(self, normal_offset_m: float, T_Ptip_I: ArrayLike) -> FloatArray:
+        """``T_base_probe (4, 4)`` that puts the image where :meth:`image_pose` says."""
+        return self.image_pose(normal_offset_m) @ inverse(np.asarray(T_Ptip_I))
+
+    def needle_pose(self, p_base: ArrayLike) -> FloatArray:
+        """``T_base_needle (4, 4)`` target: tip at ``p_base``, z along the insertion direction.
+
+        The roll about the needle is free in the planner; this sets one (x ⟂ z, towards base +z).
+        """
+        z = _unit(self.insertion_dir, "insertion direction")
+        helper = np.array([0.0, 0.0, 1.0]) if abs(z[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        x = helper - (helper @ z) * z
+        x /= np.linalg.norm(x)
+        return make_transform(np.column_stack([x, np.cross(z, x), z]), p_base)
