@@ -90,13 +90,6 @@ def test_model_lists_axes_and_tool_frames(capsys):
     assert "15 controlled axes" in text and "arm_right_link_tool0 -> needle_tip" in text
 
 
-def test_demo_runs_and_writes_its_outputs(tmp_path, capsys):
-    assert main(["demo", "--out", str(tmp_path)]) == 0
-    text = capsys.readouterr().out
-    assert "0.000 mm from the image plane" in text
-    assert (tmp_path / "poses.csv").exists() and (tmp_path / "sda10f_nominal.urdf").exists()
-
-
 def test_console_script_exits_2_without_traceback(tmp_path):
     result = subprocess.run(
         [str(CONSOLE), "fk", str(tmp_path / "missing.csv"), "--frames", "needle_tip", "--out", str(tmp_path / "o.csv")],

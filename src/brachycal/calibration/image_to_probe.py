@@ -113,7 +113,7 @@ def predict_base(
     return transform_points(T_R_I, calibration.image_points(uv_px))
 
 
-def leave_one_out(
+def leave_one_out_points(
     method: str,
     uv_px: ArrayLike,
     T_R_ER: ArrayLike,
@@ -122,8 +122,8 @@ def leave_one_out(
     T_EL_Ptip: ArrayLike,
     spacing_m: ArrayLike,
     T_Ptip_I_init: ArrayLike | None = None,
-) -> ErrorStats:
-    """Table II figures of one method: N fits on N−1 samples, each predicting the one left out."""
+) -> tuple[FloatArray, FloatArray]:
+    """``(P_real (N, 3), P_cal (N, 3))`` in ``base_link``: each P_cal(i) from a fit without sample i."""
     uv = np.asarray(uv_px, dtype=float)
     T_R_ER, T_R_EL = np.asarray(T_R_ER), np.asarray(T_R_EL)
     if len(uv) < 4:
@@ -137,4 +137,19 @@ def leave_one_out(
         calibration = fit(method, uv[keep], p_Ptip[keep], spacing_m, T_Ptip_I_init)
         p_cal[i] = predict_base(calibration, T_R_EL[i], T_EL_Ptip, uv[i])[0]
         keep[i] = True
+    return p_real, p_cal
+
+
+def leave_one_out(
+    method: str,
+    uv_px: ArrayLike,
+    T_R_ER: ArrayLike,
+    T_R_EL: ArrayLike,
+    p_ER_Ntip: ArrayLike,
+    T_EL_Ptip: ArrayLike,
+    spacing_m: ArrayLike,
+    T_Ptip_I_init: ArrayLike | None = None,
+) -> ErrorStats:
+    """Table II figures of one method: N fits on N−1 samples, each predicting the one left out."""
+    p_real, p_cal = leave_one_out_points(method, uv_px, T_R_ER, T_R_EL, p_ER_Ntip, T_EL_Ptip, spacing_m, T_Ptip_I_init)
     return ErrorStats.between(p_real, p_cal)

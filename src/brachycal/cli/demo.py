@@ -1,93 +1,161 @@
-"""``brachycal demo``: the main job on the bundled example.
+"""``brachycal demo``: the main job on the bundled example — a full calibration on the digital twin.
 
-For now a forward-kinematics walkthrough: the model, the tool frames, the example joint log,
-tool poses over time, and eq. (1) of the paper evaluated at the final pose.
+Simulates a session with the paper's set-up (or loads the committed example), calibrates it
+exactly as a lab would (from the session files), prints Tables I and II, and next to them the
+end-to-end targeting error against the truth, then writes a report folder.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import time
 from pathlib import Path
 
 import numpy as np
 
-from brachycal.data import read_joint_log, write_pose_table
+from brachycal.calibration import METHODS, calibrate, write_result
+from brachycal.calibration.image_to_probe import leave_one_out_points
+from brachycal.calibration.metrics import ErrorStats
+from brachycal.data.session import read_session
 from brachycal.files import bundled
-from brachycal.model import LEFT_FLANGE, NEEDLE_TIP, PROBE_TIP, RIGHT_FLANGE, US_IMAGE, Robot
-from brachycal.se3 import inverse, transform_points
+from brachycal.model import LEFT_FLANGE, RIGHT_FLANGE, Robot
+from brachycal.reporting import table_i, table_ii, targeting_table
+from brachycal.reporting.figures import error_histogram, method_comparison, points_3d
+from brachycal.simulation.targeting import targeting_error
+from brachycal.simulation.twin import TwinConfig, simulate
+from brachycal.simulation.twin_files import read_twin, write_twin
 
-HELP = "walk through the bundled example (forward kinematics of the tool frames)"
-#: Pixel spacing of the paper's scanner (mm/pixel), CONVENTIONS.md.
-SPACING_MM = 0.19
+HELP = "calibrate a simulated session (digital twin) and compare with the truth"
+DESCRIPTION = """\
+The main job on the bundled example: a digital twin of a calibration session with the paper's
+set-up (SDA10F with a slightly different physical geometry, tools off their nominal frames,
+encoder noise, jog error at the touches, 1 px annotation noise, the needle tip within the beam's
+thickness, water's speed of sound), calibrated from its session files. Prints Table I, Table II
+and the end-to-end targeting error against the truth, and writes DIR/session (the session and
+its truth), DIR/result.json and DIR/report (figures and per-sample residuals).
+
+examples:
+  brachycal demo                      simulate with seed 0 (= examples/twin_session)
+  brachycal demo --seed 7             another simulated session
+  brachycal demo --example            calibrate the committed examples/twin_session
+"""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser("demo", help=HELP, description=HELP + ".")
-    parser.add_argument(
-        "--out", default="demo_output", metavar="DIR", help="folder for the outputs (default demo_output)"
+    parser = sub.add_parser(
+        "demo", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
+    parser.add_argument("--out", default="demo_output", metavar="DIR", help="output folder (default demo_output)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the simulated session (default 0)")
+    parser.add_argument("--example", action="store_true", help="use the committed examples/twin_session")
+    parser.add_argument("--targets", type=int, default=50, help="targets for the targeting error (default 50)")
     parser.set_defaults(run=run)
 
 
-def _mm(p: np.ndarray) -> str:
-    return "(" + ", ".join(f"{x:8.2f}" for x in np.asarray(p) * 1e3) + ")"
+def _mm(v: np.ndarray) -> str:
+    return f"{np.linalg.norm(v) * 1e3:.3f} mm"
 
 
 def run(args: argparse.Namespace) -> int:
-    robot = Robot.load()
-    print("brachycal demo: forward kinematics of the SDA10F tool frames on the bundled example\n")
-    print(f"model      {robot.source}")
-    print(f"           {robot.nq} controlled axes: torso_joint_b1, arm_left_joint_1_s..7_t, arm_right_joint_1_s..7_t")
-    print("           (the vendor's torso_joint_b2 only mirrors b1 and is a fixed joint here)")
-    print("tool frames, nominal placeholders until calibrated (xyz in mm in the parent frame):")
-    for frame in (NEEDLE_TIP, PROBE_TIP, US_IMAGE):
-        parent, T = robot.tool_transform(frame)
-        print(f"           {frame:10s} on {parent:22s} {_mm(T[:3, 3])}")
-
-    log_path = bundled("examples", "joint_log.csv")
-    log = read_joint_log(log_path, robot)
-    print(f"\njoint log  {log_path}: {len(log)} samples over {log.time[-1] - log.time[0]:.2f} s")
-
-    frames = [NEEDLE_TIP, PROBE_TIP]
     start = time.perf_counter()
-    poses = robot.fk_frames(frames, log.q)
-    batch_s = time.perf_counter() - start
-    reference = robot.fk_frames_loop(frames, log.q)
-    agreement = float(np.abs(poses - reference).max())
-
-    print("tool tips in base_link (mm):")
-    for t in (0.0, 5.0, 10.0):
-        i = int(np.argmin(np.abs(log.time - t)))
-        print(
-            f"  t = {log.time[i]:5.2f} s   needle_tip {_mm(poses[0, i, :3, 3])}   probe_tip {_mm(poses[1, i, :3, 3])}"
-        )
-
-    q = log.q[-1]
-    T_R_ER, T_R_EL = robot.fk(RIGHT_FLANGE, q), robot.fk(LEFT_FLANGE, q)
-    _, T_ER_Ntip = robot.tool_transform(NEEDLE_TIP)
-    _, T_EL_Ptip = robot.tool_transform(PROBE_TIP)
-    _, T_Ptip_I = robot.tool_transform(US_IMAGE)
-    p_R_Ntip = transform_points(T_R_ER, T_ER_Ntip[:3, 3])
-    p_I_Ntip = transform_points(inverse(T_R_EL @ T_EL_Ptip @ T_Ptip_I), p_R_Ntip)
-    u, v = p_I_Ntip[:2] * 1e3 / SPACING_MM
-    print("\neq. (1) at the final pose: where the image sees the needle tip")
-    print("  p_I = inv(T_R_EL @ T_EL_Ptip @ T_Ptip_I) @ T_R_ER @ p_ER_Ntip")
-    print(
-        f"      = pixel (u, v) = ({u:.1f}, {v:.1f}) at {SPACING_MM} mm/pixel, "
-        f"{abs(p_I_Ntip[2]) * 1e3:.3f} mm from the image plane"
-    )
-
-    print(
-        f"\nbatch FK   {len(log)} samples x {len(frames)} frames in {batch_s * 1e3:.1f} ms; "
-        f"agrees with Pinocchio's per-sample loop to {agreement:.1e} m"
-    )
-
+    robot = Robot.load()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    table = write_pose_table(out / "poses.csv", log.time, frames, poses, force=True)
-    urdf = robot.write_urdf(out / "sda10f_nominal.urdf", force=True)
-    print(f"wrote      {table} (pose table) and {urdf} (URDF, loadable from there)")
-    print("\nnext: brachycal fk LOG --frames needle_tip,probe_tip --out poses.csv")
-    print("      brachycal calibrate examples/session_exact --out result.json   (brachycal --help)")
+    if args.example:
+        twin = read_twin(bundled("examples", "twin_session"), robot)
+        origin = "the committed example examples/twin_session"
+    else:
+        twin = simulate(robot, TwinConfig(seed=args.seed))
+        origin = f"a simulated session (seed {args.seed})"
+    c = twin.config
+    print(f"brachycal demo: the paper's calibration on {origin}\n")
+    print(
+        f"twin: {len(twin.session.sample_ids)} planned sample poses in a {c.spec.edge_m * 1e3:.0f} mm cube, "
+        f"{c.trials} touches per tool and reference tip"
+    )
+    print(
+        f"      physical robot off its URDF (joint origins {c.link_offset_sd_m * 1e3:.2f} mm / "
+        f"{np.degrees(c.link_tilt_sd_rad):.3f} deg SD), tools ~{c.tool_offset_sd_m * 1e3:.0f} mm / "
+        f"{np.degrees(c.tool_tilt_sd_rad):.0f} deg off nominal, encoder {c.encoder_sd_rad:g} rad, "
+        f"jog {c.jog_sd_m * 1e3:.2f} mm"
+    )
+    print(
+        f"      annotation {c.annotation_sd_px:g} px, needle tip within {c.beam_thickness_m / 2 * 1e3:.1f} mm of the "
+        f"image plane, sound {c.sound_speed_m_s:.0f} m/s in water (scanner assumes 1540: depths read "
+        f"{(1 / c.axial_scale - 1) * 100:.1f}% long)"
+    )
+    session_dir = write_twin(twin, out / "session", force=True)
+    session = read_session(session_dir, robot)
+    result = calibrate(session, robot)
+    write_result(result, out / "result.json", force=True)
+    print(f"      session and truth in {session_dir}, result in {out / 'result.json'}\n")
+    print(table_i(result))
+    print()
+    print(table_ii(result))
+
+    targeting = {
+        m: targeting_error(twin, result.T_ER_Ntip, result.T_EL_Ptip, result.image[m], args.targets) for m in METHODS
+    }
+    print()
+    print(targeting_table({m: t.stats for m, t in targeting.items()}, args.targets))
+    truth = twin.truth
+    print("\nsecondary, transforms against the truth (a calibration rightly absorbs part of the robot's own error):")
+    print(
+        f"  needle tip {_mm(result.T_ER_Ntip[:3, 3] - truth.T_ER_Ntip[:3, 3])}, "
+        f"probe tip {_mm(result.T_EL_Ptip[:3, 3] - truth.T_EL_Ptip[:3, 3])}"
+    )
+    for method in ("kabsch", "scaled_uv"):
+        image = result.image[method]
+        chain = result.T_EL_Ptip @ image.T_Ptip_I
+        chain_true = truth.T_EL_Ptip @ truth.T_Ptip_I
+        centre = np.array([540 * truth.spacing_m[0], 221 * truth.spacing_m[1], 0.0, 1.0])
+        centre_cal = np.array([540 * image.spacing_m[0], 221 * image.spacing_m[1], 0.0, 1.0])
+        print(
+            f"  {method:9s} image centre on the left flange {_mm((chain @ centre_cal - chain_true @ centre)[:3])}, "
+            f"spacing {image.spacing_m[0] * 1e3:.4f} x {image.spacing_m[1] * 1e3:.4f} mm/px "
+            f"(true {truth.spacing_m[0] * 1e3:.4f} x {truth.spacing_m[1] * 1e3:.4f})"
+        )
+
+    report = out / "report"
+    report.mkdir(exist_ok=True)
+    T_R_ER = robot.fk(RIGHT_FLANGE, session.samples_q)
+    T_R_EL = robot.fk(LEFT_FLANGE, session.samples_q)
+    p_real, p_cal = leave_one_out_points(
+        "icp",
+        session.uv_px,
+        T_R_ER,
+        T_R_EL,
+        result.T_ER_Ntip[:3, 3],
+        result.T_EL_Ptip,
+        session.spacing_m,
+        robot.tool_transform("us_image")[1],
+    )
+    figures = [
+        points_3d(p_real, p_cal, report / "fig10_points.png", "Fig. 10 (e): real and calibrated points (ICP, LOO)"),
+        error_histogram(
+            ErrorStats.between(p_real, p_cal), report / "fig11_loo_histogram.png", "Fig. 11: leave-one-out errors (ICP)"
+        ),
+        method_comparison(
+            {m: t.stats for m, t in targeting.items()},
+            report / "targeting_errors.png",
+            f"End-to-end targeting error, {args.targets} targets",
+        ),
+    ]
+    with (report / "residuals.csv").open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["sample", "u_px", "v_px", "out_of_plane_mm", "outlier", *(f"loo_{m}_mm" for m in METHODS)])
+        for k, sample in enumerate(session.sample_ids):
+            writer.writerow(
+                [
+                    sample,
+                    f"{session.uv_px[k, 0]:.3f}",
+                    f"{session.uv_px[k, 1]:.3f}",
+                    f"{twin.out_of_plane_m[k] * 1e3:.3f}",
+                    int(twin.outlier[k]),
+                    *(f"{result.loocv[m].errors_m[k] * 1e3:.4f}" for m in METHODS),
+                ]
+            )
+    print(f"\nreport: {', '.join(str(f) for f in figures)}, {report / 'residuals.csv'}")
+    print(f"done in {time.perf_counter() - start:.1f} s")
     return 0

@@ -8,7 +8,7 @@ import sys
 from collections.abc import Sequence
 
 from brachycal import __version__
-from brachycal.cli import calibrate, demo, fk, locate, model, pivot, plan
+from brachycal.cli import calibrate, demo, fk, locate, model, pivot, plan, study
 from brachycal.errors import InputError
 
 DESCRIPTION = """\
@@ -18,7 +18,7 @@ ultrasound image on the probe. Units: metres and radians in files, unless a colu
 otherwise (u_px, mae_mm).
 
 start here:
-  brachycal demo                      walk through the bundled example
+  brachycal demo                      calibrate the bundled example (a digital twin)
   brachycal model                     joints, limits and tool frames of the robot model
   brachycal fk LOG --frames needle_tip,probe_tip --out poses.csv
                                       tool poses from a joint log (CSV or ROS bag)
@@ -29,6 +29,7 @@ start here:
                                       where an image pixel is in base_link
   brachycal pivot POSES.csv --out pivot.json
                                       pivot calibration of a tracked tool
+  brachycal study --out DIR           how many samples? truth error vs LOO on the twin
 """
 
 
@@ -38,7 +39,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"brachycal {__version__}")
     sub = parser.add_subparsers(title="commands", metavar="COMMAND", required=True)
-    for module in (demo, model, fk, plan, calibrate, pivot, locate):
+    for module in (demo, model, fk, plan, calibrate, pivot, locate, study):
         module.add_parser(sub)
     return parser
 

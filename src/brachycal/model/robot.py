@@ -188,6 +188,20 @@ class Robot:
         urdf_text.set_fixed_joint_transform(root, frame, np.asarray(T_parent_frame, dtype=float), self.source)
         return Robot(urdf_text.to_text(root), base_dir=self.base_dir, source=self.source)
 
+    def with_joint_origins(self, origins: Mapping[str, ArrayLike]) -> Robot:
+        """A new robot whose joints ``name`` have ``<origin>`` ``T_parent_joint`` ``(4, 4)``.
+
+        Used to build a "physical" robot whose geometry differs slightly from the nominal one.
+        """
+        root = urdf_text.parse(self.urdf_xml, self.source)
+        for name, T in origins.items():
+            urdf_text.set_joint_origin(root, name, np.asarray(T, dtype=float), self.source)
+        return Robot(urdf_text.to_text(root), base_dir=self.base_dir, source=self.source)
+
+    def joint_origin(self, name: str) -> FloatArray:
+        """``T_parent_joint (4, 4)``: the ``<origin>`` of joint ``name`` in the URDF."""
+        return urdf_text.joint_origin(self._root, name, self.source)
+
     def write_urdf(self, path: str | os.PathLike[str], *, force: bool = False) -> Path:
         """Write the URDF (with the current tool joints) atomically; mesh paths stay valid.
 

@@ -59,6 +59,32 @@ def set_fixed_joint_transform(root: ET.Element, child: str, T_parent_child: Floa
     origin.set("rpy", " ".join(repr(float(v)) for v in rpy))
 
 
+def _joint_named(root: ET.Element, name: str, source: str) -> ET.Element:
+    for joint in root.iter("joint"):
+        if joint.get("name") == name:
+            return joint
+    raise InputError(f"no joint {name!r}", file=source)
+
+
+def joint_origin(root: ET.Element, name: str, source: str) -> FloatArray:
+    """``T_parent_joint (4, 4)`` of the ``<origin>`` of joint ``name`` (any type)."""
+    origin = _joint_named(root, name, source).find("origin")
+    xyz = [0.0, 0.0, 0.0] if origin is None else [float(v) for v in origin.get("xyz", "0 0 0").split()]
+    rpy = [0.0, 0.0, 0.0] if origin is None else [float(v) for v in origin.get("rpy", "0 0 0").split()]
+    return from_xyz_rpy(xyz, rpy)
+
+
+def set_joint_origin(root: ET.Element, name: str, T: FloatArray, source: str) -> None:
+    """Replace the ``<origin>`` of joint ``name`` (any type), in place."""
+    joint = _joint_named(root, name, source)
+    xyz, rpy = to_xyz_rpy(np.asarray(T, dtype=float))
+    origin = joint.find("origin")
+    if origin is None:
+        origin = ET.SubElement(joint, "origin")
+    origin.set("xyz", " ".join(repr(float(v)) for v in xyz))
+    origin.set("rpy", " ".join(repr(float(v)) for v in rpy))
+
+
 def rebase_mesh_paths(root: ET.Element, from_dir: Path, to_dir: Path) -> None:
     """Rewrite relative mesh paths (and MuJoCo's ``meshdir``), resolved against ``from_dir``,
     relative to ``to_dir``."""

@@ -1,5 +1,5 @@
-"""Reports for people: the paper's tables."""
+"""Reports for people: the paper's tables and figures."""
 
-from brachycal.reporting.tables import table_i, table_ii
+from brachycal.reporting.tables import table_i, table_ii, targeting_table
 
-__all__ = ["table_i", "table_ii"]
+__all__ = ["table_i", "table_ii", "targeting_table"]

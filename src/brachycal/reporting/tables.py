@@ -46,3 +46,15 @@ def table_ii(result: CalibrationResult) -> str:
         )
         lines.append(_row(label, stats, width) + suffix)
     return "\n".join(lines)
+
+
+def targeting_table(stats: dict[str, ErrorStats], n_targets: int) -> str:
+    """End-to-end targeting error on the twin, one row per image calibration method."""
+    width = 26
+    lines = [
+        f"END-TO-END TARGETING ERROR ({n_targets} targets in the prostate cube; needle commanded through the "
+        "calibrated chain, landed by the physical robot)",
+        _header("Registration algorithms", width),
+    ]
+    lines += [_row(METHOD_LABELS[m], s, width) for m, s in stats.items()]
+    return "\n".join(lines)

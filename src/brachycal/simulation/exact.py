@@ -19,6 +19,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from brachycal.data.session import Session, Touches
+from brachycal.errors import InputError
 from brachycal.model.ik import solve_ik
 from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, TOP_MODEL_TIP, US_IMAGE
 from brachycal.model.robot import Robot
@@ -91,12 +92,59 @@ def default_truth(robot: Robot, spacing_scale: tuple[float, float] = (1.0, 1.0))
     )
 
 
-def _approach(k: int, n: int) -> FloatArray:
+def _approach(k: int, n: int, turn_deg: float = 0.0) -> FloatArray:
     """Orientation of a tool approaching a tip, trial ``k`` of ``n``: z forward-down, varied."""
     base = Rotation.from_euler("y", 135.0, degrees=True)  # z axis points forward and down
-    spin = Rotation.from_euler("z", 360.0 * k / n, degrees=True)
+    spin = Rotation.from_euler("z", 360.0 * k / n + turn_deg, degrees=True)
     tilt = Rotation.from_euler("x", 12.0, degrees=True)
     return (base * spin * tilt).as_matrix()
+
+
+def touch(
+    robot: Robot, frame: str, arm: list[int], p_R: FloatArray, k: int, n: int, q0: FloatArray, seed: int
+) -> FloatArray:
+    """Joints that put ``frame`` on ``p_R`` for trial ``k`` of ``n``.
+
+    Like an operator, it turns the approach about the vertical when one direction is out of the
+    arm's reach (up to ±60° in 20° steps).
+    """
+    for turn in (0.0, 20.0, -20.0, 40.0, -40.0, 60.0, -60.0):
+        try:
+            T = make_transform(_approach(k, n, turn), p_R)
+            return solve_ik(robot, frame, T, q0, arm, margin=0.05, restarts=10, seed=seed)
+        except InputError:
+            continue
+    raise InputError(f"{frame} cannot touch the reference tip at {np.round(p_R, 4).tolist()} m")
+
+
+#: Where the three-point moves start, per tool: in front of the robot, each on its arm's side.
+AXES_START = {"needle": np.array([0.70, -0.10, 0.95]), "probe": np.array([0.70, 0.15, 0.95])}
+
+
+def axes_moves(
+    robot: Robot, frame: str, arm: list[int], p1: FloatArray, q0: FloatArray, seed: int, move_m: float = 0.02
+) -> dict[str, FloatArray]:
+    """Joints at p1, p2 = p1 + move along the tool's y, p3 = p1 + move along its z (one orientation).
+
+    The orientation is turned about the vertical (as in :func:`touch`) until all three points
+    are reachable; p2 and p3 start from p1's joints so the arm stays in one posture.
+    """
+    for turn in (0.0, 20.0, -20.0, 40.0, -40.0, 60.0, -60.0):
+        R = _approach(0, 1, turn)
+        try:
+            q1 = solve_ik(robot, frame, make_transform(R, p1), q0, arm, margin=0.05, restarts=10, seed=seed)
+            return {
+                "p1": q1,
+                "p2": solve_ik(
+                    robot, frame, make_transform(R, p1 + move_m * R[:, 1]), q1, arm, margin=0.05, restarts=10, seed=seed
+                ),
+                "p3": solve_ik(
+                    robot, frame, make_transform(R, p1 + move_m * R[:, 2]), q1, arm, margin=0.05, restarts=10, seed=seed
+                ),
+            }
+        except InputError:
+            continue
+    raise InputError(f"{frame} cannot make the three-point moves from {np.round(p1, 4).tolist()} m")
 
 
 def exact_session(
@@ -127,9 +175,6 @@ def exact_session(
     q_home[RIGHT] = [0.3, -1.0, 0.0, -1.3, 0.0, -0.6, 0.0]
     ik = dict(margin=0.05, restarts=50, seed=seed)
 
-    def touch(frame: str, arm: list[int], p_R: FloatArray, k: int) -> FloatArray:
-        return solve_ik(physical, frame, make_transform(_approach(k, trials), p_R), q_home, arm, **ik)
-
     touches = {}
     for reference, p_R in (("rtip1", truth.p_R_Rtip1), ("rtip2", truth.p_R_Rtip2)):
         for tool, frame, arm in (
@@ -137,19 +182,13 @@ def exact_session(
             ("needle", NEEDLE_TIP, RIGHT),
             ("probe", PROBE_TIP, LEFT),
         ):
-            q = np.array([touch(frame, arm, p_R, k) for k in range(trials)])
+            q = np.array([touch(physical, frame, arm, p_R, k, trials, q_home, seed) for k in range(trials)])
             touches[tool, reference] = Touches(np.arange(1, trials + 1), q)
 
-    axes = {}
-    for tool, frame, arm, p1 in (
-        ("needle", NEEDLE_TIP, RIGHT, np.array([0.70, -0.10, 0.95])),
-        ("probe", PROBE_TIP, LEFT, np.array([0.70, 0.15, 0.95])),
-    ):
-        R = _approach(0, 1)
-        points = {"p1": p1, "p2": p1 + 0.02 * R[:, 1], "p3": p1 + 0.02 * R[:, 2]}
-        axes[tool] = {
-            name: solve_ik(physical, frame, make_transform(R, p), q_home, arm, **ik) for name, p in points.items()
-        }
+    axes = {
+        tool: axes_moves(physical, frame, arm, AXES_START[tool], q_home, seed)
+        for tool, frame, arm in (("needle", NEEDLE_TIP, RIGHT), ("probe", PROBE_TIP, LEFT))
+    }
 
     width, height = truth.size_px
     us = np.linspace(0.3 * width, 0.75 * width, grid)

@@ -1,0 +1,174 @@
+"""Parameter studies on the twin: how the truth error and the LOO figures change with the set-up.
+
+One run = one simulated session (a seed and a set of parameters) calibrated with the chosen
+methods, judged by leave-one-out (what a lab sees) and by the end-to-end targeting error against
+the truth (what the clinic needs). Runs are independent pure functions of their parameters, so
+they can go to local processes or to a Dask cluster, and the rows come back in the same order
+with the same numbers as a serial run.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import socket
+from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass, replace
+
+import numpy as np
+
+from brachycal.calibration import calibrate
+from brachycal.errors import InputError
+from brachycal.model.robot import Robot
+from brachycal.planning import PlanSpec
+from brachycal.simulation.targeting import targeting_error
+from brachycal.simulation.twin import TwinConfig, simulate
+
+
+@dataclass(frozen=True)
+class RunParams:
+    """Parameters of one run (all plain values, so runs can be shipped to other processes)."""
+
+    seed: int
+    points_per_axis: int
+    edge_mm: float
+    annotation_px: float
+    sound_speed: bool
+    outlier_rate: float
+    methods: tuple[str, ...]
+    targets: int
+
+
+def sweep(
+    seeds: int,
+    points: Sequence[int],
+    edges_mm: Sequence[float],
+    annotation_px: Sequence[float],
+    sound_speed: Sequence[bool] = (True,),
+    outlier_rates: Sequence[float] = (0.0,),
+    methods: tuple[str, ...] = ("kabsch", "scaled_uv"),
+    targets: int = 30,
+) -> list[RunParams]:
+    """Every combination, seeds innermost (the order rows are reported in)."""
+    combos = itertools.product(points, edges_mm, annotation_px, sound_speed, outlier_rates, range(seeds))
+    return [RunParams(seed, p, e, a, s, o, methods, targets) for p, e, a, s, o, seed in combos]
+
+
+def run_one(params: RunParams) -> list[dict[str, object]]:
+    """Simulate, calibrate and judge one session; one row per method."""
+    robot = Robot.load()
+    base = TwinConfig()
+    config = replace(
+        base,
+        seed=params.seed,
+        annotation_sd_px=params.annotation_px,
+        sound_speed=params.sound_speed,
+        outliers=params.outlier_rate > 0,
+        outlier_rate=params.outlier_rate,
+        spec=replace(PlanSpec(), points_per_axis=params.points_per_axis, edge_m=params.edge_mm * 1e-3),
+    )
+    twin = simulate(robot, config)
+    result = calibrate(twin.session, robot, params.methods)
+    rows = []
+    for method in params.methods:
+        hit = targeting_error(twin, result.T_ER_Ntip, result.T_EL_Ptip, result.image[method], params.targets).stats
+        loo = result.loocv[method]
+        rows.append(
+            {
+                **{k: v for k, v in asdict(params).items() if k != "methods"},
+                "samples": len(twin.session.sample_ids),
+                "method": method,
+                "loo_mae_mm": loo.mae_mm,
+                "loo_rmse_mm": loo.rmse_mm,
+                "loo_sd_mm": loo.sd_mm,
+                "loo_max_mm": loo.max_mm,
+                "target_mae_mm": hit.mae_mm,
+                "target_rmse_mm": hit.rmse_mm,
+                "target_sd_mm": hit.sd_mm,
+                "target_max_mm": hit.max_mm,
+                "needle_tip_error_mm": float(
+                    np.linalg.norm(result.T_ER_Ntip[:3, 3] - twin.truth.T_ER_Ntip[:3, 3]) * 1e3
+                ),
+            }
+        )
+    return rows
+
+
+def run_study(
+    runs: Sequence[RunParams],
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> list[dict[str, object]]:
+    """Run every run; rows in the order of ``runs`` whatever executes them.
+
+    Args:
+        runs: from :func:`sweep`.
+        workers: local processes (default: all cores; 1 runs serially in this process).
+        scheduler: address of a Dask distributed scheduler (``tcp://host:8786``) to run on instead.
+        progress: called with 1 as each run finishes.
+    """
+
+    def tick(rows: list[dict[str, object]]) -> list[dict[str, object]]:
+        if progress is not None:
+            progress(1)
+        return rows
+
+    if scheduler is not None:
+        results: Iterable[list[dict[str, object]]] = _dask_map(runs, scheduler, tick)
+    elif workers == 1:
+        results = [tick(run_one(r)) for r in runs]
+    else:
+        with ProcessPoolExecutor(max_workers=workers or os.cpu_count()) as pool:
+            results = [tick(rows) for rows in pool.map(run_one, runs)]
+    return [row for rows in results for row in rows]
+
+
+def _dask_map(runs: Sequence[RunParams], scheduler: str, tick: Callable) -> list[list[dict[str, object]]]:
+    try:
+        from distributed import Client, as_completed
+    except ImportError:
+        raise InputError("--scheduler needs Dask: pip install 'brachycal[cluster]'") from None
+    _check_reachable(scheduler)
+    try:
+        client = Client(scheduler, timeout=10)
+    except (OSError, TimeoutError) as exc:
+        raise InputError(f"cannot reach the Dask scheduler at {scheduler} ({exc})") from None
+    with client:
+        futures = client.map(run_one, runs, pure=False)
+        index = {f.key: k for k, f in enumerate(futures)}
+        out: list[list[dict[str, object]] | None] = [None] * len(runs)
+        for future in as_completed(futures):
+            out[index[future.key]] = tick(future.result())
+    return [rows for rows in out if rows is not None]
+
+
+def _check_reachable(scheduler: str) -> None:
+    """Fail at once on a refused TCP address (Dask itself retries until its timeout)."""
+    if not scheduler.startswith("tcp://"):
+        return
+    host, _, port = scheduler[len("tcp://") :].rpartition(":")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=3).close()
+    except (OSError, ValueError) as exc:
+        raise InputError(f"cannot reach the Dask scheduler at {scheduler} ({exc})") from None
+
+
+def summarise(rows: Sequence[dict[str, object]]) -> list[dict[str, object]]:
+    """Mean and SD over seeds for each parameter combination and method."""
+    keys = ("points_per_axis", "samples", "edge_mm", "annotation_px", "sound_speed", "outlier_rate", "method")
+    groups: dict[tuple, list[dict[str, object]]] = {}
+    for row in rows:
+        groups.setdefault(tuple(row[k] for k in keys), []).append(row)
+    out = []
+    for key, members in groups.items():
+        entry: dict[str, object] = dict(zip(keys, key, strict=True))
+        entry["seeds"] = len(members)
+        for figure in ("loo_mae_mm", "loo_rmse_mm", "target_mae_mm", "target_rmse_mm", "target_max_mm"):
+            values = np.array([m[figure] for m in members], dtype=float)
+            entry[f"{figure}_mean"] = float(values.mean())
+            entry[f"{figure}_sd"] = float(values.std())
+        out.append(entry)
+    return out
