@@ -113,7 +113,7 @@ def test_committed_twin_example_is_seed_0(tmp_path):
 def test_demo_prints_both_tables_and_the_truth_errors_and_writes_the_report(tmp_path, capsys):
     assert main(["demo", "--out", str(tmp_path), "--targets", "20"]) == 0
     text = capsys.readouterr().out
-    for heading in ("TABLE I.", "TABLE II.", "END-TO-END TARGETING ERROR (20 targets", "secondary, transforms"):
+    for heading in ("TABLE I.", "TABLE II.", "END-TO-END TARGETING ERROR (20 targets", "TABLE III (twin)", "secondary"):
         assert heading in text
     for name in ("fig10_points.png", "fig11_loo_histogram.png", "targeting_errors.png", "residuals.csv"):
         assert (tmp_path / "report" / name).stat().st_size > 1000
@@ -173,3 +173,20 @@ def test_study_cli_writes_runs_summary_and_plot(tmp_path, capsys):
         == 2
     )
     assert "cannot reach the Dask scheduler" in capsys.readouterr().err
+
+
+def test_tracker_route_is_exact_without_noise_and_worse_than_fusion_with_it(robot):
+    from brachycal.simulation.nwire_twin import T_PTIP_MARKER, NWireSimConfig, tracker_route
+
+    twin = simulate(robot, TwinConfig(seed=0).without_noise())
+    route = tracker_route(twin, NWireSimConfig().without_noise())
+    assert np.abs(route.T_EL_marker - twin.truth.T_EL_Ptip @ T_PTIP_MARKER).max() < 1e-9
+    assert np.abs(route.image.T_Ptip_I - np.linalg.inv(T_PTIP_MARKER) @ twin.truth.T_Ptip_I).max() < 1e-9
+    result = calibrate(twin.session, robot, ("kabsch",))
+    assert targeting_error(twin, result.T_ER_Ntip, route.T_EL_marker, route.image, 10).stats.max_mm < 1e-6
+    noisy = simulate(robot, TwinConfig(seed=0))
+    result = calibrate(noisy.session, robot, ("scaled_uv",))
+    tracked = tracker_route(noisy, NWireSimConfig(seed=0))
+    hit_tracker = targeting_error(noisy, result.T_ER_Ntip, tracked.T_EL_marker, tracked.image, 20).stats
+    hit_fusion = targeting_error(noisy, result.T_ER_Ntip, result.T_EL_Ptip, result.image["scaled_uv"], 20).stats
+    assert hit_tracker.mae_mm > 3 * hit_fusion.mae_mm

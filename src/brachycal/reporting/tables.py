@@ -58,3 +58,14 @@ def targeting_table(stats: dict[str, ErrorStats], n_targets: int) -> str:
     ]
     lines += [_row(METHOD_LABELS[m], s, width) for m, s in stats.items()]
     return "\n".join(lines)
+
+
+def table_iii(stats: dict[str, ErrorStats], n_targets: int) -> str:
+    """TABLE III in the twin: whole-system targeting error of the tracker route and of the fusion method."""
+    width = 44
+    lines = [
+        f"TABLE III (twin). WHOLE-SYSTEM TARGETING ERROR, {n_targets} targets, same simulated robot",
+        _header("Method", width),
+    ]
+    lines += [_row(label, s, width) for label, s in stats.items()]
+    return "\n".join(lines)

@@ -1,0 +1,226 @@
+"""N-wire phantom calibration (tracked probe, fCal-type phantom): the paper's Table III comparator.
+
+Geometry (Comeau et al. 2000; Carbajal et al. 2013): an image plane cuts the three wires of an N
+at collinear points. The middle intersection divides the segment between the outer two in a
+ratio that the image shows directly (ratios along a line survive any affine pixel scaling),
+and that ratio fixes where along the diagonal wire the plane cut it — in the phantom frame,
+independently of the image calibration. Carried through Phantom → Reference → Tracker → Probe,
+each middle point pairs a pixel with a probe-frame position; those pairs give ``T_Probe_Image``
+by the registration code of :mod:`brachycal.calibration.registration` (the scaled-u/v fit), and
+an affine fit with pixel scales (what PLUS reports) is solved by linear least squares.
+
+As in PLUS: ``W12`` and ``W32`` are the points of the side wires' lines closest to the diagonal
+(where they meet it, for coplanar wires); with ``α = |p2 − p1| / |p3 − p1|`` in the image, the
+middle point is ``W12 + α (W32 − W12)`` — exact by similar triangles when the wires are coplanar
+and the sides parallel.
+
+Two image models: ``affine`` is PLUS's (``vtkPlusProbeCalibrationAlgo``): each probe coordinate is
+a linear least-squares fit in (u, v, 1) with its own 3σ outlier rejection, and the third column
+is the unit normal scaled by the mean pixel size. ``rigid`` is a proper rotation plus separate
+u/v pixel spacings (the constrained model), with 3D outlier rejection.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from brachycal.calibration import registration
+from brachycal.calibration.metrics import ErrorStats
+from brachycal.data.plus_files import PlusConfig, SegmentedFrame, Wire
+from brachycal.errors import InputError
+from brachycal.se3 import FloatArray, inverse, transform_points
+
+
+def _closest_point_on_first(a0: FloatArray, a1: FloatArray, b0: FloatArray, b1: FloatArray) -> FloatArray:
+    """Point of line a (through a0, a1) closest to line b (through b0, b1)."""
+    u, v, w = a1 - a0, b1 - b0, a0 - b0
+    denominator = (u @ u) * (v @ v) - (u @ v) ** 2
+    if denominator < 1e-24:
+        raise InputError("an N-wire's side wire is parallel to its diagonal: not an N pattern")
+    s = ((u @ v) * (v @ w) - (v @ v) * (u @ w)) / denominator
+    return a0 + s * u
+
+
+def middle_point_phantom(
+    pattern: tuple[Wire, Wire, Wire], p1_px: ArrayLike, p2_px: ArrayLike, p3_px: ArrayLike
+) -> FloatArray:
+    """Where the image plane cuts the diagonal wire, in the phantom frame, metres ``(3,)``.
+
+    Args:
+        pattern: (first side wire, diagonal wire, second side wire).
+        p1_px, p2_px, p3_px: their segmented intersections in the image, pixels ``(2,)``.
+    """
+    w1, w2, w3 = pattern
+    w12 = _closest_point_on_first(w1.front_m, w1.back_m, w2.front_m, w2.back_m)
+    w32 = _closest_point_on_first(w3.front_m, w3.back_m, w2.front_m, w2.back_m)
+    p1, p2, p3 = (np.asarray(p, dtype=float) for p in (p1_px, p2_px, p3_px))
+    alpha = np.linalg.norm(p2 - p1) / np.linalg.norm(p3 - p1)
+    return w12 + alpha * (w32 - w12)
+
+
+def wire_point_pairs(config: PlusConfig, frames: list[SegmentedFrame]) -> tuple[FloatArray, FloatArray, np.ndarray]:
+    """Middle-wire pairs of all usable frames: ``(uv_px (K, 2), p_probe_m (K, 3), frame (K,))``."""
+    T_reference_phantom = config.transforms.get(("Phantom", "Reference"))
+    if T_reference_phantom is None:
+        raise InputError("the configuration has no Phantom->Reference transform (phantom registration)")
+    uv, p_probe, frame_of = [], [], []
+    for frame in frames:
+        if not frame.ok:
+            continue
+        T_probe_phantom = inverse(frame.T_tracker_probe) @ frame.T_tracker_reference @ T_reference_phantom
+        for pattern in config.patterns:
+            names = [w.name for w in pattern]
+            if not all(n in frame.points_px for n in names):
+                continue
+            m = middle_point_phantom(pattern, *(frame.points_px[n] for n in names))
+            uv.append(frame.points_px[names[1]])
+            p_probe.append(transform_points(T_probe_phantom, m))
+            frame_of.append(frame.index)
+    if len(uv) < 3:
+        raise InputError(f"only {len(uv)} usable middle-wire points: at least 3 are needed")
+    return np.array(uv), np.array(p_probe), np.array(frame_of)
+
+
+@dataclass(frozen=True)
+class NWireCalibration:
+    """``T_Probe_Image`` as a rigid transform with pixel spacings, and as PLUS's affine matrix.
+
+    Attributes:
+        T_probe_image: ``(4, 4)`` rigid.
+        spacing_m: ``(2,)`` pixel spacing (s_u, s_v), metres.
+        affine: ``(4, 4)`` unconstrained affine image→probe (columns 0, 1 carry the scales; metres).
+        inliers: ``(K,)`` which calibration points were kept.
+        residuals_m: ``(K,)`` 3D residuals of the rigid+scales fit at all points.
+    """
+
+    T_probe_image: FloatArray
+    spacing_m: FloatArray
+    affine: FloatArray
+    inliers: np.ndarray
+    residuals_m: FloatArray
+
+    def to_probe(self, uv_px: ArrayLike, model: str = "rigid") -> FloatArray:
+        uv = np.atleast_2d(np.asarray(uv_px, dtype=float))
+        if model == "affine":
+            return uv @ self.affine[:3, :2].T + self.affine[:3, 3]
+        return transform_points(self.T_probe_image, np.column_stack([uv * self.spacing_m, np.zeros(len(uv))]))
+
+
+def _lsq_reject(design: FloatArray, target: FloatArray, reject_sd: float) -> tuple[FloatArray, np.ndarray]:
+    """Least squares with PLUS's rejection: drop equations with |d − mean d| ≥ k σ, refit, repeat."""
+    keep = np.ones(len(target), dtype=bool)
+    while True:
+        x = np.linalg.lstsq(design[keep], target[keep], rcond=None)[0]
+        d = design @ x - target
+        sigma = d[keep].std()
+        new = keep & (np.abs(d - d[keep].mean()) < reject_sd * sigma)
+        if np.array_equal(new, keep) or new.sum() <= 8:
+            return x, keep
+        keep = new
+
+
+def fit_affine(uv_px: ArrayLike, p_probe: ArrayLike, reject_sd: float = 3.0) -> tuple[FloatArray, np.ndarray]:
+    """PLUS's linear least-squares ``Image→Probe``: ``(4, 4)`` matrix (metres) and the points kept.
+
+    Each probe coordinate is fitted to ``[u, v, 1]`` with its own outlier rejection; a point is
+    kept if no coordinate rejected it. The third column is the unit normal times the mean of the
+    two pixel sizes, as PLUS writes it.
+    """
+    uv = np.asarray(uv_px, dtype=float)
+    p = np.asarray(p_probe, dtype=float)
+    design = np.column_stack([uv, np.ones(len(uv))])
+    M = np.eye(4)
+    kept = np.ones(len(uv), dtype=bool)
+    for row in range(3):
+        (a, b, c), keep = _lsq_reject(design, p[:, row], reject_sd)
+        M[row, 0], M[row, 1], M[row, 3] = a, b, c
+        kept &= keep
+    normal = np.cross(M[:3, 0], M[:3, 1])
+    M[:3, 2] = normal / np.linalg.norm(normal) * (np.linalg.norm(M[:3, 0]) + np.linalg.norm(M[:3, 1])) / 2
+    return M, kept
+
+
+def calibrate_nwire(
+    uv_px: ArrayLike, p_probe: ArrayLike, nominal_spacing_m: float, *, reject_sd: float = 3.0, max_rounds: int = 5
+) -> NWireCalibration:
+    """Fit rigid + pixel spacings (and an affine) with iterative outlier rejection.
+
+    Each round fits on the inliers and drops points whose 3D residual exceeds the mean plus
+    ``reject_sd`` standard deviations of the inliers' residuals, until nothing changes.
+    """
+    uv = np.asarray(uv_px, dtype=float)
+    p = np.asarray(p_probe, dtype=float)
+    inliers = np.ones(len(uv), dtype=bool)
+    spacing0 = np.array([nominal_spacing_m, nominal_spacing_m])
+    for _ in range(max_rounds):
+        T, spacing = registration.scaled_uv(uv[inliers], p[inliers], spacing0)
+        predicted = transform_points(T, np.column_stack([uv * spacing, np.zeros(len(uv))]))
+        residuals = np.linalg.norm(predicted - p, axis=1)
+        limit = residuals[inliers].mean() + reject_sd * residuals[inliers].std()
+        keep = residuals <= limit
+        if np.array_equal(keep, inliers):
+            break
+        inliers = keep
+    return NWireCalibration(T, spacing, fit_affine(uv, p)[0], inliers, residuals)
+
+
+def reprojection_errors(
+    calibration: NWireCalibration, uv_px: ArrayLike, p_probe: ArrayLike, model: str = "rigid"
+) -> ErrorStats:
+    """3D distances between the image points mapped into the probe and the wire points."""
+    return ErrorStats.between(p_probe, calibration.to_probe(uv_px, model))
+
+
+def best_fraction(stats: ErrorStats, fraction: float = 0.95) -> ErrorStats:
+    """The statistics of the smallest ``round(fraction · N)`` errors (PLUS reports these as its
+    validation mean and SD)."""
+    errors = np.sort(stats.errors_m)
+    return ErrorStats(errors[: max(1, round(fraction * len(errors)))])
+
+
+def wire_errors_2d(
+    calibration: NWireCalibration, config: PlusConfig, frames: list[SegmentedFrame], model: str = "rigid"
+) -> dict[str, FloatArray]:
+    """Per wire: signed pixel error ``segmented − projected`` ``(F, 2)``, as PLUS reports it.
+
+    The wire (phantom → image) is intersected with the image plane z = 0 and the intersection's
+    pixel compared with the segmented point.
+    """
+    T_reference_phantom = config.transforms[("Phantom", "Reference")]
+    if model == "affine":
+        T_image_probe = np.linalg.inv(calibration.affine)
+        to_px = np.eye(2)
+    else:
+        T_image_probe = inverse(calibration.T_probe_image)
+        to_px = np.diag(1.0 / calibration.spacing_m)
+    out: dict[str, list[FloatArray]] = {w.name: [] for pattern in config.patterns for w in pattern}
+    for frame in frames:
+        if not frame.ok:
+            continue
+        T_image_phantom = (
+            T_image_probe @ inverse(frame.T_tracker_probe) @ frame.T_tracker_reference @ T_reference_phantom
+        )
+        for pattern in config.patterns:
+            for wire in pattern:
+                if wire.name not in frame.points_px:
+                    continue
+                a, b = transform_points(T_image_phantom, np.stack([wire.front_m, wire.back_m]))
+                if abs(b[2] - a[2]) < 1e-15:
+                    continue
+                hit = a + (-a[2] / (b[2] - a[2])) * (b - a)
+                out[wire.name].append(frame.points_px[wire.name] - to_px @ hit[:2])
+    return {name: np.array(values).reshape(-1, 2) for name, values in out.items()}
+
+
+def rotation_difference_deg(A: FloatArray, B: FloatArray) -> float:
+    """Angle between the rotations of two (possibly scaled) 4×4 matrices, degrees (via SVD)."""
+
+    def rotation(T: FloatArray) -> FloatArray:
+        U, _, Vt = np.linalg.svd(T[:3, :3])
+        return U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+
+    R = rotation(A).T @ rotation(B)
+    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0))))
