@@ -33,6 +33,8 @@ METHOD_LABELS: dict[str, str] = {
     "similarity": "Similarity (1 scale)",
     "scaled_uv": "Scaled u/v (2 scales)",
 }
+#: Labels of every image calibration a result can hold (the whole-chain method's included).
+ALL_LABELS: dict[str, str] = {**METHOD_LABELS, "chain": "Whole chain"}
 METHODS: tuple[str, ...] = tuple(METHOD_LABELS)
 #: The paper's three rigid methods.
 PAPER_METHODS: tuple[str, ...] = ("icp", "kabsch", "horn")

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -19,13 +19,20 @@ from brachycal.calibration.image_to_probe import METHODS, ImageCalibration
 from brachycal.calibration.sequential import CalibrationResult
 from brachycal.errors import InputError
 from brachycal.files import atomic_open
+from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, is_rigid
 
 FORMAT = "brachycal-result/1"
 
 
-def to_json(result: CalibrationResult, *, robot_source: str = "", robot_sha256: str = "") -> dict:
-    """The result as a JSON-ready dict."""
+def to_json(result: CalibrationResult, *, robot_source: str = "", robot_sha256: str = "", chain=None) -> dict:
+    """The result as a JSON-ready dict.
+
+    With ``chain`` (a :class:`~brachycal.calibration.chain_report.ChainReport`), the transforms
+    are the whole-chain method's (``Ptip_T_I`` and ``spacing_mm`` under ``"chain"``), its section
+    ``chain`` is added, and the sequential method's transforms and figures stay under
+    ``sequential`` for comparison (they go with its own ``EL_T_Ptip``).
+    """
     import pinocchio
 
     from brachycal import __version__
@@ -35,7 +42,7 @@ def to_json(result: CalibrationResult, *, robot_source: str = "", robot_sha256: 
         out["axes_angle_deg"] = calibration.rotation.axes_angle_deg
         return out
 
-    return {
+    payload = {
         "format": FORMAT,
         "transforms": {
             "ER_T_Ntip": result.T_ER_Ntip.tolist(),
@@ -52,6 +59,22 @@ def to_json(result: CalibrationResult, *, robot_source: str = "", robot_sha256: 
         "robot_model": {"urdf": robot_source, "sha256": robot_sha256},
         "software": {"brachycal": __version__, "pinocchio": pinocchio.__version__, "numpy": np.__version__},
     }
+    if chain is None:
+        return payload
+    from brachycal.calibration.chain_report import chain_json
+
+    sequential = {k: payload.pop(k) for k in ("transforms", "spacing_mm", "loocv", "fit_residuals")}
+    fit = chain.fit
+    payload["transforms"] = {
+        "ER_T_Ntip": fit.T_ER_Ntip.tolist(),
+        "EL_T_Ptip": fit.T_EL_Ptip.tolist(),
+        "Ptip_T_I": {"chain": fit.image.T_Ptip_I.tolist()},
+    }
+    payload["spacing_mm"] = {"chain": (fit.image.spacing_m * 1e3).tolist()}
+    payload["loocv"] = {"chain": chain.loocv.as_dict(with_errors=True)}
+    payload["chain"] = chain_json(chain, result.sample_ids)
+    payload["sequential"] = sequential
+    return payload
 
 
 def write_result(
@@ -61,9 +84,10 @@ def write_result(
     force: bool = False,
     robot_source: str = "",
     robot_sha256: str = "",
+    chain=None,
 ) -> Path:
     """Write the result atomically; never replaces an existing file unless ``force``."""
-    payload = to_json(result, robot_source=robot_source, robot_sha256=robot_sha256)
+    payload = to_json(result, robot_source=robot_source, robot_sha256=robot_sha256, chain=chain)
     with atomic_open(path, force=force) as handle:
         json.dump(payload, handle, indent=2)
         handle.write("\n")
@@ -78,6 +102,11 @@ class StoredCalibration:
     T_EL_Ptip: FloatArray
     image: dict[str, ImageCalibration]
     raw: dict
+    joint_offsets_rad: dict[str, float] = field(default_factory=dict)
+
+    def software_robot(self, robot: Robot) -> Robot:
+        """The robot model to compute and command with: ``robot`` with the estimated joint offsets."""
+        return robot.with_joint_offsets(self.joint_offsets_rad) if self.joint_offsets_rad else robot
 
 
 def _matrix(value: object, path: Path, key: str) -> FloatArray:
@@ -108,7 +137,7 @@ def read_result(path: str | os.PathLike[str]) -> StoredCalibration:
         raise InputError("no image transforms", file=path, column="transforms.Ptip_T_I")
     image = {}
     for method, T in images.items():
-        if method not in METHODS:
+        if method not in (*METHODS, "chain"):
             raise InputError(f"unknown method {method!r}", file=path, column="transforms.Ptip_T_I")
         spacing = np.array(raw.get("spacing_mm", {}).get(method, [np.nan, np.nan]), dtype=float) * 1e-3
         if spacing.shape != (2,) or not np.all(spacing > 0):
@@ -119,4 +148,5 @@ def read_result(path: str | os.PathLike[str]) -> StoredCalibration:
         T_EL_Ptip=_matrix(transforms.get("EL_T_Ptip"), path, "transforms.EL_T_Ptip"),
         image=image,
         raw=raw,
+        joint_offsets_rad={str(k): float(v) for k, v in raw.get("chain", {}).get("joint_offsets_rad", {}).items()},
     )

@@ -7,10 +7,11 @@ import hashlib
 from pathlib import Path
 
 from brachycal.calibration import METHODS, calibrate, write_result
-from brachycal.cli.common import add_urdf_option, load_robot
+from brachycal.calibration.chain_report import calibrate_chain
+from brachycal.cli.common import add_urdf_option, load_robot, progress_bar
 from brachycal.data.session import read_session
 from brachycal.errors import InputError
-from brachycal.reporting import table_i, table_ii
+from brachycal.reporting import chain_summary, table_i, table_ii
 
 HELP = "calibrate a session: tool tips, tool rotations, image-to-probe; prints Tables I and II"
 DESCRIPTION = """\
@@ -19,6 +20,11 @@ session.toml, touches.csv, axes.csv, samples.csv): reference tips with the top-m
 and probe tips (Table I, validated at rtip2), the tool rotations from three points, and the
 image-to-probe transform by ICP, Kabsch, Horn ("Landmark"), a similarity fit and a fit with
 separate u/v pixel spacings, each evaluated by leave-one-out cross-validation (Table II).
+
+With --method chain, the whole chain is also solved as one robust least-squares problem over
+all the data (touches, axes moves, images), the image model (rigid, similarity, scaled u/v, or
+speed of sound) chosen by cross-validation, with 95% intervals and the predicted landing error
+over the sample poses and the image; the result then carries the chain's transforms.
 
 The result (brachycal-result/1, JSON, metres) is written atomically to --out and never replaces
 an existing file without --force.
@@ -40,8 +46,28 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="A,B",
         help=f"registration methods (default all: {','.join(METHODS)})",
     )
+    parser.add_argument(
+        "--method",
+        choices=("sequential", "chain"),
+        default="sequential",
+        help="sequential: the paper's steps (default); chain: one least-squares problem over all data, "
+        "image model chosen by cross-validation, with uncertainty",
+    )
+    parser.add_argument(
+        "--joint-offsets",
+        action="store_true",
+        help="with --method chain: also estimate the joint zero offsets this session identifies",
+    )
+    parser.add_argument(
+        "--bootstrap",
+        type=int,
+        default=0,
+        metavar="N",
+        help="with --method chain: N bootstrap refits for percentile intervals (default 0)",
+    )
     add_urdf_option(parser)
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(run=run)
 
 
@@ -56,10 +82,26 @@ def run(args: argparse.Namespace) -> int:
     robot = load_robot(args)
     session = read_session(args.session, robot)
     result = calibrate(session, robot, methods)
+    chain = None
+    if args.method == "chain":
+        if args.bootstrap < 0:
+            raise InputError("--bootstrap must be 0 or more")
+        with progress_bar(args.bootstrap, "bootstrap", args.quiet or not args.bootstrap) as bar:
+            chain = calibrate_chain(
+                session,
+                robot,
+                result,
+                bootstrap_replicates=args.bootstrap,
+                joint_offsets=args.joint_offsets,
+                progress=bar.update,
+            )
     print(table_i(result))
     print()
-    print(table_ii(result))
+    print(table_ii(result, chain.loocv if chain else None))
+    if chain is not None:
+        print()
+        print(chain_summary(chain, session.sample_ids))
     urdf_sha = hashlib.sha256(robot.urdf_xml.encode()).hexdigest()
-    write_result(result, out, force=args.force, robot_source=robot.source, robot_sha256=urdf_sha)
+    write_result(result, out, force=args.force, robot_source=robot.source, robot_sha256=urdf_sha, chain=chain)
     print(f"\nwrote {out}")
     return 0

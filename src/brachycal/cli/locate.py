@@ -56,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(
             f"the result has no method {args.method!r} (it has {', '.join(stored.image)})", file=args.result
         )
-    robot = load_robot(args)
+    robot = stored.software_robot(load_robot(args))
     path = Path(args.joints)
     header, rows, records = read_table(path, [])
     names = [h for h in header if h in robot.joint_names or h == "torso_joint_b2"]

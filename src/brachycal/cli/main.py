@@ -8,7 +8,7 @@ import sys
 from collections.abc import Sequence
 
 from brachycal import __version__
-from brachycal.cli import calibrate, demo, fk, locate, model, nwire, pivot, plan, study
+from brachycal.cli import calibrate, demo, design, fk, locate, model, nwire, pivot, plan, study
 from brachycal.errors import InputError
 
 DESCRIPTION = """\
@@ -32,6 +32,7 @@ start here:
   brachycal nwire CONFIG FRAMES --out nwire.json
                                       N-wire phantom calibration of a tracked probe (PLUS files)
   brachycal study --out DIR           how many samples? truth error vs LOO on the twin
+  brachycal design --out DIR          which sample design gives most accuracy per robot minute
 """
 
 
@@ -41,7 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"brachycal {__version__}")
     sub = parser.add_subparsers(title="commands", metavar="COMMAND", required=True)
-    for module in (demo, model, fk, plan, calibrate, pivot, locate, nwire, study):
+    for module in (demo, model, fk, plan, calibrate, pivot, locate, nwire, study, design):
         module.add_parser(sub)
     return parser
 

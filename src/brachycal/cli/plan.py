@@ -104,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
         if args.method not in stored.image:
             raise InputError(f"the result has no method {args.method!r}", file=args.result)
         image = stored.image[args.method]
-        robot = robot.with_tool_transform(NEEDLE_TIP, stored.T_ER_Ntip)
+        robot = stored.software_robot(robot).with_tool_transform(NEEDLE_TIP, stored.T_ER_Ntip)
         robot = robot.with_tool_transform(PROBE_TIP, stored.T_EL_Ptip)
         robot = robot.with_tool_transform(US_IMAGE, image.T_Ptip_I)
         spacing = image.spacing_m

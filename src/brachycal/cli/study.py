@@ -9,7 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from brachycal.calibration import METHOD_LABELS, METHODS
+from brachycal.calibration import METHODS
+from brachycal.calibration.image_to_probe import ALL_LABELS as METHOD_LABELS
 from brachycal.cli.common import progress_bar
 from brachycal.errors import InputError
 from brachycal.simulation.study import run_study, summarise, sweep
@@ -57,7 +58,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="speed of sound: water (1482 m/s, default), tissue (= scanner's 1540), or both",
     )
     parser.add_argument("--outlier-rate", default="0", help="gross annotation outlier rates (default 0)")
-    parser.add_argument("--methods", default="kabsch,scaled_uv", help="registration methods (default kabsch,scaled_uv)")
+    parser.add_argument(
+        "--methods",
+        default="kabsch,scaled_uv",
+        help="methods: the sequential ones and 'chain' (default kabsch,scaled_uv)",
+    )
     parser.add_argument("--targets", type=int, default=30, help="targets per run for the truth error (default 30)")
     parser.add_argument("--workers", type=int, default=os.cpu_count(), help="local processes (default: all cores)")
     parser.add_argument("--scheduler", metavar="ADDRESS", help="Dask distributed scheduler to run on")
@@ -73,9 +78,9 @@ def run(args: argparse.Namespace) -> int:
         if path.exists() and not args.force:
             raise InputError("already exists; pass --force to replace it", file=path)
     methods = tuple(_list(args.methods, str, "--methods"))
-    unknown = [m for m in methods if m not in METHODS]
+    unknown = [m for m in methods if m not in (*METHODS, "chain")]
     if unknown:
-        raise InputError(f"unknown method(s) {', '.join(unknown)}; choose from {', '.join(METHODS)}")
+        raise InputError(f"unknown method(s) {', '.join(unknown)}; choose from {', '.join(METHODS)}, chain")
     points = _list(args.points, int, "--points")
     if min(points) < 2 or args.seeds < 1:
         raise InputError("--points must be at least 2 and --seeds at least 1")

@@ -24,7 +24,7 @@ from brachycal.errors import InputError
 from brachycal.files import atomic_open, bundled
 from brachycal.model import urdf_text
 from brachycal.model.batch_fk import BatchForwardKinematics
-from brachycal.se3 import FloatArray, inverse
+from brachycal.se3 import FloatArray, inverse, make_transform
 
 #: Configurations evaluated per block by the batch path: bounds the working memory (~2 MiB
 #: besides the output) and paces progress reports; 4096 measured fastest of 1024 to 20,000.
@@ -197,6 +197,27 @@ class Robot:
         for name, T in origins.items():
             urdf_text.set_joint_origin(root, name, np.asarray(T, dtype=float), self.source)
         return Robot(urdf_text.to_text(root), base_dir=self.base_dir, source=self.source)
+
+    def joint_axis(self, name: str) -> FloatArray:
+        """``(3,)`` unit axis of a 1-DoF joint in its own frame (rotation axis, or slide direction)."""
+        jmodel = self.model.joints[self.model.getJointId(name)]
+        jdata = jmodel.createData()
+        jmodel.calc(jdata, np.zeros(self.nq))
+        S = np.asarray(jdata.S).reshape(6)
+        return S[3:].copy() if np.any(S[3:]) else S[:3].copy()
+
+    def with_joint_offsets(self, offsets_rad: Mapping[str, float]) -> Robot:
+        """A robot whose revolute joints read ``q`` where this one reads ``q + offset``.
+
+        ``FK_new(q) = FK_this(q + offsets)``: each offset turns the joint's origin about its axis.
+        """
+        from scipy.spatial.transform import Rotation
+
+        origins = {}
+        for name, offset in offsets_rad.items():
+            turn = Rotation.from_rotvec(float(offset) * self.joint_axis(name)).as_matrix()
+            origins[name] = self.joint_origin(name) @ make_transform(turn, np.zeros(3))
+        return self.with_joint_origins(origins)
 
     def joint_origin(self, name: str) -> FloatArray:
         """``T_parent_joint (4, 4)``: the ``<origin>`` of joint ``name`` in the URDF."""

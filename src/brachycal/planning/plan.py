@@ -69,7 +69,11 @@ class Plan:
 
 def grid_points(spec: PlanSpec) -> list[GridPoint]:
     index, p_base, uv, normal = spec.grid()
-    return [GridPoint(f"g{i}{j}{k}", index[n], p_base[n], uv[n], float(normal[n])) for n, (i, j, k) in enumerate(index)]
+    if spec.offsets_m is None:
+        names = [f"g{i}{j}{k}" for i, j, k in index]
+    else:
+        names = [f"p{n + 1:03d}" for n in range(len(index))]
+    return [GridPoint(names[n], index[n], p_base[n], uv[n], float(normal[n])) for n in range(len(index))]
 
 
 def _reasons_for_failed_ik(check: PoseCheck, settings: IKSettings) -> tuple[str, ...]:

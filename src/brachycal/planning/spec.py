@@ -93,6 +93,9 @@ class PlanSpec:
         spacing_m: ``(2,)`` pixel spacing, metres.
         fov: the image's field of view (sector or rectangle).
         fov_margin_m: grid pixels must lie this far inside the field of view.
+        offsets_m: ``(N, 3)`` sample points as offsets from the cube centre along the image's
+            lateral, depth and normal axes, metres — a design other than the regular grid
+            (``points_per_axis`` and ``edge_m`` then only describe the cube for targets).
     """
 
     cube_centre_m: FloatArray = field(default_factory=lambda: np.array([0.80, 0.10, 1.05]))
@@ -107,6 +110,7 @@ class PlanSpec:
     spacing_m: FloatArray = field(default_factory=lambda: np.array([0.19e-3, 0.19e-3]))
     fov: SectorFOV | RectFOV = field(default_factory=SectorFOV)
     fov_margin_m: float = 0.002
+    offsets_m: FloatArray | None = None
 
     def __post_init__(self) -> None:
         if not (self.edge_m > 0 and np.isfinite(self.edge_m)):
@@ -131,10 +135,15 @@ class PlanSpec:
 
         Indices ``(i, j, k)`` count along the image's lateral, depth and normal axes.
         """
-        n = self.points_per_axis
-        steps = (np.arange(n) - (n - 1) / 2) * self.edge_m / (n - 1)
-        index = np.array([(i, j, k) for k in range(n) for j in range(n) for i in range(n)])
-        offsets = steps[index]  # (N, 3) along image x, y, z
+        if self.offsets_m is not None:
+            offsets = np.asarray(self.offsets_m, dtype=float).reshape(-1, 3)
+            # dense ranks along each axis stand in for grid indices (ordering, point names)
+            index = np.column_stack([np.unique(np.round(offsets[:, a], 9), return_inverse=True)[1] for a in range(3)])
+        else:
+            n = self.points_per_axis
+            steps = (np.arange(n) - (n - 1) / 2) * self.edge_m / (n - 1)
+            index = np.array([(i, j, k) for k in range(n) for j in range(n) for i in range(n)])
+            offsets = steps[index]  # (N, 3) along image x, y, z
         R = self.image_axes()
         p_base = self.cube_centre_m + offsets @ R.T
         uv = np.asarray(self.centre_px) + offsets[:, :2] / self.spacing_m

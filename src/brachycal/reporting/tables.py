@@ -30,8 +30,10 @@ def table_i(result: CalibrationResult) -> str:
     return "\n".join(lines)
 
 
-def table_ii(result: CalibrationResult) -> str:
-    """TABLE II. The accuracy of US probe calibration (leave-one-out over the samples)."""
+def table_ii(result: CalibrationResult, chain_loocv: ErrorStats | None = None) -> str:
+    """TABLE II. The accuracy of US probe calibration (leave-one-out over the samples).
+
+    ``chain_loocv`` adds the whole-chain method's row (its own leave-one-out figures)."""
     width = 26
     n = next(iter(result.loocv.values())).n if result.loocv else 0
     lines = [
@@ -45,6 +47,43 @@ def table_ii(result: CalibrationResult) -> str:
             f"   spacing {spacing[0]:.4f} x {spacing[1]:.4f} mm/px" if method in ("similarity", "scaled_uv") else ""
         )
         lines.append(_row(label, stats, width) + suffix)
+    if chain_loocv is not None:
+        lines.append(_row("Whole chain", chain_loocv, width))
+    return "\n".join(lines)
+
+
+def chain_summary(report, sample_ids: list[str]) -> str:
+    """What the whole-chain method chose and how sure it is."""
+    fit = report.fit
+    evidence = report.choice.evidence()
+    lines = [
+        "WHOLE-CHAIN CALIBRATION (one robust least-squares problem over all data)",
+        f"image model: {fit.model}  (8-fold cross-validated RMSE, mm: "
+        + ", ".join(f"{m} {e['cv_rmse_mm']:.3f}±{e['se_mm']:.3f}" for m, e in evidence.items())
+        + ")",
+        f"rule: {report.choice.rule}",
+    ]
+    intervals = report.intervals()
+    if "sound_speed_m_s" in intervals:
+        c = intervals["sound_speed_m_s"]
+        lines.append(
+            f"speed of sound: {c['value'][0]:.1f} m/s (95% {c['low'][0]:.1f}..{c['high'][0]:.1f}); "
+            "the scanner assumes 1540"
+        )
+    spacing = fit.image.spacing_m * 1e3
+    lines.append(f"pixel spacing: {spacing[0]:.5f} x {spacing[1]:.5f} mm/px")
+    sigma = fit.sigma_m
+    lines.append(
+        f"noise levels from the residuals: touches {sigma['touch'] * 1e3:.3f} mm, axes moves "
+        f"{sigma['axes'] * 1e3:.3f} mm, images {sigma['image'] * 1e3:.3f} mm (per coordinate)"
+    )
+    flagged = [s for s, f in zip(sample_ids, fit.outliers, strict=True) if f]
+    lines.append(f"outlier images: {', '.join(flagged) if flagged else 'none'}")
+    lines.append(
+        f"predicted landing error (RMS) over the sample poses: mean {report.predicted_cube_mm.mean():.3f} mm, "
+        f"max {report.predicted_cube_mm.max():.3f} mm; over the image at the central pose: "
+        f"{report.predicted_fov_mm.min():.3f}..{report.predicted_fov_mm.max():.3f} mm"
+    )
     return "\n".join(lines)
 
 

@@ -19,6 +19,7 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 
 from brachycal.calibration import calibrate
+from brachycal.calibration.chain import cross_validate, fit_chain, select_model
 from brachycal.errors import InputError
 from brachycal.model.robot import Robot
 from brachycal.planning import PlanSpec
@@ -69,16 +70,28 @@ def run_one(params: RunParams) -> list[dict[str, object]]:
         spec=replace(PlanSpec(), points_per_axis=params.points_per_axis, edge_m=params.edge_mm * 1e-3),
     )
     twin = simulate(robot, config)
-    result = calibrate(twin.session, robot, params.methods)
+    sequential = tuple(m for m in params.methods if m != "chain")
+    result = calibrate(twin.session, robot, sequential or ("scaled_uv",))
     rows = []
     for method in params.methods:
-        hit = targeting_error(twin, result.T_ER_Ntip, result.T_EL_Ptip, result.image[method], params.targets).stats
-        loo = result.loocv[method]
+        chosen = ""
+        if method == "chain":
+            choice = select_model(twin.session, robot, result)
+            fit = fit_chain(twin.session, robot, result, choice.model)
+            chosen = choice.model
+            hit = targeting_error(twin, fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image, params.targets).stats
+            loo = cross_validate(twin.session, robot, result, choice.model, folds=len(twin.session.uv_px))
+            tip = fit.T_ER_Ntip
+        else:
+            hit = targeting_error(twin, result.T_ER_Ntip, result.T_EL_Ptip, result.image[method], params.targets).stats
+            loo = result.loocv[method]
+            tip = result.T_ER_Ntip
         rows.append(
             {
                 **{k: v for k, v in asdict(params).items() if k != "methods"},
                 "samples": len(twin.session.sample_ids),
                 "method": method,
+                "chain_model": chosen,
                 "loo_mae_mm": loo.mae_mm,
                 "loo_rmse_mm": loo.rmse_mm,
                 "loo_sd_mm": loo.sd_mm,
@@ -87,9 +100,7 @@ def run_one(params: RunParams) -> list[dict[str, object]]:
                 "target_rmse_mm": hit.rmse_mm,
                 "target_sd_mm": hit.sd_mm,
                 "target_max_mm": hit.max_mm,
-                "needle_tip_error_mm": float(
-                    np.linalg.norm(result.T_ER_Ntip[:3, 3] - twin.truth.T_ER_Ntip[:3, 3]) * 1e3
-                ),
+                "needle_tip_error_mm": float(np.linalg.norm(tip[:3, 3] - twin.truth.T_ER_Ntip[:3, 3]) * 1e3),
             }
         )
     return rows

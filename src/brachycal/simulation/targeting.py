@@ -22,6 +22,7 @@ from brachycal.calibration.metrics import ErrorStats
 from brachycal.errors import InputError
 from brachycal.model.ik import solve_ik
 from brachycal.model.names import LEFT_FLANGE, NEEDLE_TIP, US_IMAGE
+from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, make_transform
 from brachycal.simulation.exact import LEFT, RIGHT
 from brachycal.simulation.twin import STREAMS, Twin, _streams
@@ -29,11 +30,17 @@ from brachycal.simulation.twin import STREAMS, Twin, _streams
 
 @dataclass(frozen=True)
 class TargetingResult:
-    """Targets (``(M, 3)``, physical, base_link), where the needle landed, and the error stats."""
+    """Targets (``(M, 3)``, physical, base_link), where the needle landed, and the error stats.
+
+    ``uv_px (M, 2)`` and ``q_read (M, nq)`` are the pixel and the read joints (probe imaging, needle
+    arm at its start pose) each target was computed from — what a prediction of the error uses.
+    """
 
     targets_m: FloatArray
     landed_m: FloatArray
     stats: ErrorStats
+    uv_px: FloatArray
+    q_read: FloatArray
 
 
 def random_targets(twin: Twin, n: int) -> FloatArray:
@@ -50,30 +57,40 @@ def targeting_error(
     T_EL_Ptip: FloatArray,
     image: ImageCalibration,
     n_targets: int = 50,
+    software: Robot | None = None,
 ) -> TargetingResult:
-    """Needle landing error over ``n_targets`` targets for one calibration (see the module docstring)."""
-    aim = _Aim(twin, twin.nominal.with_tool_transform(NEEDLE_TIP, T_ER_Ntip), T_EL_Ptip, image)
+    """Needle landing error over ``n_targets`` targets for one calibration (see the module docstring).
+
+    ``software`` is the robot model the software computes and commands with (default: the
+    nominal URDF; a calibration that corrects joint offsets passes its corrected model).
+    """
+    aim = _Aim(twin, software or twin.nominal, T_ER_Ntip, T_EL_Ptip, image)
     targets = random_targets(twin, n_targets)
     landed = np.empty_like(targets)
+    uv = np.empty((n_targets, 2))
+    q_read = np.empty((n_targets, twin.nominal.nq))
     # Each target starts from the sample poses whose needle tips were nearest (planned poses).
     sample_tips = twin.physical.fk(NEEDLE_TIP, twin.true_samples_q)[:, :3, 3]
     for k, target in enumerate(targets):
         starts = np.argsort(np.linalg.norm(sample_tips - target, axis=1))[:5]
         for attempt, nearest in enumerate(starts):
             try:
-                landed[k] = aim.land(target, twin.true_samples_q[nearest])
+                landed[k], uv[k], q_read[k] = aim.land(target, twin.true_samples_q[nearest])
                 break
             except InputError:
                 if attempt == len(starts) - 1:
                     raise
-    return TargetingResult(targets, landed, ErrorStats.between(targets, landed))
+    return TargetingResult(targets, landed, ErrorStats.between(targets, landed), uv, q_read)
 
 
 class _Aim:
     """One calibration used to image a target, compute it, and send the needle there."""
 
-    def __init__(self, twin: Twin, nominal_cal, T_EL_Ptip: FloatArray, image: ImageCalibration) -> None:
-        self.twin, self.nominal_cal, self.T_EL_Ptip, self.image = twin, nominal_cal, T_EL_Ptip, image
+    def __init__(
+        self, twin: Twin, software: Robot, T_ER_Ntip: FloatArray, T_EL_Ptip: FloatArray, image: ImageCalibration
+    ) -> None:
+        self.twin, self.software, self.T_EL_Ptip, self.image = twin, software, T_EL_Ptip, image
+        self.nominal_cal = software.with_tool_transform(NEEDLE_TIP, T_ER_Ntip)
         spec = twin.config.spec
         self.R_image = spec.image_axes()
         self.direction = spec.needle_pose(spec.cube_centre_m)[:3, 2]
@@ -82,8 +99,9 @@ class _Aim:
         # points can need a little more); no random restarts far from the start pose.
         self.ik = dict(margin=0.0, restarts=0)
 
-    def land(self, target: FloatArray, q_start: FloatArray) -> FloatArray:
-        """Where the physical needle tip lands when aimed at ``target`` (metres, base_link)."""
+    def land(self, target: FloatArray, q_start: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Where the physical needle tip lands when aimed at ``target`` (metres, base_link), the
+        target's pixel, and the joints read (probe arm imaging it, needle arm at its start)."""
         twin, spec, truth = self.twin, self.twin.config.spec, self.twin.truth
         # The probe images the target at the pixel the cube geometry puts it (true spacing).
         offset = self.R_image.T @ (target - spec.cube_centre_m)
@@ -95,11 +113,13 @@ class _Aim:
             q_read += self.read_rng.normal(scale=twin.config.encoder_sd_rad, size=q_true.shape)
         # The software's estimate of the target, and the needle commanded onto it: the roll as in
         # the start pose, the axis turned onto the insertion direction.
-        p_software = predict_base(self.image, twin.nominal.fk(LEFT_FLANGE, q_read), self.T_EL_Ptip, uv[None])[0]
+        p_software = predict_base(self.image, self.software.fk(LEFT_FLANGE, q_read), self.T_EL_Ptip, uv[None])[0]
         R_needle = self.nominal_cal.fk(NEEDLE_TIP, q_start)[:3, :3]
         turn, _ = Rotation.align_vectors([self.direction], [R_needle[:, 2]])
         T_command = make_transform(turn.as_matrix() @ R_needle, p_software)
         q_command = solve_ik(self.nominal_cal, NEEDLE_TIP, T_command, q_read, RIGHT, **self.ik)
         q_executed = q_true.copy()
         q_executed[RIGHT] = q_command[RIGHT]
-        return twin.physical.fk(NEEDLE_TIP, q_executed)[:3, 3]
+        q_seen = q_read.copy()
+        q_seen[RIGHT] = q_command[RIGHT]
+        return twin.physical.fk(NEEDLE_TIP, q_executed)[:3, 3], uv, q_seen

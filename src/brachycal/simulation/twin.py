@@ -133,21 +133,13 @@ def physical_kinematics(nominal: Robot, config: TwinConfig, rng: np.random.Gener
     """The nominal robot with every joint's origin moved a little (fixed for this robot)."""
     if not config.kinematic_error:
         return nominal
-    origins = {}
-    for k, name in enumerate(nominal.joint_names):
-        shift_tilt = _small_motion(rng, config.link_offset_sd_m, config.link_tilt_sd_rad)
-        zero = Rotation.from_rotvec(rng.normal(scale=config.joint_offset_sd_rad) * _joint_axis(nominal, k))
-        origins[name] = nominal.joint_origin(name) @ shift_tilt @ make_transform(zero.as_matrix(), np.zeros(3))
-    return nominal.with_joint_origins(origins)
-
-
-def _joint_axis(robot: Robot, k: int) -> FloatArray:
-    """Unit axis of configuration joint ``k`` in its own frame (from the URDF via Pinocchio)."""
-    jid = robot.model.getJointId(robot.joint_names[k])
-    jmodel = robot.model.joints[jid]
-    jdata = jmodel.createData()
-    jmodel.calc(jdata, np.zeros(robot.nq))
-    return np.asarray(jdata.S).reshape(6)[3:].copy()
+    origins, zeros = {}, {}
+    for name in nominal.joint_names:  # per joint: shift and tilt, then its zero offset
+        origins[name] = nominal.joint_origin(name) @ _small_motion(
+            rng, config.link_offset_sd_m, config.link_tilt_sd_rad
+        )
+        zeros[name] = rng.normal(scale=config.joint_offset_sd_rad)
+    return nominal.with_joint_origins(origins).with_joint_offsets(zeros)
 
 
 def _truth(nominal: Robot, config: TwinConfig, rng: np.random.Generator) -> SessionTruth:
