@@ -12,6 +12,7 @@ from brachycal.cli.common import add_urdf_option, load_robot, progress_bar
 from brachycal.data.session import read_session
 from brachycal.errors import InputError
 from brachycal.reporting import chain_summary, table_i, table_ii
+from brachycal.reporting.html_report import write_report
 
 HELP = "calibrate a session: tool tips, tool rotations, image-to-probe; prints Tables I and II"
 DESCRIPTION = """\
@@ -68,6 +69,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_urdf_option(parser)
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--report", metavar="DIR", help="also write a self-contained HTML report (DIR/report.html)")
     parser.set_defaults(run=run)
 
 
@@ -103,5 +105,8 @@ def run(args: argparse.Namespace) -> int:
         print(chain_summary(chain, session.sample_ids))
     urdf_sha = hashlib.sha256(robot.urdf_xml.encode()).hexdigest()
     write_result(result, out, force=args.force, robot_source=robot.source, robot_sha256=urdf_sha, chain=chain)
+    if args.report:
+        report = write_report(args.report, result, session, robot, str(args.session), chain)
+        print(f"report: {report}")
     print(f"\nwrote {out}")
     return 0

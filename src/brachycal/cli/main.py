@@ -8,7 +8,7 @@ import sys
 from collections.abc import Sequence
 
 from brachycal import __version__
-from brachycal.cli import calibrate, demo, design, fk, locate, model, nwire, pivot, plan, study
+from brachycal.cli import calibrate, demo, design, export, fk, locate, model, nwire, pivot, plan, study
 from brachycal.errors import InputError
 
 DESCRIPTION = """\
@@ -27,6 +27,7 @@ start here:
                                       calibrate a session folder (Tables I and II)
   brachycal locate RESULT JOINTS --uv U,V
                                       where an image pixel is in base_link
+  brachycal export RESULT --out DIR   calibrated URDF, Slicer/ITK, PLUS and ROS files
   brachycal pivot POSES.csv --out pivot.json
                                       pivot calibration of a tracked tool
   brachycal nwire CONFIG FRAMES --out nwire.json
@@ -42,7 +43,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"brachycal {__version__}")
     sub = parser.add_subparsers(title="commands", metavar="COMMAND", required=True)
-    for module in (demo, model, fk, plan, calibrate, pivot, locate, nwire, study, design):
+    for module in (demo, model, fk, plan, calibrate, locate, export, pivot, nwire, study, design):
         module.add_parser(sub)
     return parser
 

@@ -78,6 +78,30 @@ def _transform_mm(text: str | None, path: Path, where: str) -> FloatArray:
     return T
 
 
+def _metres(M: FloatArray) -> FloatArray:
+    M = M.copy()
+    M[:3, 3] *= MM
+    return M
+
+
+def _coordinate_definitions(root: Element, path: Path) -> dict[tuple[str, str], FloatArray]:
+    out = {}
+    for element in root.iter("Transform"):
+        key = (element.get("From", ""), element.get("To", ""))
+        M = _numbers(element.get("Matrix"), 16, path, f"Transform {key[0]}->{key[1]}").reshape(4, 4)
+        if np.abs(M[3] - [0, 0, 0, 1]).max() > 1e-9:
+            where = f"Transform {key[0]}->{key[1]}"
+            raise InputError("bottom row of the matrix must be 0 0 0 1", file=path, column=where)
+        out[key] = M
+    return out
+
+
+def read_coordinate_definitions(path: str | os.PathLike[str]) -> dict[tuple[str, str], FloatArray]:
+    """``(From, To)`` → matrix ``(4, 4)`` of every ``<Transform>`` in a PLUS XML, in the file's units (mm)."""
+    path = Path(path)
+    return _coordinate_definitions(_parse(path), path)
+
+
 def read_plus_config(path: str | os.PathLike[str]) -> PlusConfig:
     """Read the phantom definition and coordinate definitions of a PLUS device-set XML."""
     path = Path(path)
@@ -101,10 +125,7 @@ def read_plus_config(path: str | os.PathLike[str]) -> PlusConfig:
         patterns.append(tuple(wires))
     if not patterns:
         raise InputError("no N-wire patterns in PhantomDefinition", file=path)
-    transforms = {}
-    for element in root.iter("Transform"):
-        key = (element.get("From", ""), element.get("To", ""))
-        transforms[key] = _transform_mm(element.get("Matrix"), path, f"Transform {key[0]}->{key[1]}")
+    transforms = {key: _metres(M) for key, M in _coordinate_definitions(root, path).items()}
     segmentation = next(root.iter("Segmentation"), None)
     spacing = segmentation.get("ApproximateSpacingMmPerPixel") if segmentation is not None else None
     return PlusConfig(patterns, transforms, float(spacing) * MM if spacing else None)

@@ -73,3 +73,21 @@ def method_comparison(stats: Mapping[str, ErrorStats], path: str | os.PathLike[s
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return Path(path)
+
+
+def residuals_per_sample(stats: Mapping[str, ErrorStats], sample_ids: list[str], path: str | os.PathLike[str]) -> Path:
+    """Leave-one-out error of every sample (mm), one line per method."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(9, 3.6))
+    x = np.arange(len(sample_ids))
+    for method, s in stats.items():
+        ax.plot(x, s.errors_m * 1e3, marker=".", lw=0.8, label=METHOD_LABELS.get(method, method))
+    step = max(1, len(sample_ids) // 16)
+    ax.set_xticks(x[::step], [sample_ids[i] for i in x[::step]], rotation=45, fontsize=7)
+    ax.set_ylabel("LOO error (mm)")
+    ax.set_title("Residual per sample (leave-one-out)")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)

@@ -1,0 +1,96 @@
+"""A self-contained HTML report of a calibration: tables, figures (embedded), input hashes.
+
+One ``report.html`` (PNG figures embedded as base64, no external files or scripts), written
+next to the figures themselves, so it can be mailed, archived with the session or opened offline.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import os
+from pathlib import Path
+
+import numpy as np
+
+from brachycal.calibration.image_to_probe import METHOD_LABELS, leave_one_out_points
+from brachycal.calibration.metrics import ErrorStats
+from brachycal.calibration.sequential import CalibrationResult
+from brachycal.data.session import Session
+from brachycal.model.names import LEFT_FLANGE, RIGHT_FLANGE, US_IMAGE
+from brachycal.model.robot import Robot
+from brachycal.reporting.figures import error_histogram, points_3d, residuals_per_sample
+from brachycal.reporting.tables import chain_summary, table_i, table_ii
+
+STYLE = """body{font-family:system-ui,sans-serif;max-width:980px;margin:2em auto;color:#222}
+pre{background:#f6f6f6;padding:1em;overflow-x:auto}img{max-width:100%}td,th{padding:2px 8px;text-align:left}
+h1{font-size:1.5em}h2{font-size:1.2em;margin-top:2em}"""
+
+
+def _img(path: Path) -> str:
+    data = base64.b64encode(path.read_bytes()).decode()
+    return f'<p><img alt="{html.escape(path.stem)}" src="data:image/png;base64,{data}"></p>'
+
+
+def write_report(
+    folder: str | os.PathLike[str],
+    result: CalibrationResult,
+    session: Session,
+    robot: Robot,
+    session_path: str = "",
+    chain=None,
+) -> Path:
+    """Write ``folder/report.html`` (and its PNG figures); returns the HTML path."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    T_R_ER = robot.fk(RIGHT_FLANGE, session.samples_q)
+    T_R_EL = robot.fk(LEFT_FLANGE, session.samples_q)
+    best = min(result.loocv, key=lambda m: result.loocv[m].rmse_mm)
+    p_real, p_cal = leave_one_out_points(
+        best,
+        session.uv_px,
+        T_R_ER,
+        T_R_EL,
+        result.T_ER_Ntip[:3, 3],
+        result.T_EL_Ptip,
+        session.spacing_m,
+        robot.tool_transform(US_IMAGE)[1],
+    )
+    label = METHOD_LABELS[best]
+    figures = [
+        error_histogram(
+            ErrorStats.between(p_real, p_cal), folder / "loo_histogram.png", f"Leave-one-out errors ({label})"
+        ),
+        residuals_per_sample(
+            {m: s for m, s in result.loocv.items()}, session.sample_ids, folder / "loo_per_sample.png"
+        ),
+        points_3d(p_real, p_cal, folder / "points_3d.png", f"Real and calibrated points ({label}, LOO)"),
+    ]
+    parts = [
+        "<!DOCTYPE html><html><head><meta charset='utf-8'><title>brachycal calibration report</title>",
+        f"<style>{STYLE}</style></head><body>",
+        "<h1>brachycal calibration report</h1>",
+        f"<p>Session: <code>{html.escape(session_path)}</code> — {len(session.sample_ids)} image samples; "
+        f"robot model <code>{html.escape(robot.source)}</code>.</p>",
+        "<h2>Mechanical calibration</h2>",
+        f"<pre>{html.escape(table_i(result))}</pre>",
+        "<h2>Image-to-probe calibration</h2>",
+        f"<pre>{html.escape(table_ii(result, chain.loocv if chain else None))}</pre>",
+    ]
+    if chain is not None:
+        parts += ["<h2>Whole chain</h2>", f"<pre>{html.escape(chain_summary(chain, session.sample_ids))}</pre>"]
+    parts += [
+        "<h2>Figures</h2>",
+        *(_img(f) for f in figures),
+        "<h2>Transforms (metres)</h2><pre>",
+        html.escape(
+            f"ER_T_Ntip =\n{np.array2string(result.T_ER_Ntip, precision=6, suppress_small=True)}\n"
+            f"EL_T_Ptip =\n{np.array2string(result.T_EL_Ptip, precision=6, suppress_small=True)}"
+        ),
+        "</pre><h2>Inputs (SHA-256)</h2><table>",
+        *(f"<tr><td>{html.escape(k)}</td><td><code>{v}</code></td></tr>" for k, v in result.inputs.items()),
+        "</table></body></html>",
+    ]
+    path = folder / "report.html"
+    path.write_text("\n".join(parts))
+    return path

@@ -1,0 +1,127 @@
+"""A 3D scene of the robot at a configuration, with tool frames and the image plane.
+
+Built with yourdfpy/trimesh from the same URDF the kinematics use (the vendor's light collision
+meshes), so what is drawn is what is computed. It can be shown in a notebook
+(``scene.show()``), saved as a self-contained binary glTF (``.glb``, opens in any glTF viewer,
+Blender, 3D Slicer), or rendered to a PNG with matplotlib (no OpenGL needed).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from collections.abc import Sequence
+from functools import partial
+from pathlib import Path
+
+import numpy as np
+import trimesh
+import yourdfpy
+from numpy.typing import ArrayLike
+
+from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
+from brachycal.model.robot import Robot
+from brachycal.se3 import FloatArray, transform_points
+
+TOOL_FRAMES = (NEEDLE_TIP, PROBE_TIP, US_IMAGE)
+
+
+def robot_scene(
+    robot: Robot,
+    q: ArrayLike,
+    *,
+    frames: Sequence[str] = TOOL_FRAMES,
+    image_size_px: tuple[int, int] | None = (1080, 720),
+    spacing_m: ArrayLike = (0.19e-3, 0.19e-3),
+    points_m: ArrayLike | None = None,
+) -> trimesh.Scene:
+    """The robot at ``q`` (``(nq,)``), axes on ``frames``, the image rectangle, optional points ``(K, 3)``."""
+    q = np.asarray(q, dtype=float)
+    urdf = yourdfpy.URDF.load(
+        io.StringIO(robot.urdf_xml),
+        filename_handler=partial(yourdfpy.filename_handler_relative, dir=str(robot.base_dir)),
+    )
+    urdf.update_cfg(robot.named(q))
+    scene = urdf.scene.copy()
+    for frame in frames:
+        axis = trimesh.creation.axis(origin_size=0.004, axis_radius=0.002, axis_length=0.05)
+        scene.add_geometry(axis, node_name=f"{frame}_axes", geom_name=f"{frame}_axes", transform=robot.fk(frame, q))
+    for tool, flange, colour in (
+        (NEEDLE_TIP, "arm_right_link_tool0", [200, 200, 200, 255]),
+        (PROBE_TIP, "arm_left_link_tool0", [60, 60, 60, 255]),
+    ):
+        # The end-effectors have no geometry in the URDF: draw each as a rod from flange to tip.
+        a, b = robot.fk(flange, q)[:3, 3], robot.fk(tool, q)[:3, 3]
+        rod = trimesh.creation.cylinder(radius=0.004 if tool == NEEDLE_TIP else 0.009, segment=np.stack([a, b]))
+        rod.visual.face_colors = colour
+        scene.add_geometry(rod, node_name=f"{tool}_rod", geom_name=f"{tool}_rod")
+    if image_size_px is not None:
+        w, h = image_size_px
+        corners = np.array([[0, 0], [w, 0], [w, h], [0, h]], dtype=float) * np.asarray(spacing_m)
+        p = transform_points(robot.fk(US_IMAGE, q), np.column_stack([corners, np.zeros(4)]))
+        plane = trimesh.Trimesh(vertices=p, faces=[[0, 1, 2], [0, 2, 3], [2, 1, 0], [3, 2, 0]], process=False)
+        plane.visual.face_colors = [255, 160, 0, 120]
+        scene.add_geometry(plane, node_name="us_image_plane", geom_name="us_image_plane")
+    if points_m is not None:
+        for k, point in enumerate(np.atleast_2d(points_m)):
+            ball = trimesh.creation.icosphere(subdivisions=1, radius=0.0015)
+            ball.visual.face_colors = [200, 30, 30, 255]
+            place = trimesh.transformations.translation_matrix(point)
+            scene.add_geometry(ball, node_name=f"point_{k}", geom_name=f"point_{k}", transform=place)
+    return scene
+
+
+def save_glb(scene: trimesh.Scene, path: str | os.PathLike[str]) -> Path:
+    """Write the scene as one self-contained binary glTF file."""
+    Path(path).write_bytes(scene.export(file_type="glb"))
+    return Path(path)
+
+
+def render_png(
+    scene: trimesh.Scene,
+    path: str | os.PathLike[str],
+    *,
+    elevation: float = 20.0,
+    azimuth: float = -60.0,
+    zoom_to: FloatArray | None = None,
+) -> Path:
+    """A matplotlib rendering of the scene's triangles (flat shaded), as a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    fig = plt.figure(figsize=(7, 6))
+    ax = fig.add_subplot(projection="3d")
+    light = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
+    lows, highs = [], []
+    for name in scene.graph.nodes_geometry:
+        transform, geometry_name = scene.graph[name]
+        mesh = scene.geometry[geometry_name]
+        if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+            continue
+        vertices = transform_points(transform, mesh.vertices)
+        triangles = vertices[mesh.faces]
+        normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+        normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+        base = np.asarray(mesh.visual.face_colors[:, :3], dtype=float) / 255.0
+        shade = 0.45 + 0.55 * np.abs(normals @ light)
+        colours = np.clip(base * shade[:, None], 0, 1)
+        alpha = mesh.visual.face_colors[:, 3] / 255.0
+        ax.add_collection3d(Poly3DCollection(triangles, facecolors=np.column_stack([colours, alpha]), linewidths=0))
+        lows.append(vertices.min(axis=0))
+        highs.append(vertices.max(axis=0))
+    low, high = (np.min(lows, axis=0), np.max(highs, axis=0)) if zoom_to is None else zoom_to
+    centre, half = (low + high) / 2, np.max(high - low) / 2
+    for setter, c in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), centre, strict=True):
+        setter(c - half, c + half)
+    ax.set_box_aspect((1, 1, 1))
+    ax.view_init(elev=elevation, azim=azimuth)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_zlabel("z (m)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return Path(path)
