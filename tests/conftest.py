@@ -2,13 +2,21 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
+from hypothesis import settings
 
 from brachycal.model import Robot
+
+# On CI, property-based tests draw the same examples every run (a failure found there can be
+# replayed); locally they explore new ones each time.
+settings.register_profile("ci", derandomize=True, deadline=None)
+if os.environ.get("CI"):
+    settings.load_profile("ci")
 
 DATA = Path(__file__).parent / "data"
 ROOT = Path(__file__).parents[1]

@@ -50,7 +50,15 @@ def test_kabsch_and_horn_recover_exact_transforms(seed, kind, n):
 def test_kabsch_horn_and_icp_agree_on_noisy_correspondences(seed, kind, n):
     rng = np.random.default_rng(seed)
     T_true = random_pose(rng)
-    src = point_set(rng, kind, n) * 5.0  # points a few cm apart: NN pairing is unambiguous
+    # A jittered 5 cm grid: every point at least 3 cm from the others, so that nearest-neighbour
+    # pairing is unambiguous after a few millimetres of initial error.
+    if kind == "planar":
+        cells = np.array([(i, j, 0) for i in range(9) for j in range(8)], dtype=float)
+        jitter = rng.uniform(-0.2, 0.2, size=(n, 3)) * [1.0, 1.0, 0.0]
+    else:
+        cells = np.array([(i, j, k) for i in range(5) for j in range(5) for k in range(3)], dtype=float)
+        jitter = rng.uniform(-0.2, 0.2, size=(n, 3))
+    src = (cells[rng.permutation(len(cells))[:n]] + jitter) * 0.05
     dst = transform_points(T_true, src) + rng.normal(scale=3e-4, size=(n, 3))
     T_k = registration.kabsch(src, dst)
     T_h = registration.horn(src, dst)
