@@ -24,6 +24,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/fk_throughput.py
 	$(BIN)/python benchmarks/calibrate_speed.py
 	$(BIN)/python benchmarks/plan_speed.py
+	$(BIN)/python benchmarks/chain_checks.py
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
