@@ -39,7 +39,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import approx_fprime, least_squares
 from scipy.spatial.transform import Rotation
 
 from brachycal.calibration.image_to_probe import ImageCalibration
@@ -134,6 +134,11 @@ class _Layout:
         else:  # sound_speed: scale[0] is c / 1540
             spacing = nominal_spacing * [1.0, scale[0]]
         return T_ER_Ntip, T_EL_Ptip, T_Ptip_I, rtips, spacing
+
+
+def finite_difference_steps(x: FloatArray) -> FloatArray:
+    """Forward-difference steps for Jacobians at ``x``: 1e-7, relative for large entries."""
+    return 1e-7 * np.maximum(1.0, np.abs(x))
 
 
 def _perpendicular(move: FloatArray, axis: FloatArray) -> FloatArray:
@@ -411,12 +416,7 @@ def identifiable_joint_offsets(
         return _residuals(fit.x, layout, data_k, fit.base, sigma, use)
 
     r0 = residuals(data)
-    J = np.empty((len(r0), len(fit.x)))
-    for k in range(len(fit.x)):
-        x = fit.x.copy()
-        step = 1e-7 * max(1.0, abs(x[k]))
-        x[k] += step
-        J[:, k] = (_residuals(x, layout, data, fit.base, sigma, use) - r0) / step
+    J = approx_fprime(fit.x, _residuals, finite_difference_steps(fit.x), layout, data, fit.base, sigma, use)
     Q, _ = np.linalg.qr(J)
     out = {}
     step = 1e-6
@@ -451,13 +451,8 @@ def information_blocks(session: Session, robot: Robot, fit: ChainFit) -> tuple[F
     layout = _Layout(fit.model)
     data = _Data.of(session, robot)
     use = np.ones(len(session.uv_px), dtype=bool)
-    r0 = _residuals(fit.x, layout, data, fit.base, fit.sigma_m, use)
-    J = np.empty((len(r0), layout.size))
-    for k in range(layout.size):
-        x = fit.x[: layout.size].copy()
-        step = 1e-7 * max(1.0, abs(x[k]))
-        x[k] += step
-        J[:, k] = (_residuals(x, layout, data, fit.base, fit.sigma_m, use) - r0) / step
+    x = fit.x[: layout.size]
+    J = approx_fprime(x, _residuals, finite_difference_steps(x), layout, data, fit.base, fit.sigma_m, use)
     n_images = 3 * len(session.uv_px)
     fixed = J[:-n_images]
     return fixed.T @ fixed, J[-n_images:].reshape(len(session.uv_px), 3, layout.size)

@@ -15,9 +15,10 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy.optimize import approx_fprime
 from scipy.stats import chi2
 
-from brachycal.calibration.chain import ChainFit, _Layout, fit_chain
+from brachycal.calibration.chain import ChainFit, _Layout, finite_difference_steps, fit_chain
 from brachycal.calibration.sequential import CalibrationResult
 from brachycal.data.session import Session
 from brachycal.model.names import LEFT_FLANGE, RIGHT_FLANGE
@@ -56,14 +57,11 @@ def landing_jacobian(
     q = np.atleast_2d(np.asarray(q, dtype=float))
     uv = np.atleast_2d(np.asarray(uv_px, dtype=float))
     spacing = np.asarray(nominal_spacing, dtype=float)
-    base = _landing(fit.x, fit, spacing, robot, q, uv)
-    G = np.empty((len(uv), 3, len(fit.x)))
-    for k in range(len(fit.x)):
-        step = 1e-7 * max(1.0, abs(fit.x[k]))
-        x = fit.x.copy()
-        x[k] += step
-        G[:, :, k] = (_landing(x, fit, spacing, robot, q, uv) - base) / step
-    return G
+
+    def landing(x: FloatArray) -> FloatArray:
+        return _landing(x, fit, spacing, robot, q, uv).ravel()
+
+    return approx_fprime(fit.x, landing, finite_difference_steps(fit.x)).reshape(len(uv), 3, len(fit.x))
 
 
 def predicted_rms_mm(covariance: FloatArray) -> FloatArray:

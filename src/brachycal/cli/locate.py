@@ -5,11 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import numpy as np
-
 from brachycal.calibration import read_result
 from brachycal.calibration.sequential import locate
-from brachycal.cli.common import add_urdf_option, load_robot
+from brachycal.cli.common import add_urdf_option, load_robot, parse_numbers
 from brachycal.data.csv_log import read_table, to_float
 from brachycal.data.joint_log import configurations_from_columns
 from brachycal.errors import InputError
@@ -39,18 +37,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser.set_defaults(run=run)
 
 
-def _pixel(text: str) -> np.ndarray:
-    try:
-        u, v = (float(x) for x in text.split(","))
-    except ValueError:
-        raise InputError(f"--uv must be two numbers U,V, got {text!r}") from None
-    if not (np.isfinite(u) and np.isfinite(v)):
-        raise InputError(f"--uv must be finite, got {text!r}")
-    return np.array([[u, v]])
-
-
 def run(args: argparse.Namespace) -> int:
-    uv = _pixel(args.uv)
+    uv = parse_numbers(args.uv, "--uv", 2)[None]
     stored = read_result(args.result)
     if args.method not in stored.image:
         raise InputError(

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from brachycal.calibration import read_result
-from brachycal.cli.common import add_urdf_option, load_robot, progress_bar
+from brachycal.cli.common import add_urdf_option, load_robot, parse_numbers, progress_bar
 from brachycal.errors import InputError
 from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
 from brachycal.planning import IKSettings, PlanSpec, RectFOV, SectorFOV, Thresholds, plan_poses
@@ -38,16 +38,6 @@ example:
   brachycal plan --out plan.csv
   brachycal plan --result result.json --centre-mm 800,100,1050 --edge-mm 30 --out plan.csv
 """
-
-
-def _floats(text: str, n: int, name: str) -> np.ndarray:
-    try:
-        values = np.array([float(x) for x in text.split(",")])
-    except ValueError:
-        raise InputError(f"{name} must be {n} comma-separated numbers, got {text!r}") from None
-    if values.shape != (n,) or not np.all(np.isfinite(values)):
-        raise InputError(f"{name} must be {n} comma-separated finite numbers, got {text!r}")
-    return values
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -109,24 +99,24 @@ def run(args: argparse.Namespace) -> int:
         robot = robot.with_tool_transform(US_IMAGE, image.T_Ptip_I)
         spacing = image.spacing_m
     if args.spacing_mm:
-        spacing = _floats(args.spacing_mm, 2, "--spacing-mm") * 1e-3
+        spacing = parse_numbers(args.spacing_mm, "--spacing-mm", 2) * 1e-3
     if args.fov == "sector":
         fov = SectorFOV(
-            tuple(_floats(args.sector_apex_px, 2, "--sector-apex-px")),
+            tuple(parse_numbers(args.sector_apex_px, "--sector-apex-px", 2)),
             args.sector_depth_mm * 1e-3,
             np.radians(args.sector_angle_deg),
         )
     else:
-        u0, u1, v0, v1 = _floats(args.rect_px, 4, "--rect-px")
+        u0, u1, v0, v1 = parse_numbers(args.rect_px, "--rect-px", 4)
         fov = RectFOV((u0, u1), (v0, v1))
     spec = PlanSpec(
-        cube_centre_m=_floats(args.centre_mm, 3, "--centre-mm") * 1e-3,
+        cube_centre_m=parse_numbers(args.centre_mm, "--centre-mm", 3) * 1e-3,
         edge_m=args.edge_mm * 1e-3,
         points_per_axis=args.points,
-        insertion_dir=_floats(args.insertion, 3, "--insertion"),
-        image_depth_dir=_floats(args.image_depth, 3, "--image-depth"),
-        image_lateral_dir=_floats(args.image_lateral, 3, "--image-lateral"),
-        centre_px=tuple(_floats(args.centre_px, 2, "--centre-px")),
+        insertion_dir=parse_numbers(args.insertion, "--insertion", 3),
+        image_depth_dir=parse_numbers(args.image_depth, "--image-depth", 3),
+        image_lateral_dir=parse_numbers(args.image_lateral, "--image-lateral", 3),
+        centre_px=tuple(parse_numbers(args.centre_px, "--centre-px", 2)),
         spacing_m=spacing,
         fov=fov,
     )

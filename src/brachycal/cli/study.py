@@ -11,7 +11,7 @@ import numpy as np
 
 from brachycal.calibration import METHODS
 from brachycal.calibration.image_to_probe import ALL_LABELS as METHOD_LABELS
-from brachycal.cli.common import progress_bar
+from brachycal.cli.common import parse_list, progress_bar
 from brachycal.errors import InputError
 from brachycal.simulation.study import run_study, summarise, sweep
 
@@ -30,16 +30,6 @@ DIR/summary.csv (mean and SD over seeds) and DIR/study.png.
 example:
   brachycal study --out study --points 3,4,5 --annotation-px 0.5,1,2 --seeds 5
 """
-
-
-def _list(text: str, kind, name: str) -> list:
-    try:
-        values = [kind(x) for x in text.split(",") if x.strip()]
-    except ValueError:
-        raise InputError(f"{name} must be a comma-separated list, got {text!r}") from None
-    if not values:
-        raise InputError(f"{name} is empty")
-    return values
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -77,21 +67,21 @@ def run(args: argparse.Namespace) -> int:
     for path in files:
         if path.exists() and not args.force:
             raise InputError("already exists; pass --force to replace it", file=path)
-    methods = tuple(_list(args.methods, str, "--methods"))
+    methods = tuple(parse_list(args.methods, "--methods", str))
     unknown = [m for m in methods if m not in (*METHODS, "chain")]
     if unknown:
         raise InputError(f"unknown method(s) {', '.join(unknown)}; choose from {', '.join(METHODS)}, chain")
-    points = _list(args.points, int, "--points")
+    points = parse_list(args.points, "--points", int)
     if min(points) < 2 or args.seeds < 1:
         raise InputError("--points must be at least 2 and --seeds at least 1")
     sound = {"water": [True], "tissue": [False], "both": [True, False]}[args.sound]
     runs = sweep(
         args.seeds,
         points,
-        _list(args.edge_mm, float, "--edge-mm"),
-        _list(args.annotation_px, float, "--annotation-px"),
+        parse_list(args.edge_mm, "--edge-mm", float),
+        parse_list(args.annotation_px, "--annotation-px", float),
         sound,
-        _list(args.outlier_rate, float, "--outlier-rate"),
+        parse_list(args.outlier_rate, "--outlier-rate", float),
         methods,
         args.targets,
     )

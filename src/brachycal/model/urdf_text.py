@@ -39,24 +39,31 @@ def _fixed_joint_to(root: ET.Element, child: str, source: str) -> ET.Element:
     raise InputError(f"no fixed joint ends at frame {child!r}", file=source)
 
 
-def fixed_joint_transform(root: ET.Element, child: str, source: str) -> tuple[str, FloatArray]:
-    """``(parent link, T_parent_child (4, 4))`` of the fixed joint whose child is ``child``."""
-    joint = _fixed_joint_to(root, child, source)
+def _read_origin(joint: ET.Element) -> FloatArray:
     origin = joint.find("origin")
     xyz = [0.0, 0.0, 0.0] if origin is None else [float(v) for v in origin.get("xyz", "0 0 0").split()]
     rpy = [0.0, 0.0, 0.0] if origin is None else [float(v) for v in origin.get("rpy", "0 0 0").split()]
-    return joint.find("parent").get("link"), from_xyz_rpy(xyz, rpy)
+    return from_xyz_rpy(xyz, rpy)
 
 
-def set_fixed_joint_transform(root: ET.Element, child: str, T_parent_child: FloatArray, source: str) -> None:
-    """Replace the ``<origin>`` of the fixed joint ending at ``child`` (in place)."""
-    joint = _fixed_joint_to(root, child, source)
-    xyz, rpy = to_xyz_rpy(np.asarray(T_parent_child, dtype=float))
+def _write_origin(joint: ET.Element, T: FloatArray) -> None:
+    xyz, rpy = to_xyz_rpy(np.asarray(T, dtype=float))
     origin = joint.find("origin")
     if origin is None:
         origin = ET.SubElement(joint, "origin")
     origin.set("xyz", " ".join(repr(float(v)) for v in xyz))
     origin.set("rpy", " ".join(repr(float(v)) for v in rpy))
+
+
+def fixed_joint_transform(root: ET.Element, child: str, source: str) -> tuple[str, FloatArray]:
+    """``(parent link, T_parent_child (4, 4))`` of the fixed joint whose child is ``child``."""
+    joint = _fixed_joint_to(root, child, source)
+    return joint.find("parent").get("link"), _read_origin(joint)
+
+
+def set_fixed_joint_transform(root: ET.Element, child: str, T_parent_child: FloatArray, source: str) -> None:
+    """Replace the ``<origin>`` of the fixed joint ending at ``child`` (in place)."""
+    _write_origin(_fixed_joint_to(root, child, source), T_parent_child)
 
 
 def _joint_named(root: ET.Element, name: str, source: str) -> ET.Element:
@@ -68,21 +75,12 @@ def _joint_named(root: ET.Element, name: str, source: str) -> ET.Element:
 
 def joint_origin(root: ET.Element, name: str, source: str) -> FloatArray:
     """``T_parent_joint (4, 4)`` of the ``<origin>`` of joint ``name`` (any type)."""
-    origin = _joint_named(root, name, source).find("origin")
-    xyz = [0.0, 0.0, 0.0] if origin is None else [float(v) for v in origin.get("xyz", "0 0 0").split()]
-    rpy = [0.0, 0.0, 0.0] if origin is None else [float(v) for v in origin.get("rpy", "0 0 0").split()]
-    return from_xyz_rpy(xyz, rpy)
+    return _read_origin(_joint_named(root, name, source))
 
 
 def set_joint_origin(root: ET.Element, name: str, T: FloatArray, source: str) -> None:
     """Replace the ``<origin>`` of joint ``name`` (any type), in place."""
-    joint = _joint_named(root, name, source)
-    xyz, rpy = to_xyz_rpy(np.asarray(T, dtype=float))
-    origin = joint.find("origin")
-    if origin is None:
-        origin = ET.SubElement(joint, "origin")
-    origin.set("xyz", " ".join(repr(float(v)) for v in xyz))
-    origin.set("rpy", " ".join(repr(float(v)) for v in rpy))
+    _write_origin(_joint_named(root, name, source), T)
 
 
 def rebase_mesh_paths(root: ET.Element, from_dir: Path, to_dir: Path) -> None:

@@ -117,6 +117,10 @@ def touch(
     raise InputError(f"{frame} cannot touch the reference tip at {np.round(p_R, 4).tolist()} m")
 
 
+#: The tools that touch the reference tips: session name, their frame, the arm's joints. The
+#: needle and the probe also make the three-point axes moves.
+TOUCH_TOOLS = (("top_model", TOP_MODEL_TIP, RIGHT), ("needle", NEEDLE_TIP, RIGHT), ("probe", PROBE_TIP, LEFT))
+
 #: Where the three-point moves start, per tool: in front of the robot, each on its arm's side.
 AXES_START = {"needle": np.array([0.70, -0.10, 0.95]), "probe": np.array([0.70, 0.15, 0.95])}
 
@@ -177,17 +181,12 @@ def exact_session(
 
     touches = {}
     for reference, p_R in (("rtip1", truth.p_R_Rtip1), ("rtip2", truth.p_R_Rtip2)):
-        for tool, frame, arm in (
-            ("top_model", TOP_MODEL_TIP, RIGHT),
-            ("needle", NEEDLE_TIP, RIGHT),
-            ("probe", PROBE_TIP, LEFT),
-        ):
+        for tool, frame, arm in TOUCH_TOOLS:
             q = np.array([touch(physical, frame, arm, p_R, k, trials, q_home, seed) for k in range(trials)])
             touches[tool, reference] = Touches(np.arange(1, trials + 1), q)
 
     axes = {
-        tool: axes_moves(physical, frame, arm, AXES_START[tool], q_home, seed)
-        for tool, frame, arm in (("needle", NEEDLE_TIP, RIGHT), ("probe", PROBE_TIP, LEFT))
+        tool: axes_moves(physical, frame, arm, AXES_START[tool], q_home, seed) for tool, frame, arm in TOUCH_TOOLS[1:]
     }
 
     width, height = truth.size_px

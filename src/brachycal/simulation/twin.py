@@ -37,11 +37,20 @@ from scipy.spatial.transform import Rotation
 
 from brachycal.data.session import Session, Touches
 from brachycal.model.ik import solve_ik
-from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, TOP_MODEL_TIP, US_IMAGE
+from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.planning import PlanSpec, plan_poses
 from brachycal.se3 import FloatArray, make_transform, transform_points
-from brachycal.simulation.exact import AXES_START, LEFT, RIGHT, SessionTruth, axes_moves, default_truth, touch
+from brachycal.simulation.exact import (
+    AXES_START,
+    LEFT,
+    RIGHT,
+    TOUCH_TOOLS,
+    SessionTruth,
+    axes_moves,
+    default_truth,
+    touch,
+)
 
 STREAMS = ("robot", "tools", "jog", "encoder", "beam", "annotation", "outliers", "targets")
 SCANNER_SOUND_SPEED = 1540.0
@@ -174,11 +183,7 @@ def simulate(nominal: Robot, config: TwinConfig = TwinConfig()) -> Twin:
     q_home[LEFT] = q_home[RIGHT] = [0.3, -1.0, 0.0, -1.3, 0.0, -0.6, 0.0]
     touches = {}
     for reference, p_R in (("rtip1", truth.p_R_Rtip1), ("rtip2", truth.p_R_Rtip2)):
-        for tool, frame, arm in (
-            ("top_model", TOP_MODEL_TIP, RIGHT),
-            ("needle", NEEDLE_TIP, RIGHT),
-            ("probe", PROBE_TIP, LEFT),
-        ):
+        for tool, frame, arm in TOUCH_TOOLS:
             q = [
                 touch(physical, frame, arm, p_R + jog(), k, config.trials, q_home, config.seed)
                 for k in range(config.trials)
@@ -190,7 +195,7 @@ def simulate(nominal: Robot, config: TwinConfig = TwinConfig()) -> Twin:
             point: read(q)
             for point, q in axes_moves(physical, frame, arm, AXES_START[tool], q_home, config.seed).items()
         }
-        for tool, frame, arm in (("needle", NEEDLE_TIP, RIGHT), ("probe", PROBE_TIP, LEFT))
+        for tool, frame, arm in TOUCH_TOOLS[1:]
     }
 
     plan = plan_poses(nominal, config.spec)
