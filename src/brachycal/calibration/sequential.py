@@ -137,6 +137,23 @@ def calibrate(
     )
 
 
+def loo_points(session: Session, robot: Robot, result: CalibrationResult, method: str) -> tuple[FloatArray, FloatArray]:
+    """``(P_real (N, 3), P_cal (N, 3))`` of one method's leave-one-out, for figures (Fig. 10).
+
+    The same folds as :attr:`CalibrationResult.loocv`, ICP started from the model's ``us_image``.
+    """
+    return image_to_probe.leave_one_out_points(
+        method,
+        session.uv_px,
+        robot.fk(RIGHT_FLANGE, session.samples_q),
+        robot.fk(LEFT_FLANGE, session.samples_q),
+        result.T_ER_Ntip[:3, 3],
+        result.T_EL_Ptip,
+        session.spacing_m,
+        robot.tool_transform(US_IMAGE)[1],
+    )
+
+
 def locate(
     robot: Robot, q: FloatArray, uv_px: FloatArray, T_EL_Ptip: FloatArray, calibration: ImageCalibration
 ) -> FloatArray:

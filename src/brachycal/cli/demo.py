@@ -15,11 +15,12 @@ from pathlib import Path
 import numpy as np
 
 from brachycal.calibration import METHODS, calibrate, write_result
-from brachycal.calibration.image_to_probe import METHOD_LABELS, leave_one_out_points
+from brachycal.calibration.image_to_probe import METHOD_LABELS
 from brachycal.calibration.metrics import ErrorStats
+from brachycal.calibration.sequential import loo_points
 from brachycal.data.session import read_session
 from brachycal.files import bundled
-from brachycal.model import LEFT_FLANGE, RIGHT_FLANGE, Robot
+from brachycal.model import Robot
 from brachycal.reporting import table_i, table_ii, table_iii, targeting_table
 from brachycal.reporting.figures import error_histogram, method_comparison, points_3d
 from brachycal.simulation.nwire_twin import NWireSimConfig, tracker_route
@@ -134,18 +135,7 @@ def run(args: argparse.Namespace) -> int:
 
     report = out / "report"
     report.mkdir(exist_ok=True)
-    T_R_ER = robot.fk(RIGHT_FLANGE, session.samples_q)
-    T_R_EL = robot.fk(LEFT_FLANGE, session.samples_q)
-    p_real, p_cal = leave_one_out_points(
-        "icp",
-        session.uv_px,
-        T_R_ER,
-        T_R_EL,
-        result.T_ER_Ntip[:3, 3],
-        result.T_EL_Ptip,
-        session.spacing_m,
-        robot.tool_transform("us_image")[1],
-    )
+    p_real, p_cal = loo_points(session, robot, result, "icp")
     figures = [
         points_3d(p_real, p_cal, report / "fig10_points.png", "Fig. 10 (e): real and calibrated points (ICP, LOO)"),
         error_histogram(

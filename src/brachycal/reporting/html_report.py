@@ -13,11 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from brachycal.calibration.image_to_probe import METHOD_LABELS, leave_one_out_points
+from brachycal.calibration.image_to_probe import METHOD_LABELS
 from brachycal.calibration.metrics import ErrorStats
-from brachycal.calibration.sequential import CalibrationResult
+from brachycal.calibration.sequential import CalibrationResult, loo_points
 from brachycal.data.session import Session
-from brachycal.model.names import LEFT_FLANGE, RIGHT_FLANGE, US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.reporting.figures import error_histogram, points_3d, residuals_per_sample
 from brachycal.reporting.tables import chain_summary, table_i, table_ii
@@ -43,19 +42,8 @@ def write_report(
     """Write ``folder/report.html`` (and its PNG figures); returns the HTML path."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    T_R_ER = robot.fk(RIGHT_FLANGE, session.samples_q)
-    T_R_EL = robot.fk(LEFT_FLANGE, session.samples_q)
     best = min(result.loocv, key=lambda m: result.loocv[m].rmse_mm)
-    p_real, p_cal = leave_one_out_points(
-        best,
-        session.uv_px,
-        T_R_ER,
-        T_R_EL,
-        result.T_ER_Ntip[:3, 3],
-        result.T_EL_Ptip,
-        session.spacing_m,
-        robot.tool_transform(US_IMAGE)[1],
-    )
+    p_real, p_cal = loo_points(session, robot, result, best)
     label = METHOD_LABELS[best]
     figures = [
         error_histogram(
