@@ -101,6 +101,8 @@ def run_one(params: RunParams) -> list[dict[str, object]]:
                 "target_sd_mm": hit.sd_mm,
                 "target_max_mm": hit.max_mm,
                 "needle_tip_error_mm": float(np.linalg.norm(tip[:3, 3] - twin.truth.T_ER_Ntip[:3, 3]) * 1e3),
+                "table1_needle_mae_mm": result.needle.validation.mae_mm,
+                "table1_probe_mae_mm": result.probe.validation.mae_mm,
             }
         )
     return rows
@@ -177,7 +179,16 @@ def summarise(rows: Sequence[dict[str, object]]) -> list[dict[str, object]]:
     for key, members in groups.items():
         entry: dict[str, object] = dict(zip(keys, key, strict=True))
         entry["seeds"] = len(members)
-        for figure in ("loo_mae_mm", "loo_rmse_mm", "target_mae_mm", "target_rmse_mm", "target_max_mm"):
+        for figure in (
+            "loo_mae_mm",
+            "loo_rmse_mm",
+            "loo_sd_mm",
+            "target_mae_mm",
+            "target_rmse_mm",
+            "target_max_mm",
+            "table1_needle_mae_mm",
+            "table1_probe_mae_mm",
+        ):
             values = np.array([m[figure] for m in members], dtype=float)
             entry[f"{figure}_mean"] = float(values.mean())
             entry[f"{figure}_sd"] = float(values.std())

@@ -16,9 +16,10 @@ and its own random stream (so switching one source off does not change the other
 - ``outliers`` (off by default): a fraction (10 %) of annotations are gross mistakes, 15–40 px off.
 
 With these defaults the twin reproduces the paper's figures: Table I MAE ≈ 0.18 mm (needle) and
-0.29 mm (probe) against the paper's 0.19 and 0.19; Table II (Kabsch) MAE / RMSE / SD ≈ 0.63 /
-0.69 / 0.29 mm against 0.65 / 0.71 / 0.30 (mean of seeds 0–5), and half of that without the
-sound-speed stretch.
+0.28 mm (probe) against the paper's 0.19 and 0.19; Table II (Kabsch) MAE / RMSE / SD ≈ 0.62 /
+0.69 / 0.28 mm against 0.65 / 0.71 / 0.30, and 0.32 mm MAE without the sound-speed stretch
+(mean of seeds 0–5: ``brachycal study --points 4 --annotation-px 1 --seeds 6 --methods kabsch
+--sound both``).
 
 The session follows the paper's protocol: three touches per tool and reference tip (top-model,
 needle and probe on ``rtip1`` and ``rtip2``), three-point axes moves, and one image per planned
