@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
-from collections.abc import Sequence
+import threading
+import warnings
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 
 from brachycal import __version__
 from brachycal.cli import calibrate, demo, design, export, fk, locate, model, nwire, pivot, plan, study
-from brachycal.errors import InputError
+from brachycal.errors import BrachycalError
 
 DESCRIPTION = """\
 brachycal calibrates an ultrasound-guided dual-arm robot (Yaskawa SDA10F) for prostate
@@ -37,32 +41,79 @@ start here:
 """
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line (what is wrong, and where to read more), exit code 2."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="brachycal", description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--version", action="version", version=f"brachycal {__version__}")
-    sub = parser.add_subparsers(title="commands", metavar="COMMAND", required=True)
+    sub = parser.add_subparsers(title="commands", metavar="COMMAND", required=True, parser_class=OneLineParser)
     for module in (demo, model, fk, plan, calibrate, locate, export, pivot, nwire, study, design):
         module.add_parser(sub)
     return parser
 
 
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread so that staged outputs are removed as on Ctrl-C."""
+
+
+def _raise_terminated(signum: int, frame: object) -> None:
+    raise Terminated
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    print(f"brachycal: warning: {' '.join(str(message).split())}", file=sys.stderr)
+
+
+@contextmanager
+def _command_environment() -> Iterator[None]:
+    """What the command line (and only it) sets for the process: one-line warnings, SIGTERM."""
+    in_main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _raise_terminated) if in_main_thread else None
+    with warnings.catch_warnings():
+        warnings.showwarning = _show_warning
+        warnings.simplefilter("default")
+        # Library chatter a user cannot act on (NumPy on a refused input, parser notices).
+        warnings.filterwarnings("ignore", category=RuntimeWarning)
+        try:
+            yield
+        finally:
+            if in_main_thread:
+                signal.signal(signal.SIGTERM, previous)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        return int(args.run(args) or 0)
-    except InputError as exc:
+        with _command_environment():
+            return int(args.run(args) or 0)
+    except BrachycalError as exc:
         print(f"brachycal: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("brachycal: interrupted", file=sys.stderr)
-        return 130
     except BrokenPipeError:
         # The reader went away (e.g. `| head`): stop quietly, as Unix tools do.
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 141
+    except OSError as exc:
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"brachycal: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
+    except MemoryError:
+        print("brachycal: error: out of memory (ask for less: fewer points, samples or targets)", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("brachycal: interrupted", file=sys.stderr)
+        return 130
+    except Terminated:
+        print("brachycal: terminated", file=sys.stderr)
+        return 143
 
 
 if __name__ == "__main__":
