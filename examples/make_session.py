@@ -11,10 +11,10 @@ come from the digital twin.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 from brachycal.data.session import write_session
+from brachycal.files import write_json
 from brachycal.model import Robot
 from brachycal.simulation import default_truth, exact_session
 
@@ -24,19 +24,17 @@ def main() -> None:
     truth = default_truth(robot)
     folder = Path(__file__).with_name("session_exact")
     write_session(exact_session(robot, truth), folder, force=True)
-    (folder / "truth.json").write_text(
-        json.dumps(
-            {
-                "format": "brachycal-truth/1",
-                "ER_T_Ntip": truth.T_ER_Ntip.tolist(),
-                "EL_T_Ptip": truth.T_EL_Ptip.tolist(),
-                "Ptip_T_I": truth.T_Ptip_I.tolist(),
-                "spacing_mm": (truth.spacing_m * 1e3).tolist(),
-                "reference_tips_m": {"rtip1": truth.p_R_Rtip1.tolist(), "rtip2": truth.p_R_Rtip2.tolist()},
-            },
-            indent=2,
-        )
-        + "\n"
+    write_json(
+        folder / "truth.json",
+        {
+            "format": "brachycal-truth/1",
+            "ER_T_Ntip": truth.T_ER_Ntip.tolist(),
+            "EL_T_Ptip": truth.T_EL_Ptip.tolist(),
+            "Ptip_T_I": truth.T_Ptip_I.tolist(),
+            "spacing_mm": (truth.spacing_m * 1e3).tolist(),
+            "reference_tips_m": {"rtip1": truth.p_R_Rtip1.tolist(), "rtip2": truth.p_R_Rtip2.tolist()},
+        },
+        force=True,
     )
     print(f"wrote {folder}")
 

@@ -1,4 +1,8 @@
-"""Whole-chain calibration: exactness, robustness, model choice, honest uncertainty, designs."""
+"""Whole-chain calibration: exactness, robustness, model choice, calibrated uncertainty, conditioning, designs.
+
+The coverage figures over many sessions (the README's) come from ``benchmarks/chain_checks.py``;
+the tests here are the smaller, two-sided checks that run in CI.
+"""
 
 from __future__ import annotations
 
@@ -7,11 +11,27 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from scipy.optimize import approx_fprime
+from scipy.spatial.transform import Rotation
+from scipy.stats import chi2
 
 from brachycal.calibration import calibrate
-from brachycal.calibration.chain import MODELS, fit_chain, identifiable_joint_offsets, select_model
-from brachycal.calibration.uncertainty import inside_ellipsoid, interval, landing_covariance
+from brachycal.calibration.chain import (
+    MODELS,
+    ROTATION_SD_LIMIT,
+    _Data,
+    _jacobian,
+    _Layout,
+    _residuals,
+    _start,
+    fit_chain,
+    identifiable_joint_offsets,
+    select_model,
+)
+from brachycal.calibration.chain_report import WARN_LANDING_RMS_MM, calibrate_chain
+from brachycal.calibration.uncertainty import bootstrap, interval, landing_covariance
 from brachycal.cli.main import main
+from brachycal.errors import DegenerateDataError
 from brachycal.simulation.design import grid_offsets, optimal_offsets
 from brachycal.simulation.targeting import targeting_error
 from brachycal.simulation.twin import TwinConfig, simulate
@@ -29,9 +49,34 @@ def test_noise_free_twin_every_image_model_is_exact(robot):
     for model in MODELS:
         fit = fit_chain(twin.session, robot, initial, model)
         assert np.abs(fit.T_ER_Ntip - twin.truth.T_ER_Ntip).max() < 1e-9, model
-        assert np.abs(fit.T_EL_Ptip @ fit.image.T_Ptip_I - twin.truth.T_EL_Ptip @ twin.truth.T_Ptip_I).max() < 1e-9
+        assert np.abs(fit.T_EL_I() - twin.truth.T_EL_Ptip @ twin.truth.T_Ptip_I).max() < 1e-9
         assert np.abs(fit.image.spacing_m - twin.truth.spacing_m).max() < 1e-15
         assert not fit.outliers.any()
+        # Exact data have no noise to measure: said so, not printed as a noise level.
+        assert fit.noise["image"].source == fit.noise["touch"].source == "below resolution"
+
+
+def test_analytic_jacobian_matches_central_differences(robot, stretched):
+    twin, sequential = stretched
+    data = _Data.of(twin.session, robot)
+    rng = np.random.default_rng(0)
+    sigma = {"touch": 1e-4, "axes": 2e-4, "image": 3e-4}
+    use = rng.random(len(twin.session.uv_px)) > 0.2
+    for model in MODELS:
+        layout = _Layout(model)
+        x, base = _start(sequential, layout, data.spacing_m)
+        for name in ("rot_ER_Ntip", "rot_EL_Ptip", "rot_Ptip_I"):  # away from the start: J_l(ω) ≠ I matters
+            x[layout.blocks()[name]] += rng.normal(scale=0.05, size=3)
+        step = 1e-6
+
+        def r(x: np.ndarray, layout=layout, base=base) -> np.ndarray:
+            return _residuals(x, layout, data, base, sigma, use)
+
+        numeric = np.column_stack([(r(x + step * e) - r(x - step * e)) / (2 * step) for e in np.eye(len(x))])
+        analytic = _jacobian(x, layout, data, base, sigma, use)
+        # Central differences are exact to ~1e-10 of the largest entry here (step² × curvature,
+        # rounding / step); a wrong term would be off by its own size.
+        assert np.abs(analytic - numeric).max() < 1e-8 * np.abs(numeric).max(), model
 
 
 def test_chain_beats_the_papers_rigid_method_fourfold_under_a_4_percent_stretch(robot, stretched):
@@ -45,9 +90,11 @@ def test_chain_beats_the_papers_rigid_method_fourfold_under_a_4_percent_stretch(
     assert chain.mae_mm <= paper.mae_mm / 4
 
 
-def test_gross_outliers_are_flagged_and_barely_matter(robot):
-    clean = simulate(robot, TwinConfig(seed=2))
-    dirty = simulate(robot, replace(TwinConfig(seed=2), outliers=True))
+@pytest.mark.parametrize("seed", [2, 5, 9])
+@pytest.mark.filterwarnings("ignore::brachycal.errors.ConditioningWarning")  # the sequential start, on the mistakes
+def test_gross_outliers_are_flagged_left_out_and_barely_matter(robot, seed):
+    clean = simulate(robot, TwinConfig(seed=seed))
+    dirty = simulate(robot, replace(TwinConfig(seed=seed), outliers=True))
     assert dirty.outlier.sum() >= 3
     hits = []
     for twin in (clean, dirty):
@@ -55,6 +102,12 @@ def test_gross_outliers_are_flagged_and_barely_matter(robot):
         fit = fit_chain(twin.session, robot, initial, "sound_speed")
         hits.append(targeting_error(twin, fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image, 30).stats.mae_mm)
         assert np.array_equal(fit.outliers, twin.outlier)
+    # Left out, not down-weighted: the fit equals the fit without those samples (to its solver's tolerance).
+    without = fit_chain(dirty.session, robot, initial, "sound_speed", samples=~dirty.outlier)
+    assert np.abs(without.x - fit.x).max() < 1e-9
+    # Over seeds 0-19 the ratio runs 0.89-1.17, median 1.03 (benchmarks/chain_checks.py, section 2):
+    # 1.2 is the README's bound, which a fit that kept the mistakes broke on 3 of 10 seeds (up to 1.86).
+    # Here (sound-speed model) seeds 2, 5, 9 run 1.16, 1.15, 0.89: 2 and 5 among the highest, where the bound is tight.
     assert hits[1] <= 1.2 * hits[0]
 
 
@@ -69,19 +122,77 @@ def test_without_a_stretch_the_simplest_model_is_chosen(robot):
     )
 
 
-def test_stated_95_percent_intervals_cover_the_truth(robot):
-    runs, covered_c, inside, total = 8, 0, 0, 0
-    for seed in range(runs):
-        twin = simulate(robot, TwinConfig(seed=10 + seed))
+def _parameter_errors(fit, truth) -> tuple[np.ndarray, np.ndarray]:
+    """Error of every quantity the data determine with their own noise level, and its covariance.
+
+    The needle and probe tips, the reference tips, the depth scale and the image frame on the left
+    flange (rotation vector and origin). Left out: the tool rotations alone, which rest on the
+    axes moves' assumed noise level (the touches', deliberately conservative).
+    """
+    T_true = truth.T_EL_Ptip @ truth.T_Ptip_I
+    direct = [("p_ER_Ntip", truth.T_ER_Ntip[:3, 3]), ("p_EL_Ptip", truth.T_EL_Ptip[:3, 3])]
+    direct += [("p_R_Rtip1", truth.p_R_Rtip1), ("p_R_Rtip2", truth.p_R_Rtip2)]
+    direct += [("scale", np.array([truth.spacing_m[1] / truth.nominal_spacing_m[1]]))]
+    rows, errors = [], []
+    for name, true in direct:
+        k = fit.block(name)
+        rows.append(np.eye(len(fit.x))[k])
+        errors.append(fit.x[k] - true)
+
+    def image_frame(x: np.ndarray) -> np.ndarray:
+        T = fit.T_EL_I(x)
+        return np.r_[Rotation.from_matrix(T[:3, :3] @ T_true[:3, :3].T).as_rotvec(), T[:3, 3] - T_true[:3, 3]]
+
+    rows.append(approx_fprime(fit.x, image_frame, 1e-8))
+    errors.append(image_frame(fit.x))
+    G = np.vstack(rows)
+    return np.concatenate(errors), G @ fit.covariance @ G.T
+
+
+def test_stated_uncertainty_is_calibrated_on_both_sides(robot):
+    """Standardised errors over 8 sessions of a twin whose robot is exactly its model (the
+    covariance's premise: it carries the session's noise, not the robot model's own error; the
+    default twin's coverage, with that error, is the benchmark's section 1).
+
+    Under the model, each session's 19 parameter errors (tips, reference tips, depth scale, image
+    frame) give d² ~ χ²₁₉ and each session's landing error at one target d² ~ χ²₃, independent across
+    sessions: Σd² ~ χ²₁₅₂ and χ²₂₄. The two-sided 99 % bounds (Σd²/152 in 0.73..1.31) fail both a
+    covariance 1.3× too wide in SD (as the robust-loss covariance was for the speed of sound:
+    expected 0.59) and 1.3× too narrow (1.69), each with probability > 0.95; a calibrated one
+    fails with probability 0.01.
+    """
+    runs, parameter_d2, landing_d2, parameter_dof = 8, 0.0, 0.0, 0
+    for seed in range(10, 10 + runs):
+        twin = simulate(robot, replace(TwinConfig(seed=seed), kinematic_error=False))
         fit = fit_chain(twin.session, robot, calibrate(twin.session, robot, ("scaled_uv",)), "sound_speed")
-        low, high = interval(fit, 24)
-        covered_c += low * 1540 <= 1482 <= high * 1540
-        hit = targeting_error(twin, fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image, 15)
-        C = landing_covariance(fit, robot, twin.session.spacing_m, hit.q_read, hit.uv_px)
-        ok = inside_ellipsoid(hit.landed_m - hit.targets_m, C)
-        inside, total = inside + ok.sum(), total + len(ok)
-    assert covered_c >= runs - 2
-    assert 0.85 <= inside / total <= 1.0
+        error, C = _parameter_errors(fit, twin.truth)
+        parameter_d2 += error @ np.linalg.solve(C, error)
+        parameter_dof += len(error)
+        exact_reading = replace(twin, config=replace(twin.config, encoder_noise=False))  # the calibration's part
+        hit = targeting_error(exact_reading, fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image, 1)
+        C_land = landing_covariance(fit, robot, twin.session.spacing_m, hit.q_read, hit.uv_px)[0]
+        e = hit.landed_m[0] - hit.targets_m[0]
+        landing_d2 += e @ np.linalg.solve(C_land, e)
+    assert parameter_dof == 19 * runs
+    low, high = chi2.ppf([0.005, 0.995], parameter_dof)
+    assert low <= parameter_d2 <= high, (parameter_d2 / parameter_dof, low / parameter_dof, high / parameter_dof)
+    low, high = chi2.ppf([0.005, 0.995], 3 * runs)
+    assert low <= landing_d2 <= high, landing_d2 / (3 * runs)
+
+
+def test_bootstrap_sees_the_touches(robot, stretched):
+    twin, sequential = stretched
+    fit = fit_chain(twin.session, robot, sequential, "sound_speed")
+    boot = bootstrap(twin.session, robot, fit, 200, seed=1)
+    for name in ("p_ER_Ntip", "p_EL_Ptip", "sound_speed_m_s"):
+        lo, hi = boot.interval(name)
+        block = fit.block("scale" if name == "sound_speed_m_s" else name)
+        unit = 1540.0 if name == "sound_speed_m_s" else 1.0
+        stated = 1.96 * fit.parameter_sd()[block] * unit
+        # Percentile half-widths from 200 replicates scatter by ~10 % around the covariance's for
+        # linear, Gaussian-like data; images-only resampling gave the tips 0.000-0.048 mm (ratio < 0.5).
+        ratio = (np.asarray(hi) - np.asarray(lo)) / 2 / stated
+        assert np.all((0.7 < ratio) & (ratio < 1.4)), (name, ratio)
 
 
 def test_joint_offset_identifiability(robot, stretched):
@@ -93,6 +204,56 @@ def test_joint_offset_identifiability(robot, stretched):
     assert min(ratios[f"arm_right_joint_{j}"] for j in ("1_s", "2_l", "3_e", "4_u", "5_r", "6_b")) > 0.05
 
 
+# --- conditioning -----------------------------------------------------------------------------------
+def _subset(session, rows):
+    rows = np.asarray(rows)
+    return replace(
+        session,
+        samples_q=session.samples_q[rows],
+        uv_px=session.uv_px[rows],
+        sample_ids=[f"s{i}" for i in range(len(rows))],
+    )
+
+
+def test_samples_at_one_robot_pose_are_refused_not_reported_as_exact(robot, stretched):
+    twin, sequential = stretched
+    one_pose = _subset(twin.session, np.zeros(64, dtype=int))  # before: predicted landing error 0.000 mm
+    for model in MODELS:
+        with pytest.raises(DegenerateDataError, match=r"samples\.csv.*not determined.*1 distinct robot pose"):
+            fit_chain(one_pose, robot, sequential, model)
+    with pytest.raises(DegenerateDataError, match="not determined"):
+        calibrate_chain(one_pose, robot, sequential)
+
+
+def test_samples_without_spread_are_refused(robot, stretched):
+    twin, sequential = stretched
+    uv = twin.session.uv_px
+    patch = _subset(twin.session, np.argsort(np.linalg.norm(uv - uv[0], axis=1))[:4])  # 4 images within ~2 px
+    limit = f"limit {np.degrees(ROTATION_SD_LIMIT):.1f}"
+    with pytest.raises(DegenerateDataError, match=f"image rotation is determined only to .*{limit}"):
+        fit_chain(patch, robot, sequential, "rigid")
+    one_pose = _subset(twin.session, np.zeros(64, dtype=int))  # and pixels scattered by 1 px
+    jitter = replace(one_pose, uv_px=uv[0] + np.random.default_rng(0).normal(size=(64, 2)))
+    with pytest.raises(DegenerateDataError, match=r"samples\.csv"):
+        fit_chain(jitter, robot, sequential, "rigid")
+
+
+def test_samples_in_part_of_the_image_warn_with_the_honest_figure(robot, tmp_path, capsys):
+    from conftest import ROOT
+
+    from brachycal.data.session import read_session, write_session
+
+    full = read_session(ROOT / "examples" / "twin_session", robot)
+    write_session(_subset(full, np.arange(16)), tmp_path / "session")  # 16 images: determined, not across the image
+    out = tmp_path / "result.json"
+    assert main(["calibrate", str(tmp_path / "session"), "--out", str(out), "--method", "chain", "--quiet"]) == 0
+    warned = [line for line in capsys.readouterr().err.splitlines() if "whole chain" in line]
+    assert len(warned) == 1 and warned[0].startswith("brachycal: warning: whole chain: predicted landing error up to")
+    image_map = json.loads(out.read_text())["chain"]["predicted_landing_rms_mm"]["image_map"]["rms_mm"]
+    assert max(image_map) > WARN_LANDING_RMS_MM  # the honest figure is in the result
+
+
+# --- the command ------------------------------------------------------------------------------------
 def test_calibrate_chain_cli_and_locate_with_joint_offsets(tmp_path, capsys):
     from conftest import ROOT
 
@@ -115,12 +276,18 @@ def test_calibrate_chain_cli_and_locate_with_joint_offsets(tmp_path, capsys):
         )
         == 0
     )
-    text = capsys.readouterr().out
+    captured = capsys.readouterr()
+    text = captured.out
+    assert "warning" not in captured.err  # a session that spans the cube is in the clear
     assert "WHOLE-CHAIN CALIBRATION" in text and "Whole chain" in text and "speed of sound" in text
+    assert "axes moves" in text and "assumed" in text  # the axes group's level is said to be assumed
     raw = json.loads(out.read_text())
     chain = raw["chain"]
     assert chain["model"] in MODELS and set(chain["model_selection"]["evidence"]) == set(MODELS)
     assert chain["joint_offsets_rad"] and "bootstrap_spacing_m" in chain["intervals_95"]
+    assert "bootstrap_p_ER_Ntip" in chain["intervals_95"] and "bootstrap_p_EL_Ptip" in chain["intervals_95"]
+    assert chain["noise"]["axes"]["source"] == "assumed" and chain["noise"]["image"]["source"] == "residuals"
+    assert chain["conditioning"]["rcond"] > chain["conditioning"]["rcond_limit"]
     assert set(raw["transforms"]["Ptip_T_I"]) == {"chain"} and "sequential" in raw
     assert len(raw["loocv"]["chain"]["errors_mm"]) == 64
     joints = tmp_path / "q.csv"
@@ -140,3 +307,44 @@ def test_optimal_design_is_a_subset_of_the_candidates(robot):
     candidates = {tuple(np.round(p, 9)) for p in grid_offsets(5, 0.04)}
     assert len({tuple(np.round(p, 9)) for p in chosen}) == 10
     assert all(tuple(np.round(p, 9)) in candidates for p in chosen)
+
+
+def test_interval_of_a_named_block(robot, stretched):
+    twin, sequential = stretched
+    fit = fit_chain(twin.session, robot, sequential, "sound_speed")
+    low, high = interval(fit, "scale")
+    assert low[0] * 1540 < fit.sound_speed_m_s < high[0] * 1540
+    assert np.allclose((high - low) / 2, 1.959964 * fit.parameter_sd()[fit.block("scale")], rtol=1e-6)
+
+
+def test_a_model_the_data_cannot_determine_is_left_out_of_the_choice(robot, stretched, monkeypatch):
+    from brachycal.calibration import chain
+    from brachycal.calibration.metrics import ErrorStats
+
+    twin, sequential = stretched
+    n = len(twin.session.uv_px)
+    refusal = "whole chain: the pixel scale is not determined by the data"
+
+    def fake_fit(session, robot, initial, model, **kwargs):
+        if model == "scaled_uv":
+            raise DegenerateDataError(refusal)
+        return replace(fit, outliers=np.zeros(n, dtype=bool))
+
+    def fake_cv(session, robot, initial, model, folds=8, seed=0, exclude=None):
+        if model == "sound_speed":
+            raise DegenerateDataError(refusal)
+        return ErrorStats(np.full(n, {"rigid": 3e-4, "similarity": 2e-4}[model]) * (1 + np.arange(n) / n))
+
+    fit = fit_chain(twin.session, robot, sequential, "rigid")
+    monkeypatch.setattr(chain, "fit_chain", fake_fit)
+    monkeypatch.setattr(chain, "cross_validate", fake_cv)
+    choice = chain.select_model(twin.session, robot, sequential)
+    assert set(choice.undetermined) == {"scaled_uv", "sound_speed"} and set(choice.cv) == {"rigid", "similarity"}
+    assert choice.model == "similarity"  # the better of the determined ones (one SE apart)
+
+    def refuse(*args, **kwargs):
+        raise DegenerateDataError(refusal)
+
+    monkeypatch.setattr(chain, "cross_validate", refuse)  # no model left
+    with pytest.raises(DegenerateDataError, match="not determined"):
+        chain.select_model(twin.session, robot, sequential)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +11,8 @@ from conftest import random_configurations
 
 from brachycal import InputError
 from brachycal.data import read_csv_log, read_joint_log
+from brachycal.data.joint_log import LIMIT_TOLERANCE_RAD, configurations_from_columns
+from brachycal.errors import BrachycalWarning
 
 
 def write_log(path: Path, names: list[str], time: np.ndarray, values: np.ndarray) -> Path:
@@ -114,6 +117,43 @@ def test_values_outside_joint_limits(good_log, robot):
     )
 
 
+def test_readings_within_the_encoder_tolerance_of_a_limit_are_kept_with_one_warning(good_log, robot):
+    # The issue's case: 1.919869 rad read against the limit 1.9198622 (6.8e-6 rad over, encoder noise
+    # at a pose planned on the limit). Kept as read; one warning for the file names the first
+    # reading and counts them all.
+    edit(good_log, 5, "arm_left_joint_2_l", "1.919869")
+    edit(
+        good_log,
+        9,
+        "arm_right_joint_4_u",
+        repr(float(robot.lower[robot.joint_names.index("arm_right_joint_4_u")]) - 9e-4),
+    )
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        log = read_csv_log(good_log, robot)
+    assert [w.category for w in caught] == [BrachycalWarning]
+    message = str(caught[0].message)
+    assert message.startswith(
+        f"{good_log}, row 5, column 'arm_left_joint_2_l': value 1.919869 rad is 6.8e-06 rad beyond"
+    )
+    assert "2 reading(s)" in message and "kept as read" in message and "\n" not in message
+    assert log.q[3, robot.joint_names.index("arm_left_joint_2_l")] == 1.919869  # what the encoder said, not clipped
+
+
+def test_readings_beyond_the_encoder_tolerance_are_refused(good_log, robot):
+    k = robot.joint_names.index("arm_left_joint_2_l")
+    over = robot.upper[k] + LIMIT_TOLERANCE_RAD + 1e-5  # just past the stated tolerance
+    message = refusal(edit(good_log, 5, "arm_left_joint_2_l", repr(float(over))), robot)
+    assert "row 5, column 'arm_left_joint_2_l'" in message and "more than the 0.001 rad allowed" in message
+
+
+def test_a_joint_listed_twice_is_refused_by_the_validator_too(robot):
+    # Readers other than the CSV one (bags, sessions built in code) reach the same check.
+    names = [*robot.joint_names, "arm_left_joint_3_e"]
+    with pytest.raises(InputError, match=r"src, column 'arm_left_joint_3_e': joint listed twice \(columns 4 and 16\)"):
+        configurations_from_columns(robot, names, np.zeros((2, len(names))), source="src")
+
+
 def test_values_that_look_like_degrees(tmp_path, robot, log_data):
     time, Q = log_data
     path = write_log(tmp_path / "deg.csv", list(robot.joint_names), time, np.degrees(Q))
@@ -162,3 +202,17 @@ def test_blank_lines_keep_true_row_numbers(good_log, robot):
     good_log.write_text("\n".join(lines) + "\n")
     log = read_csv_log(good_log, robot)
     assert log.rows[:4].tolist() == [2, 3, 5, 6]
+
+
+def test_prismatic_joints_get_a_tolerance_in_metres():
+    # 1 µm beyond a linear axis' limit is encoder noise; the 1e-3 of a revolute joint would be 1 mm.
+    from brachycal.model import Robot
+
+    urdf = """<robot name="slide"><link name="a"/><link name="b"/>
+      <joint name="slide" type="prismatic"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/>
+        <limit lower="0" upper="0.1" effort="1" velocity="1"/></joint></robot>"""
+    slide = Robot(urdf, base_dir=".")
+    with pytest.warns(BrachycalWarning, match=r"row 1, column 'slide': value 0\.100000500 m is 5e-07 m beyond"):
+        configurations_from_columns(slide, ["slide"], [[0.1 + 5e-7]], source="s.csv")
+    with pytest.raises(InputError, match=r"by 2e-06 m \(more than the 1e-06 m allowed for encoder noise\)"):
+        configurations_from_columns(slide, ["slide"], [[0.1 + 2e-6]], source="s.csv")

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import DATA
+from conftest import reference
 from scipy.spatial.transform import Rotation
 
 from brachycal import InputError
@@ -30,10 +31,15 @@ from brachycal.data.plus_files import (
 from brachycal.se3 import inverse, make_transform
 from brachycal.simulation.nwire_twin import NWireSimConfig, simulate_nwire
 
-PLUS = DATA / "plus_fcal_nwire"
-CONFIG = PLUS / "PlusDeviceSet_fCal_Sim_SpatialCalibration_2.0.xml"
-FRAMES = PLUS / "fCal_3NWires_segmented_frames.xml"
-HEADER = PLUS / "fCal_Test_Validation_3NWires_fCal2.0.header.mha"
+
+def plus(name: str) -> Path:
+    """A file of PLUS's fCal 3-N-wire recording (outside data: skips the test where it is absent)."""
+    return reference("plus_fcal_nwire", name)
+
+
+CONFIG = "PlusDeviceSet_fCal_Sim_SpatialCalibration_2.0.xml"
+FRAMES = "fCal_3NWires_segmented_frames.xml"
+SEQUENCE = "fCal_Test_Validation_3NWires_fCal2.0.igs.mha"
 
 # PLUS's regression baseline for this recording (PlusLibData TestImages/
 # FreehandCalibration3NWires_fCal2.0.results.xml): Image->Probe (mm), validation 3D error as PLUS
@@ -62,8 +68,8 @@ PLUS_WIRE_2D_MEAN_PX = {
 
 @pytest.fixture(scope="module")
 def real():
-    config = read_plus_config(CONFIG)
-    calibration, validation = read_segmented_frames(FRAMES)
+    config = read_plus_config(plus(CONFIG))
+    calibration, validation = read_segmented_frames(plus(FRAMES))
     return config, calibration, validation
 
 
@@ -74,10 +80,10 @@ def test_readers(real):
     assert ("Phantom", "Reference") in config.transforms and config.approximate_spacing_m == pytest.approx(0.078e-3)
     assert len(calibration) == 190 and sum(f.ok for f in calibration) == 184
     assert len(validation) == 103 and all(f.ok for f in validation)
-    header, frames = read_sequence_header(HEADER)
+    header, frames = read_sequence_header(plus(SEQUENCE))
     assert header["DimSize"].split() == ["820", "616", "103"] and len(frames) == 103
     for k in (0, 50, 102):  # the sequence header carries the same tracker readings as the XML
-        T = sequence_transform(frames[k], "ProbeToTrackerTransform", HEADER, k)
+        T = sequence_transform(frames[k], "ProbeToTrackerTransform", plus(SEQUENCE), k)
         assert np.allclose(T, validation[k].T_tracker_probe, atol=1e-12)
 
 
@@ -98,7 +104,9 @@ def test_unsafe_and_malformed_xml_is_refused(tmp_path):
     with pytest.raises(InputError, match="no N-wire patterns"):
         read_plus_config(empty)
     bad = tmp_path / "frames.xml"
-    bad.write_text(FRAMES.read_text().replace('Name="ProbeToTrackerTransform" Value="0.239045', 'Name="X" Value="0'))
+    bad.write_text(
+        plus(FRAMES).read_text().replace('Name="ProbeToTrackerTransform" Value="0.239045', 'Name="X" Value="0')
+    )
     with pytest.raises(InputError, match=r"ValidationData Frame 0.*missing ProbeToTrackerTransform"):
         read_segmented_frames(bad)
 
@@ -163,10 +171,10 @@ def test_hand_eye_recovers_the_marker_mount():
 
 def test_cli(tmp_path, capsys):
     out = tmp_path / "nwire.json"
-    assert main(["nwire", str(CONFIG), str(FRAMES), "--out", str(out)]) == 0
+    assert main(["nwire", str(plus(CONFIG)), str(plus(FRAMES)), "--out", str(out)]) == 0
     assert "best 95% 0.540 ± 0.224" in capsys.readouterr().out
     payload = json.loads(out.read_text())
     assert payload["errors"]["affine"]["validation_3d"]["n"] == 309
     assert np.allclose(payload["affine_spacing_mm"], [0.08033, 0.07446], atol=1e-5)
-    assert main(["nwire", str(FRAMES), str(FRAMES), "--out", str(tmp_path / "x.json")]) == 2
+    assert main(["nwire", str(plus(FRAMES)), str(plus(FRAMES)), "--out", str(tmp_path / "x.json")]) == 2
     assert "no N-wire patterns" in capsys.readouterr().err

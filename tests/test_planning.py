@@ -153,3 +153,22 @@ def test_plan_with_a_calibration_result(tmp_path, capsys):
     out = tmp_path / "plan.csv"
     assert main(["plan", "--out", str(out), "--points", "2", "--result", str(result), "--quiet"]) == 0
     assert "planned 8 of 8 poses" in capsys.readouterr().out
+
+
+def test_a_point_whose_qp_fails_is_listed_as_solver_and_the_plan_is_refused(tmp_path, robot, monkeypatch, capsys):
+    # A start 1 rad past the left shoulder's limit makes every point's first QP infeasible (a real
+    # daqp failure): each point is listed with the reason "solver" and the solver's one-line
+    # message, the plan is refused with one line on stderr, and nothing is written.
+    import brachycal.planning.plan as planning
+
+    k = robot.joint_names.index("arm_left_joint_1_s")
+    start = planning.READY.copy()
+    start[k] = robot.upper[k] + 1.0
+    monkeypatch.setattr(planning, "READY", start)
+    out = tmp_path / "plan.csv"
+    assert main(["plan", "--out", str(out), "--points", "2", "--quiet"]) == 2
+    captured = capsys.readouterr()
+    assert captured.out.count(": solver — dual-arm IK: the QP solver daqp found no joint velocity") == 8
+    assert "outside its limits: arm_left_joint_1_s" in captured.out
+    assert captured.err.count("\n") == 1 and "8 of 8 grid points have no verified pose (solver: 8)" in captured.err
+    assert list(tmp_path.iterdir()) == []

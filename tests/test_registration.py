@@ -69,6 +69,26 @@ def test_kabsch_horn_and_icp_agree_on_noisy_correspondences(seed, kind, n):
     assert np.abs(T_k - T_i).max() < 1e-9
 
 
+@settings(max_examples=25, deadline=None)
+@given(seeds, st.sampled_from(["general", "planar"]), st.integers(5, 70))
+def test_global_icp_agrees_with_kabsch_from_any_start(seed, kind, n):
+    # The same jittered grids and noise as above, but ICP is given a random prior (any rotation, a
+    # translation of ~0.2 m): its 48 principal-axes starts find the fit Kabsch finds with the pairs.
+    rng = np.random.default_rng(seed)
+    T_true = random_pose(rng)
+    if kind == "planar":
+        cells = np.array([(i, j, 0) for i in range(9) for j in range(8)], dtype=float)
+        jitter = rng.uniform(-0.2, 0.2, size=(n, 3)) * [1.0, 1.0, 0.0]
+    else:
+        cells = np.array([(i, j, k) for i in range(5) for j in range(5) for k in range(3)], dtype=float)
+        jitter = rng.uniform(-0.2, 0.2, size=(n, 3))
+    src = (cells[rng.permutation(len(cells))[:n]] + jitter) * 0.05
+    dst = transform_points(T_true, src) + rng.normal(scale=3e-4, size=(n, 3))
+    result = registration.icp_global(src, dst[::-1], random_pose(rng), tie_m=np.sqrt(3) * 3e-4)
+    assert np.array_equal(result.match, np.arange(n)[::-1])
+    assert np.abs(result.T - registration.kabsch(src, dst)).max() < 1e-9
+
+
 @settings(max_examples=40, deadline=None)
 @given(seeds, st.integers(3, 40))
 def test_kabsch_matches_scipy_align_vectors(seed, n):

@@ -11,6 +11,7 @@ from brachycal.calibration import METHODS, calibrate, read_result, write_result
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.sequential import locate
 from brachycal.calibration.tool_rotation import tool_rotation
+from brachycal.errors import ConditioningWarning
 from brachycal.se3 import is_rigid, make_transform, transform_points
 from brachycal.simulation import default_truth, exact_session
 
@@ -48,7 +49,10 @@ def test_kabsch_horn_and_icp_agree(result):
 def test_axial_stretch_is_absorbed_only_by_the_two_scale_fit(robot):
     # Water at room temperature: depths (v) read ~4% long at the scanner's assumed sound speed.
     truth = default_truth(robot, spacing_scale=(1.0, 1.04))
-    result = calibrate(exact_session(robot, truth, probe_poses=2, grid=3), robot)
+    # The rigid fits' residual is the stretch itself (0.4 mm per coordinate over 18 samples): their
+    # predicted error 50 mm from the samples' centre exceeds 0.5 mm, and they say so.
+    with pytest.warns(ConditioningWarning, match=r"(icp|kabsch|horn): the image calibration is poorly determined"):
+        result = calibrate(exact_session(robot, truth, probe_poses=2, grid=3), robot)
     assert np.abs(result.image["scaled_uv"].spacing_m - truth.spacing_m).max() < 1e-15
     assert np.abs(result.image["scaled_uv"].T_Ptip_I - truth.T_Ptip_I).max() < 1e-9
     assert result.loocv["scaled_uv"].max_mm < 1e-6
@@ -75,7 +79,8 @@ def test_rotation_is_orthonormalised_when_moves_are_not_perpendicular():
     p_tip = np.array([0.0, 0.0, 0.1])
     T2 = make_transform(np.eye(3), [0.5, 0.02, 1.0])
     T3 = make_transform(np.eye(3), [0.5, 0.001, 1.02])  # 2.9° off perpendicular
-    rotation = tool_rotation(T1, T2, T3, p_tip)
+    with pytest.warns(ConditioningWarning, match=r"2\.86 deg off perpendicular"):  # 10 predicted SDs: not noise
+        rotation = tool_rotation(T1, T2, T3, p_tip)
     assert abs(rotation.axes_angle_deg - (90 - np.degrees(np.arctan(0.001 / 0.02)))) < 1e-9
     R = rotation.R_E_tool
     assert np.allclose(R.T @ R, np.eye(3), atol=1e-15) and np.isclose(np.linalg.det(R), 1.0)
@@ -100,7 +105,7 @@ def test_committed_example_session_is_reproducible_and_calibrates_to_its_truth(t
     import subprocess
     import sys
 
-    from conftest import ROOT
+    from conftest import ROOT, assert_same_files
 
     from brachycal.data.session import read_session
 
@@ -108,8 +113,11 @@ def test_committed_example_session_is_reproducible_and_calibrates_to_its_truth(t
     copy = tmp_path / "examples"
     shutil.copytree(ROOT / "examples", copy)
     subprocess.run([sys.executable, str(copy / "make_session.py")], check=True, capture_output=True)
-    for name in ("session.toml", "touches.csv", "axes.csv", "samples.csv", "truth.json"):
-        assert (copy / "session_exact" / name).read_text() == (example / name).read_text(), name
+    # Numbers within 1e-9 rad / 1e-9 m / 1e-6 px (conftest.TOLERANCE_*): regenerated elsewhere,
+    # the files differ from the committed ones in the last bits only.
+    assert_same_files(
+        copy / "session_exact", example, ["session.toml", "touches.csv", "axes.csv", "samples.csv", "truth.json"]
+    )
     truth = json.loads((example / "truth.json").read_text())
     result = calibrate(read_session(example, robot), robot)
     assert np.abs(result.T_ER_Ntip - truth["ER_T_Ntip"]).max() < 1e-9

@@ -94,6 +94,28 @@ def test_degrees_in_a_session(session_dir, robot):
     assert "axes.csv, row 3, column 'arm_right_joint_2_l': value 45 looks like degrees" in refused(session_dir, robot)
 
 
+def test_a_reading_within_the_encoder_tolerance_of_a_limit_is_calibrated_with_a_warning(session_dir, tmp_path, capsys):
+    # Issue 18: one sample read a few encoder counts beyond a limit (a pose planned on the limit)
+    # made calibrate refuse the whole session. Within 1e-3 rad it is kept as read, with a warning
+    # naming the file, row and joint; the first sample's wrist sits 0.05 rad inside its limit π.
+    edit(session_dir / "samples.csv", 2, "arm_right_joint_7_t", repr(np.pi + 7e-6))
+    out = tmp_path / "result.json"
+    assert main(["calibrate", str(session_dir), "--out", str(out)]) == 0
+    warnings = [line for line in capsys.readouterr().err.splitlines() if "warning:" in line]
+    assert len(warnings) == 1 and "samples.csv, row 2, column 'arm_right_joint_7_t'" in warnings[0]
+    assert "7e-06 rad beyond the joint limit" in warnings[0] and "kept as read" in warnings[0]
+    assert out.exists()
+
+
+def test_a_reading_beyond_the_encoder_tolerance_of_a_limit_is_refused(session_dir, tmp_path, capsys):
+    edit(session_dir / "axes.csv", 3, "arm_right_joint_7_t", repr(np.pi + 2e-3))
+    out = tmp_path / "result.json"
+    assert main(["calibrate", str(session_dir), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "axes.csv, row 3, column 'arm_right_joint_7_t'" in err
+    assert "outside the joint limits" in err and "more than the 0.001 rad allowed" in err and not out.exists()
+
+
 def test_duplicate_touch(session_dir, robot):
     lines = (session_dir / "touches.csv").read_text().splitlines()
     (session_dir / "touches.csv").write_text("\n".join([*lines, lines[1]]) + "\n")
@@ -157,7 +179,9 @@ def test_locate_cli(session_dir, tmp_path, capsys, robot, truth, exact):
     physical = truth.robot(robot)
     expected = physical.fk("us_image", q[1]) @ [540 * 0.19e-3, 300 * 0.19e-3, 0, 1]
     assert np.abs(p - expected[:3]).max() < 1e-8  # printed to 1e-9 m
-    assert main(["locate", str(out), str(joints), "--uv", "540"]) == 2
-    assert "--uv must be 2 comma-separated finite numbers" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as refusal:  # argparse checks --uv before any work
+        main(["locate", str(out), str(joints), "--uv", "540"])
+    assert refusal.value.code == 2
+    assert "argument --uv: must be 2 comma-separated numbers" in capsys.readouterr().err
     assert main(["locate", str(joints), str(joints), "--uv", "1,2"]) == 2
     assert "not valid JSON" in capsys.readouterr().err

@@ -9,7 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, assert_same_files, assert_same_numbers
 
 from brachycal.calibration import METHODS, calibrate
 from brachycal.cli.main import main
@@ -40,9 +40,9 @@ def test_same_seed_same_files_other_seed_other_files(robot, tmp_path):
     a = write_twin(simulate(robot, TwinConfig(seed=5)), tmp_path / "a")
     b = write_twin(simulate(robot, TwinConfig(seed=5)), tmp_path / "b")
     c = write_twin(simulate(robot, TwinConfig(seed=6)), tmp_path / "c")
-    for name in names:
-        assert (a / name).read_bytes() == (b / name).read_bytes(), name
-    assert (a / "samples.csv").read_bytes() != (c / "samples.csv").read_bytes()
+    assert_same_files(a, b, names)  # same numbers to 1e-9 rad / m, 1e-6 px (conftest.TOLERANCE_*)
+    with pytest.raises(AssertionError):  # another seed moves the pixels by far more than that
+        assert_same_files(a, c, ["samples.csv"])
 
 
 def test_each_noise_source_has_its_own_switch_and_stream(robot, default_twin):
@@ -104,10 +104,16 @@ def test_committed_twin_example_is_seed_0(tmp_path):
     copy = tmp_path / "examples"
     shutil.copytree(ROOT / "examples", copy)
     subprocess.run([sys.executable, str(copy / "make_twin_session.py")], check=True, capture_output=True)
-    for path in sorted((ROOT / "examples" / "twin_session").iterdir()):
-        if path.name == "physical_robot.urdf":
-            continue  # its mesh paths point from the copy's location
-        assert (copy / "twin_session" / path.name).read_bytes() == path.read_bytes(), path.name
+    committed = ROOT / "examples" / "twin_session"
+    names = sorted(path.name for path in committed.iterdir())
+    assert sorted(path.name for path in (copy / "twin_session").iterdir()) == names
+    # Numbers within 1e-9 m, 1e-6 px (conftest.TOLERANCE_*): regenerated on another machine the files
+    # differ in the last bits only; the URDF's mesh paths are compared as the files they point at.
+    # Except the samples' joints: the planner's QP iterations stop at a tolerance (tip within
+    # 0.01 mm), so round-off changes where along the arms' self-motion they stop: measured up to
+    # 4e-5 rad between two machines, with identical pixels, touches and axes. Another seed or a
+    # changed twin moves joints by ~0.1 rad, so 2e-4 rad still tells a stale example.
+    assert_same_files(copy / "twin_session", committed, names, joint_tolerance=2e-4)
 
 
 def test_demo_prints_both_tables_and_the_truth_errors_and_writes_the_report(tmp_path, capsys):
@@ -128,9 +134,10 @@ def test_study_is_identical_serial_parallel_and_on_dask():
     runs = sweep(2, [2], [40.0], [1.0], targets=5)
     serial = run_study(runs, workers=1)
     assert len(serial) == 4 and serial[0]["samples"] == 8
-    assert run_study(runs, workers=2) == serial
+    # Same rows (runs, seeds, methods exactly; errors within 1e-6 mm): other processes may round differently.
+    assert_same_numbers(run_study(runs, workers=2), serial, "rows")
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
-        assert run_study(runs, scheduler=cluster.scheduler_address) == serial
+        assert_same_numbers(run_study(runs, scheduler=cluster.scheduler_address), serial, "rows")
 
 
 def test_study_cli_writes_runs_summary_and_plot(tmp_path, capsys):
@@ -175,7 +182,12 @@ def test_study_cli_writes_runs_summary_and_plot(tmp_path, capsys):
     assert "cannot reach the Dask scheduler" in capsys.readouterr().err
 
 
-def test_tracker_route_is_exact_without_noise_and_worse_than_fusion_with_it(robot):
+#: Table III on the twin, the tracker route's whole-system MAE over seeds 0–9, 50 targets each:
+#: mean and per-seed SD in mm (``python benchmarks/table3.py``).
+TRACKER_ROUTE_MAE_MM = (0.486, 0.129)
+
+
+def test_tracker_route_is_exact_without_noise(robot):
     from brachycal.simulation.nwire_twin import T_PTIP_MARKER, NWireSimConfig, tracker_route
 
     twin = simulate(robot, TwinConfig(seed=0).without_noise())
@@ -184,9 +196,72 @@ def test_tracker_route_is_exact_without_noise_and_worse_than_fusion_with_it(robo
     assert np.abs(route.image.T_Ptip_I - np.linalg.inv(T_PTIP_MARKER) @ twin.truth.T_Ptip_I).max() < 1e-9
     result = calibrate(twin.session, robot, ("kabsch",))
     assert targeting_error(twin, result.T_ER_Ntip, route.T_EL_marker, route.image, 10).stats.max_mm < 1e-6
-    noisy = simulate(robot, TwinConfig(seed=0))
-    result = calibrate(noisy.session, robot, ("scaled_uv",))
-    tracked = tracker_route(noisy, NWireSimConfig(seed=0))
-    hit_tracker = targeting_error(noisy, result.T_ER_Ntip, tracked.T_EL_marker, tracked.image, 20).stats
-    hit_fusion = targeting_error(noisy, result.T_ER_Ntip, result.T_EL_Ptip, result.image["scaled_uv"], 20).stats
-    assert hit_tracker.mae_mm > 3 * hit_fusion.mae_mm
+
+
+def test_each_tracker_route_error_source_has_its_own_switch_and_stream():
+    from brachycal.simulation.nwire_twin import T_PTIP_MARKER, NWireSimConfig, simulate_nwire
+
+    def frames(**changes):
+        sim = replace(NWireSimConfig(seed=1, calibration_frames=10, validation_frames=0), **changes)
+        return simulate_nwire(np.linalg.inv(T_PTIP_MARKER), np.array([0.19e-3, 0.18e-3]), (1080, 720), sim)[1]
+
+    def readings(frames) -> np.ndarray:
+        return np.array([f.T_tracker_probe for f in frames])
+
+    def pixels(frames) -> np.ndarray:
+        return np.array([[f.points_px[w] for w in sorted(f.points_px)] for f in frames])
+
+    noisy = frames()
+    for source in ("segmentation_noise", "wire_beam_thickness", "phantom_tolerance"):
+        other = frames(**{source: False})  # the pixels change, the tracker's readings do not
+        assert np.array_equal(readings(other), readings(noisy)), source
+        assert not np.array_equal(pixels(other), pixels(noisy)), source
+    other = frames(tracker_noise=False)  # the readings change, the pixels do not
+    assert np.array_equal(pixels(other), pixels(noisy))
+    assert not np.array_equal(readings(other), readings(noisy))
+
+
+def test_frame_averaging_divides_the_tracker_jitter_by_sqrt_frames_and_leaves_its_error_field(robot):
+    from scipy.spatial.transform import Rotation
+
+    from brachycal.simulation.nwire_twin import T_PTIP_MARKER, NWireSimConfig, tracker_route
+
+    twin = simulate(robot, TwinConfig(seed=0).without_noise())
+    true_marker = twin.truth.T_EL_Ptip @ T_PTIP_MARKER
+
+    def error(sim) -> np.ndarray:
+        """The hand-eye estimate's error: (6,) rotation vector (rad) and translation (m)."""
+        E = np.linalg.inv(true_marker) @ tracker_route(twin, sim).T_EL_marker
+        return np.concatenate([Rotation.from_matrix(E[:3, :3]).as_rotvec(), E[:3, 3]])
+
+    quiet = NWireSimConfig().without_noise()
+    jitter = replace(quiet, tracker_noise=True, tracker_jitter_m=quiet.tracker_accuracy_m)  # no field
+    one, twenty = error(replace(jitter, tracker_frames=1)), error(replace(jitter, tracker_frames=20))
+    # Same draws, scaled by 1/sqrt(20); the estimate is linear in noise this small (0.25 mm against
+    # 50 mm marker bodies and 20 deg turns) to well under 2 %.
+    assert np.linalg.norm(one - np.sqrt(20) * twenty) < 0.02 * np.linalg.norm(one)
+    field = replace(quiet, tracker_noise=True, tracker_jitter_m=0.0)  # the repeatable part only
+    # Averaging cannot remove an error that every frame repeats: the same estimate up to rounding.
+    assert np.abs(error(replace(field, tracker_frames=1)) - error(replace(field, tracker_frames=20))).max() < 1e-12
+    assert np.linalg.norm(error(field)[3:]) > 1e-5  # ... and that error is there (> 0.01 mm)
+
+
+def test_tracker_route_lands_where_the_benchmark_says_and_behind_the_scale_aware_fit(robot):
+    from brachycal.simulation.nwire_twin import NWireSimConfig, tracker_route
+
+    tracker, fused = [], []
+    for seed in range(3):
+        twin = simulate(robot, TwinConfig(seed=seed))
+        result = calibrate(twin.session, robot, ("scaled_uv",))
+        route = tracker_route(twin, NWireSimConfig(seed=seed))
+        tracker.append(targeting_error(twin, result.T_ER_Ntip, route.T_EL_marker, route.image, 50).stats.mae_mm)
+        image = result.image["scaled_uv"]
+        fused.append(targeting_error(twin, result.T_ER_Ntip, result.T_EL_Ptip, image, 50).stats.mae_mm)
+    mean, sd = TRACKER_ROUTE_MAE_MM
+    # Two-sided: three seeds' mean lies within 3 standard errors (3 SD / sqrt(3)) of the benchmark's
+    # ten-seed mean; outside it, the tracker route's model has changed and the README's Table III with it.
+    assert abs(np.mean(tracker) - mean) < 3 * sd / np.sqrt(3)
+    # The tracker route calibrates the probe against the tracker, not against the needle arm, so it
+    # cannot absorb the robot's own geometry error between the arms (about 0.25 mm with every tracker
+    # and phantom error off); the scale-aware fusion fit does, seed by seed.
+    assert all(t > f for t, f in zip(tracker, fused, strict=True))

@@ -1,8 +1,11 @@
 """Derive ``urdf/sda10f.urdf`` from the vendor's SDA10F description.
 
-Run from the repository root::
+The vendor file is outside data, not in this repository: ``sda10f_expanded.urdf`` is the xacro of
+ROS-Industrial's ``motoman_sda10f_support`` (github.com/ros-industrial/motoman, commit 433be15f)
+expanded to plain URDF; the team keeps it in ``../shared/reference/motoman_sda10f/``. Run from the
+repository root::
 
-    python urdf/make_sda10f_urdf.py tests/data/vendor/sda10f_expanded.urdf urdf/sda10f.urdf
+    python urdf/make_sda10f_urdf.py ../shared/reference/motoman_sda10f/sda10f_expanded.urdf urdf/sda10f.urdf
 
 What changes against the vendor file (kinematics of the vendor links are untouched):
 

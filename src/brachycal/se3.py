@@ -79,13 +79,24 @@ def to_position_quaternion(T_a_b: ArrayLike) -> tuple[FloatArray, FloatArray]:
     return T[..., :3, 3].copy(), quat.reshape(*T.shape[:-2], 4)
 
 
-def is_rigid(T_a_b: ArrayLike, tol: float = 1e-9) -> bool:
-    """Whether ``T_a_b`` ``(*, 4, 4)`` is a proper rigid transform (orthonormal, det +1)."""
+def rigidity_error(T_a_b: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """How far each of ``T_a_b`` ``(*, 4, 4)`` is from a proper rigid transform.
+
+    Returns ``(orthonormality, determinant, last_row)``, each of shape ``(*,)``: the largest entry
+    of ``|RᵀR − I|``, ``det R`` itself, and the largest entry of ``|last row − (0, 0, 0, 1)|``. The
+    one computation behind :func:`is_rigid` and :func:`brachycal.validate.check_transform`.
+    """
     T = np.asarray(T_a_b, dtype=float)
     R = T[..., :3, :3]
-    eye = np.eye(3)
-    return bool(
-        np.all(np.abs(np.swapaxes(R, -1, -2) @ R - eye) < tol)
-        and np.all(np.abs(np.linalg.det(R) - 1.0) < tol)
-        and np.all(np.abs(T[..., 3, :] - [0.0, 0.0, 0.0, 1.0]) < tol)
-    )
+    orthonormality = np.abs(np.swapaxes(R, -1, -2) @ R - np.eye(3)).max(axis=(-1, -2))
+    last_row = np.abs(T[..., 3, :] - [0.0, 0.0, 0.0, 1.0]).max(axis=-1)
+    return orthonormality, np.linalg.det(R), last_row
+
+
+def is_rigid(T_a_b: ArrayLike, tol: float = 1e-9) -> bool:
+    """Whether ``T_a_b`` ``(*, 4, 4)`` is a proper rigid transform (orthonormal, det +1) within ``tol``.
+
+    A predicate; to refuse input with a message, use :func:`brachycal.validate.check_transform`.
+    """
+    orthonormality, determinant, last_row = rigidity_error(T_a_b)
+    return bool(np.all(orthonormality < tol) and np.all(np.abs(determinant - 1.0) < tol) and np.all(last_row < tol))

@@ -1,20 +1,62 @@
 """The one input validator: every entry point checks its numbers and transforms here.
 
-Each check returns the value as a NumPy array (or float) when it is acceptable and raises
-:class:`~brachycal.errors.InputError` naming ``name`` (an option, a field, a column) when it is
-not; ``file`` and ``row`` pass through to the error so that it says where the value came from.
+Each ``check_*`` function returns the value (a float, an int or a NumPy array) when it is
+acceptable and raises :class:`~brachycal.errors.InputError` naming ``name`` (an option, a field, a
+column) when it is not; ``file`` and ``row`` pass through to the error so that it says where the
+value came from. Every comparison is written so that NaN fails it (NaN compares False), so a NaN
+can never switch a check off.
+
+The command line uses the same checks through argparse ``type=`` factories (:func:`finite_float`,
+:func:`bounded_int`, :func:`number_list`, :func:`name_list`, :func:`probability`, :func:`seed`,
+:func:`spacing_mm`): a bad value is refused while the arguments are parsed, before any work, as
+``brachycal CMD: error: argument --OPTION: <what is wrong>``. Each factory's ``rule`` attribute is
+the accepted range in words, for ``--help``.
+
+Bounds that are not physics are typo guards, chosen so that no accepted value can exhaust memory
+or time: see :data:`MAX_GRID_POINTS`, :data:`MAX_TARGETS`, :data:`MAX_WORKERS`, :data:`MAX_SEEDS`.
 """
 
 from __future__ import annotations
 
+import argparse
 import math
+from collections.abc import Callable, Collection, Sequence
 from os import PathLike
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from brachycal.errors import InputError
-from brachycal.se3 import FloatArray
+from brachycal.se3 import FloatArray, rigidity_error
+
+#: Plausible ultrasound pixel spacings, millimetres per pixel. The finest clinical images (high-
+#: frequency linear probes, zoomed) are about 0.02 mm/px and the coarsest (deep abdominal sectors
+#: on small screens) about 0.5 mm/px; the range leaves a factor 4 on both sides. A value 1000
+#: times too small or too large (metres typed as millimetres, or the reverse) falls outside it.
+SPACING_MM_RANGE = (0.005, 2.0)
+
+#: Largest pixel coordinate accepted where the image size is not known: no ultrasound image is
+#: 10000 px wide, so a larger coordinate is a typo (or metres/millimetres typed as pixels).
+MAX_IMAGE_PX = 10_000
+
+#: Grid points per cube axis: 20 gives 8000 planned poses (about an hour of planning, a day of
+#: robot time); more is a typo, and 1000 per axis would be a billion poses.
+MAX_GRID_POINTS = 20
+
+#: Targets of a targeting-error evaluation (each one is two IK solves, ~10 ms): 1e5 is ~20 min.
+MAX_TARGETS = 100_000
+
+#: Local worker processes: more than any single machine's cores; each process loads the robot.
+MAX_WORKERS = 256
+
+#: Seeds (simulated sessions per setting) of a study or design comparison: each is a full
+#: simulated session (seconds to minutes), so 1000 is already days of computing.
+MAX_SEEDS = 1000
+
+#: NumPy's seeds: ``SeedSequence`` takes any non-negative integer, but the twin's files and the
+#: study's rows keep a seed as a 32-bit unsigned number.
+SEED_LIMIT = 2**32
 
 #: Largest deviation of a rotation block from orthonormality (‖RᵀR − I‖ max entry) and of its
 #: determinant from 1 that a stored rigid transform may show. Transforms written with 9+ decimals
@@ -46,11 +88,9 @@ def check_transform(
         raise InputError(f"{name} must be a 4x4 matrix, got shape {A.shape}", file=file, row=row)
     if not np.all(np.isfinite(A)):
         raise InputError(f"{name} holds a non-finite value (NaN or infinity)", file=file, row=row)
-    if np.abs(A[..., 3, :] - [0.0, 0.0, 0.0, 1.0]).max(initial=0.0) > tolerance:
+    off, det, last_row = rigidity_error(A)
+    if np.max(last_row, initial=0.0) > tolerance:
         raise InputError(f"{name} is not a rigid transform: its last row is not 0 0 0 1", file=file, row=row)
-    R = A[..., :3, :3]
-    off = np.abs(np.swapaxes(R, -1, -2) @ R - np.eye(3)).max(axis=(-1, -2))
-    det = np.linalg.det(R)
     bad = np.flatnonzero((off > tolerance) | (np.abs(det - 1.0) > tolerance))
     if bad.size:
         k = int(bad[0])
@@ -74,6 +114,33 @@ def check_finite(
     return A
 
 
+def _interval(
+    low: float | None, high: float | None, low_open: bool = False, high_open: bool = False, unit: str = ""
+) -> str:
+    """The accepted range in words: ``in [1, 500] mm``, ``>= 0``, ``in (0, 1]``."""
+    unit_text = f" {unit}" if unit else ""
+    if low is not None and high is not None:
+        return f"in {'(' if low_open else '['}{low:g}, {high:g}{')' if high_open else ']'}{unit_text}"
+    if low is not None:
+        return f"{'>' if low_open else '>='} {low:g}{unit_text}"
+    if high is not None:
+        return f"{'<' if high_open else '<='} {high:g}{unit_text}"
+    return "finite"
+
+
+def _inside(x: float, low: float | None, high: float | None, low_open: bool, high_open: bool) -> bool:
+    """Whether ``x`` is finite and within the bounds; written so that NaN is never inside."""
+    if not math.isfinite(x):
+        return False
+    above = low is None or (x > low if low_open else x >= low)
+    below = high is None or (x < high if high_open else x <= high)
+    return above and below
+
+
+def _where(name: str) -> str:
+    return f"{name} " if name else ""
+
+
 def check_range(
     value: float,
     name: str,
@@ -83,17 +150,375 @@ def check_range(
     low_open: bool = False,
     high_open: bool = False,
     unit: str = "",
+    file: str | PathLike[str] | None = None,
+    row: int | None = None,
 ) -> float:
-    """A finite number within ``[low, high]`` (open ends with ``low_open``/``high_open``)."""
-    x = float(value)
+    """A finite number within ``[low, high]`` (open ends with ``low_open``/``high_open``).
+
+    NaN and ±infinity are always refused (a NaN would otherwise pass every ``<`` test).
+    """
+    try:
+        x = float(value)
+    except OverflowError:  # an int beyond float range (10**400)
+        x = math.inf
+    except (TypeError, ValueError):
+        raise InputError(f"{_where(name)}must be a number, got {value!r}", file=file, row=row) from None
     unit_text = f" {unit}" if unit else ""
     if not math.isfinite(x):
-        raise InputError(f"{name} must be a finite number, got {value!r}")
-    too_low = low is not None and (x <= low if low_open else x < low)
-    too_high = high is not None and (x >= high if high_open else x > high)
-    if too_low or too_high:
-        lo = "" if low is None else f"{'>' if low_open else '>='} {low:g}{unit_text}"
-        hi = "" if high is None else f"{'<' if high_open else '<='} {high:g}{unit_text}"
-        rule = " and ".join(part for part in (lo, hi) if part)
-        raise InputError(f"{name} must be {rule}, got {x:g}{unit_text}")
+        raise InputError(f"{_where(name)}must be a finite number, got {x}", file=file, row=row)
+    if not _inside(x, low, high, low_open, high_open):
+        rule = _interval(low, high, low_open, high_open, unit)
+        raise InputError(f"{_where(name)}must be {rule}, got {x:g}{unit_text}", file=file, row=row)
     return x
+
+
+def check_int(
+    value: object,
+    name: str,
+    *,
+    low: int | None = None,
+    high: int | None = None,
+    file: str | PathLike[str] | None = None,
+    row: int | None = None,
+) -> int:
+    """A whole number within ``[low, high]``; ``True``/``False`` and fractional values are refused."""
+    if isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)):
+        n = int(value)  # exact, however large (no detour through float)
+    elif isinstance(value, (float, np.floating)) and math.isfinite(value) and float(value).is_integer():
+        n = int(value)
+    else:
+        raise InputError(f"{_where(name)}must be a whole number, got {value!r}", file=file, row=row)
+    above = low is None or n >= low
+    below = high is None or n <= high
+    if not (above and below):
+        raise InputError(f"{_where(name)}must be {_interval(low, high)}, got {n}", file=file, row=row)
+    return n
+
+
+def check_probability(value: float, name: str, *, high: float = 1.0) -> float:
+    """A probability (fraction) in ``[0, high]``."""
+    return check_range(value, name, low=0.0, high=high)
+
+
+def check_seed(value: object, name: str = "seed") -> int:
+    """A random seed: a whole number with ``0 <= seed < 2**32``."""
+    n = check_int(value, name)
+    if not 0 <= n < SEED_LIMIT:
+        raise InputError(f"{_where(name)}must be in [0, 2**32), got {n}")
+    return n
+
+
+def check_vector(
+    value: ArrayLike,
+    name: str,
+    size: int,
+    *,
+    low: float | None = None,
+    high: float | None = None,
+    unit: str = "",
+) -> FloatArray:
+    """``(size,)`` finite numbers, each within ``[low, high]``."""
+    try:
+        A = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{_where(name)}must be {size} numbers, got {value!r}") from None
+    if A.shape != (size,):
+        raise InputError(f"{_where(name)}must be {size} numbers, got shape {A.shape}")
+    for k, x in enumerate(A):
+        check_range(x, f"{name} value {k + 1}".strip() if size > 1 else name, low=low, high=high, unit=unit)
+    return A
+
+
+def check_direction(value: ArrayLike, name: str) -> FloatArray:
+    """A direction: ``(3,)`` finite numbers, not all zero; returned normalised (unit length).
+
+    Any scale works (1,0,0 or 1e-12,0,0 or 1e300,0,0: the vector is first divided by its largest
+    component, so its norm neither underflows nor overflows); only the zero vector has no direction.
+    """
+    v = check_vector(value, name, 3)
+    largest = float(np.abs(v).max())
+    if not largest > 0:
+        raise InputError(f"{_where(name)}is the zero vector; a direction needs a non-zero component")
+    v = v / largest
+    return v / np.linalg.norm(v)
+
+
+def _spacing_problem(value: float, unit: str) -> str | None:
+    """Why ``value`` (in ``unit``: ``"mm"`` or ``"m"`` per pixel) is not a plausible spacing, or None.
+
+    A value a thousand times off in the direction of a unit slip gets the hint: in millimetres,
+    1.9e-4 is a spacing in metres; in metres, 0.19 is a spacing in millimetres.
+    """
+    scale = 1.0 if unit == "mm" else 1e-3  # accepted range in the unit given
+    low, high = SPACING_MM_RANGE[0] * scale, SPACING_MM_RANGE[1] * scale
+    if not math.isfinite(value):
+        return f"must be a finite number of {unit}/px, got {value}"
+    if value <= 0:
+        return f"must be positive, got {value:g} {unit}/px"
+    if low <= value <= high:
+        return None
+    if unit == "mm" and low <= value * 1e3 <= high:
+        return (
+            f"{value:g} mm/px is far below any ultrasound image's ({low:g}..{high:g} mm/px): it looks like a "
+            f"spacing in metres typed as millimetres; give {value * 1e3:g}"
+        )
+    if unit == "m" and low <= value * 1e-3 <= high:
+        return (
+            f"{value:g} m/px is far above any ultrasound image's ({low:g}..{high:g} m/px): it looks like a "
+            f"spacing in millimetres given as metres; give {value * 1e-3:g}"
+        )
+    return f"must be in [{low:g}, {high:g}] {unit}/px (a plausible ultrasound pixel spacing), got {value:g}"
+
+
+def _check_spacing(
+    value: ArrayLike, name: str, unit: str, file: str | PathLike[str] | None, column: str | None
+) -> FloatArray:
+    try:
+        A = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{_where(name)}must be two numbers (s_u, s_v), got {value!r}", file=file) from None
+    if A.shape != (2,):
+        raise InputError(f"{_where(name)}must be two numbers (s_u, s_v), got shape {A.shape}", file=file)
+    for axis, x in zip("uv", A, strict=True):
+        problem = _spacing_problem(float(x), unit)
+        if problem:
+            raise InputError(f"{_where(name)}s_{axis} {problem}", file=file, column=column)
+    return A
+
+
+def check_spacing_mm(
+    value: ArrayLike, name: str, *, file: str | PathLike[str] | None = None, column: str | None = None
+) -> FloatArray:
+    """Pixel spacing ``(s_u, s_v)`` in millimetres per pixel: finite, within :data:`SPACING_MM_RANGE`.
+
+    A value a thousand times too small is named as a spacing in metres typed as millimetres.
+    """
+    return _check_spacing(value, name, "mm", file, column)
+
+
+def check_spacing_m(
+    value: ArrayLike, name: str, *, file: str | PathLike[str] | None = None, column: str | None = None
+) -> FloatArray:
+    """Pixel spacing ``(s_u, s_v)`` in metres per pixel (the library's unit), ``(2,)``.
+
+    Finite and within :data:`SPACING_MM_RANGE` (converted to metres); a value a thousand times
+    too large (0.19 for 0.19 mm/px) is named as millimetres given as metres.
+    """
+    return _check_spacing(value, name, "m", file, column)
+
+
+def check_pixel(uv_px: ArrayLike, name: str, *, size_px: ArrayLike | None = None) -> FloatArray:
+    """Pixel(s) ``(2,)`` or ``(N, 2)`` ``(u, v)`` inside the image.
+
+    The image covers ``-0.5 <= u <= width - 0.5`` and ``-0.5 <= v <= height - 0.5``: pixel
+    ``(0, 0)``'s centre is the origin and each pixel extends half a pixel around its centre (the
+    session reader accepts annotations on the same range). Without ``size_px`` (width, height) the
+    bound is :data:`MAX_IMAGE_PX`.
+    """
+    uv = np.asarray(uv_px, dtype=float)
+    if uv.shape[-1:] != (2,) or uv.ndim > 2:
+        raise InputError(f"{_where(name)}must be (u, v) pixel pairs, got shape {uv.shape}")
+    if size_px is None:
+        upper = np.array([MAX_IMAGE_PX, MAX_IMAGE_PX], dtype=float)
+        image = "any ultrasound image"
+    else:
+        size = np.asarray(size_px, dtype=float)
+        upper = size - 0.5
+        image = f"the {size[0]:g} x {size[1]:g} px image"
+    for k, pair in enumerate(np.atleast_2d(uv)):
+        which = f" (pixel {k + 1})" if uv.ndim == 2 else ""
+        for axis, x, hi in zip("uv", pair, upper, strict=True):
+            if not math.isfinite(x):
+                raise InputError(f"{_where(name)}{axis} must be a finite number, got {x}{which}")
+            if not -0.5 <= x <= hi:
+                raise InputError(
+                    f"{_where(name)}{axis} = {x:g} px is outside {image}{which} (-0.5 <= {axis} <= {hi:g})"
+                )
+    return uv
+
+
+# ---------------------------------------------------------------------------------------------
+# Comma-separated lists (``--centre-mm 800,100,1050``) and argparse ``type=`` factories
+
+
+def parse_number_list(
+    text: str,
+    name: str,
+    *,
+    count: int | None = None,
+    kind: type = float,
+    low: float | None = None,
+    high: float | None = None,
+    low_open: bool = False,
+    high_open: bool = False,
+    unit: str = "",
+    max_items: int = 100,
+) -> list:
+    """Comma-separated numbers, each one checked: a typo in any item names that item.
+
+    Args:
+        text: ``"3,4,5"``; blanks around items are allowed, empty items are not.
+        name: the option, for the error.
+        count: exact number of items required (None: 1 to ``max_items``).
+        kind: ``float`` or ``int`` (whole numbers).
+        low, high, low_open, high_open, unit: range of each item, as :func:`check_range`.
+    """
+    items = [item.strip() for item in str(text).split(",")]
+    if count is not None and len(items) != count:
+        raise InputError(f"{_where(name)}must be {count} comma-separated numbers, got {len(items)} in {text!r}")
+    if len(items) > max_items:
+        raise InputError(f"{_where(name)}takes at most {max_items} values, got {len(items)}")
+    values = []
+    for k, item in enumerate(items, start=1):
+        label = f"{name} value {k}".strip() if len(items) > 1 else name
+        if not item:
+            raise InputError(f"{_where(label)}is empty (in {text!r})")
+        try:
+            number = kind(item)
+        except ValueError:
+            what = "a whole number" if kind is int else "a number"
+            raise InputError(f"{_where(label)}must be {what}, got {item!r}") from None
+        if kind is int:
+            values.append(check_int(number, label, low=low, high=high))  # type: ignore[arg-type]
+        else:
+            values.append(
+                check_range(number, label, low=low, high=high, low_open=low_open, high_open=high_open, unit=unit)
+            )
+    return values
+
+
+def parse_name_list(text: str, name: str, choices: Collection[str] | None = None) -> list[str]:
+    """Comma-separated names, none empty, no repeats, each among ``choices`` when given."""
+    items = [item.strip() for item in str(text).split(",")]
+    seen: set[str] = set()
+    for k, item in enumerate(items, start=1):
+        if not item:
+            raise InputError(f"{_where(name)}item {k} is empty (in {text!r})")
+        if choices is not None and item not in choices:
+            raise InputError(f"{_where(name)}{item!r} is not one of: {', '.join(choices)}")
+        if item in seen:
+            raise InputError(f"{_where(name)}names {item!r} twice")
+        seen.add(item)
+    return items
+
+
+class OptionType:
+    """An argparse ``type=``: converts and checks one option's text; ``rule`` is for ``--help``.
+
+    A refused value raises :class:`argparse.ArgumentTypeError`, which argparse prints as one line
+    naming the option (``argument --edge-mm: must be in [1, 500] mm, got 0 mm``).
+    """
+
+    def __init__(self, convert: Callable[[str], Any], rule: str, label: str) -> None:
+        self.convert, self.rule, self.__name__ = convert, rule, label
+
+    def __call__(self, text: str) -> Any:
+        try:
+            return self.convert(text)
+        except InputError as exc:
+            raise argparse.ArgumentTypeError(exc.problem) from None
+
+    def __repr__(self) -> str:
+        return f"{self.__name__}({self.rule})"
+
+
+def _number(text: str, kind: type) -> float:
+    try:
+        return kind(text.strip())
+    except ValueError:
+        raise InputError(f"must be {'a whole number' if kind is int else 'a number'}, got {text!r}") from None
+
+
+def finite_float(
+    *,
+    low: float | None = None,
+    high: float | None = None,
+    low_open: bool = False,
+    high_open: bool = False,
+    unit: str = "",
+) -> OptionType:
+    """argparse type: one finite number in the range (NaN and ±inf refused)."""
+    rule = _interval(low, high, low_open, high_open, unit)
+
+    def convert(text: str) -> float:
+        return check_range(
+            _number(text, float), "", low=low, high=high, low_open=low_open, high_open=high_open, unit=unit
+        )
+
+    return OptionType(convert, rule, "number")
+
+
+def bounded_int(*, low: int, high: int) -> OptionType:
+    """argparse type: one whole number in ``[low, high]``."""
+
+    def convert(text: str) -> int:
+        return check_int(_number(text, int), "", low=low, high=high)
+
+    return OptionType(convert, _interval(low, high), "whole number")
+
+
+def number_list(
+    *,
+    count: int | None = None,
+    kind: type = float,
+    low: float | None = None,
+    high: float | None = None,
+    low_open: bool = False,
+    high_open: bool = False,
+    unit: str = "",
+    max_items: int = 100,
+) -> OptionType:
+    """argparse type: comma-separated numbers as a NumPy array (``count`` of them, or a list of 1..max)."""
+    rule = (
+        f"each {_interval(low, high, low_open, high_open, unit)}" if (low is not None or high is not None) else "finite"
+    )
+
+    def convert(text: str) -> np.ndarray:
+        values = parse_number_list(
+            text,
+            "",
+            count=count,
+            kind=kind,
+            low=low,
+            high=high,
+            low_open=low_open,
+            high_open=high_open,
+            unit=unit,
+            max_items=max_items,
+        )
+        return np.array(values, dtype=kind)
+
+    return OptionType(convert, rule, "numbers")
+
+
+def name_list(choices: Sequence[str] | None = None) -> OptionType:
+    """argparse type: comma-separated names (a list), each among ``choices`` when given."""
+    rule = f"from {', '.join(choices)}" if choices is not None else "non-empty names"
+    return OptionType(lambda text: parse_name_list(text, "", choices), rule, "names")
+
+
+def _probability(text: str) -> float:
+    return check_probability(_number(text, float), "")
+
+
+def _seed(text: str) -> int:
+    return check_seed(_number(text, int), "")
+
+
+def _spacing_mm(text: str) -> np.ndarray:
+    values = parse_number_list(text, "", count=2)
+    return check_spacing_mm(values, "")
+
+
+def _direction(text: str) -> np.ndarray:
+    return check_direction(parse_number_list(text, "", count=3), "")
+
+
+#: argparse type: ``DX,DY,DZ`` a direction (finite, not all zero), returned as a unit ``(3,)`` array.
+direction = OptionType(_direction, "finite, not all zero", "direction")
+#: argparse type: a probability in [0, 1].
+probability = OptionType(_probability, "in [0, 1]", "probability")
+#: argparse type: a random seed, a whole number in [0, 2**32).
+seed = OptionType(_seed, "in [0, 2**32)", "seed")
+#: argparse type: ``SU,SV`` pixel spacing in mm/px, each plausible for ultrasound.
+spacing_mm = OptionType(_spacing_mm, f"each in [{SPACING_MM_RANGE[0]:g}, {SPACING_MM_RANGE[1]:g}] mm/px", "spacing")

@@ -1,33 +1,103 @@
-"""Calibration: tool tips, pivot, tool rotations, image-to-probe registration, validation."""
+"""Calibration: the estimators, pure functions on arrays and small dataclasses (SI units inside).
+
+The paper's sequential method, step by step (``T_a_b`` maps frame b into frame a; metres):
+
+- :func:`calibrate` — a whole session: reference tips, ``T_ER_Ntip`` (needle tip on the right
+  flange), ``T_EL_Ptip`` (probe tip on the left flange) with Table I, and ``T_Ptip_I`` (image on
+  the probe) by every method of :data:`METHODS` with its leave-one-out figures (Table II), as a
+  :class:`CalibrationResult`; :func:`calibrate_folder` reads a session folder first (and can add
+  the whole chain); :func:`loo_points` gives one method's leave-one-out points (Fig. 10);
+  :func:`locate` maps image pixels to ``base_link`` through a calibration (targeting).
+- :class:`ImageCalibration` — a rigid ``T_Ptip_I (4, 4)`` with the pixel spacing ``(2,)`` it goes
+  with, metres per pixel; :class:`ErrorStats` — MAE, RMSE, SD and max of 3D errors (``*_mm``).
+
+Beyond the paper: the whole chain as one least-squares problem (:func:`calibrate_chain`,
+:func:`fit_chain`, :func:`select_model`; its uncertainty with :func:`landing_covariance` and
+:func:`predicted_rms_mm`); pivot calibration (:func:`pivot_algebraic`, :func:`pivot_robust`, and
+of a pose-list file :func:`pivot_from_file`); N-wire phantom calibration from PLUS files
+(:func:`nwire_from_files`); hand–eye calibration (:func:`hand_eye`). Result files:
+``brachycal-result/1`` (:func:`write_result`, :func:`read_result`), ``brachycal-pivot/1``
+(:func:`write_pivot`, :func:`read_pivot`), ``brachycal-nwire/1`` (:func:`write_nwire`,
+:func:`read_nwire`).
+"""
 
 from brachycal.calibration.chain import MODELS, ChainFit, fit_chain, select_model
 from brachycal.calibration.chain_report import ChainReport, calibrate_chain
-from brachycal.calibration.image_to_probe import METHOD_LABELS, METHODS, PAPER_METHODS, ImageCalibration
+from brachycal.calibration.hand_eye import hand_eye
+from brachycal.calibration.image_to_probe import (
+    ALL_LABELS,
+    METHOD_LABELS,
+    METHODS,
+    PAPER_METHODS,
+    ImageCalibration,
+    PredictedUncertainty,
+)
 from brachycal.calibration.metrics import ErrorStats
+from brachycal.calibration.nwire import NWireCalibration, calibrate_nwire, wire_point_pairs
+from brachycal.calibration.nwire_file import NWireRun, StoredNWire, nwire_from_files, read_nwire, write_nwire
 from brachycal.calibration.pivot import PivotResult, pivot_algebraic, pivot_robust
+from brachycal.calibration.pivot_file import (
+    PIVOT_METHODS,
+    PivotCalibration,
+    StoredPivot,
+    pivot_from_file,
+    read_pivot,
+    write_pivot,
+)
 from brachycal.calibration.result_file import StoredCalibration, read_result, write_result
-from brachycal.calibration.sequential import CalibrationResult, ToolCalibration, calibrate, locate
+from brachycal.calibration.sequential import CalibrationResult, ToolCalibration, calibrate, locate, loo_points
+from brachycal.calibration.session_calibration import SessionCalibration, calibrate_folder
+from brachycal.calibration.uncertainty import (
+    inside_ellipsoid,
+    landing_covariance,
+    landing_jacobian,
+    predicted_rms_mm,
+)
 
 __all__ = [
+    "ALL_LABELS",
     "METHODS",
     "METHOD_LABELS",
     "MODELS",
     "PAPER_METHODS",
+    "PIVOT_METHODS",
     "CalibrationResult",
     "ChainFit",
     "ChainReport",
     "ErrorStats",
     "ImageCalibration",
+    "NWireCalibration",
+    "NWireRun",
+    "PivotCalibration",
     "PivotResult",
+    "PredictedUncertainty",
+    "SessionCalibration",
     "StoredCalibration",
+    "StoredNWire",
+    "StoredPivot",
     "ToolCalibration",
     "calibrate",
     "calibrate_chain",
+    "calibrate_folder",
+    "calibrate_nwire",
     "fit_chain",
+    "hand_eye",
+    "inside_ellipsoid",
+    "landing_covariance",
+    "landing_jacobian",
     "locate",
+    "loo_points",
+    "nwire_from_files",
     "pivot_algebraic",
+    "pivot_from_file",
     "pivot_robust",
+    "predicted_rms_mm",
+    "read_nwire",
+    "read_pivot",
     "read_result",
     "select_model",
+    "wire_point_pairs",
+    "write_nwire",
+    "write_pivot",
     "write_result",
 ]

@@ -1,25 +1,44 @@
-"""Whole-chain calibration: one robust least-squares problem over every recorded datum.
+"""Whole-chain calibration: one least-squares problem over every recorded datum.
 
 Unknowns ``θ``: the needle tip and needle rotation on the right flange (``T_ER_Ntip``), the probe
 tip frame on the left flange (``T_EL_Ptip``), the image on the probe (``T_Ptip_I``), the image's
 pixel scale (per the image model), and the two reference tips (nuisance). Residuals, each
-divided by its group's noise level:
+divided by its group's noise level (metres per coordinate):
 
 - touches: ``T_R_ER @ p_ER_Mtip``, ``T_R_ER @ p_ER_Ntip`` and ``T_R_EL @ p_EL_Ptip`` against the
   reference tip they touched (3 per touch);
-- axes: the tip's move p1→p2 (p1→p3) must run along the tool's y (z) axis: its component
-  perpendicular to that axis (3 per move; the move's length is not recorded, so not used);
+- axes: the tip's move p1→p2 (p1→p3) must run along the tool's y (z) axis: its components along
+  the tool's other two axes (2 per move; the move's length is not recorded, so not used);
 - image samples: the needle tip through the right arm against the annotated pixel through the left
   arm, ``T_R_ER p_ER_Ntip − T_R_EL T_EL_Ptip T_Ptip_I (u s_u, v s_v, 0)`` (3 per image).
 
 Image models: ``rigid`` (the scanner's spacing), ``similarity`` (one scale), ``scaled_uv`` (a scale
 per axis) and ``sound_speed`` (the physical model: lateral spacing as the scanner says, depth
-spacing times c / 1540 m/s, with the speed of sound c estimated). Solved by
-:func:`scipy.optimize.least_squares` (trust-region reflective, soft-L1 loss on the normalised
-residuals) from the sequential result; the groups' noise levels are then re-estimated from their
-residuals (robustly, by the median absolute deviation) and the problem solved again, so that
-weights and covariance rest on the data. Image samples whose normalised residual exceeds 3.5 are
-flagged as outliers.
+spacing times c / 1540 m/s, with the speed of sound c estimated).
+
+Two stages, both :func:`scipy.optimize.least_squares` from the sequential result:
+
+1. **Robust stage** (finds gross errors): soft-L1 loss on the normalised residuals, each group's
+   noise level re-estimated from its residuals by the median absolute deviation (× 1.4826, with
+   the degrees-of-freedom correction below). Image samples whose 3D residual exceeds
+   :data:`OUTLIER_THRESHOLD` × √3 σ_image are flagged: for Gaussian noise ``|r|²/σ²`` is χ²₃, and
+   3 × 3.5² = 36.75 puts a clean sample past it with probability 5e-8 (3e-6 per session of 64),
+   while a 15 px annotation mistake (2.9 mm) sits at about 8 × √3 σ_image.
+2. **Final stage** (the estimate and its covariance): the flagged samples are left out and the
+   problem is solved by plain least squares (the efficient estimator for the remaining,
+   Gaussian-like noise; the soft-L1 estimate's variance is E[ψ²]/E[ψ']² = 1.08 times that, while
+   its Gauss–Newton covariance, ``(E[ψ'] JᵀJ)⁻¹`` with E[ψ'] = 0.56, states 1.77 times: SDs 1.28×
+   too wide, as the speed of sound's were). Each group's noise level is its residual sum
+   of squares over its residual degrees of freedom ``n_g − Σ_{i∈g} h_ii`` (``h`` the leverages
+   of the weighted problem: the unbiased estimate for a linear model), iterated with the weights.
+   The covariance is ``(JᵀJ)⁻¹`` of the Jacobian of the normalised residuals. A group with fewer
+   than :data:`MIN_NOISE_DOF` residual degrees of freedom cannot estimate its own noise (its
+   relative error would exceed 25 %): the axes moves (8 residuals, 6 rotations: 2 degrees of
+   freedom) take the touches' level (the same robot placing the same tools), reported as assumed.
+   A group whose residuals are below :data:`RESOLUTION_M` is reported as below resolution.
+
+Conditioning (refusals with :class:`~brachycal.errors.DegenerateDataError`): see
+:func:`check_conditioning`.
 
 Identifiability: the image samples fix only the product ``T_EL_Ptip @ T_Ptip_I`` (the probe-tip
 frame is a convention); the probe touches fix ``p_EL_Ptip``, the axes moves ``R_EL_Ptip``. The
@@ -32,30 +51,91 @@ parameters. Two are never identifiable here: the torso (it turns both arms toget
 data only see it through the reference tips, which are unknown too) and each arm's last joint
 (its offset is a turn about the flange axis, which the tool transforms absorb). The others are
 estimated with a weak prior (0.01° SD) that keeps poorly excited ones near zero.
+
+What the covariance does not contain: the robot model's own error (the physical robot's joint
+origins differ from the URDF's). Where the session's data see it (the spread of touches across
+poses, of images across the cube) it is in the noise levels; where they cannot (e.g. an offset of
+the left arm against the right one, which the probe-tip touches cannot tell from the probe tip)
+it is not. ``benchmarks/chain_checks.py`` measures both on the twin.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
-from scipy.optimize import approx_fprime, least_squares
-from scipy.spatial.transform import Rotation
+from scipy.optimize import least_squares
 
 from brachycal.calibration.image_to_probe import ImageCalibration
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.sequential import CalibrationResult
 from brachycal.data.session import Session
-from brachycal.errors import InputError
+from brachycal.errors import DegenerateDataError, InputError
 from brachycal.model.names import LEFT_FLANGE, RIGHT_FLANGE
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, make_transform, transform_points
 
 SCANNER_SOUND_SPEED = 1540.0
 MODELS = ("rigid", "similarity", "scaled_uv", "sound_speed")
-#: Starting noise levels (metres) of the residual groups, before they are estimated from the data.
+#: Starting noise levels (metres per coordinate) of the residual groups; also the level assumed
+#: for a group with too few residual degrees of freedom to estimate its own.
 INITIAL_SIGMA = {"touch": 1e-4, "axes": 1e-4, "image": 3e-4}
+GROUPS = ("touch", "axes", "image")
 OUTLIER_THRESHOLD = 3.5
+#: Most least-squares solves of the final stage while its weights (noise levels) settle; they
+#: settle to 1e-6 in 3-5 (each solve's leverages and residuals barely move the next).
+NOISE_ITERATIONS = 20
+#: Fewest residual degrees of freedom ν from which a group's noise level is estimated: the
+#: relative SD of the estimate is about 1/√(2ν), 25 % at ν = 8.
+MIN_NOISE_DOF = 8.0
+#: One micrometre: below anything this set-up resolves (encoder noise alone is ~20 µm at 1 m). A
+#: group's noise level is not taken below it (it weights the group), and a group whose residual
+#: scale is at it is reported as below resolution, not as a measured noise level.
+RESOLUTION_M = 1e-6
+#: Reciprocal condition number (smallest over largest singular value of the normalised Jacobian
+#: with unit-norm columns) below which a combination of the unknowns counts as undetermined. The
+#: Jacobian is analytic (exact to rounding), but with joint offsets it comes from forward
+#: differences with relative steps of ~1.5e-8, whose entries carry relative errors of that order:
+#: a singular value 1e-8 of the largest cannot be told from zero. An exactly degenerate session
+#: (every sample at one pose) measures ~1e-17; sessions that span the prostate cube 7e-3–2e-2
+#: (twin seeds 0–19, `benchmarks/chain_checks.py`).
+RCOND_LIMIT = 1e-8
+#: Largest accepted SD (rad) of a fitted rotation (largest axis of its 3×3 covariance). The
+#: intervals and the predicted landing error are linearisations; the second-order term of a
+#: rotation error δ is δ²/2, i.e. a fraction δ/2 of the first-order one. At SD 0.05 rad (2.9°)
+#: the 95 % range reaches 0.1 rad, where the linearisation is off by 5 %: beyond it, the data do
+#: not determine the rotation well enough for any stated uncertainty to hold. Sessions that span
+#: the prostate cube measure 0.2–0.5° (twin seeds 0–19, `benchmarks/chain_checks.py`).
+ROTATION_SD_LIMIT = 0.05
+
+
+#: Blocks of the parameter vector: name → (first index, length) for the fixed part; the scale
+#: factors and joint offsets follow (see :meth:`_Layout.blocks`).
+_FIXED_BLOCKS = {
+    "p_ER_Ntip": (0, 3),
+    "rot_ER_Ntip": (3, 3),
+    "rot_EL_Ptip": (6, 3),
+    "p_EL_Ptip": (9, 3),
+    "rot_Ptip_I": (12, 3),
+    "p_Ptip_I": (15, 3),
+    "p_R_Rtip1": (18, 3),
+    "p_R_Rtip2": (21, 3),
+}
+#: What each block is, and the session file whose data determine it (for refusals).
+BLOCK_LABELS = {
+    "p_ER_Ntip": ("the needle tip", "touches.csv"),
+    "rot_ER_Ntip": ("the needle rotation", "axes.csv"),
+    "rot_EL_Ptip": ("the probe rotation", "axes.csv"),
+    "p_EL_Ptip": ("the probe tip", "touches.csv"),
+    "rot_Ptip_I": ("the image rotation", "samples.csv"),
+    "p_Ptip_I": ("the image origin", "samples.csv"),
+    "p_R_Rtip1": ("reference tip rtip1", "touches.csv"),
+    "p_R_Rtip2": ("reference tip rtip2", "touches.csv"),
+    "scale": ("the pixel scale", "samples.csv"),
+    "joint_offsets": ("the joint offsets", "samples.csv"),
+}
+ROTATIONS = ("rot_ER_Ntip", "rot_EL_Ptip", "rot_Ptip_I")
 
 
 @dataclass(frozen=True)
@@ -100,6 +180,34 @@ class _Data:
             spacing_m=session.spacing_m,
         )
 
+    @cached_property
+    def touch_T(self) -> FloatArray:
+        """``(M, 4, 4)`` flange poses of every touch: top-model, needle, probe; rtip1 then rtip2."""
+        return np.concatenate([T for touches in (self.top, self.needle, self.probe) for _, T in touches])
+
+    @cached_property
+    def touch_tool(self) -> np.ndarray:
+        """``(M,)`` which tool each touch holds: 0 top-model, 1 needle, 2 probe."""
+        return np.concatenate(
+            [np.full(len(T), i) for i, touches in enumerate((self.top, self.needle, self.probe)) for _, T in touches]
+        )
+
+    @cached_property
+    def touch_ref(self) -> np.ndarray:
+        """``(M,)`` which reference tip each touch touched: 0 rtip1, 1 rtip2."""
+        return np.concatenate(
+            [np.full(len(T), k) for touches in (self.top, self.needle, self.probe) for k, T in touches]
+        )
+
+    @property
+    def n_touch_rows(self) -> int:
+        return 3 * len(self.touch_tool)
+
+    def group_rows(self, n_images: int) -> dict[str, slice]:
+        """Rows of each residual group in :func:`_residuals` with ``n_images`` samples used."""
+        t = self.n_touch_rows
+        return {"touch": slice(0, t), "axes": slice(t, t + 8), "image": slice(t + 8, t + 8 + 3 * n_images)}
+
 
 @dataclass(frozen=True)
 class _Layout:
@@ -114,17 +222,25 @@ class _Layout:
     def size(self) -> int:
         return 24 + self.n_scale + len(self.offset_joints)
 
+    def blocks(self) -> dict[str, slice]:
+        """Parameter name → its slice of the parameter vector (the one place that knows the layout)."""
+        out = {name: slice(start, start + n) for name, (start, n) in _FIXED_BLOCKS.items()}
+        out["scale"] = slice(24, 24 + self.n_scale)
+        out["joint_offsets"] = slice(24 + self.n_scale, self.size)
+        return out
+
     def offsets(self, x: FloatArray, nq: int) -> FloatArray:
         out = np.zeros(nq)
-        out[list(self.offset_joints)] = x[24 + self.n_scale :]
+        out[list(self.offset_joints)] = x[self.blocks()["joint_offsets"]]
         return out
 
     def unpack(self, x: FloatArray, base: dict[str, FloatArray], nominal_spacing: FloatArray):
-        T_ER_Ntip = make_transform(Rotation.from_rotvec(x[3:6]).as_matrix() @ base["R_ER_Ntip"], x[0:3])
-        T_EL_Ptip = make_transform(Rotation.from_rotvec(x[6:9]).as_matrix() @ base["R_EL_Ptip"], x[9:12])
-        T_Ptip_I = make_transform(Rotation.from_rotvec(x[12:15]).as_matrix() @ base["R_Ptip_I"], x[15:18])
-        rtips = x[18:24].reshape(2, 3)
-        scale = x[24 : 24 + self.n_scale]
+        b = self.blocks()
+        T_ER_Ntip = make_transform(_rotation(x[b["rot_ER_Ntip"]]) @ base["R_ER_Ntip"], x[b["p_ER_Ntip"]])
+        T_EL_Ptip = make_transform(_rotation(x[b["rot_EL_Ptip"]]) @ base["R_EL_Ptip"], x[b["p_EL_Ptip"]])
+        T_Ptip_I = make_transform(_rotation(x[b["rot_Ptip_I"]]) @ base["R_Ptip_I"], x[b["p_Ptip_I"]])
+        rtips = np.vstack([x[b["p_R_Rtip1"]], x[b["p_R_Rtip2"]]])
+        scale = x[b["scale"]]
         if self.model == "rigid":
             spacing = nominal_spacing
         elif self.model == "similarity":
@@ -136,32 +252,43 @@ class _Layout:
         return T_ER_Ntip, T_EL_Ptip, T_Ptip_I, rtips, spacing
 
 
+def _rotation(rotvec: FloatArray) -> FloatArray:
+    """``(3, 3)`` rotation of a rotation vector (Rodrigues; scipy's Rotation costs 20× more per call)."""
+    angle = float(np.sqrt(rotvec @ rotvec))
+    if angle == 0.0:
+        return np.eye(3)
+    K = np.array([[0.0, -rotvec[2], rotvec[1]], [rotvec[2], 0.0, -rotvec[0]], [-rotvec[1], rotvec[0], 0.0]])
+    half = 0.5 * angle  # (1 − cos a)/a² = ½ (sin(a/2)/(a/2))²: no cancellation at the tiny angles of a Jacobian step
+    return np.eye(3) + np.sin(angle) / angle * K + 0.5 * (np.sin(half) / half) ** 2 * K @ K
+
+
 def finite_difference_steps(x: FloatArray) -> FloatArray:
     """Forward-difference steps for Jacobians at ``x``: 1e-7, relative for large entries."""
     return 1e-7 * np.maximum(1.0, np.abs(x))
 
 
-def _perpendicular(move: FloatArray, axis: FloatArray) -> FloatArray:
-    return move - (move @ axis) * axis
+#: Axes moves: (point, the column of the tool's rotation it moves along, the two columns its
+#: residual is measured along).
+_AXES_MOVES = ((1, 1, [0, 2]), (2, 2, [0, 1]))
 
 
 def _residuals(
-    x: FloatArray, layout: _Layout, data: _Data, base: dict, sigma: dict[str, float], samples: np.ndarray
+    x: FloatArray,
+    layout: _Layout,
+    data: _Data,
+    base: dict,
+    sigma: dict[str, float],
+    samples: np.ndarray,
 ) -> FloatArray:
     T_ER_Ntip, T_EL_Ptip, T_Ptip_I, rtips, spacing = layout.unpack(x, base, data.spacing_m)
-    parts = []
-    for touches, p_tool in (
-        (data.top, data.p_ER_Mtip),
-        (data.needle, T_ER_Ntip[:3, 3]),
-        (data.probe, T_EL_Ptip[:3, 3]),
-    ):
-        for k, T in touches:
-            parts.append(((transform_points(T, p_tool) - rtips[k]) / sigma["touch"]).ravel())
+    p_tools = np.stack([data.p_ER_Mtip, T_ER_Ntip[:3, 3], T_EL_Ptip[:3, 3]])[data.touch_tool]
+    touch = np.einsum("nij,nj->ni", data.touch_T[:, :3, :3], p_tools) + data.touch_T[:, :3, 3] - rtips[data.touch_ref]
+    parts = [touch.ravel() / sigma["touch"]]
     for T_axes, T_tool in ((data.needle_axes, T_ER_Ntip), (data.probe_axes, T_EL_Ptip)):
         tips = transform_points(T_axes, T_tool[:3, 3])
         R_tool = T_axes[0, :3, :3] @ T_tool[:3, :3]
-        for point, column in ((1, 1), (2, 2)):
-            parts.append(_perpendicular(tips[point] - tips[0], R_tool[:, column]) / sigma["axes"])
+        for point, _, across in _AXES_MOVES:
+            parts.append(R_tool[:, across].T @ (tips[point] - tips[0]) / sigma["axes"])
     parts.append(_image_residuals(data, T_ER_Ntip, T_EL_Ptip @ T_Ptip_I, spacing)[samples].ravel() / sigma["image"])
     return np.concatenate(parts)
 
@@ -169,6 +296,118 @@ def _residuals(
 def _image_residuals(data: _Data, T_ER_Ntip: FloatArray, T_EL_I: FloatArray, spacing: FloatArray) -> FloatArray:
     p_I = np.column_stack([data.uv_px * spacing, np.zeros(len(data.uv_px))])
     return transform_points(data.T_R_ER, T_ER_Ntip[:3, 3]) - transform_points(data.T_R_EL @ T_EL_I, p_I)
+
+
+def _skew(v: FloatArray) -> FloatArray:
+    """``(..., 3, 3)`` cross-product matrices of ``(..., 3)`` vectors: ``skew(a) @ b = a × b``."""
+    v = np.asarray(v, dtype=float)
+    out = np.zeros((*v.shape[:-1], 3, 3))
+    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
+    return out
+
+
+def _left_jacobian(rotvec: FloatArray) -> FloatArray:
+    """``(3, 3)`` left Jacobian of SO(3): ``exp(ω + dω) ≈ exp(J_l(ω) dω) exp(ω)``."""
+    angle = float(np.sqrt(rotvec @ rotvec))
+    K = _skew(rotvec)
+    if angle < 1e-6:  # series: the next terms are below 1e-13
+        return np.eye(3) + 0.5 * K + K @ K / 6.0
+    half = 0.5 * angle
+    return np.eye(3) + 0.5 * (np.sin(half) / half) ** 2 * K + (angle - np.sin(angle)) / angle**3 * K @ K
+
+
+def _jacobian(
+    x: FloatArray, layout: _Layout, data: _Data, base: dict, sigma: dict[str, float], samples: np.ndarray
+) -> FloatArray:
+    """Analytic Jacobian ``(M, P)`` of :func:`_residuals` (layouts without joint offsets).
+
+    A rotation ``R = exp(ω) R_base`` moves a vector ``b`` by ``d(R b) = −[R b]× J_l(ω) dω``.
+    """
+    b = layout.blocks()
+    T_ER_Ntip, T_EL_Ptip, T_Ptip_I, _, spacing = layout.unpack(x, base, data.spacing_m)
+    R_P, R_I = T_EL_Ptip[:3, :3], T_Ptip_I[:3, :3]
+    rows = data.group_rows(int(np.count_nonzero(samples)))
+    J = np.zeros((rows["image"].stop, layout.size))
+    # Touches: R p_tool + t − rtip.
+    touch = np.zeros((len(data.touch_tool), 3, layout.size))
+    R_touch = data.touch_T[:, :3, :3]
+    for tool, name in ((1, "p_ER_Ntip"), (2, "p_EL_Ptip")):
+        touch[data.touch_tool == tool, :, b[name]] = R_touch[data.touch_tool == tool]
+    for k, name in enumerate(("p_R_Rtip1", "p_R_Rtip2")):
+        touch[data.touch_ref == k, :, b[name]] = -np.eye(3)
+    J[rows["touch"]] = touch.reshape(-1, layout.size) / sigma["touch"]
+    # Axes moves: (R_a0 R_tool e_c) · (tip_i − tip_0) for the two columns c across the move.
+    axes = []
+    for T_axes, T_tool, rot, tip in (
+        (data.needle_axes, T_ER_Ntip, "rot_ER_Ntip", "p_ER_Ntip"),
+        (data.probe_axes, T_EL_Ptip, "rot_EL_Ptip", "p_EL_Ptip"),
+    ):
+        R_a, t_a = T_axes[:, :3, :3], T_axes[:, :3, 3]
+        R_tool, p_tool = T_tool[:3, :3], T_tool[:3, 3]
+        J_l = _left_jacobian(x[b[rot]])
+        for point, _, across in _AXES_MOVES:
+            move = (R_a[point] - R_a[0]) @ p_tool + t_a[point] - t_a[0]
+            w = R_a[0].T @ move
+            for c in across:
+                v = R_tool[:, c]
+                row = np.zeros(layout.size)
+                row[b[tip]] = (R_a[0] @ v) @ (R_a[point] - R_a[0])
+                row[b[rot]] = np.cross(v, w) @ J_l
+                axes.append(row)
+    J[rows["axes"]] = np.array(axes) / sigma["axes"]
+    # Images: R_ER p_N + t_ER − R_EL (R_P (R_I p_I + t_I) + t_P) − t_EL.
+    uv = data.uv_px[samples]
+    R_ER, R_EL = data.T_R_ER[samples, :3, :3], data.T_R_EL[samples, :3, :3]
+    p_I = np.column_stack([uv * spacing, np.zeros(len(uv))])
+    R_I_p = p_I @ R_I.T
+    w = R_I_p + T_Ptip_I[:3, 3]
+    image = np.zeros((len(uv), 3, layout.size))
+    image[:, :, b["p_ER_Ntip"]] = R_ER
+    image[:, :, b["p_EL_Ptip"]] = -R_EL
+    image[:, :, b["p_Ptip_I"]] = -R_EL @ R_P
+    image[:, :, b["rot_EL_Ptip"]] = R_EL @ _skew(w @ R_P.T) @ _left_jacobian(x[b["rot_EL_Ptip"]])
+    image[:, :, b["rot_Ptip_I"]] = R_EL @ R_P @ _skew(R_I_p) @ _left_jacobian(x[b["rot_Ptip_I"]])
+    nominal = data.spacing_m
+    du = np.column_stack([uv[:, 0] * nominal[0], np.zeros((len(uv), 2))])  # ∂p_I per unit of a u scale
+    dv = np.column_stack([np.zeros(len(uv)), uv[:, 1] * nominal[1], np.zeros(len(uv))])
+    dp = {"rigid": [], "similarity": [du + dv], "scaled_uv": [du, dv], "sound_speed": [dv]}[layout.model]
+    R_total = R_EL @ (R_P @ R_I)
+    for k, d in enumerate(dp):
+        image[:, :, b["scale"].start + k] = -np.einsum("nij,nj->ni", R_total, d)
+    J[rows["image"]] = image.reshape(-1, layout.size) / sigma["image"]
+    return J
+
+
+@dataclass(frozen=True)
+class NoiseLevel:
+    """A residual group's noise level and where it comes from.
+
+    Attributes:
+        sd_m: noise SD per coordinate, metres (the weight the group gets).
+        dof: residual degrees of freedom of the group (its rows minus its leverages).
+        source: ``"residuals"`` (estimated from them), ``"assumed"`` (too few degrees of freedom;
+            see ``note``) or ``"below resolution"`` (the residuals are under :data:`RESOLUTION_M`).
+        note: one line a person can read.
+    """
+
+    sd_m: float
+    dof: float
+    source: str
+    note: str
+
+
+@dataclass(frozen=True)
+class Conditioning:
+    """How well the final fit's data determine its unknowns.
+
+    Attributes:
+        rcond: reciprocal condition number of the normalised Jacobian with unit-norm columns.
+        rotation_sd_rad: each fitted rotation's largest SD (rad).
+    """
+
+    rcond: float
+    rotation_sd_rad: dict[str, float]
 
 
 @dataclass(frozen=True)
@@ -181,12 +420,15 @@ class ChainFit:
         image: the image calibration (rigid ``T_Ptip_I`` and spacing).
         sound_speed_m_s: the implied speed of sound (from the depth scale; None for rigid).
         p_R_Rtip: ``(2, 3)`` reference tips.
-        sigma_m: estimated noise level per residual group (touch, axes, image), metres.
-        covariance: ``(P, P)`` of the parameter vector (metres, radians, scale factors).
+        sigma_m: noise level per residual group (touch, axes, image), metres per coordinate.
+        covariance: ``(P, P)`` of the parameter vector (metres, radians, scale factors): ``(JᵀJ)⁻¹`` of
+            the final fit, the session's noise (not the robot model's own error; module docstring).
         x: ``(P,)`` parameter vector (increments of rotations about the starting rotations).
-        outliers: ``(N,)`` image samples flagged as gross errors.
-        image_residuals: ``(N, 3)`` per-sample residual, metres (all samples, flagged included).
+        outliers: ``(N,)`` image samples flagged as gross errors and left out of the final fit.
+        image_residuals: ``(N, 3)`` per-sample residual of the final fit, metres (flagged included).
         joint_offsets_rad: estimated joint zero offsets (empty unless asked for).
+        noise: per group, the noise level with its degrees of freedom and source.
+        conditioning: the conditioning figures of the final fit.
     """
 
     model: str
@@ -202,13 +444,36 @@ class ChainFit:
     outliers: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     image_residuals: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
     joint_offsets_rad: dict[str, float] = field(default_factory=dict)
+    noise: dict[str, NoiseLevel] = field(default_factory=dict)
+    conditioning: Conditioning | None = None
 
     def offsets(self, joint_names: tuple[str, ...]) -> FloatArray:
         """``(nq,)`` estimated joint zero offsets (zeros unless estimated), radians."""
         return np.array([self.joint_offsets_rad.get(name, 0.0) for name in joint_names])
 
     def parameter_sd(self) -> FloatArray:
+        """``(P,)`` SD of each parameter (metres, radians, scale factors)."""
         return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
+
+    def T_EL_I(self, x: FloatArray | None = None) -> FloatArray:
+        """``(4, 4)`` the image frame on the left flange, ``T_EL_Ptip @ T_Ptip_I``, at ``x`` (default the
+        estimate): what the image samples determine, whatever the probe-tip frame's convention."""
+        layout = _Layout(self.model)
+        at = self.x if x is None else np.asarray(x, dtype=float)
+        _, T_EL_Ptip, T_Ptip_I, _, _ = layout.unpack(at[: layout.size], self.base, np.ones(2))
+        return T_EL_Ptip @ T_Ptip_I
+
+    def block(self, name: str) -> slice:
+        """The slice of parameter ``name`` (see :data:`BLOCK_LABELS`) in ``x`` and ``covariance``."""
+        s = _Layout(self.model).blocks()[name]
+        return slice(s.start, len(self.x)) if name == "joint_offsets" else s
+
+    def noise_text(self) -> str:
+        """The noise levels in one line, each with its source."""
+        names = {"touch": "touches", "axes": "axes moves", "image": "images"}
+        return "; ".join(f"{names[g]} {n.note}" for g, n in self.noise.items()) or ", ".join(
+            f"{names[g]} {v * 1e3:.3f} mm" for g, v in self.sigma_m.items()
+        )
 
 
 def _start(initial: CalibrationResult, layout: _Layout, nominal_spacing: FloatArray) -> tuple[FloatArray, dict]:
@@ -218,23 +483,75 @@ def _start(initial: CalibrationResult, layout: _Layout, nominal_spacing: FloatAr
         "R_EL_Ptip": initial.T_EL_Ptip[:3, :3],
         "R_Ptip_I": image.T_Ptip_I[:3, :3],
     }
+    b = layout.blocks()
     x = np.zeros(layout.size)
-    x[0:3] = initial.T_ER_Ntip[:3, 3]
-    x[9:12] = initial.T_EL_Ptip[:3, 3]
-    x[15:18] = image.T_Ptip_I[:3, 3]
-    x[18:21], x[21:24] = initial.p_R_Rtip["rtip1"], initial.p_R_Rtip["rtip2"]
+    x[b["p_ER_Ntip"]] = initial.T_ER_Ntip[:3, 3]
+    x[b["p_EL_Ptip"]] = initial.T_EL_Ptip[:3, 3]
+    x[b["p_Ptip_I"]] = image.T_Ptip_I[:3, 3]
+    x[b["p_R_Rtip1"]], x[b["p_R_Rtip2"]] = initial.p_R_Rtip["rtip1"], initial.p_R_Rtip["rtip2"]
     ratio = image.spacing_m / nominal_spacing
     if layout.model == "similarity":
-        x[24] = ratio.mean()
+        x[b["scale"]] = ratio.mean()
     elif layout.model == "scaled_uv":
-        x[24:26] = ratio
+        x[b["scale"]] = ratio
     elif layout.model == "sound_speed":
-        x[24] = ratio[1]
+        x[b["scale"]] = ratio[1]
     return x, base
 
 
 #: Prior SD of an estimated joint zero offset (rad): keeps weakly excited offsets near zero.
 OFFSET_PRIOR_SD = np.radians(0.01)
+
+
+def _leverages(J: FloatArray) -> FloatArray:
+    """Diagonal of the hat matrix ``J (JᵀJ)⁺ Jᵀ`` (rows' leverages), from an SVD of ``J``."""
+    norms = np.linalg.norm(J, axis=0)
+    live = norms > 0  # the hat matrix does not depend on the columns' scales: equilibrate them
+    U, s, _ = np.linalg.svd(J[:, live] / norms[live], full_matrices=False)
+    rank = s > s[0] * RCOND_LIMIT if s.size and s[0] > 0 else np.zeros(s.size, dtype=bool)
+    return np.sum(U[:, rank] ** 2, axis=1)
+
+
+def _noise_levels(
+    normalised: FloatArray,
+    J: FloatArray,
+    rows: dict[str, slice],
+    sigma: dict[str, float],
+    robust: bool,
+) -> dict[str, NoiseLevel]:
+    """Each group's noise level from its residuals, with the degrees-of-freedom correction.
+
+    ``normalised`` and ``J`` are the residuals and Jacobian of the weighted problem (rows divided
+    by ``sigma``). Final stage: ``σ_g² = Σ_g r_raw² / (n_g − Σ_g h_ii)``; robust stage: the same
+    correction applied to 1.4826 × the median absolute residual. Groups with fewer than
+    :data:`MIN_NOISE_DOF` residual degrees of freedom take an assumed level (see the module).
+    """
+    h = _leverages(J)
+    out: dict[str, NoiseLevel] = {}
+    for g in GROUPS:
+        raw = normalised[rows[g]] * sigma[g]
+        dof = float(raw.size - h[rows[g]].sum())
+        if dof < MIN_NOISE_DOF:
+            continue
+        if robust:
+            scale = 1.4826 * float(np.median(np.abs(raw))) * np.sqrt(raw.size / dof)
+        else:
+            scale = float(np.sqrt(np.sum(raw**2) / dof))
+        if scale < RESOLUTION_M:
+            note = f"below {RESOLUTION_M * 1e3:.3f} mm (resolution)"
+            out[g] = NoiseLevel(RESOLUTION_M, dof, "below resolution", note)
+        else:
+            out[g] = NoiseLevel(scale, dof, "residuals", f"{scale * 1e3:.3f} mm ({dof:.0f} residual dof)")
+    for g in GROUPS:
+        if g in out:
+            continue
+        dof = float(normalised[rows[g]].size - h[rows[g]].sum())
+        if g == "axes" and "touch" in out:
+            level, why = out["touch"].sd_m, "the touches' level"
+        else:
+            level, why = INITIAL_SIGMA[g], "the prior level"
+        out[g] = NoiseLevel(level, dof, "assumed", f"{level * 1e3:.3f} mm assumed ({why}: {dof:.0f} residual dof)")
+    return out
 
 
 def fit_chain(
@@ -247,7 +564,7 @@ def fit_chain(
     rounds: int = 2,
     joint_offsets: bool = False,
 ) -> ChainFit:
-    """Solve the whole chain with one image model.
+    """Solve the whole chain with one image model (robust stage, then the final fit without outliers).
 
     Args:
         session: the recorded data.
@@ -255,8 +572,11 @@ def fit_chain(
         initial: the sequential result (starting values).
         model: one of :data:`MODELS`.
         samples: ``(N,)`` bool mask of image samples to use (for cross-validation; default all).
-        rounds: solves, each re-estimating the groups' noise levels from the previous residuals.
+        rounds: robust solves, each re-estimating the groups' noise levels from the previous residuals.
         joint_offsets: also estimate the zero offsets of the joints this session identifies.
+
+    Raises:
+        DegenerateDataError: the data do not determine the unknowns (:func:`check_conditioning`).
     """
     if model not in MODELS:
         raise InputError(f"unknown image model {model!r}; choose from {', '.join(MODELS)}")
@@ -270,39 +590,67 @@ def fit_chain(
     x, base = _start(initial, layout, data.spacing_m)
     use = np.ones(len(data.uv_px), dtype=bool) if samples is None else np.asarray(samples, dtype=bool)
     sigma = dict(INITIAL_SIGMA)
+    offsets_block = layout.blocks()["joint_offsets"]
 
     def data_at(x: FloatArray) -> _Data:
         return _Data.of(session, robot, layout.offsets(x, robot.nq)) if joints else data
 
-    def residual(x: FloatArray) -> FloatArray:
-        r = _residuals(x, layout, data_at(x), base, sigma, use)
-        return np.concatenate([r, x[24 + layout.n_scale :] / OFFSET_PRIOR_SD]) if joints else r
+    def solve(x: FloatArray, keep: np.ndarray, loss: str, tol: float = 1e-10):
+        def residual(x: FloatArray) -> FloatArray:
+            r = _residuals(x, layout, data_at(x), base, sigma, keep)
+            return np.concatenate([r, x[offsets_block] / OFFSET_PRIOR_SD]) if joints else r
 
-    def solve(x: FloatArray):
+        def jacobian(x: FloatArray) -> FloatArray:
+            return _jacobian(x, layout, data, base, sigma, keep)
+
         return least_squares(
             residual,
             x,
+            jac="2-point" if joints else jacobian,  # joint offsets move the flange poses: by differences
             method="trf",
-            loss="soft_l1",
+            loss=loss,
             f_scale=1.0,
             x_scale="jac",
-            xtol=1e-15,
-            ftol=1e-15,
-            gtol=1e-15,
+            xtol=tol,
+            ftol=tol,
+            gtol=tol,
             max_nfev=200,
         )
 
-    for _ in range(rounds):
-        x = solve(x).x
-        sigma = _group_sigmas(x, layout, data_at(x), base, sigma, use)
-    fit = solve(x)
+    def flagged(x: FloatArray) -> np.ndarray:
+        T_ER_Ntip, T_EL_Ptip, T_Ptip_I, _, spacing = layout.unpack(x, base, data.spacing_m)
+        residuals = _image_residuals(data_at(x), T_ER_Ntip, T_EL_Ptip @ T_Ptip_I, spacing)
+        return np.linalg.norm(residuals, axis=1) / (np.sqrt(3.0) * sigma["image"]) > OUTLIER_THRESHOLD
+
+    # Robust stage: find the gross errors.
+    for _ in range(max(rounds, 1)):
+        fit = solve(x, use, "soft_l1")
+        x = fit.x
+        noise = _noise_levels(fit.fun, fit.jac, data.group_rows(int(use.sum())), sigma, robust=True)
+        sigma = {g: n.sd_m for g, n in noise.items()}
+    outliers = use & flagged(x)
+    # Final stage: least squares without them; noise levels from the residuals, dof-corrected.
+    for attempt in range(3):  # a sample flagged (or cleared) by the final fit is dropped (or restored)
+        keep = use & ~outliers
+        for _ in range(NOISE_ITERATIONS):  # weights and noise levels to their common fixed point
+            fit = solve(x, keep, "linear")
+            x = fit.x
+            noise = _noise_levels(fit.fun, fit.jac, data.group_rows(int(keep.sum())), sigma, robust=False)
+            change = max(abs(noise[g].sd_m / sigma[g] - 1.0) for g in GROUPS)
+            sigma = {g: n.sd_m for g, n in noise.items()}
+            if change < 1e-6:
+                break
+        again = use & flagged(x)
+        if np.array_equal(again, outliers) or attempt == 2:
+            break
+        outliers = again
+    fit = solve(x, keep, "linear", tol=1e-15)  # the estimate: to the last digit (the others only weight and flag)
     x = fit.x
-    covariance = np.linalg.pinv(fit.jac.T @ fit.jac, rcond=1e-12)
+    conditioning, covariance = check_conditioning(fit.jac, layout, session, keep)
     T_ER_Ntip, T_EL_Ptip, T_Ptip_I, rtips, spacing = layout.unpack(x, base, data.spacing_m)
     residuals = _image_residuals(data_at(x), T_ER_Ntip, T_EL_Ptip @ T_Ptip_I, spacing)
-    outliers = np.linalg.norm(residuals, axis=1) / (np.sqrt(3.0) * sigma["image"]) > OUTLIER_THRESHOLD
     sound = None if model in ("rigid",) else float(SCANNER_SOUND_SPEED * spacing[1] / data.spacing_m[1])
-    offsets = {robot.joint_names[k]: float(v) for k, v in zip(joints, x[24 + layout.n_scale :], strict=True)}
+    offsets = {robot.joint_names[k]: float(v) for k, v in zip(joints, x[offsets_block], strict=True)}
     return ChainFit(
         model,
         T_ER_Ntip,
@@ -317,19 +665,84 @@ def fit_chain(
         outliers,
         residuals,
         offsets,
+        noise,
+        conditioning,
     )
 
 
-def _group_sigmas(
-    x: FloatArray, layout: _Layout, data: _Data, base: dict, sigma: dict[str, float], use: np.ndarray
-) -> dict[str, float]:
-    """Noise level per group from its residuals: 1.4826 × the median absolute residual per coordinate."""
-    ones = {k: 1.0 for k in sigma}
-    r = _residuals(x, layout, data, base, ones, use)
-    n_touch = 3 * sum(len(T) for touches in (data.top, data.needle, data.probe) for _, T in touches)
-    groups = {"touch": r[:n_touch], "axes": r[n_touch : n_touch + 12], "image": r[n_touch + 12 :]}
-    floor = {"touch": 1e-6, "axes": 1e-6, "image": 1e-6}
-    return {k: max(1.4826 * float(np.median(np.abs(v))), floor[k]) for k, v in groups.items()}
+def check_conditioning(
+    J: FloatArray, layout: _Layout, session: Session, used: np.ndarray
+) -> tuple[Conditioning, FloatArray]:
+    """Refuse a fit whose data do not determine its unknowns; else return its covariance.
+
+    ``J`` is the Jacobian of the normalised residuals at the solution. Two refusals
+    (:class:`~brachycal.errors.DegenerateDataError`, naming the unknowns and the session file):
+
+    - **undetermined**: the reciprocal condition number of ``J`` with unit-norm columns is below
+      :data:`RCOND_LIMIT` (a combination of unknowns the data do not see at all: e.g. every image
+      sample at one robot pose and pixel, or too few samples);
+    - **linearisation invalid**: a fitted rotation's largest SD exceeds :data:`ROTATION_SD_LIMIT`
+      (e.g. samples spread over a pixel or two: the image rotation is then known only to tens of
+      degrees and no linearised interval or predicted error would hold).
+
+    Returns:
+        The conditioning figures and the covariance ``(JᵀJ)⁻¹`` ``(P, P)``.
+    """
+    norms = np.linalg.norm(J, axis=0)
+    blocks = layout.blocks()
+    if np.any(norms == 0):
+        column = int(np.argmin(norms))
+        _refuse(blocks, [column], "does not enter any residual", session, used)
+    _, s, Vt = np.linalg.svd(J / norms, full_matrices=False)
+    rcond = float(s[-1] / s[0])
+    if rcond < RCOND_LIMIT:
+        weakest = np.argsort(-np.abs(Vt[-1]))
+        involved = [int(k) for k in weakest if abs(Vt[-1][k]) > 0.2] or [int(weakest[0])]
+        _refuse(
+            blocks,
+            involved,
+            f"are not determined by the data (reciprocal condition {rcond:.1e}, limit {RCOND_LIMIT:.0e})",
+            session,
+            used,
+        )
+    # (JᵀJ)⁻¹ in the scaled coordinates, scaled back: exact inverse, no truncation.
+    covariance = (Vt.T / s**2) @ Vt / np.outer(norms, norms)
+    rotation_sd = {
+        name: float(np.sqrt(max(np.linalg.eigvalsh(covariance[blocks[name], blocks[name]]).max(), 0.0)))
+        for name in ROTATIONS
+    }
+    worst = max(rotation_sd, key=rotation_sd.get)
+    if rotation_sd[worst] > ROTATION_SD_LIMIT:
+        _refuse(
+            blocks,
+            [blocks[worst].start],
+            f"is determined only to {np.degrees(rotation_sd[worst]):.1f}° SD "
+            f"(limit {np.degrees(ROTATION_SD_LIMIT):.1f}°, where linearised intervals stop holding)",
+            session,
+            used,
+        )
+    return Conditioning(rcond, rotation_sd), covariance
+
+
+def _refuse(blocks: dict[str, slice], columns: list[int], problem: str, session: Session, used: np.ndarray):
+    names = []
+    for column in columns:
+        name = next(n for n, s in blocks.items() if s.start <= column < s.stop)
+        if name not in names:
+            names.append(name)
+    labels = [BLOCK_LABELS[n][0] for n in names]
+    files = sorted({BLOCK_LABELS[n][1] for n in names})
+    what = labels[0] if len(labels) == 1 else ", ".join(labels[:-1]) + " and " + labels[-1]
+    advice = ""
+    if "samples.csv" in files:
+        q = session.samples_q[used]
+        poses = len(np.unique(np.round(q, 6), axis=0))
+        span = np.ptp(session.uv_px[used], axis=0) if used.any() else np.zeros(2)
+        advice = (
+            f"; the {int(used.sum())} image samples come from {poses} distinct robot pose(s) and span "
+            f"{span[0]:.0f} x {span[1]:.0f} px: record the needle at several probe poses spread over the image"
+        )
+    raise DegenerateDataError(f"whole chain: {what} {problem}{advice}", file=files[0] if len(files) == 1 else None)
 
 
 def cross_validate(
@@ -342,7 +755,11 @@ def cross_validate(
     exclude: np.ndarray | None = None,
 ) -> ErrorStats:
     """K-fold cross-validated image error of a chain model: each fold's samples predicted by a fit
-    without them. Samples in ``exclude`` (flagged outliers) are fitted robustly but not scored."""
+    without them. Samples in ``exclude`` (flagged outliers) are fitted robustly but not scored.
+
+    Raises:
+        DegenerateDataError: a fold's training samples do not determine the chain.
+    """
     n = len(session.uv_px)
     order = np.random.default_rng(seed).permutation(n)
     errors = np.empty(n)
@@ -350,7 +767,11 @@ def cross_validate(
     for fold in range(folds):
         held = np.zeros(n, dtype=bool)
         held[order[fold::folds]] = True
-        fit = fit_chain(session, robot, initial, model, samples=~held, rounds=1)
+        try:
+            fit = fit_chain(session, robot, initial, model, samples=~held, rounds=1)
+        except DegenerateDataError as exc:
+            left_out = ", ".join(session.sample_ids[i] for i in np.flatnonzero(held)[:3])
+            raise DegenerateDataError(f"{model} cross-validation without sample(s) {left_out}: {exc.problem}") from None
         residuals = _image_residuals(data, fit.T_ER_Ntip, fit.T_EL_Ptip @ fit.image.T_Ptip_I, fit.image.spacing_m)
         errors[held] = np.linalg.norm(residuals[held], axis=1)
     keep = np.ones(n, dtype=bool) if exclude is None else ~np.asarray(exclude, dtype=bool)
@@ -359,12 +780,16 @@ def cross_validate(
 
 @dataclass(frozen=True)
 class ModelChoice:
-    """The chosen image model and the evidence: cross-validated errors per model (outliers not scored)."""
+    """The chosen image model and the evidence: cross-validated errors per model (outliers not scored).
+
+    ``undetermined`` lists the models the data cannot determine (model → the reason), left out.
+    """
 
     model: str
     cv: dict[str, ErrorStats]
     rule: str
     scored_samples: int
+    undetermined: dict[str, str] = field(default_factory=dict)
 
     def evidence(self) -> dict[str, dict[str, float]]:
         out = {}
@@ -383,18 +808,40 @@ def select_model(
 ) -> ModelChoice:
     """Choose the image model by K-fold CV: the simplest model within one standard error of the best.
 
-    Samples that the most flexible model flags as gross outliers are left out of the scores (they
-    would dominate every model's error alike).
+    Samples that the most flexible determined model flags as gross outliers are left out of the
+    scores (they would dominate every model's error alike). A model the data cannot determine
+    (:func:`check_conditioning`) is left out of the choice, with its reason.
+
+    Raises:
+        DegenerateDataError: no model is determined by the data.
     """
-    flagged = fit_chain(session, robot, initial, "scaled_uv").outliers
-    cv = {m: cross_validate(session, robot, initial, m, folds, exclude=flagged) for m in models}
+    undetermined: dict[str, str] = {}
+    flagged = None
+    for m in sorted(models, key=lambda m: -COMPLEXITY[m]):
+        try:
+            flagged = fit_chain(session, robot, initial, m).outliers
+            break
+        except DegenerateDataError as exc:
+            undetermined[m] = exc.problem
+    if flagged is None:
+        raise DegenerateDataError(next(iter(undetermined.values())))
+    cv = {}
+    for m in models:
+        if m in undetermined:
+            continue
+        try:
+            cv[m] = cross_validate(session, robot, initial, m, folds, exclude=flagged)
+        except DegenerateDataError as exc:
+            undetermined[m] = exc.problem
+    if not cv:
+        raise DegenerateDataError(next(iter(undetermined.values())))
     rule = "simplest model within one standard error of the lowest cross-validated RMSE (outliers not scored)"
     evidence = ModelChoice("", cv, rule, int((~flagged).sum())).evidence()
     best = min(evidence, key=lambda m: evidence[m]["cv_rmse_mm"])
     limit = evidence[best]["cv_rmse_mm"] + evidence[best]["se_mm"]
-    eligible = [m for m in models if evidence[m]["cv_rmse_mm"] <= limit]
+    eligible = [m for m in cv if evidence[m]["cv_rmse_mm"] <= limit]
     chosen = min(eligible, key=lambda m: (COMPLEXITY[m], evidence[m]["cv_rmse_mm"]))
-    return ModelChoice(chosen, cv, rule, int((~flagged).sum()))
+    return ModelChoice(chosen, cv, rule, int((~flagged).sum()), undetermined)
 
 
 def identifiable_joint_offsets(
@@ -413,10 +860,10 @@ def identifiable_joint_offsets(
     sigma = fit.sigma_m
 
     def residuals(data_k: _Data) -> FloatArray:
-        return _residuals(fit.x, layout, data_k, fit.base, sigma, use)
+        return _residuals(fit.x[: layout.size], layout, data_k, fit.base, sigma, use)
 
     r0 = residuals(data)
-    J = approx_fprime(fit.x, _residuals, finite_difference_steps(fit.x), layout, data, fit.base, sigma, use)
+    J = _jacobian(fit.x[: layout.size], layout, data, fit.base, sigma, use)
     Q, _ = np.linalg.qr(J)
     out = {}
     step = 1e-6
@@ -429,8 +876,6 @@ def identifiable_joint_offsets(
 
 
 def _shift_joint(session: Session, k: int, delta: float) -> Session:
-    from dataclasses import replace
-
     def shift(q: FloatArray) -> FloatArray:
         q = np.array(q, dtype=float, copy=True)
         q[..., k] += delta
@@ -451,8 +896,7 @@ def information_blocks(session: Session, robot: Robot, fit: ChainFit) -> tuple[F
     layout = _Layout(fit.model)
     data = _Data.of(session, robot)
     use = np.ones(len(session.uv_px), dtype=bool)
-    x = fit.x[: layout.size]
-    J = approx_fprime(x, _residuals, finite_difference_steps(x), layout, data, fit.base, fit.sigma_m, use)
+    J = _jacobian(fit.x[: layout.size], layout, data, fit.base, fit.sigma_m, use)
     n_images = 3 * len(session.uv_px)
     fixed = J[:-n_images]
     return fixed.T @ fixed, J[-n_images:].reshape(len(session.uv_px), 3, layout.size)

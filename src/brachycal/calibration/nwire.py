@@ -30,8 +30,10 @@ from numpy.typing import ArrayLike
 from brachycal.calibration import registration
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.data.plus_files import PlusConfig, SegmentedFrame, Wire
-from brachycal.errors import InputError
+from brachycal.errors import DegenerateDataError, InputError
+from brachycal.imaging.pixels import image_points
 from brachycal.se3 import FloatArray, inverse, transform_points
+from brachycal.validate import check_finite
 
 
 def _closest_point_on_first(a0: FloatArray, a1: FloatArray, b0: FloatArray, b1: FloatArray) -> FloatArray:
@@ -57,30 +59,72 @@ def middle_point_phantom(
     w12 = _closest_point_on_first(w1.front_m, w1.back_m, w2.front_m, w2.back_m)
     w32 = _closest_point_on_first(w3.front_m, w3.back_m, w2.front_m, w2.back_m)
     p1, p2, p3 = (np.asarray(p, dtype=float) for p in (p1_px, p2_px, p3_px))
-    alpha = np.linalg.norm(p2 - p1) / np.linalg.norm(p3 - p1)
-    return w12 + alpha * (w32 - w12)
+    span = np.linalg.norm(p3 - p1)
+    if not span > 0.0:  # the ratio would be 0/0: no position along the diagonal wire
+        raise InputError(f"the outer wires {w1.name!r} and {w3.name!r} are segmented at the same pixel")
+    return w12 + (np.linalg.norm(p2 - p1) / span) * (w32 - w12)
+
+
+def check_wire_names(config: PlusConfig, frame: SegmentedFrame) -> None:
+    """A segmented frame's wire names are exactly the configuration's (an OK frame has every wire).
+
+    A name the phantom definition does not know means frames and configuration describe different
+    phantoms (or a wire was renamed): its pattern would be dropped without a word, so refuse.
+
+    Raises:
+        InputError: naming the frames file and frame, the unknown name and the configuration's
+            wires that the frame lacks.
+    """
+    configured = [w.name for pattern in config.patterns for w in pattern]
+    unknown = [name for name in frame.points_px if name not in configured]
+    lacking = [name for name in configured if name not in frame.points_px]
+    if not unknown and not lacking:
+        return
+    config_name = config.source or "the configuration"
+    if unknown:
+        message = f"segmented wire {unknown[0]!r} is not a wire of the phantom in {config_name}"
+        if lacking:
+            message += f" (this frame lacks its wire(s) {', '.join(map(repr, lacking))})"
+    else:
+        message = (
+            f"lacks the segmented point of wire(s) {', '.join(map(repr, lacking))} of the phantom in {config_name}"
+        )
+    raise InputError(message, file=frame.source, row=frame.index, row_label=frame.label)
 
 
 def wire_point_pairs(config: PlusConfig, frames: list[SegmentedFrame]) -> tuple[FloatArray, FloatArray, np.ndarray]:
-    """Middle-wire pairs of all usable frames: ``(uv_px (K, 2), p_probe_m (K, 3), frame (K,))``."""
+    """Middle-wire pairs of all usable frames: ``(uv_px (K, 2), p_probe_m (K, 3), frame (K,))``.
+
+    Every frame with segmentation status OK contributes one pair per N-wire pattern; its wire names
+    must be the configuration's (:func:`check_wire_names`).
+    """
     T_reference_phantom = config.transforms.get(("Phantom", "Reference"))
     if T_reference_phantom is None:
-        raise InputError("the configuration has no Phantom->Reference transform (phantom registration)")
+        raise InputError(
+            "the configuration has no Phantom->Reference transform (phantom registration)", file=config.source
+        )
     uv, p_probe, frame_of = [], [], []
     for frame in frames:
         if not frame.ok:
             continue
+        check_wire_names(config, frame)
         T_probe_phantom = inverse(frame.T_tracker_probe) @ frame.T_tracker_reference @ T_reference_phantom
         for pattern in config.patterns:
             names = [w.name for w in pattern]
-            if not all(n in frame.points_px for n in names):
-                continue
+            if not np.linalg.norm(frame.points_px[names[2]] - frame.points_px[names[0]]) > 0.0:
+                raise InputError(
+                    f"the outer wires {names[0]!r} and {names[2]!r} are segmented at the same pixel",
+                    file=frame.source,
+                    row=frame.index,
+                    row_label=frame.label,
+                )
             m = middle_point_phantom(pattern, *(frame.points_px[n] for n in names))
             uv.append(frame.points_px[names[1]])
             p_probe.append(transform_points(T_probe_phantom, m))
             frame_of.append(frame.index)
     if len(uv) < 3:
-        raise InputError(f"only {len(uv)} usable middle-wire points: at least 3 are needed")
+        source = frames[0].source if frames else None
+        raise DegenerateDataError(f"only {len(uv)} usable middle-wire points: at least 3 are needed", file=source)
     return np.array(uv), np.array(p_probe), np.array(frame_of)
 
 
@@ -106,7 +150,7 @@ class NWireCalibration:
         uv = np.atleast_2d(np.asarray(uv_px, dtype=float))
         if model == "affine":
             return uv @ self.affine[:3, :2].T + self.affine[:3, 3]
-        return transform_points(self.T_probe_image, np.column_stack([uv * self.spacing_m, np.zeros(len(uv))]))
+        return transform_points(self.T_probe_image, image_points(uv, self.spacing_m))
 
 
 def _lsq_reject(design: FloatArray, target: FloatArray, reject_sd: float) -> tuple[FloatArray, np.ndarray]:
@@ -150,21 +194,34 @@ def calibrate_nwire(
 
     Each round fits on the inliers and drops points whose 3D residual exceeds the mean plus
     ``reject_sd`` standard deviations of the inliers' residuals, until nothing changes.
+
+    Raises:
+        InputError: non-finite points.
+        DegenerateDataError: a fitted quantity is not finite or a spacing not positive (the points
+            do not determine it) — refused rather than reported as NaN.
     """
-    uv = np.asarray(uv_px, dtype=float)
-    p = np.asarray(p_probe, dtype=float)
+    uv = check_finite(uv_px, "middle-wire pixels")
+    p = check_finite(p_probe, "middle-wire points in the probe frame")
     inliers = np.ones(len(uv), dtype=bool)
     spacing0 = np.array([nominal_spacing_m, nominal_spacing_m])
     for _ in range(max_rounds):
         T, spacing = registration.scaled_uv(uv[inliers], p[inliers], spacing0)
-        predicted = transform_points(T, np.column_stack([uv * spacing, np.zeros(len(uv))]))
+        predicted = transform_points(T, image_points(uv, spacing))
         residuals = np.linalg.norm(predicted - p, axis=1)
         limit = residuals[inliers].mean() + reject_sd * residuals[inliers].std()
         keep = residuals <= limit
         if np.array_equal(keep, inliers):
             break
         inliers = keep
-    return NWireCalibration(T, spacing, fit_affine(uv, p)[0], inliers, residuals)
+    affine = fit_affine(uv, p)[0]
+    for name, value in (("T_Probe_Image", T), ("pixel spacing", spacing), ("affine Image->Probe", affine)):
+        if not np.all(np.isfinite(value)):
+            raise DegenerateDataError(
+                f"the N-wire fit's {name} is not finite: the {len(uv)} middle-wire points do not determine it"
+            )
+    if np.any(spacing <= 0):
+        raise DegenerateDataError(f"the N-wire fit's pixel spacing {spacing.tolist()} is not positive")
+    return NWireCalibration(T, spacing, affine, inliers, residuals)
 
 
 def reprojection_errors(
@@ -188,6 +245,10 @@ def wire_errors_2d(
 
     The wire (phantom → image) is intersected with the image plane z = 0 and the intersection's
     pixel compared with the segmented point.
+
+    Raises:
+        InputError: a frame's wire names differ from the configuration's, or a wire has no
+            usable point in any frame (its statistics would be NaN).
     """
     T_reference_phantom = config.transforms[("Phantom", "Reference")]
     if model == "affine":
@@ -200,6 +261,7 @@ def wire_errors_2d(
     for frame in frames:
         if not frame.ok:
             continue
+        check_wire_names(config, frame)
         T_image_phantom = (
             T_image_probe @ inverse(frame.T_tracker_probe) @ frame.T_tracker_reference @ T_reference_phantom
         )
@@ -212,6 +274,10 @@ def wire_errors_2d(
                     continue
                 hit = a + (-a[2] / (b[2] - a[2])) * (b - a)
                 out[wire.name].append(frame.points_px[wire.name] - to_px @ hit[:2])
+    for name, values in out.items():
+        if not values:
+            source = frames[0].source if frames else None
+            raise InputError(f"wire {name!r} has no usable segmented point in these frames", file=source)
     return {name: np.array(values).reshape(-1, 2) for name, values in out.items()}
 
 

@@ -13,22 +13,42 @@ distances ``‖R_i p_tip + t_i − p_pivot‖`` (= √3 × per-axis).
 
 Units are those of the input (the pose-list file says which: the SciKit-Surgery recording is in
 millimetres; brachycal's own files are in metres).
+
+Error propagation and the conditioning check. With noise of SD ``σ`` per coordinate on each
+pose's equations, ``Cov([p_tip; p_pivot]) = σ² (AᵀA)⁻¹`` for the stacked ``A = [R_i  −I]``; ``σ`` is
+estimated from the residual, ``σ̂² = RSS / (3N − 6)``. The tip block of ``(AᵀA)⁻¹`` is
+``(I − R̄ᵀR̄)⁻¹ / N`` with ``R̄ = mean_i R_i`` (Schur complement), and for small rotations
+``I − R̄ᵀR̄ ≈ tr(C) I − C`` with ``C`` the covariance of the rotation vectors: its smallest eigenvalue
+is the sum of the two smallest rotation variances. Its square root, the *rotation spread* ``φ``
+(radians), is how far the tool turned about the two least-covered axes, and an error of a pose that
+does not average out over the poses (a tracker's bias, a flexing tool) reaches the tip multiplied
+by ``1/φ``. Hence, independent of units and of the noise level (which exact data do not show):
+
+- ``1/φ`` above :data:`MAX_GAIN` (φ < 1.15°) refuses
+  (:class:`~brachycal.errors.DegenerateDataError`): a 0.1-mm pose error would move the tip by 5 mm;
+  rotations about one axis (φ = 0) leave the tip undetermined along it;
+- ``1/φ`` above :data:`WARN_GAIN` (φ < 5.7°) warns (:class:`~brachycal.errors.ConditioningWarning`).
+
+The predicted 3D SDs ``sqrt(trace(Cov))`` of tip and pivot (units of the input) are reported with
+the result (``tip_sd``, ``pivot_sd``).
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 
-from brachycal.errors import InputError
+from brachycal.errors import ConditioningWarning, DegenerateDataError, InputError
 from brachycal.se3 import FloatArray
 
-#: Smallest ratio of the smallest to the largest singular value of the stacked system: below
-#: it the rotations do not span enough directions to fix the tip.
-MIN_CONDITION = 1e-6
+#: Largest gain ``1/φ`` from a pose error to the tip error (module docstring) that is accepted.
+MAX_GAIN = 50.0
+#: Gain ``1/φ`` above which the result comes with a warning.
+WARN_GAIN = 10.0
 
 
 @dataclass(frozen=True)
@@ -41,6 +61,10 @@ class PivotResult:
         residuals: ``(N,)`` 3D residual distance of each pose.
         inliers: ``(N,)`` bool; all True for the algebraic method.
         method: ``"algebraic"`` or ``"robust"``.
+        noise_sd: per-coordinate noise estimated from the inliers' residual, ``sqrt(RSS / (3n − 6))``.
+        tip_sd: predicted 3D SD of ``p_marker_tip``, ``sqrt(trace(Cov))`` (module docstring).
+        pivot_sd: predicted 3D SD of ``p_ref_pivot``.
+        rotation_spread_deg: rotation spread ``φ`` about the two least-covered axes, degrees.
     """
 
     p_marker_tip: FloatArray
@@ -48,6 +72,10 @@ class PivotResult:
     residuals: FloatArray
     inliers: np.ndarray
     method: str
+    noise_sd: float = 0.0
+    tip_sd: float = 0.0
+    pivot_sd: float = 0.0
+    rotation_spread_deg: float = 0.0
 
     @property
     def rms_3d(self) -> float:
@@ -72,16 +100,61 @@ def _check(T_ref_marker: ArrayLike) -> FloatArray:
         raise InputError(f"{len(T)} poses: pivot calibration needs at least 3 with different orientations")
     if not np.all(np.isfinite(T)):
         raise InputError("poses contain NaN or infinite values")
-    s = np.linalg.svd(_system(T)[0], compute_uv=False)
-    if s[-1] / s[0] < MIN_CONDITION:
-        raise InputError("the orientations do not vary enough about the pivot: the tip is undetermined")
+    rotation_spread(T, check=True)
     return T
+
+
+def rotation_spread(T_ref_marker: ArrayLike, *, check: bool = False) -> float:
+    """Rotation spread ``φ = sqrt(λ_min(I − R̄ᵀR̄))`` of poses ``(N, 4, 4)``, radians (module docstring).
+
+    With ``check``, refuse (:class:`DegenerateDataError`) when ``1/φ > MAX_GAIN`` and warn when
+    ``1/φ > WARN_GAIN``.
+    """
+    R_mean = np.asarray(T_ref_marker, dtype=float)[:, :3, :3].mean(axis=0)
+    spread = float(np.sqrt(max(np.linalg.eigvalsh(np.eye(3) - R_mean.T @ R_mean)[0], 0.0)))
+    if check:
+        gain = 1.0 / spread if spread > 0 else np.inf
+        figures = f"rotation spread {np.degrees(spread):.3g} deg about the two least-covered axes"
+        if gain > MAX_GAIN:
+            consequence = (
+                f"a pose error reaches the tip {gain:.3g}-fold (> {MAX_GAIN:g})"
+                if np.isfinite(gain)
+                else "the tip is undetermined along the one axis turned about"
+            )
+            raise DegenerateDataError(
+                f"the orientations do not vary enough about the pivot: {figures} "
+                f"(< {np.degrees(1 / MAX_GAIN):.2f} deg), so {consequence}; rotate the tool about its tip by "
+                "15 deg or more in two directions"
+            )
+        if gain > WARN_GAIN:
+            warnings.warn(
+                f"the tip is poorly determined: {figures} (< {np.degrees(1 / WARN_GAIN):.1f} deg), so a pose "
+                f"error reaches the tip {gain:.3g}-fold; rotate the tool further about its tip",
+                ConditioningWarning,
+                stacklevel=4,
+            )
+    return spread
 
 
 def _result(T: FloatArray, x: FloatArray, inliers: np.ndarray, method: str) -> PivotResult:
     A, b = _system(T)
     residuals = np.linalg.norm((A @ x - b).reshape(-1, 3), axis=1)
-    return PivotResult(x[:3].copy(), x[3:].copy(), residuals, inliers, method)
+    used = np.repeat(inliers, 3)
+    A_in = A[used]
+    n = int(inliers.sum())
+    noise = float(np.sqrt(np.sum(residuals[inliers] ** 2) / max(3 * n - 6, 1)))
+    cov = noise**2 * np.linalg.inv(A_in.T @ A_in)
+    return PivotResult(
+        x[:3].copy(),
+        x[3:].copy(),
+        residuals,
+        inliers,
+        method,
+        noise_sd=noise,
+        tip_sd=float(np.sqrt(np.trace(cov[:3, :3]))),
+        pivot_sd=float(np.sqrt(np.trace(cov[3:, 3:]))),
+        rotation_spread_deg=float(np.degrees(rotation_spread(T[inliers]))),
+    )
 
 
 def pivot_algebraic(T_ref_marker: ArrayLike) -> PivotResult:
@@ -101,7 +174,7 @@ def pivot_robust(T_ref_marker: ArrayLike, outlier_threshold: float = 3.0) -> Piv
     """
     T = _check(T_ref_marker)
     A, b = _system(T)
-    start = pivot_algebraic(T)
+    start = _result(T, np.linalg.lstsq(A, b, rcond=None)[0], np.ones(len(T), dtype=bool), "algebraic")
     scale = max(1.4826 * float(np.median(start.residuals)) / np.sqrt(3.0), 1e-12)
     fit = least_squares(
         lambda x: A @ x - b,
@@ -113,4 +186,9 @@ def pivot_robust(T_ref_marker: ArrayLike, outlier_threshold: float = 3.0) -> Piv
     )
     residuals = np.linalg.norm((A @ fit.x - b).reshape(-1, 3), axis=1)
     inliers = residuals <= outlier_threshold * np.sqrt(3.0) * scale
+    if inliers.sum() < 3 or 1.0 / max(rotation_spread(T[inliers]), 1e-300) > MAX_GAIN:
+        raise DegenerateDataError(
+            f"{int(inliers.sum())} of {len(T)} poses are inliers and their orientations do not vary enough about "
+            "the pivot to determine the tip; record more poses or use the algebraic method"
+        )
     return _result(T, fit.x, inliers, "robust")

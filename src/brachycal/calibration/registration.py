@@ -15,10 +15,26 @@ All functions take corresponding points ``p_src (N, 3)`` and ``p_dst (N, 3)`` (m
   differs from the scanner's assumption (the axial scale is off by a few per cent).
 
 Image points are planar (z = 0); all methods handle planar point sets. Collinear or too few
-points make the problem degenerate and raise :class:`~brachycal.errors.InputError`.
+points make the problem degenerate and raise :class:`~brachycal.errors.InputError`; a
+similarity or u/v scale that comes out zero or negative raises
+:class:`~brachycal.errors.DegenerateDataError`.
+
+:func:`icp_global` removes ICP's dependence on its initial guess: it starts from the nominal and
+from 48 orientations (the two sets' principal axes aligned, normals both ways, every 15° about the
+normal), keeps the distinct converged fits, and returns the best RMS residual; fits within a tie
+tolerance of the best (a symmetric pattern of points matches itself turned over) are told apart by
+closeness to the prior guess, and reported.
+
+:func:`fit_uncertainty` gives every fit's predicted uncertainty by linear error propagation: with
+isotropic noise of SD ``σ`` per coordinate on the residuals ``r_i = R S p_i + t − q_i``,
+``Cov(x) = σ² (JᵀJ)⁻¹`` for the parameters ``x`` = (rotation increment ``δθ`` [rad], translation
+``t`` [m], scale factors), ``J`` the residuals' Jacobian at the solution, and
+``σ̂² = RSS / (3N − p)``.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -26,7 +42,7 @@ from scipy.optimize import least_squares
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from brachycal.errors import InputError
+from brachycal.errors import DegenerateDataError, InputError
 from brachycal.se3 import FloatArray, make_transform, transform_points
 
 #: Smallest ratio of the second to the first singular value of a centred point set: below it
@@ -61,7 +77,11 @@ def _pair(p_src: ArrayLike, p_dst: ArrayLike) -> tuple[FloatArray, FloatArray]:
 
 def kabsch(p_src: ArrayLike, p_dst: ArrayLike) -> FloatArray:
     """``T_dst_src (4, 4)`` by SVD (Kabsch), reflection-safe."""
-    src, dst = _pair(p_src, p_dst)
+    return _kabsch(*_pair(p_src, p_dst))
+
+
+def _kabsch(src: FloatArray, dst: FloatArray) -> FloatArray:
+    """:func:`kabsch` of checked ``(N, 3)`` arrays."""
     c_src, c_dst = src.mean(axis=0), dst.mean(axis=0)
     H = (src - c_src).T @ (dst - c_dst)
     U, _, Vt = np.linalg.svd(H)
@@ -100,7 +120,19 @@ def similarity(p_src: ArrayLike, p_dst: ArrayLike) -> tuple[FloatArray, float]:
     D = np.array([1.0, 1.0, d])
     R = Vt.T @ np.diag(D) @ U.T
     scale = float(np.sum(sigma * D) / np.sum(a**2))
+    if not scale > 0.0 or _without_spread(dst):
+        spread = float(np.sqrt(np.sum(b**2) / len(b)))
+        raise DegenerateDataError(
+            f"the similarity scale comes out {scale:.3g} (target points spread {spread * 1e3:.3g} mm RMS): "
+            "the target points do not follow the source points"
+        )
     return make_transform(R, c_dst - scale * R @ c_src), scale
+
+
+def _without_spread(points: FloatArray) -> bool:
+    """True when ``(N, 3)`` points coincide to round-off (spread ≤ 1e-12 of their magnitude)."""
+    centred = points - points.mean(axis=0)
+    return bool(np.abs(centred).max() <= 1e-12 * max(np.abs(points).max(), np.finfo(float).tiny))
 
 
 def icp(
@@ -133,7 +165,7 @@ def icp(
         if np.array_equal(new_match, match):
             return T, iteration - 1, match
         match = new_match
-        T = kabsch(src, dst[match])
+        T = _kabsch(src, dst[match])
     return T, max_iterations, match
 
 
@@ -159,6 +191,8 @@ def scaled_uv(
     uv = np.asarray(uv_px, dtype=float)
     dst = np.asarray(p_dst, dtype=float)
     s0 = np.asarray(spacing_m, dtype=float)
+    if _without_spread(dst):
+        raise DegenerateDataError("the target points coincide: no pixel spacing can map the pixels onto them")
     src0 = np.column_stack([uv * s0, np.zeros(len(uv))])
     T0 = kabsch(src0, dst)
     R0 = T0[:3, :3]
@@ -170,5 +204,242 @@ def scaled_uv(
 
     x0 = np.concatenate([np.zeros(3), T0[:3, 3], np.ones(2)])
     fit = least_squares(residuals, x0, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    if not np.all(fit.x[6:8] > 0.0):
+        raise DegenerateDataError(
+            f"the fitted pixel spacings come out {fit.x[6] * s0[0] * 1e3:.3g} x {fit.x[7] * s0[1] * 1e3:.3g} mm/px "
+            "(not positive): the target points do not follow the pixels"
+        )
     R = Rotation.from_rotvec(fit.x[:3]).as_matrix() @ R0
     return make_transform(R, fit.x[3:6]), s0 * fit.x[6:8]
+
+
+# --- ICP from many starts -------------------------------------------------------------------------
+
+#: Two converged ICP fits are the same local minimum when they move the source points by less than
+#: this RMS (metres): far below any noise, far above the convergence round-off (~1e-15 m).
+SAME_MINIMUM_M = 1e-6
+
+
+@dataclass(frozen=True)
+class IcpResult:
+    """Outcome of :func:`icp_global`.
+
+    Attributes:
+        T: ``(4, 4)`` the chosen ``T_dst_src``.
+        rms_m: RMS distance of the source points to their matched targets under ``T``, metres.
+        match: ``(N,)`` index in ``p_dst`` paired with each source point.
+        minima: distinct converged fits ``(T, rms_m)``, best RMS first (the starts of later runs).
+        ties: the distinct fits other than ``T`` whose RMS is within the tie tolerance of the best.
+    """
+
+    T: FloatArray
+    rms_m: float
+    match: np.ndarray
+    minima: list[tuple[FloatArray, float]] = field(default_factory=list)
+    ties: list[tuple[FloatArray, float]] = field(default_factory=list)
+
+
+def _principal_axes(points: FloatArray) -> FloatArray:
+    """``(3, 3)`` proper rotation whose columns are the principal axes of ``(N, 3)`` points, largest first."""
+    _, _, Vt = np.linalg.svd(points - points.mean(axis=0))
+    E = Vt.T
+    if np.linalg.det(E) < 0:
+        E[:, 2] = -E[:, 2]
+    return E
+
+
+def icp_starts(p_src: ArrayLike, p_dst: ArrayLike, steps: int = 24) -> list[FloatArray]:
+    """Initial guesses of ``T_dst_src`` that do not depend on any prior: ``2 × steps`` of them.
+
+    The centroids coincide and the principal axes of the two sets are aligned, the smallest one
+    (the normal of planar sets) both ways, and turned about it every ``360°/steps``: one of them is
+    within ``180°/steps`` of any rotation that maps the sets' planes onto each other.
+    """
+    src, dst = np.asarray(p_src, dtype=float), np.asarray(p_dst, dtype=float)
+    E_src, E_dst = _principal_axes(src), _principal_axes(dst)
+    starts = []
+    for flip in (np.eye(3), np.diag([1.0, -1.0, -1.0])):
+        for angle in 2 * np.pi * np.arange(steps) / steps:
+            R = E_dst @ flip @ Rotation.from_rotvec([0.0, 0.0, angle]).as_matrix() @ E_src.T
+            starts.append(make_transform(R, dst.mean(axis=0) - R @ src.mean(axis=0)))
+    return starts
+
+
+def displacement(T_a: FloatArray, T_b: FloatArray, points: FloatArray) -> float:
+    """RMS distance between ``T_a @ p`` and ``T_b @ p`` over ``(N, 3)`` points, metres."""
+    return _displacement(T_a, T_b, *_moments(np.asarray(points, dtype=float)))
+
+
+def _moments(points: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Centroid ``(3,)`` and covariance ``(3, 3)`` (population) of ``(N, 3)`` points."""
+    centre = points.mean(axis=0)
+    return centre, (points - centre).T @ (points - centre) / len(points)
+
+
+def _displacement(T_a: FloatArray, T_b: FloatArray, centre: FloatArray, cov: FloatArray) -> float:
+    # mean ‖ΔR p + Δt‖² = ‖ΔR c + Δt‖² + trace(ΔR C ΔRᵀ): no need to move every point.
+    dR, dt = T_a[:3, :3] - T_b[:3, :3], T_a[:3, 3] - T_b[:3, 3]
+    offset = dR @ centre + dt
+    return float(np.sqrt(max(offset @ offset + np.trace(dR @ cov @ dR.T), 0.0)))
+
+
+def icp_global(
+    p_src: ArrayLike,
+    p_dst: ArrayLike,
+    T_prior: ArrayLike,
+    *,
+    starts: list[FloatArray] | None = None,
+    tie_m: float = 0.0,
+    max_iterations: int = 100,
+) -> IcpResult:
+    """ICP whose answer does not hinge on its initial guess.
+
+    Runs :func:`icp` from ``T_prior`` and from ``starts`` (default :func:`icp_starts`), keeps the
+    distinct converged fits and chooses the one with the smallest RMS residual ``r_best``. Fits
+    with ``r² ≤ r_best² + max(tie_m, r_best)²`` (within ``√2 r_best`` once the residual exceeds the
+    noise) match the data equally well: a symmetric pattern of points matches itself turned over,
+    and with noise such a flipped fit pairs points with their nearest rather than their own
+    targets, which lowers its RMS by as much as the noise. Among them the one that moves the source
+    points least away from ``T_prior`` is chosen; the others are reported as ``ties``.
+
+    Args:
+        p_src: ``(N, 3)`` points to move (image points).
+        p_dst: ``(M, 3)`` target points, in any order.
+        T_prior: ``(4, 4)`` prior guess of ``T_dst_src`` (e.g. the URDF's nominal frame): one start
+            among many, and the tie-breaker.
+        starts: ``(4, 4)`` initial guesses to try besides ``T_prior``.
+        tie_m: tie tolerance, metres (e.g. the noise level of the points).
+        max_iterations: iteration cap of each run.
+    """
+    src = check_geometry(p_src, "source points")
+    dst = np.asarray(p_dst, dtype=float)
+    prior = np.asarray(T_prior, dtype=float)
+    tree = cKDTree(dst)
+    moments = _moments(src)
+    minima: list[tuple[FloatArray, float, np.ndarray]] = []
+    for start in [prior, *(icp_starts(src, dst) if starts is None else starts)]:
+        T, _, _ = icp(src, dst, start, max_iterations=max_iterations)
+        distances, match = tree.query(transform_points(T, src))
+        rms = float(np.sqrt(np.mean(distances**2)))
+        if not any(_displacement(T, other, *moments) < SAME_MINIMUM_M for other, _, _ in minima):
+            minima.append((T, rms, match))
+    minima.sort(key=lambda m: m[1])
+    best_rms = minima[0][1]
+    tied = [m for m in minima if m[1] ** 2 <= best_rms**2 + max(tie_m, best_rms) ** 2]
+    chosen = min(tied, key=lambda m: _displacement(m[0], prior, *moments))
+    return IcpResult(
+        T=chosen[0],
+        rms_m=chosen[1],
+        match=chosen[2],
+        minima=[(T, rms) for T, rms, _ in minima],
+        ties=[(T, rms) for T, rms, _ in tied if T is not chosen[0]],
+    )
+
+
+# --- predicted uncertainty ------------------------------------------------------------------------
+
+#: Scale models of :func:`fit_uncertainty`: how many scale factors each fits.
+SCALE_MODELS = {"rigid": 0, "similarity": 1, "uv": 2}
+
+
+@dataclass(frozen=True)
+class FitUncertainty:
+    """Predicted uncertainty of a fit ``q ≈ R S p + t`` (module docstring).
+
+    Attributes:
+        model: ``"rigid"``, ``"similarity"`` (one scale factor) or ``"uv"`` (factors on x and y).
+        R: ``(3, 3)`` fitted rotation. scale: ``(3,)`` fitted factors on the source axes (``S``).
+        noise_sd_m: ``σ̂`` per coordinate from the residual, metres. dof: ``3N − p``.
+        cov_unit: ``(p, p)`` ``(JᵀJ)⁻¹`` (parameter covariance for σ = 1 m): ``δθ`` [rad],
+            ``t`` [m], scale factors [1].
+    """
+
+    model: str
+    R: FloatArray
+    scale: FloatArray
+    noise_sd_m: float
+    dof: int
+    cov_unit: FloatArray
+
+    def cov(self, sigma_m: float | None = None) -> FloatArray:
+        """``(p, p)`` parameter covariance for noise ``sigma_m`` per coordinate (default ``σ̂``)."""
+        sigma = self.noise_sd_m if sigma_m is None else sigma_m
+        return sigma**2 * self.cov_unit
+
+    def rotation_sd_rad(self, sigma_m: float | None = None) -> float:
+        """Predicted RMS angle of the rotation error, ``sqrt(trace(Cov_δθ))``, radians."""
+        return float(np.sqrt(np.trace(self.cov(sigma_m)[:3, :3])))
+
+    def translation_sd_m(self, sigma_m: float | None = None) -> float:
+        """Predicted 3D SD of the translation ``t`` (the source origin's image), metres."""
+        return float(np.sqrt(np.trace(self.cov(sigma_m)[3:6, 3:6])))
+
+    def scale_sd(self, sigma_m: float | None = None) -> FloatArray:
+        """``(k,)`` predicted SDs of the fitted scale factors (relative: 0.01 = 1 %)."""
+        return np.sqrt(np.diag(self.cov(sigma_m))[6:])
+
+    def point_sd_m(self, p_src: ArrayLike, sigma_m: float | None = None) -> FloatArray:
+        """``(N,)`` predicted 3D SD of the fitted map ``R S p + t`` at source points ``(N, 3)``, metres."""
+        J = _jacobian(self.model, self.R, self.scale, np.atleast_2d(np.asarray(p_src, dtype=float)))
+        blocks = J.reshape(-1, 3, J.shape[1])
+        return np.sqrt(np.einsum("nij,jk,nik->n", blocks, self.cov(sigma_m), blocks))
+
+
+def _jacobian(model: str, R: FloatArray, scale: FloatArray, p_src: FloatArray) -> FloatArray:
+    """``(3N, p)`` Jacobian of ``R S p_i + t`` with respect to (δθ, t, scale factors)."""
+    mapped = (p_src * scale) @ R.T
+    n = len(p_src)
+    skew = np.zeros((n, 3, 3))
+    skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -mapped[:, 2], mapped[:, 1], -mapped[:, 0]
+    skew -= np.swapaxes(skew, 1, 2)
+    columns = [-skew, np.broadcast_to(np.eye(3), (n, 3, 3))]
+    if model == "similarity":
+        columns.append((p_src @ R.T)[:, :, None])
+    elif model == "uv":
+        columns.append((p_src[:, :1] * R[:, 0])[:, :, None])
+        columns.append((p_src[:, 1:2] * R[:, 1])[:, :, None])
+    return np.concatenate(columns, axis=2).reshape(3 * n, -1)
+
+
+def fit_uncertainty(
+    p_src: ArrayLike,
+    p_dst: ArrayLike,
+    T_dst_src: ArrayLike,
+    *,
+    model: str = "rigid",
+    scale: ArrayLike = (1.0, 1.0, 1.0),
+) -> FitUncertainty:
+    """Predicted uncertainty of a fit from its residual and its design (module docstring).
+
+    Args:
+        p_src: ``(N, 3)`` source points as given to the fit (image points at the nominal spacing).
+        p_dst: ``(N, 3)`` the target points paired with them.
+        T_dst_src: ``(4, 4)`` the fitted rigid part. model: key of :data:`SCALE_MODELS`.
+        scale: ``(3,)`` the fitted factors on the source axes (``(k, k, k)``, ``(k_u, k_v, 1)``).
+
+    Raises:
+        DegenerateDataError: the design does not determine the parameters (``JᵀJ`` singular).
+    """
+    src, dst = np.asarray(p_src, dtype=float), np.asarray(p_dst, dtype=float)
+    T = np.asarray(T_dst_src, dtype=float)
+    S = np.asarray(scale, dtype=float)
+    J = _jacobian(model, T[:3, :3], S, src)
+    n_params = J.shape[1]
+    residual = (src * S) @ T[:3, :3].T + T[:3, 3] - dst
+    dof = 3 * len(src) - n_params
+    if dof <= 0:
+        raise DegenerateDataError(f"{len(src)} points cannot determine {n_params} parameters with a residual to spare")
+    singular = np.linalg.svd(J, compute_uv=False)
+    if singular[-1] <= 1e-12 * singular[0]:
+        raise DegenerateDataError(
+            f"the points do not determine the {model} fit (smallest/largest singular value of the design "
+            f"{singular[-1] / singular[0]:.2g})"
+        )
+    return FitUncertainty(
+        model=model,
+        R=T[:3, :3].copy(),
+        scale=S.copy(),
+        noise_sd_m=float(np.sqrt(np.sum(residual**2) / dof)),
+        dof=dof,
+        cov_unit=np.linalg.inv(J.T @ J),
+    )

@@ -1,4 +1,4 @@
-"""Calibration result, format ``brachycal-result/1`` (a JSON file; CONVENTIONS.md).
+"""Calibration result, format ``brachycal-result/1`` (a JSON file; ``docs/conventions.md``).
 
 Transforms are 4×4 row-major lists in metres. Besides the keys of the conventions
 (``transforms``, ``mechanical``, ``loocv``, ``inputs``), the file carries the pixel spacing each
@@ -18,9 +18,10 @@ import numpy as np
 from brachycal.calibration.image_to_probe import METHODS, ImageCalibration
 from brachycal.calibration.sequential import CalibrationResult
 from brachycal.errors import InputError
-from brachycal.files import atomic_open
+from brachycal.files import write_json
 from brachycal.model.robot import Robot
-from brachycal.se3 import FloatArray, is_rigid
+from brachycal.se3 import FloatArray
+from brachycal.validate import MAX_IMAGE_PX, check_int, check_spacing_mm, check_transform
 
 FORMAT = "brachycal-result/1"
 
@@ -40,6 +41,12 @@ def to_json(result: CalibrationResult, *, robot_source: str = "", robot_sha256: 
     def tool(calibration) -> dict:
         out = calibration.validation.as_dict(with_errors=True)
         out["axes_angle_deg"] = calibration.rotation.axes_angle_deg
+        # Predicted uncertainties (conditioning checks): tip from the trials' spread, rotation
+        # and axes angle from the moves' lengths and the stated positioning noise.
+        if calibration.tip is not None:
+            out["predicted_tip_sd_mm"] = calibration.tip.sd_m * 1e3
+        out["predicted_rotation_sd_deg"] = calibration.rotation.rotation_sd_deg
+        out["axes_angle_sd_deg"] = calibration.rotation.axes_angle_sd_deg
         return out
 
     payload = {
@@ -54,7 +61,10 @@ def to_json(result: CalibrationResult, *, robot_source: str = "", robot_sha256: 
         "loocv": {m: s.as_dict(with_errors=True) for m, s in result.loocv.items()},
         "fit_residuals": {m: s.as_dict() for m, s in result.fit_residuals.items()},
         "reference_tips_m": {k: v.tolist() for k, v in result.p_R_Rtip.items()},
+        "reference_tips_sd_mm": {k: tip.sd_m * 1e3 for k, tip in result.reference_tips.items()},
+        "predicted_uncertainty": {m: c.uncertainty.as_dict() for m, c in result.image.items() if c.uncertainty},
         "samples": result.sample_ids,
+        **({"image": {"size_px": list(result.image_size_px)}} if result.image_size_px else {}),
         "inputs": result.inputs,
         "robot_model": {"urdf": robot_source, "sha256": robot_sha256},
         "software": {"brachycal": __version__, "pinocchio": pinocchio.__version__, "numpy": np.__version__},
@@ -63,7 +73,9 @@ def to_json(result: CalibrationResult, *, robot_source: str = "", robot_sha256: 
         return payload
     from brachycal.calibration.chain_report import chain_json
 
-    sequential = {k: payload.pop(k) for k in ("transforms", "spacing_mm", "loocv", "fit_residuals")}
+    sequential = {
+        k: payload.pop(k) for k in ("transforms", "spacing_mm", "loocv", "fit_residuals", "predicted_uncertainty")
+    }
     fit = chain.fit
     payload["transforms"] = {
         "ER_T_Ntip": fit.T_ER_Ntip.tolist(),
@@ -86,12 +98,14 @@ def write_result(
     robot_sha256: str = "",
     chain=None,
 ) -> Path:
-    """Write the result atomically; never replaces an existing file unless ``force``."""
+    """Write the result atomically; never replaces an existing file unless ``force``.
+
+    Raises:
+        OutputError: the file exists (without ``force``), cannot be written, or a value is NaN or
+            infinite (the error names its key; JSON has no NaN).
+    """
     payload = to_json(result, robot_source=robot_source, robot_sha256=robot_sha256, chain=chain)
-    with atomic_open(path, force=force) as handle:
-        json.dump(payload, handle, indent=2)
-        handle.write("\n")
-    return Path(path)
+    return write_json(path, payload, force=force)
 
 
 @dataclass(frozen=True)
@@ -103,6 +117,9 @@ class StoredCalibration:
     image: dict[str, ImageCalibration]
     raw: dict
     joint_offsets_rad: dict[str, float] = field(default_factory=dict)
+    #: ``(width, height)`` of the calibrated images, pixels (``image.size_px``); None in files
+    #: written before it was stored.
+    image_size_px: tuple[int, int] | None = None
 
     def software_robot(self, robot: Robot) -> Robot:
         """The robot model to compute and command with: ``robot`` with the estimated joint offsets."""
@@ -110,13 +127,18 @@ class StoredCalibration:
 
 
 def _matrix(value: object, path: Path, key: str) -> FloatArray:
+    """The rigid ``(4, 4)`` at ``key`` (:func:`~brachycal.validate.check_transform`, its default
+    tolerance: results are written with full precision), refused naming the file and the key."""
     try:
         T = np.array(value, dtype=float)
     except (TypeError, ValueError):
         raise InputError("not a 4x4 matrix of numbers", file=path, column=key) from None
-    if T.shape != (4, 4) or not np.all(np.isfinite(T)) or not is_rigid(T, tol=1e-6):
-        raise InputError("not a rigid 4x4 transform", file=path, column=key)
-    return T
+    if T.shape != (4, 4):
+        raise InputError(f"not a 4x4 matrix (shape {T.shape})", file=path, column=key)
+    try:
+        return check_transform(T, "matrix")
+    except InputError as exc:  # restated with the file and the key it was read from
+        raise InputError(exc.problem, file=path, column=key) from None
 
 
 def read_result(path: str | os.PathLike[str]) -> StoredCalibration:
@@ -139,9 +161,10 @@ def read_result(path: str | os.PathLike[str]) -> StoredCalibration:
     for method, T in images.items():
         if method not in (*METHODS, "chain"):
             raise InputError(f"unknown method {method!r}", file=path, column="transforms.Ptip_T_I")
-        spacing = np.array(raw.get("spacing_mm", {}).get(method, [np.nan, np.nan]), dtype=float) * 1e-3
-        if spacing.shape != (2,) or not np.all(spacing > 0):
-            raise InputError("missing or invalid pixel spacing", file=path, column=f"spacing_mm.{method}")
+        spacing_mm = raw.get("spacing_mm", {}).get(method)
+        if spacing_mm is None:
+            raise InputError("missing pixel spacing", file=path, column=f"spacing_mm.{method}")
+        spacing = check_spacing_mm(spacing_mm, "pixel spacing", file=path, column=f"spacing_mm.{method}") * 1e-3
         image[method] = ImageCalibration(method, _matrix(T, path, f"transforms.Ptip_T_I.{method}"), spacing)
     return StoredCalibration(
         T_ER_Ntip=_matrix(transforms.get("ER_T_Ntip"), path, "transforms.ER_T_Ntip"),
@@ -149,4 +172,22 @@ def read_result(path: str | os.PathLike[str]) -> StoredCalibration:
         image=image,
         raw=raw,
         joint_offsets_rad={str(k): float(v) for k, v in raw.get("chain", {}).get("joint_offsets_rad", {}).items()},
+        image_size_px=_image_size(raw, path),
     )
+
+
+def _image_size(raw: dict, path: Path) -> tuple[int, int] | None:
+    """``image.size_px`` as (width, height), or None if the file does not say (older files)."""
+    image = raw.get("image")
+    if image is None:
+        return None
+    size = image.get("size_px") if isinstance(image, dict) else None
+    try:
+        width, height = (check_int(n, "image size", low=1, high=MAX_IMAGE_PX) for n in size)
+    except (TypeError, ValueError):  # InputError is a ValueError: restate it with the place
+        raise InputError(
+            f"must be two whole numbers of pixels in [1, {MAX_IMAGE_PX}] (width, height), got {size!r}",
+            file=path,
+            column="image.size_px",
+        ) from None
+    return width, height

@@ -4,11 +4,18 @@ Order (Fig. 5): reference tips from the top-model (eq. 4); needle and probe tips
 Table I at the second reference tip; tool rotations from three points (eq. 7); the needle tips
 in the probe frame (eq. 8); ``T_Ptip_I`` by every registration method (eq. 9) with leave-one-out
 figures (Table II). Flange poses come from the robot model's forward kinematics; the model's
-own tool frames only serve as ICP's initial guess.
+own ``us_image`` frame only serves ICP as a prior (one start among many, and the tie-breaker).
+
+Every step checks its conditioning (see each module) and refuses data that cannot determine its
+estimate with :class:`~brachycal.errors.DegenerateDataError`, naming the session file the data came
+from (``touches.csv``, ``axes.csv``, ``samples.csv``); grey-zone estimates warn
+(:class:`~brachycal.errors.ConditioningWarning`). Each estimate carries its predicted uncertainty.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -17,8 +24,17 @@ from brachycal.calibration import image_to_probe
 from brachycal.calibration.image_to_probe import METHODS, ImageCalibration
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.tool_rotation import ToolRotation, tool_rotation
-from brachycal.calibration.tool_tips import reference_tip, tool_tip, validate_tip
+from brachycal.calibration.tool_tips import (
+    TipEstimate,
+    check_distinct_touches,
+    check_separation,
+    check_tip,
+    reference_tip_estimate,
+    tool_tip_estimate,
+    validate_tip,
+)
 from brachycal.data.session import Session
+from brachycal.errors import DegenerateDataError
 from brachycal.model.names import LEFT_FLANGE, RIGHT_FLANGE, US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, make_transform, transform_points
@@ -35,11 +51,13 @@ class ToolCalibration:
         T_E_tool: ``(4, 4)`` the tool frame in its flange frame (``T_ER_Ntip`` or ``T_EL_Ptip``).
         validation: Table I figures at the validation tip ``rtip2``.
         rotation: the three-point rotation and its axis-angle quality figure.
+        tip: the tip estimate with its per-trial values and predicted covariance.
     """
 
     T_E_tool: FloatArray
     validation: ErrorStats
     rotation: ToolRotation
+    tip: TipEstimate | None = None
 
 
 @dataclass(frozen=True)
@@ -55,6 +73,8 @@ class CalibrationResult:
         loocv: method → leave-one-out figures (Table II).
         sample_ids: names of the samples, in the order of the per-sample errors.
         inputs: session file → SHA-256.
+        image_size_px: ``(width, height)`` of the session's images, pixels (what a pixel given
+            to the calibration later must lie inside); None if not known.
     """
 
     p_R_Rtip: dict[str, FloatArray]
@@ -65,6 +85,8 @@ class CalibrationResult:
     loocv: dict[str, ErrorStats]
     sample_ids: list[str]
     inputs: dict[str, str] = field(default_factory=dict)
+    reference_tips: dict[str, TipEstimate] = field(default_factory=dict)
+    image_size_px: tuple[int, int] | None = None
 
     @property
     def T_ER_Ntip(self) -> FloatArray:
@@ -75,9 +97,22 @@ class CalibrationResult:
         return self.probe.T_E_tool
 
 
-def _tool(session: Session, robot: Robot, tool: str, p_R_Rtip1: FloatArray) -> ToolCalibration:
+@contextmanager
+def _data_of(file: str) -> Iterator[None]:
+    """Name the session file in a refusal that does not name one yet."""
+    try:
+        yield
+    except DegenerateDataError as exc:
+        if exc.file is not None:
+            raise
+        raise DegenerateDataError(exc.problem, file=file) from None
+
+
+def _tool(session: Session, robot: Robot, tool: str, rtip1: TipEstimate) -> ToolCalibration:
     flange = TOOL_FLANGE[tool]
-    p_E_tool = tool_tip(robot.fk(flange, session.touches[tool, "rtip1"].q), p_R_Rtip1)
+    tip = tool_tip_estimate(robot.fk(flange, session.touches[tool, "rtip1"].q), rtip1)
+    check_tip(tip, f"{tool} tip")
+    p_E_tool = tip.p
     validation = validate_tip(
         robot.fk(flange, session.touches[tool, "rtip2"].q),
         p_E_tool,
@@ -85,8 +120,9 @@ def _tool(session: Session, robot: Robot, tool: str, p_R_Rtip1: FloatArray) -> T
         session.p_ER_Mtip,
     )
     axes = session.axes[tool]
-    rotation = tool_rotation(*(robot.fk(flange, axes[p]) for p in ("p1", "p2", "p3")), p_E_tool)
-    return ToolCalibration(make_transform(rotation.R_E_tool, p_E_tool), validation, rotation)
+    with _data_of("axes.csv"):
+        rotation = tool_rotation(*(robot.fk(flange, axes[p]) for p in ("p1", "p2", "p3")), p_E_tool, tool=tool)
+    return ToolCalibration(make_transform(rotation.R_E_tool, p_E_tool), validation, rotation, tip)
 
 
 def calibrate(
@@ -101,14 +137,23 @@ def calibrate(
         session: the recorded data.
         robot: kinematic model giving the flange poses (the URDF's flanges).
         methods: registration methods to fit and cross-validate (default: all).
-        T_Ptip_I_init: ``(4, 4)`` ICP's initial guess; default: the model's ``us_image`` frame.
+        T_Ptip_I_init: ``(4, 4)`` ICP's prior; default: the model's ``us_image`` frame.
+
+    Raises:
+        DegenerateDataError: a step's conditioning check failed; the message names the session file.
     """
-    p_R_Rtip = {
-        ref: reference_tip(robot.fk(RIGHT_FLANGE, session.touches["top_model", ref].q), session.p_ER_Mtip)
-        for ref in ("rtip1", "rtip2")
-    }
-    needle = _tool(session, robot, "needle", p_R_Rtip["rtip1"])
-    probe = _tool(session, robot, "probe", p_R_Rtip["rtip1"])
+    with _data_of("touches.csv"):
+        check_distinct_touches(session.touches)
+        reference_tips = {
+            ref: reference_tip_estimate(robot.fk(RIGHT_FLANGE, session.touches["top_model", ref].q), session.p_ER_Mtip)
+            for ref in ("rtip1", "rtip2")
+        }
+        check_separation(reference_tips["rtip1"], reference_tips["rtip2"])
+    for ref, tip in reference_tips.items():
+        check_tip(tip, f"reference tip {ref}")
+    p_R_Rtip = {ref: tip.p for ref, tip in reference_tips.items()}
+    needle = _tool(session, robot, "needle", reference_tips["rtip1"])
+    probe = _tool(session, robot, "probe", reference_tips["rtip1"])
     if T_Ptip_I_init is None:
         T_Ptip_I_init = robot.tool_transform(US_IMAGE)[1]
 
@@ -119,12 +164,13 @@ def calibrate(
     p_real = transform_points(T_R_ER, p_ER_Ntip)
     image, residuals, loocv = {}, {}, {}
     for method in methods:
-        image[method] = image_to_probe.fit(method, session.uv_px, p_Ptip, session.spacing_m, T_Ptip_I_init)
+        with _data_of("samples.csv"):
+            image[method] = image_to_probe.fit(method, session.uv_px, p_Ptip, session.spacing_m, T_Ptip_I_init)
+            loocv[method] = image_to_probe.leave_one_out(
+                method, session.uv_px, T_R_ER, T_R_EL, p_ER_Ntip, probe.T_E_tool, session.spacing_m, T_Ptip_I_init
+            )
         p_cal = image_to_probe.predict_base(image[method], T_R_EL, probe.T_E_tool, session.uv_px)
         residuals[method] = ErrorStats.between(p_real, p_cal)
-        loocv[method] = image_to_probe.leave_one_out(
-            method, session.uv_px, T_R_ER, T_R_EL, p_ER_Ntip, probe.T_E_tool, session.spacing_m, T_Ptip_I_init
-        )
     return CalibrationResult(
         p_R_Rtip=p_R_Rtip,
         needle=needle,
@@ -134,6 +180,8 @@ def calibrate(
         loocv=loocv,
         sample_ids=list(session.sample_ids),
         inputs=dict(session.inputs),
+        reference_tips=reference_tips,
+        image_size_px=(int(session.size_px[0]), int(session.size_px[1])),
     )
 
 

@@ -5,32 +5,53 @@ Landing error model (linearised): aiming the needle at an image point, the softw
 is there; the physical tip lands at ``p̂ + R_R_ER (p_ER_Ntip − p̂_ER_Ntip)``. So the landing error
 is ``e ≈ G δθ`` with ``G = ∂p/∂θ − R_R_ER ∂p_ER_Ntip/∂θ``, and its covariance ``G Σ Gᵀ`` follows
 from the parameter covariance ``Σ`` of the fit (from its Jacobian, with the noise levels the fit
-estimated). Bootstrap: refit on image samples drawn with replacement (the touches and axes moves
-kept), percentile intervals.
+estimated). This is the calibration's part of the landing error: the robot's own errors when it
+executes a target (encoder noise of the probe arm's reading, say) come on top of it;
+``benchmarks/chain_checks.py`` measures both on the twin.
+
+Bootstrap (:func:`bootstrap`): each replicate refits the final least-squares problem of the chain
+on resampled data, every group that informs a reported quantity resampled: the image samples are
+drawn with replacement (pairs: each sample's pose and pixel together), the touches by residual
+(each touch's leverage-corrected residual vector drawn with replacement among all touches and
+added to the fitted positions: three trials per tool and tip are too few to draw from themselves,
+a draw of 3 has 10 possible outcomes and 2/3 of the variance). The axes moves are kept: they
+determine only the tool rotations, for which the bootstrap reports nothing. Percentile intervals.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.optimize import approx_fprime
-from scipy.stats import chi2
+from scipy.optimize import approx_fprime, least_squares
+from scipy.stats import chi2, norm
 
-from brachycal.calibration.chain import ChainFit, _Layout, finite_difference_steps, fit_chain
-from brachycal.calibration.sequential import CalibrationResult
+from brachycal.calibration.chain import (
+    SCANNER_SOUND_SPEED,
+    ChainFit,
+    _Data,
+    _jacobian,
+    _Layout,
+    _leverages,
+    _residuals,
+    finite_difference_steps,
+)
 from brachycal.data.session import Session
 from brachycal.model.names import LEFT_FLANGE, RIGHT_FLANGE
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, transform_points
 
 
+def _layout(fit: ChainFit, robot: Robot) -> _Layout:
+    return _Layout(fit.model, tuple(robot.joint_names.index(n) for n in fit.joint_offsets_rad))
+
+
 def _landing(
     x: FloatArray, fit: ChainFit, nominal_spacing: FloatArray, robot: Robot, q: FloatArray, uv: FloatArray
 ) -> FloatArray:
-    joints = tuple(robot.joint_names.index(n) for n in fit.joint_offsets_rad)
-    layout = _Layout(fit.model, joints)
+    layout = _layout(fit, robot)
     T_ER_Ntip, T_EL_Ptip, T_Ptip_I, _, spacing = layout.unpack(x, fit.base, nominal_spacing)
     q = q + layout.offsets(x, robot.nq)
     T_R_EL = robot.fk(LEFT_FLANGE, q)
@@ -42,9 +63,10 @@ def _landing(
 def landing_covariance(
     fit: ChainFit, robot: Robot, nominal_spacing: ArrayLike, q: ArrayLike, uv_px: ArrayLike
 ) -> FloatArray:
-    """``(M, 3, 3)`` covariance of the landing error at pixels ``(M, 2)`` seen with joints ``(M, nq)``.
+    """``(M, 3, 3)`` covariance (m²) of the landing error at pixels ``(M, 2)`` seen with joints ``(M, nq)``.
 
-    The needle arm's orientation is taken from ``q`` (its right-arm joints).
+    The calibration's part (see the module docstring). The needle arm's orientation is taken from
+    ``q`` (its right-arm joints).
     """
     G = landing_jacobian(fit, robot, nominal_spacing, q, uv_px)
     return G @ fit.covariance @ np.swapaxes(G, 1, 2)
@@ -70,23 +92,25 @@ def predicted_rms_mm(covariance: FloatArray) -> FloatArray:
 
 
 def inside_ellipsoid(error_m: ArrayLike, covariance: FloatArray, level: float = 0.95) -> np.ndarray:
-    """Whether each error ``(M, 3)`` lies inside the ``level`` ellipsoid of its covariance."""
+    """Whether each error ``(M, 3)`` lies inside the ``level`` ellipsoid of its covariance ``(M, 3, 3)``."""
     e = np.atleast_2d(np.asarray(error_m, dtype=float))
-    d2 = np.einsum("ni,nij,nj->n", e, np.linalg.inv(covariance), e)
+    C = np.asarray(covariance, dtype=float)
+    if C.ndim == 2:
+        C = np.broadcast_to(C, (len(e), 3, 3))
+    d2 = np.einsum("ni,nij,nj->n", e, np.linalg.inv(C), e)
     return d2 <= chi2.ppf(level, 3)
 
 
-def interval(fit: ChainFit, index: int, level: float = 0.95) -> tuple[float, float]:
-    """Normal-theory interval of parameter ``index`` of the fit."""
-    from scipy.stats import norm
-
-    half = norm.ppf(0.5 + level / 2) * fit.parameter_sd()[index]
-    return float(fit.x[index] - half), float(fit.x[index] + half)
+def interval(fit: ChainFit, name: str, level: float = 0.95) -> tuple[FloatArray, FloatArray]:
+    """Normal-theory interval ``(low, high)`` of parameter block ``name`` (``"scale"``, ``"p_ER_Ntip"``…)."""
+    k = fit.block(name)
+    half = norm.ppf(0.5 + level / 2) * fit.parameter_sd()[k]
+    return fit.x[k] - half, fit.x[k] + half
 
 
 @dataclass(frozen=True)
 class Bootstrap:
-    """Bootstrap replicates of derived quantities: name → ``(B,)`` or ``(B, k)`` values."""
+    """Bootstrap replicates of derived quantities: name → ``(B,)`` or ``(B, k)`` values (SI units)."""
 
     values: dict[str, FloatArray]
 
@@ -99,31 +123,56 @@ class Bootstrap:
 def bootstrap(
     session: Session,
     robot: Robot,
-    initial: CalibrationResult,
-    model: str,
+    fit: ChainFit,
     replicates: int = 100,
     seed: int = 0,
-    progress=None,
+    progress: Callable[[int], None] | None = None,
 ) -> Bootstrap:
-    """Refit on image samples drawn with replacement; keep the spacing and the tool tips."""
-    rng = np.random.default_rng(seed)
-    n = len(session.uv_px)
-    out: dict[str, list] = {"spacing_m": [], "p_ER_Ntip": [], "p_EL_Ptip": [], "sound_speed_m_s": []}
-    from dataclasses import replace
+    """Bootstrap replicates of the fit's pixel spacing, tool tips and speed of sound (module docstring).
 
+    Each replicate solves the final (least-squares) problem from the fit's estimate with the fit's
+    noise levels, on the samples the fit used (its outliers stay out); estimated joint offsets are
+    held at their values.
+    """
+    rng = np.random.default_rng(seed)
+    layout = _Layout(fit.model)
+    x0 = fit.x[: layout.size]
+    data = _Data.of(session, robot, fit.offsets(robot.joint_names))
+    used = np.flatnonzero(~fit.outliers)
+    all_used = np.ones(len(used), dtype=bool)
+    rows = data.group_rows(len(used))
+    # Touch residuals (metres) at the estimate, leverage-corrected so that their spread is the noise's.
+    kept = replace(data, T_R_ER=data.T_R_ER[used], T_R_EL=data.T_R_EL[used], uv_px=data.uv_px[used])
+    r0 = _residuals(x0, layout, kept, fit.base, fit.sigma_m, all_used)
+    J = _jacobian(x0, layout, kept, fit.base, fit.sigma_m, all_used)
+    h = _leverages(J)[rows["touch"]]
+    touch = (r0[rows["touch"]] / np.sqrt(np.clip(1.0 - h, 1e-6, None))).reshape(-1, 3) * fit.sigma_m["touch"]
+    touch -= touch.mean(axis=0)
+    out: dict[str, list] = {"spacing_m": [], "p_ER_Ntip": [], "p_EL_Ptip": [], "sound_speed_m_s": []}
     for _ in range(replicates):
-        pick = rng.integers(0, n, size=n)
-        resampled = replace(
-            session,
-            samples_q=session.samples_q[pick],
-            uv_px=session.uv_px[pick],
-            sample_ids=[session.sample_ids[i] for i in pick],
-        )
-        fit = fit_chain(resampled, robot, initial, model, rounds=1)
-        out["spacing_m"].append(fit.image.spacing_m)
-        out["p_ER_Ntip"].append(fit.T_ER_Ntip[:3, 3])
-        out["p_EL_Ptip"].append(fit.T_EL_Ptip[:3, 3])
-        out["sound_speed_m_s"].append(fit.sound_speed_m_s if fit.sound_speed_m_s is not None else np.nan)
+        pick = rng.choice(used, size=len(used), replace=True)
+        drawn = replace(data, T_R_ER=data.T_R_ER[pick], T_R_EL=data.T_R_EL[pick], uv_px=data.uv_px[pick])
+        # Touches at their fitted positions plus drawn residuals: r*(θ) = r(θ) − r(θ̂) + ε*.
+        shift = np.zeros_like(r0)
+        epsilon = touch[rng.integers(0, len(touch), size=len(touch))].ravel()
+        shift[rows["touch"]] = epsilon / fit.sigma_m["touch"] - r0[rows["touch"]]
+        solution = least_squares(
+            lambda x, d=drawn, s=shift: _residuals(x, layout, d, fit.base, fit.sigma_m, all_used) + s,
+            x0,
+            jac=lambda x, d=drawn, s=shift: _jacobian(x, layout, d, fit.base, fit.sigma_m, all_used),
+            method="trf",
+            x_scale="jac",
+            xtol=1e-12,
+            ftol=1e-12,
+            gtol=1e-12,
+            max_nfev=100,
+        ).x
+        T_ER_Ntip, T_EL_Ptip, _, _, spacing = layout.unpack(solution, fit.base, session.spacing_m)
+        out["spacing_m"].append(spacing)
+        out["p_ER_Ntip"].append(T_ER_Ntip[:3, 3])
+        out["p_EL_Ptip"].append(T_EL_Ptip[:3, 3])
+        sound = SCANNER_SOUND_SPEED * spacing[1] / session.spacing_m[1] if fit.model != "rigid" else np.nan
+        out["sound_speed_m_s"].append(sound)
         if progress is not None:
             progress(1)
     return Bootstrap({k: np.array(v) for k, v in out.items()})

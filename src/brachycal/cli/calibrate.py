@@ -3,16 +3,19 @@
 from __future__ import annotations
 
 import argparse
-import hashlib
 from pathlib import Path
 
-from brachycal.calibration import METHODS, calibrate, write_result
-from brachycal.calibration.chain_report import calibrate_chain
+from brachycal.calibration import METHODS, calibrate_folder, write_result
 from brachycal.cli.common import add_urdf_option, load_robot, progress_bar
-from brachycal.data.session import read_session
 from brachycal.errors import InputError
-from brachycal.reporting import chain_summary, table_i, table_ii
-from brachycal.reporting.html_report import write_report
+from brachycal.files import OutputSet, sha256_bytes
+from brachycal.reporting import chain_summary, table_i, table_ii, uncertainty_table
+from brachycal.reporting.html_report import REPORT_FILES, write_report
+from brachycal.validate import bounded_int, name_list
+
+#: Most bootstrap refits --bootstrap takes: a 95% percentile interval is settled by ~2000; 10000
+#: refits of the chain already take hours, so a larger count is a typo.
+MAX_BOOTSTRAP = 10_000
 
 HELP = "calibrate a session: tool tips, tool rotations, image-to-probe; prints Tables I and II"
 DESCRIPTION = """\
@@ -22,13 +25,15 @@ and probe tips (Table I, validated at rtip2), the tool rotations from three poin
 image-to-probe transform by ICP, Kabsch, Horn ("Landmark"), a similarity fit and a fit with
 separate u/v pixel spacings, each evaluated by leave-one-out cross-validation (Table II).
 
-With --method chain, the whole chain is also solved as one robust least-squares problem over
-all the data (touches, axes moves, images), the image model (rigid, similarity, scaled u/v, or
-speed of sound) chosen by cross-validation, with 95% intervals and the predicted landing error
-over the sample poses and the image; the result then carries the chain's transforms.
+With --method chain, the whole chain is also solved as one least-squares problem over all the
+data (touches, axes moves, images; gross image outliers flagged and left out), the image model
+(rigid, similarity, scaled u/v, or speed of sound) chosen by cross-validation, with 95% intervals
+of the session's noise (coverage on the twin: benchmarks/chain_checks.py, see the README) and the
+predicted landing error over the sample poses and the image; data that cannot determine the chain
+are refused. The result then carries the chain's transforms.
 
-The result (brachycal-result/1, JSON, metres) is written atomically to --out and never replaces
-an existing file without --force.
+The result (brachycal-result/1, JSON, metres) and the report are written together, all or
+nothing, when everything succeeded; neither replaces an existing file without --force.
 
 example:
   brachycal calibrate examples/session --out result.json
@@ -43,9 +48,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", required=True, metavar="JSON", help="result file to write")
     parser.add_argument(
         "--methods",
+        type=name_list(METHODS),
         default=",".join(METHODS),
         metavar="A,B",
-        help=f"registration methods (default all: {','.join(METHODS)})",
+        help=f"registration methods, each once (default all: {','.join(METHODS)})",
     )
     parser.add_argument(
         "--method",
@@ -59,12 +65,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="with --method chain: also estimate the joint zero offsets this session identifies",
     )
+    replicates = bounded_int(low=0, high=MAX_BOOTSTRAP)
     parser.add_argument(
         "--bootstrap",
-        type=int,
+        type=replicates,
         default=0,
         metavar="N",
-        help="with --method chain: N bootstrap refits for percentile intervals (default 0)",
+        help=f"with --method chain: N bootstrap refits for percentile intervals, {replicates.rule} (default 0)",
     )
     add_urdf_option(parser)
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
@@ -74,39 +81,47 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
-    unknown = [m for m in methods if m not in METHODS]
-    if unknown or not methods:
-        raise InputError(f"unknown method(s) {', '.join(unknown) or '(none)'}; choose from {', '.join(METHODS)}")
-    out = Path(args.out)
-    if out.exists() and not args.force:
-        raise InputError("already exists; pass --force to replace it", file=out)
-    robot = load_robot(args)
-    session = read_session(args.session, robot)
-    result = calibrate(session, robot, methods)
-    chain = None
-    if args.method == "chain":
-        if args.bootstrap < 0:
-            raise InputError("--bootstrap must be 0 or more")
+    if args.method != "chain" and (args.bootstrap or args.joint_offsets):
+        option = "--bootstrap" if args.bootstrap else "--joint-offsets"
+        raise InputError(f"{option} needs --method chain (the sequential method has no bootstrap or joint offsets)")
+    with OutputSet(force=args.force) as outputs:
+        staged_result = outputs.claim(args.out, label="--out")
+        if args.report:
+            for name in REPORT_FILES:
+                outputs.claim(Path(args.report) / name, make_parents=True, label=f"--report's {name}")
+        robot = load_robot(args)
         with progress_bar(args.bootstrap, "bootstrap", args.quiet or not args.bootstrap) as bar:
-            chain = calibrate_chain(
-                session,
+            calibrated = calibrate_folder(
+                args.session,
                 robot,
-                result,
+                tuple(args.methods),  # checked by argparse: known, none empty, no repeats
+                chain=args.method == "chain",
                 bootstrap_replicates=args.bootstrap,
                 joint_offsets=args.joint_offsets,
                 progress=bar.update,
             )
-    print(table_i(result))
-    print()
-    print(table_ii(result, chain.loocv if chain else None))
-    if chain is not None:
+        result, chain, session = calibrated.result, calibrated.chain, calibrated.session
+        print(table_i(result))
         print()
-        print(chain_summary(chain, session.sample_ids))
-    urdf_sha = hashlib.sha256(robot.urdf_xml.encode()).hexdigest()
-    write_result(result, out, force=args.force, robot_source=robot.source, robot_sha256=urdf_sha, chain=chain)
+        print(table_ii(result, chain.loocv if chain else None))
+        print()
+        print(uncertainty_table(result))
+        if chain is not None:
+            print()
+            print(chain_summary(chain, session.sample_ids))
+        write_result(
+            result,
+            staged_result,
+            force=args.force,
+            robot_source=robot.source,
+            robot_sha256=sha256_bytes(robot.urdf_xml),
+            chain=chain,
+        )
+        if args.report:
+            write_report(
+                args.report, result, session, robot, str(args.session), chain, force=args.force, outputs=outputs
+            )
     if args.report:
-        report = write_report(args.report, result, session, robot, str(args.session), chain)
-        print(f"report: {report}")
-    print(f"\nwrote {out}")
+        print(f"report: {Path(args.report) / 'report.html'}")
+    print(f"\nwrote {args.out}")
     return 0

@@ -9,8 +9,8 @@ from collections.abc import Callable
 import numpy as np
 from tqdm import tqdm
 
-from brachycal.errors import InputError
 from brachycal.model.robot import Robot
+from brachycal.validate import parse_name_list, parse_number_list
 
 
 def add_urdf_option(parser: argparse.ArgumentParser) -> None:
@@ -38,20 +38,18 @@ def progress_bar(total: int, desc: str, quiet: bool) -> tqdm:
     )
 
 
-def parse_list(text: str, name: str, kind: Callable = float) -> list:
-    """Values of a comma-separated option (``--points 3,4,5``); a one-line error names the option."""
-    try:
-        values = [kind(x.strip()) for x in text.split(",") if x.strip()]
-    except ValueError:
-        raise InputError(f"{name} must be a comma-separated list, got {text!r}") from None
-    if not values:
-        raise InputError(f"{name} is empty")
-    return values
+def parse_list(text: str, name: str, kind: Callable = float, **bounds: float) -> list:
+    """Values of a comma-separated option (``--points 3,4,5``), each one checked.
+
+    ``kind`` is ``float``, ``int`` (numbers: finite, within ``low``/``high`` of ``bounds``, see
+    :func:`brachycal.validate.parse_number_list`) or ``str`` (names: none empty, no repeats).
+    A bad item gives a one-line error naming the option and the item.
+    """
+    if kind is str:
+        return parse_name_list(text, name)
+    return parse_number_list(text, name, kind=kind, **bounds)
 
 
-def parse_numbers(text: str, name: str, count: int) -> np.ndarray:
-    """Exactly ``count`` finite comma-separated numbers (``--uv 540,300``)."""
-    values = np.array(parse_list(text, name, float))
-    if values.shape != (count,) or not np.all(np.isfinite(values)):
-        raise InputError(f"{name} must be {count} comma-separated finite numbers, got {text!r}")
-    return values
+def parse_numbers(text: str, name: str, count: int, **bounds: float) -> np.ndarray:
+    """Exactly ``count`` finite comma-separated numbers (``--uv 540,300``), each within ``bounds``."""
+    return np.array(parse_number_list(text, name, count=count, **bounds))

@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 
 from brachycal.cli.common import progress_bar
-from brachycal.errors import InputError
-from brachycal.files import atomic_open
+from brachycal.files import OutputSet, atomic_open
 from brachycal.model import Robot
 from brachycal.simulation.design import DESIGNS, MECHANICAL_MINUTES, SECONDS_PER_SAMPLE, evaluate_design
+from brachycal.validate import MAX_SEEDS, bounded_int, name_list
 
 HELP = "compare sample designs (4x4x4, 3x3x3, random, optimal) by predicted targeting error per robot minute"
 DESCRIPTION = """\
@@ -32,35 +32,37 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "design", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder (design.csv)")
-    parser.add_argument("--seeds", type=int, default=3, help="simulated sessions per design (default 3)")
-    parser.add_argument("--designs", default=",".join(DESIGNS), help=f"subset of: {', '.join(DESIGNS)}")
+    seeds = bounded_int(low=1, high=MAX_SEEDS)
+    parser.add_argument(
+        "--seeds", type=seeds, default=3, help=f"simulated sessions per design, {seeds.rule} (default 3)"
+    )
+    parser.add_argument(
+        "--designs",
+        type=name_list(DESIGNS),
+        default=",".join(DESIGNS),
+        help=f"comma-separated subset of: {', '.join(DESIGNS)}",
+    )
     parser.add_argument("--force", action="store_true", help="replace existing outputs")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    designs = [d.strip() for d in args.designs.split(",") if d.strip()]
-    unknown = [d for d in designs if d not in DESIGNS]
-    if unknown or not designs:
-        raise InputError(f"unknown design(s) {', '.join(unknown) or '(none)'}; choose from {', '.join(DESIGNS)}")
-    if args.seeds < 1:
-        raise InputError("--seeds must be at least 1")
+    designs = args.designs  # checked by argparse: known, none empty, no repeats
     out = Path(args.out)
-    if (out / "design.csv").exists() and not args.force:
-        raise InputError("already exists; pass --force to replace it", file=out / "design.csv")
-    robot = Robot.load()
-    rows = []
-    with progress_bar(len(designs) * args.seeds, "designs", args.quiet) as bar:
-        for design in designs:
-            for seed in range(args.seeds):
-                rows.append(evaluate_design(robot, design, seed))
-                bar.update(1)
-    out.mkdir(parents=True, exist_ok=True)
-    with atomic_open(out / "design.csv", force=True) as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]), lineterminator="\n")
-        writer.writeheader()
-        writer.writerows(rows)
+    with OutputSet(force=args.force) as outputs:
+        staged = outputs.claim(out / "design.csv", make_parents=True)
+        robot = Robot.load()
+        rows = []
+        with progress_bar(len(designs) * args.seeds, "designs", args.quiet) as bar:
+            for design in designs:
+                for seed in range(args.seeds):
+                    rows.append(evaluate_design(robot, design, seed))
+                    bar.update(1)
+        with atomic_open(staged) as handle:
+            writer = csv.DictWriter(handle, fieldnames=list(rows[0]), lineterminator="\n")
+            writer.writeheader()
+            writer.writerows(rows)
     print(f"time model: {MECHANICAL_MINUTES:g} min mechanical + {SECONDS_PER_SAMPLE:g} s per sample + motion")
     print(
         f"{'design':<12} {'samples':>7} {'minutes':>8} {'predicted RMS (mm)':>19} {'actual RMS (mm)':>16} "

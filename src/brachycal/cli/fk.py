@@ -8,7 +8,8 @@ from pathlib import Path
 from brachycal.cli.common import add_urdf_option, load_robot, progress_bar
 from brachycal.data import DEFAULT_TOPIC, read_joint_log, write_pose_table
 from brachycal.data.csv_log import read_table, to_float
-from brachycal.errors import InputError
+from brachycal.files import OutputSet
+from brachycal.validate import name_list
 
 HELP = "poses of tool frames in base_link for every sample of a joint log"
 DESCRIPTION = """\
@@ -33,7 +34,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("log", metavar="LOG", help="joint log: CSV file, ROS 1 .bag, or ROS 2 bag folder")
     parser.add_argument(
-        "--frames", required=True, metavar="A,B,...", help="comma-separated frame names, e.g. needle_tip,probe_tip"
+        "--frames",
+        required=True,
+        type=name_list(),
+        metavar="A,B,...",
+        help="comma-separated frame names, each once, e.g. needle_tip,probe_tip",
     )
     parser.add_argument("--out", required=True, metavar="CSV", help="pose table to write")
     parser.add_argument(
@@ -48,26 +53,24 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     robot = load_robot(args)
-    frames = [f.strip() for f in args.frames.split(",") if f.strip()]
-    if not frames:
-        raise InputError("--frames is empty; name at least one frame, e.g. needle_tip")
+    frames = args.frames  # names checked by argparse (none empty, no repeats)
     for frame in frames:
         robot.frame_id(frame)
     out = Path(args.out)
-    if out.exists() and not args.force:
-        raise InputError("already exists; pass --force to replace it", file=out)
-    log = read_joint_log(args.log, robot, args.topic)
-    if args.times:
-        path = Path(args.times)
-        header, rows, records = read_table(path, ["time"])
-        times = to_float(path, header, rows, records, ["time"])[:, 0]
-        Q = log.interpolate(times)
-    else:
-        times, Q = log.time, log.q
-    with progress_bar(len(times), "forward kinematics", args.quiet) as bar:
-        poses = robot.fk_frames(frames, Q, progress=bar.update)
-    with progress_bar(len(times), "writing", args.quiet) as bar:
-        write_pose_table(out, times, frames, poses, force=args.force, progress=bar.update)
+    with OutputSet(force=args.force) as outputs:
+        staged = outputs.claim(out, label="--out")
+        log = read_joint_log(args.log, robot, args.topic)
+        if args.times:
+            path = Path(args.times)
+            header, rows, records = read_table(path, ["time"])
+            times = to_float(path, header, rows, records, ["time"])[:, 0]
+            Q = log.interpolate(times)
+        else:
+            times, Q = log.time, log.q
+        with progress_bar(len(times), "forward kinematics", args.quiet) as bar:
+            poses = robot.fk_frames(frames, Q, progress=bar.update)
+        with progress_bar(len(times), "writing", args.quiet) as bar:
+            write_pose_table(staged, times, frames, poses, force=args.force, progress=bar.update)
     if not args.quiet:
         print(f"wrote {len(times) * len(frames)} poses ({len(times)} samples x {len(frames)} frames) to {out}")
     return 0

@@ -6,11 +6,13 @@ import argparse
 from pathlib import Path
 
 from brachycal.calibration import read_result
+from brachycal.calibration.image_to_probe import ALL_LABELS
 from brachycal.calibration.sequential import locate
-from brachycal.cli.common import add_urdf_option, load_robot, parse_numbers
+from brachycal.cli.common import add_urdf_option, load_robot
 from brachycal.data.csv_log import read_table, to_float
 from brachycal.data.joint_log import configurations_from_columns
 from brachycal.errors import InputError
+from brachycal.validate import MAX_IMAGE_PX, check_pixel, number_list
 
 HELP = "map an image pixel to base_link through the calibrated chain (targeting)"
 DESCRIPTION = """\
@@ -31,15 +33,28 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("result", metavar="RESULT", help="calibration result (JSON)")
     parser.add_argument("joints", metavar="JOINTS", help="CSV of configurations (joint-name columns, radians)")
-    parser.add_argument("--uv", required=True, metavar="U,V", help="pixel: column u, row v")
-    parser.add_argument("--method", default="kabsch", help="which image calibration of the result (default kabsch)")
+    uv = number_list(count=2, low=-0.5, high=MAX_IMAGE_PX, unit="px")
+    parser.add_argument(
+        "--uv",
+        required=True,
+        type=uv,
+        metavar="U,V",
+        help=f"pixel: column u, row v, {uv.rule}, inside the result's image (-0.5 <= u <= width - 0.5, likewise v)",
+    )
+    parser.add_argument(
+        "--method",
+        default="kabsch",
+        choices=tuple(ALL_LABELS),
+        help="which image calibration of the result (default kabsch)",
+    )
     add_urdf_option(parser)
     parser.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    uv = parse_numbers(args.uv, "--uv", 2)[None]
     stored = read_result(args.result)
+    # The result knows its images' size (older result files do not: then argparse's bound stands).
+    uv = check_pixel(args.uv, "--uv", size_px=stored.image_size_px)[None]
     if args.method not in stored.image:
         raise InputError(
             f"the result has no method {args.method!r} (it has {', '.join(stored.image)})", file=args.result

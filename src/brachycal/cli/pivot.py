@@ -3,14 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import hashlib
-import json
-from pathlib import Path
 
-from brachycal.calibration import pivot_algebraic, pivot_robust
-from brachycal.data.pose_list import read_pose_list
-from brachycal.errors import InputError
-from brachycal.files import atomic_open
+from brachycal.calibration import PIVOT_METHODS, pivot_from_file, write_pivot
+from brachycal.calibration.pivot_file import UNITS
+from brachycal.files import OutputSet
 
 HELP = "pivot calibration: tool tip and pivot point from poses rotating about a fixed tip"
 DESCRIPTION = """\
@@ -35,42 +31,28 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("poses", metavar="POSES", help="CSV pose list")
     parser.add_argument("--out", required=True, metavar="JSON", help="result file to write")
-    parser.add_argument("--method", choices=("algebraic", "robust"), default="algebraic")
-    parser.add_argument(
-        "--units", choices=("m", "mm"), default="m", help="units of the poses' translations (default m)"
-    )
+    parser.add_argument("--method", choices=tuple(PIVOT_METHODS), default="algebraic")
+    parser.add_argument("--units", choices=UNITS, default="m", help="units of the poses' translations (default m)")
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     parser.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    out = Path(args.out)
-    if out.exists() and not args.force:
-        raise InputError("already exists; pass --force to replace it", file=out)
-    names, T, _ = read_pose_list(args.poses)
-    result = (pivot_robust if args.method == "robust" else pivot_algebraic)(T)
-    outliers = [name for name, inlier in zip(names, result.inliers, strict=True) if not inlier]
-    u = args.units
-    payload = {
-        "format": "brachycal-pivot/1",
-        "method": result.method,
-        "units": u,
-        "tip_in_tool": result.p_marker_tip.tolist(),
-        "pivot_in_reference": result.p_ref_pivot.tolist(),
-        "rms_per_axis": result.rms_per_axis,
-        "rms_3d": result.rms_3d,
-        "n_poses": len(names),
-        "n_inliers": int(result.inliers.sum()),
-        "outliers": outliers,
-        "inputs": {Path(args.poses).name: hashlib.sha256(Path(args.poses).read_bytes()).hexdigest()},
-    }
-    with atomic_open(out, force=args.force) as handle:
-        json.dump(payload, handle, indent=2)
-        handle.write("\n")
+    with OutputSet(force=args.force) as outputs:
+        staged = outputs.claim(args.out, label="--out")
+        calibration = pivot_from_file(args.poses, args.method, args.units)
+        write_pivot(calibration, staged, force=args.force)
+    result, u = calibration.result, calibration.units
     fmt = lambda v: "(" + ", ".join(f"{x:.3f}" for x in v) + ")"  # noqa: E731
-    print(f"pivot calibration ({result.method}) of {len(names)} poses, {payload['n_inliers']} used")
+    print(
+        f"pivot calibration ({result.method}) of {len(calibration.pose_names)} poses, {int(result.inliers.sum())} used"
+    )
     print(f"  tip in tool frame      {fmt(result.p_marker_tip)} {u}")
     print(f"  pivot in reference     {fmt(result.p_ref_pivot)} {u}")
     print(f"  residual RMS           {result.rms_per_axis:.3f} {u} per axis, {result.rms_3d:.3f} {u} in 3D")
-    print(f"wrote {out}")
+    print(
+        f"  predicted SD (3D)      tip {result.tip_sd:.3f} {u}, pivot {result.pivot_sd:.3f} {u} "
+        f"(rotation spread {result.rotation_spread_deg:.1f} deg about the two least-covered axes)"
+    )
+    print(f"wrote {args.out}")
     return 0

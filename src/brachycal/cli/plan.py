@@ -4,17 +4,36 @@ from __future__ import annotations
 
 import argparse
 from collections import Counter
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from brachycal.calibration import read_result
-from brachycal.cli.common import add_urdf_option, load_robot, parse_numbers, progress_bar
+from brachycal.calibration.image_to_probe import ALL_LABELS
+from brachycal.cli.common import add_urdf_option, load_robot, progress_bar
 from brachycal.errors import InputError
+from brachycal.files import OutputSet
 from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
 from brachycal.planning import IKSettings, PlanSpec, RectFOV, SectorFOV, Thresholds, plan_poses
 from brachycal.planning.output import infeasible_path, write_infeasible, write_plan
+from brachycal.planning.spec import EDGE_RANGE_M, MAX_CENTRE_M, MAX_SECTOR_DEPTH_M
+from brachycal.planning.verify import (
+    MAX_COLLISION_MARGIN_M,
+    MAX_JOINT_MARGIN_RAD,
+    MIN_COLLISION_MARGIN_M,
+    MIN_JOINT_MARGIN_RAD,
+)
 from brachycal.reporting.plan_figure import plot_plan
+from brachycal.validate import (
+    MAX_GRID_POINTS,
+    MAX_IMAGE_PX,
+    bounded_int,
+    direction,
+    finite_float,
+    number_list,
+    spacing_mm,
+)
 
 HELP = "plan the calibration sample poses (a grid of needle-tip targets) with mink IK"
 DESCRIPTION = """\
@@ -47,34 +66,102 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     d = PlanSpec()
     parser.add_argument("--out", required=True, metavar="CSV", help="plan file to write")
     g = parser.add_argument_group("grid")
-    g.add_argument("--centre-mm", default="800,100,1050", metavar="X,Y,Z", help="cube centre in base_link (mm)")
-    g.add_argument("--edge-mm", type=float, default=40.0, help="cube edge (mm, default 40)")
-    g.add_argument("--points", type=int, default=4, help="grid points per axis (default 4: 64 poses)")
+    centre = number_list(count=3, low=-MAX_CENTRE_M * 1e3, high=MAX_CENTRE_M * 1e3, unit="mm")
+    g.add_argument(
+        "--centre-mm",
+        type=centre,
+        default="800,100,1050",
+        metavar="X,Y,Z",
+        help=f"cube centre in base_link, {centre.rule} (default 800,100,1050)",
+    )
+    edge = finite_float(low=EDGE_RANGE_M[0] * 1e3, high=EDGE_RANGE_M[1] * 1e3, unit="mm")
+    g.add_argument("--edge-mm", type=edge, default=40.0, help=f"cube edge, {edge.rule} (default 40)")
+    points = bounded_int(low=2, high=MAX_GRID_POINTS)
+    g.add_argument(
+        "--points", type=points, default=4, help=f"grid points per axis, {points.rule} (default 4: 64 poses)"
+    )
     g.add_argument(
         "--insertion",
+        type=direction,
         default=",".join(f"{x:.6f}" for x in d.insertion_dir),
         metavar="DX,DY,DZ",
         help="needle direction in base_link (default: forward, 35 deg towards the left)",
     )
     i = parser.add_argument_group("imaging")
-    i.add_argument("--image-depth", default="1,0,0", metavar="DX,DY,DZ", help="image +v (depth) in base_link")
-    i.add_argument("--image-lateral", default="0,0,1", metavar="DX,DY,DZ", help="image +u (lateral) in base_link")
-    i.add_argument("--centre-px", default="540,221", metavar="U,V", help="pixel where the cube centre shows")
-    i.add_argument("--spacing-mm", metavar="SU,SV", help="pixel spacing (default: the result's, else 0.19,0.19)")
+    i.add_argument(
+        "--image-depth", type=direction, default="1,0,0", metavar="DX,DY,DZ", help="image +v (depth) in base_link"
+    )
+    i.add_argument(
+        "--image-lateral",
+        type=direction,
+        default="0,0,1",
+        metavar="DX,DY,DZ",
+        help="image +u (lateral) in base_link, not parallel to --image-depth",
+    )
+    pixel = number_list(count=2, low=-0.5, high=MAX_IMAGE_PX, unit="px")
+    i.add_argument(
+        "--centre-px",
+        type=pixel,
+        default="540,221",
+        metavar="U,V",
+        help=f"pixel where the cube centre shows, {pixel.rule} (default 540,221)",
+    )
+    i.add_argument(
+        "--spacing-mm",
+        type=spacing_mm,
+        metavar="SU,SV",
+        help=f"pixel spacing, {spacing_mm.rule} (default: the result's, else 0.19,0.19)",
+    )
     i.add_argument("--fov", choices=("sector", "rect"), default="sector", help="field of view shape")
-    i.add_argument("--sector-apex-px", default="540,0", metavar="U,V", help="sector apex (default 540,0)")
-    i.add_argument("--sector-depth-mm", type=float, default=70.0, help="sector depth (default 70)")
-    i.add_argument("--sector-angle-deg", type=float, default=120.0, help="sector opening (default 120)")
-    i.add_argument("--rect-px", default="0,1079,0,719", metavar="U0,U1,V0,V1", help="rectangle (with --fov rect)")
+    apex = number_list(count=2, low=-MAX_IMAGE_PX, high=MAX_IMAGE_PX, unit="px")
+    i.add_argument(
+        "--sector-apex-px", type=apex, default="540,0", metavar="U,V", help=f"sector apex, {apex.rule} (default 540,0)"
+    )
+    depth = finite_float(low=0.0, high=MAX_SECTOR_DEPTH_M * 1e3, low_open=True, unit="mm")
+    i.add_argument("--sector-depth-mm", type=depth, default=70.0, help=f"sector depth, {depth.rule} (default 70)")
+    angle = finite_float(low=0.0, high=180.0, low_open=True, unit="deg")
+    i.add_argument("--sector-angle-deg", type=angle, default=120.0, help=f"sector opening, {angle.rule} (default 120)")
+    rect = number_list(count=4, low=-0.5, high=MAX_IMAGE_PX, unit="px")
+    i.add_argument(
+        "--rect-px",
+        type=rect,
+        default="0,1079,0,719",
+        metavar="U0,U1,V0,V1",
+        help=f"rectangle (with --fov rect), U0 < U1 and V0 < V1, {rect.rule}",
+    )
     t = parser.add_argument_group("tools and safety")
     t.add_argument("--result", metavar="JSON", help="plan with a calibration result's tool frames")
-    t.add_argument("--method", default="kabsch", help="which image calibration of --result (default kabsch)")
+    t.add_argument(
+        "--method",
+        default="kabsch",
+        choices=tuple(ALL_LABELS),
+        help="which image calibration of --result (default kabsch)",
+    )
     add_urdf_option(t)
-    t.add_argument("--collision-margin-mm", type=float, default=10.0, help="minimum link clearance (default 10)")
-    t.add_argument("--joint-margin-deg", type=float, default=3.0, help="minimum distance to joint limits")
-    t.add_argument("--speed-scale", type=float, default=1.0, help="fraction of vendor speed for motion times")
+    clearance = finite_float(low=MIN_COLLISION_MARGIN_M * 1e3, high=MAX_COLLISION_MARGIN_M * 1e3, unit="mm")
+    t.add_argument(
+        "--collision-margin-mm",
+        type=clearance,
+        default=10.0,
+        help=f"minimum link clearance, {clearance.rule} (default 10)",
+    )
+    joint = finite_float(low=np.degrees(MIN_JOINT_MARGIN_RAD), high=np.degrees(MAX_JOINT_MARGIN_RAD), unit="deg")
+    t.add_argument(
+        "--joint-margin-deg",
+        type=joint,
+        default=3.0,
+        help=f"minimum distance to joint limits, {joint.rule} (default 3; the floor keeps encoder noise from "
+        "reading a planned pose past a limit)",
+    )
+    speed = finite_float(low=0.0, high=1.0, low_open=True)
+    t.add_argument(
+        "--speed-scale",
+        type=speed,
+        default=1.0,
+        help=f"fraction of vendor speed for motion times, {speed.rule} (default 1)",
+    )
     o = parser.add_argument_group("output")
-    o.add_argument("--figure", metavar="PNG", help="figure path (default: next to --out, .png)")
+    o.add_argument("--figure", metavar="PNG", help="figure path (default: --out with .png; never --out itself)")
     o.add_argument("--allow-partial", action="store_true", help="write the plan even if some points are infeasible")
     o.add_argument("--force", action="store_true", help="replace existing outputs")
     o.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -82,13 +169,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    with OutputSet(force=args.force) as outputs:
+        _run(args, outputs)
+    print("wrote " + ", ".join(map(str, outputs.written)))
+    return 0
+
+
+def _run(args: argparse.Namespace, outputs: OutputSet) -> None:
+    """Plan and write the plan, its figure and (with infeasible points) their list into ``outputs``."""
+    spec, settings, thresholds = _settings(args)  # every option checked before any work
     out = Path(args.out)
     figure = Path(args.figure) if args.figure else out.with_suffix(".png")
-    for path in (out, figure, infeasible_path(out)):
-        if path.exists() and not args.force:
-            raise InputError("already exists; pass --force to replace it", file=path)
+    staged_plan = outputs.claim(out, label="--out")
+    staged_infeasible = outputs.claim(infeasible_path(out), label="the list of infeasible points")
+    staged_figure = outputs.claim(figure, label="--figure" if args.figure else "the figure (--out with .png)")
     robot = load_robot(args)
-    spacing = np.array([0.19e-3, 0.19e-3])
     if args.result:
         stored = read_result(args.result)
         if args.method not in stored.image:
@@ -97,34 +192,8 @@ def run(args: argparse.Namespace) -> int:
         robot = stored.software_robot(robot).with_tool_transform(NEEDLE_TIP, stored.T_ER_Ntip)
         robot = robot.with_tool_transform(PROBE_TIP, stored.T_EL_Ptip)
         robot = robot.with_tool_transform(US_IMAGE, image.T_Ptip_I)
-        spacing = image.spacing_m
-    if args.spacing_mm:
-        spacing = parse_numbers(args.spacing_mm, "--spacing-mm", 2) * 1e-3
-    if args.fov == "sector":
-        fov = SectorFOV(
-            tuple(parse_numbers(args.sector_apex_px, "--sector-apex-px", 2)),
-            args.sector_depth_mm * 1e-3,
-            np.radians(args.sector_angle_deg),
-        )
-    else:
-        u0, u1, v0, v1 = parse_numbers(args.rect_px, "--rect-px", 4)
-        fov = RectFOV((u0, u1), (v0, v1))
-    spec = PlanSpec(
-        cube_centre_m=parse_numbers(args.centre_mm, "--centre-mm", 3) * 1e-3,
-        edge_m=args.edge_mm * 1e-3,
-        points_per_axis=args.points,
-        insertion_dir=parse_numbers(args.insertion, "--insertion", 3),
-        image_depth_dir=parse_numbers(args.image_depth, "--image-depth", 3),
-        image_lateral_dir=parse_numbers(args.image_lateral, "--image-lateral", 3),
-        centre_px=tuple(parse_numbers(args.centre_px, "--centre-px", 2)),
-        spacing_m=spacing,
-        fov=fov,
-    )
-    if not 0 < args.speed_scale <= 1:
-        raise InputError(f"--speed-scale must be in (0, 1], got {args.speed_scale}")
-    margin = args.collision_margin_mm * 1e-3
-    settings = IKSettings(collision_margin_m=margin + 2e-3, joint_margin_rad=np.radians(args.joint_margin_deg) + 0.01)
-    thresholds = Thresholds(collision_margin_m=margin, joint_margin_rad=np.radians(args.joint_margin_deg))
+        if args.spacing_mm is None:
+            spec = replace(spec, spacing_m=image.spacing_m)
     n = args.points**3
     with progress_bar(n, "planning", args.quiet) as bar:
         plan = plan_poses(
@@ -138,13 +207,51 @@ def run(args: argparse.Namespace) -> int:
             f"{len(plan.infeasible)} of {n} grid points have no verified pose ({summary}); "
             "move or shrink the cube, or pass --allow-partial"
         )
-    write_plan(plan, robot, out, force=args.force)
-    written = [str(out)]
+    write_plan(plan, robot, staged_plan, force=args.force)
     if plan.infeasible:
-        written.append(str(write_infeasible(plan, infeasible_path(out), force=args.force)))
-    written.append(str(plot_plan(plan, figure)))
-    print("wrote " + ", ".join(written))
-    return 0
+        write_infeasible(plan, staged_infeasible, force=args.force)
+    else:
+        outputs.release(infeasible_path(out))
+    plot_plan(plan, staged_figure)
+
+
+def _settings(args: argparse.Namespace) -> tuple[PlanSpec, IKSettings, Thresholds]:
+    """The planner's inputs from the options (each already range-checked by argparse), with the
+    checks that involve two options; the spacing is --spacing-mm's or 0.19 mm/px (a --result's
+    replaces the latter once the result is read).
+
+    Raises:
+        InputError: naming the options that do not go together.
+    """
+    if np.linalg.norm(np.cross(args.image_depth, args.image_lateral)) < 1e-6:
+        raise InputError("--image-depth and --image-lateral are parallel; the image plane needs two directions")
+    if args.fov == "sector":
+        fov: SectorFOV | RectFOV = SectorFOV(
+            tuple(args.sector_apex_px), args.sector_depth_mm * 1e-3, np.radians(args.sector_angle_deg)
+        )
+    else:
+        u0, u1, v0, v1 = args.rect_px
+        if not (u0 < u1 and v0 < v1):
+            raise InputError(f"--rect-px must be U0,U1,V0,V1 with U0 < U1 and V0 < V1, got {u0:g},{u1:g},{v0:g},{v1:g}")
+        fov = RectFOV((u0, u1), (v0, v1))
+    spacing = np.array([0.19, 0.19]) if args.spacing_mm is None else args.spacing_mm
+    spec = PlanSpec(
+        cube_centre_m=args.centre_mm * 1e-3,
+        edge_m=args.edge_mm * 1e-3,
+        points_per_axis=args.points,
+        insertion_dir=args.insertion,
+        image_depth_dir=args.image_depth,
+        image_lateral_dir=args.image_lateral,
+        centre_px=tuple(args.centre_px),
+        spacing_m=spacing * 1e-3,
+        fov=fov,
+    )
+    margin = args.collision_margin_mm * 1e-3
+    joint_margin = np.radians(args.joint_margin_deg)
+    # The IK keeps a little more than the check demands, so its poses pass the check.
+    settings = IKSettings(collision_margin_m=margin + 2e-3, joint_margin_rad=joint_margin + 0.01)
+    thresholds = Thresholds(collision_margin_m=margin, joint_margin_rad=joint_margin)
+    return spec, settings, thresholds
 
 
 def _report(plan) -> None:

@@ -7,13 +7,22 @@ import csv
 import os
 from pathlib import Path
 
-import numpy as np
-
-from brachycal.calibration import METHODS
 from brachycal.calibration.image_to_probe import ALL_LABELS as METHOD_LABELS
-from brachycal.cli.common import parse_list, progress_bar
-from brachycal.errors import InputError
-from brachycal.simulation.study import run_study, summarise, sweep
+from brachycal.cli.common import progress_bar
+from brachycal.files import OutputSet, atomic_open
+from brachycal.planning.spec import EDGE_RANGE_M
+from brachycal.reporting.figures import save_figure, study_figure
+from brachycal.simulation.study import MAX_STUDY_RUNS, STUDY_METHODS, RunParams, run_study, summarise, sweep
+from brachycal.simulation.twin import MAX_ANNOTATION_SD_PX, MAX_OUTLIER_RATE
+from brachycal.validate import (
+    MAX_GRID_POINTS,
+    MAX_SEEDS,
+    MAX_TARGETS,
+    MAX_WORKERS,
+    bounded_int,
+    name_list,
+    number_list,
+)
 
 HELP = "sweep noise, sample count and grid size on the twin: truth error vs leave-one-out"
 DESCRIPTION = """\
@@ -37,24 +46,60 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "study", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    parser.add_argument("--seeds", type=int, default=5, help="repeats per setting (default 5)")
-    parser.add_argument("--points", default="3,4,5", help="grid points per axis (default 3,4,5: 27/64/125 samples)")
-    parser.add_argument("--edge-mm", default="40", help="cube edges in mm (default 40)")
-    parser.add_argument("--annotation-px", default="0.5,1,2", help="annotation noise SDs in px (default 0.5,1,2)")
+    seeds = bounded_int(low=1, high=MAX_SEEDS)
+    parser.add_argument(
+        "--seeds",
+        type=seeds,
+        default=5,
+        help=f"repeats per setting, {seeds.rule} (default 5); the whole sweep (seeds x every combination) "
+        f"at most {MAX_STUDY_RUNS} simulated sessions",
+    )
+    points = number_list(kind=int, low=2, high=MAX_GRID_POINTS)
+    parser.add_argument(
+        "--points",
+        type=points,
+        default="3,4,5",
+        help=f"grid points per axis, {points.rule} (default 3,4,5: 27/64/125 samples)",
+    )
+    edges = number_list(low=EDGE_RANGE_M[0] * 1e3, high=EDGE_RANGE_M[1] * 1e3, unit="mm")
+    parser.add_argument("--edge-mm", type=edges, default="40", help=f"cube edges, {edges.rule} (default 40)")
+    noises = number_list(low=0.0, high=MAX_ANNOTATION_SD_PX, unit="px")
+    parser.add_argument(
+        "--annotation-px",
+        type=noises,
+        default="0.5,1,2",
+        help=f"annotation noise SDs, {noises.rule} (default 0.5,1,2)",
+    )
     parser.add_argument(
         "--sound",
         choices=("water", "tissue", "both"),
         default="water",
         help="speed of sound: water (1482 m/s, default), tissue (= scanner's 1540), or both",
     )
-    parser.add_argument("--outlier-rate", default="0", help="gross annotation outlier rates (default 0)")
+    rates = number_list(low=0.0, high=MAX_OUTLIER_RATE)
+    parser.add_argument(
+        "--outlier-rate",
+        type=rates,
+        default="0",
+        help=f"gross annotation outlier rates, fractions {rates.rule} (beyond half no robust fit can work; default 0)",
+    )
     parser.add_argument(
         "--methods",
+        type=name_list(STUDY_METHODS),
         default="kabsch,scaled_uv",
         help="methods: the sequential ones and 'chain' (default kabsch,scaled_uv)",
     )
-    parser.add_argument("--targets", type=int, default=30, help="targets per run for the truth error (default 30)")
-    parser.add_argument("--workers", type=int, default=os.cpu_count(), help="local processes (default: all cores)")
+    targets = bounded_int(low=1, high=MAX_TARGETS)
+    parser.add_argument(
+        "--targets", type=targets, default=30, help=f"targets per run for the truth error, {targets.rule} (default 30)"
+    )
+    workers = bounded_int(low=1, high=MAX_WORKERS)
+    parser.add_argument(
+        "--workers",
+        type=workers,
+        default=min(os.cpu_count() or 1, MAX_WORKERS),
+        help=f"local processes, {workers.rule} (default: all cores)",
+    )
     parser.add_argument("--scheduler", metavar="ADDRESS", help="Dask distributed scheduler to run on")
     parser.add_argument("--force", action="store_true", help="replace existing outputs")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -62,29 +107,32 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    out = Path(args.out)
-    files = [out / "runs.csv", out / "summary.csv", out / "study.png"]
-    for path in files:
-        if path.exists() and not args.force:
-            raise InputError("already exists; pass --force to replace it", file=path)
-    methods = tuple(parse_list(args.methods, "--methods", str))
-    unknown = [m for m in methods if m not in (*METHODS, "chain")]
-    if unknown:
-        raise InputError(f"unknown method(s) {', '.join(unknown)}; choose from {', '.join(METHODS)}, chain")
-    points = parse_list(args.points, "--points", int)
-    if min(points) < 2 or args.seeds < 1:
-        raise InputError("--points must be at least 2 and --seeds at least 1")
+    runs = _sweep(args)  # every option and the size of the sweep checked before any work
+    with OutputSet(force=args.force) as outputs:
+        out = Path(args.out)
+        files = [outputs.claim(out / name, make_parents=True) for name in ("runs.csv", "summary.csv", "study.png")]
+        _run(args, files, runs)
+    print(f"wrote {', '.join(map(str, outputs.written))}")
+    return 0
+
+
+def _sweep(args: argparse.Namespace) -> list[RunParams]:
+    """The runs of the study (each option already range-checked by argparse)."""
     sound = {"water": [True], "tissue": [False], "both": [True, False]}[args.sound]
-    runs = sweep(
+    return sweep(
         args.seeds,
-        points,
-        parse_list(args.edge_mm, "--edge-mm", float),
-        parse_list(args.annotation_px, "--annotation-px", float),
+        args.points.tolist(),
+        args.edge_mm.tolist(),
+        args.annotation_px.tolist(),
         sound,
-        parse_list(args.outlier_rate, "--outlier-rate", float),
-        methods,
+        args.outlier_rate.tolist(),
+        tuple(args.methods),
         args.targets,
     )
+
+
+def _run(args: argparse.Namespace, files: list[Path], runs: list[RunParams]) -> None:
+    """Run the study ``runs``; write runs, summary and plot to the staging paths ``files``."""
     print(
         f"study: {len(runs)} simulated sessions ({args.seeds} seeds each), "
         f"{'Dask at ' + args.scheduler if args.scheduler else str(args.workers) + ' local worker(s)'}"
@@ -92,19 +140,14 @@ def run(args: argparse.Namespace) -> int:
     with progress_bar(len(runs), "sessions", args.quiet) as bar:
         rows = run_study(runs, workers=args.workers, scheduler=args.scheduler, progress=bar.update)
     summary = summarise(rows)
-    out.mkdir(parents=True, exist_ok=True)
     _write_csv(files[0], rows)
     _write_csv(files[1], summary)
-    _plot(summary, files[2])
+    save_figure(study_figure(summary), files[2], dpi=110)
     _print(summary)
-    print(f"wrote {', '.join(map(str, files))}")
-    return 0
 
 
 def _write_csv(path: Path, rows: list[dict]) -> None:
-    from brachycal.files import atomic_open
-
-    with atomic_open(path, force=True) as handle:
+    with atomic_open(path) as handle:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]), lineterminator="\n")
         writer.writeheader()
         for row in rows:
@@ -123,46 +166,3 @@ def _print(summary: list[dict]) -> None:
             f"{s['loo_mae_mm_mean']:>7.3f} ± {s['loo_mae_mm_sd']:.3f} {s['target_mae_mm_mean']:>8.3f} ± "
             f"{s['target_mae_mm_sd']:.3f} {s['target_max_mm_mean']:>11.3f}"
         )
-
-
-def _plot(summary: list[dict], path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
-    keys = sorted(
-        {(s["method"], s["annotation_px"], s["edge_mm"], s["sound_speed"], s["outlier_rate"]) for s in summary}
-    )
-    for method, ann, edge, sound, outliers in keys:
-        rows = sorted(
-            (
-                s
-                for s in summary
-                if (s["method"], s["annotation_px"], s["edge_mm"], s["sound_speed"], s["outlier_rate"])
-                == (method, ann, edge, sound, outliers)
-            ),
-            key=lambda s: s["samples"],
-        )
-        n = np.array([s["samples"] for s in rows])
-        label = f"{METHOD_LABELS[method]}, {ann:g} px, {edge:g} mm" + ("" if sound else ", tissue")
-        for ax, figure in zip(axes, ("loo_mae_mm", "target_mae_mm"), strict=True):
-            ax.errorbar(
-                n,
-                [s[f"{figure}_mean"] for s in rows],
-                yerr=[s[f"{figure}_sd"] for s in rows],
-                marker="o",
-                capsize=3,
-                label=label,
-            )
-    axes[0].set_title("leave-one-out MAE (what a lab sees)")
-    axes[1].set_title("end-to-end targeting MAE (truth)")
-    for ax in axes:
-        ax.set_xlabel("samples")
-        ax.grid(alpha=0.3)
-    axes[0].set_ylabel("mm")
-    axes[1].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)

@@ -3,7 +3,9 @@
 Time is the message's ``header.stamp`` when set (the driver's clock, what ultrasound frames are
 paired with), else the time the bag recorded it. Each message must carry every controlled axis:
 drivers that split arms over several messages are refused rather than stitched together,
-because stitching would invent configurations the robot never reported at one instant.
+because stitching would invent configurations the robot never reported at one instant. A
+message that lists a joint twice is refused too (like a CSV header with a repeated column): which
+of its two positions is the joint's cannot be told.
 """
 
 from __future__ import annotations
@@ -71,6 +73,14 @@ def read_bag_log(path: str | os.PathLike[str], robot: Robot, topic: str = DEFAUL
             msg = reader.deserialize(raw, connection.msgtype)
             stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
             these = list(msg.name)
+            for k, name in enumerate(these):
+                if name in these[:k]:  # which of the two positions is the joint's? Refuse, as the CSV reader does.
+                    raise InputError(
+                        f"joint {name!r} listed twice (names {these.index(name) + 1} and {k + 1} of the message)",
+                        file=source,
+                        row=number,
+                        row_label="message",
+                    )
             if names is None:
                 names = these
             elif these != names:

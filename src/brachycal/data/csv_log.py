@@ -1,4 +1,5 @@
-"""Joint logs from CSV: ``time,<joint names…>`` (CONVENTIONS.md), any column order.
+"""CSV tables of joints: joint logs ``time,<joint names…>`` (``docs/conventions.md``), tables of
+configurations, and time columns; joint columns in any order.
 
 Extra columns are ignored (``torso_joint_b2`` is checked against ``torso_joint_b1``). The file is
 read in one pass; numbers are converted in bulk by NumPy, and only when that fails is the bad
@@ -13,10 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
-from brachycal.data.joint_log import JointLog, joint_log_from_columns
+from brachycal.data.joint_log import JointLog, configurations_from_columns, joint_columns, joint_log_from_columns
 from brachycal.errors import InputError
-from brachycal.model.names import MIMIC_JOINTS
 from brachycal.model.robot import Robot
+from brachycal.se3 import FloatArray
 
 
 def read_table(path: Path, required: list[str]) -> tuple[list[str], list[int], list[list[str]]]:
@@ -91,6 +92,41 @@ def read_csv_log(path: str | os.PathLike[str], robot: Robot) -> JointLog:
     """
     path = Path(path)
     header, rows, records = read_table(path, ["time"])
-    joints = [name for name in header if name in robot.joint_names or name in MIMIC_JOINTS]
+    joints = joint_columns(robot, header)
     data = to_float(path, header, rows, records, ["time", *joints])
     return joint_log_from_columns(robot, joints, data[:, 0], data[:, 1:], source=str(path), rows=rows)
+
+
+def table_configurations(
+    path: Path, robot: Robot, header: list[str], rows: list[int], records: list[list[str]]
+) -> FloatArray:
+    """``(N, nq)`` configurations from the joint columns of a table read by :func:`read_table`.
+
+    Columns that are not joints (:func:`~brachycal.data.joint_log.joint_columns`) are ignored;
+    the joints are validated by :func:`~brachycal.data.joint_log.configurations_from_columns`.
+    """
+    names = joint_columns(robot, header)
+    values = to_float(path, header, rows, records, names)
+    return configurations_from_columns(robot, names, values, source=str(path), rows=rows)
+
+
+def read_configurations(path: str | os.PathLike[str], robot: Robot) -> tuple[list[int], FloatArray]:
+    """Configurations from a CSV file whose header names the joints, one per row (radians; a joint
+    log works: its time column is ignored): ``(rows (N,) file rows, Q (N, nq) in the robot's order)``.
+
+    Raises:
+        InputError: the file has no rows, or a joint is missing, not a number or out of its limits
+            (naming the row and column).
+    """
+    path = Path(path)
+    header, rows, records = read_table(path, [])
+    if not records:
+        raise InputError("no configurations", file=path)
+    return rows, table_configurations(path, robot, header, rows, records)
+
+
+def read_times(path: str | os.PathLike[str]) -> FloatArray:
+    """``(M,)`` the ``time`` column of a CSV file, seconds (e.g. the time stamps of ultrasound frames)."""
+    path = Path(path)
+    header, rows, records = read_table(path, ["time"])
+    return to_float(path, header, rows, records, ["time"])[:, 0]

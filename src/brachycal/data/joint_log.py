@@ -1,28 +1,50 @@
 """Joint logs: timestamped configurations of the robot, validated and in model joint order.
 
 Every reader (CSV, ROS 1 bag, ROS 2 bag) ends in :func:`joint_log_from_columns`, so the same
-refusals apply whatever the source: a missing joint, a non-finite value, time that does not
-strictly increase, values that look like degrees, values outside the joint limits, and a mimic
-joint (``torso_joint_b2``) that disagrees with the axis it mirrors.
+refusals apply whatever the source: a missing joint or one listed twice, a non-finite value,
+time that does not strictly increase, values that look like degrees, values outside the joint
+limits by more than encoder noise (:data:`LIMIT_TOLERANCE_RAD`), and a mimic joint
+(``torso_joint_b2``) that disagrees with the axis it mirrors. Readings a hair beyond a limit are
+kept as read, with one :class:`~brachycal.errors.BrachycalWarning` per file.
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from brachycal.errors import InputError
+from brachycal.errors import BrachycalWarning, InputError
 from brachycal.model.names import MIMIC_JOINTS
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray
 
 #: Largest |angle| in radians a revolute joint can report; beyond it the log is taken for degrees.
 DEGREES_THRESHOLD = 2.0 * np.pi
-#: Slack on the URDF joint limits (rad): encoders may sit a hair outside a soft limit.
-LIMIT_TOLERANCE = 1e-6
+#: How far beyond a URDF limit a revolute joint's reading may lie and still be taken as read (rad).
+#: A pose planned on a limit is reported by the encoders a few counts to either side of it (the
+#: issue's example: 1.919869 against 1.919862, 7e-6 rad over); encoder resolution and noise are
+#: of order 1e-5 rad (the twin's encoder noise is 2e-5 rad SD). 1e-3 rad (0.06°, ~1 mm at the end
+#: of a 1 m arm) is fifty such SDs, so every honest reading passes, while what the limit check is
+#: for — degrees, another robot's log, swapped columns — lands far beyond it.
+LIMIT_TOLERANCE_RAD = 1e-3
+#: The same for prismatic joints (m): 1 µm, well above a linear encoder's resolution.
+LIMIT_TOLERANCE_M = 1e-6
+
+
+def limit_tolerance(robot: Robot) -> FloatArray:
+    """``(nq,)`` slack on each joint's limits: :data:`LIMIT_TOLERANCE_M` for prismatic joints
+    (metres), :data:`LIMIT_TOLERANCE_RAD` for the others (radians)."""
+    kinds = ("JointModelPX", "JointModelPY", "JointModelPZ", "JointModelPrismatic")  # Pinocchio's prismatic joints
+    prismatic = [
+        robot.model.joints[robot.model.getJointId(name)].shortname().startswith(kinds) for name in robot.joint_names
+    ]
+    return np.where(prismatic, LIMIT_TOLERANCE_M, LIMIT_TOLERANCE_RAD)
+
+
 #: Largest |b2 − b1| (rad) accepted for a mimic joint; more means the log is not what we think.
 MIMIC_TOLERANCE = 1e-3
 
@@ -71,6 +93,13 @@ class JointLog:
         return np.column_stack([np.interp(times, self.time, self.q[:, k]) for k in range(self.q.shape[1])])
 
 
+def joint_columns(robot: Robot, header: Sequence[str]) -> list[str]:
+    """The columns of ``header`` that hold joint values, in header order: the robot's joints and the
+    mimic joints (:data:`~brachycal.model.names.MIMIC_JOINTS`, which :func:`configurations_from_columns`
+    checks against the axes they mirror). Other columns (time, labels, pixels) are not joints."""
+    return [name for name in header if name in robot.joint_names or name in MIMIC_JOINTS]
+
+
 def configurations_from_columns(
     robot: Robot,
     names: Sequence[str],
@@ -96,6 +125,10 @@ def configurations_from_columns(
 
     Raises:
         InputError: one line naming the file, the row and the column of the first problem.
+
+    Warns:
+        BrachycalWarning: once per call (per file) when readings lie beyond a joint limit by less
+            than :func:`limit_tolerance`; they are kept as read (what the encoder said).
     """
     values = np.asarray(values, dtype=float).reshape(-1, len(names))
     rows = np.arange(1, len(values) + 1) if rows is None else np.asarray(rows)
@@ -104,6 +137,9 @@ def configurations_from_columns(
         row = None if index is None else int(rows[index])
         return InputError(message, file=source, row=row, column=column, row_label=row_label)
 
+    for k, name in enumerate(names):
+        if name in names[:k]:  # which reading would be the joint's? A log must say it once.
+            raise fail(f"joint listed twice (columns {list(names).index(name) + 1} and {k + 1})", column=name)
     position = {name: k for k, name in enumerate(names)}
     missing = [j for j in robot.joint_names if j not in position]
     if missing:
@@ -121,11 +157,17 @@ def configurations_from_columns(
             int(i),
             robot.joint_names[k],
         )
-    outside = (q < robot.lower - LIMIT_TOLERANCE) | (q > robot.upper + LIMIT_TOLERANCE)
+    tolerance = limit_tolerance(robot)
+    unit = np.where(tolerance == LIMIT_TOLERANCE_M, "m", "rad")
+    digits = np.where(tolerance == LIMIT_TOLERANCE_M, 9, 6)  # a thousandth of the tolerance
+    beyond = np.maximum(robot.lower - q, q - robot.upper)  # > 0 outside the limits
+    outside = beyond > tolerance
     if outside.any():
         i, k = np.unravel_index(int(np.argmax(outside)), q.shape)
         raise fail(
-            f"value {q[i, k]:.6f} rad is outside the joint limits [{robot.lower[k]:.6f}, {robot.upper[k]:.6f}]",
+            f"value {q[i, k]:.{digits[k]}f} {unit[k]} is outside the joint limits "
+            f"[{robot.lower[k]:.{digits[k]}f}, {robot.upper[k]:.{digits[k]}f}] "
+            f"by {beyond[i, k]:.3g} {unit[k]} (more than the {tolerance[k]:g} {unit[k]} allowed for encoder noise)",
             int(i),
             robot.joint_names[k],
         )
@@ -135,6 +177,17 @@ def configurations_from_columns(
             bad = ~(diff <= MIMIC_TOLERANCE)
             if bad.any():
                 raise fail(f"{mimic} must equal {leader} (it only mirrors it)", int(np.argmax(bad)), mimic)
+    near = beyond > 0  # warned about only once the file is accepted: a refusal stays one line
+    if near.any():
+        i, k = np.unravel_index(int(np.argmax(near)), q.shape)
+        where = f"{source}, {row_label} {int(rows[i])}, column {robot.joint_names[k]!r}"
+        warnings.warn(
+            f"{where}: value {q[i, k]:.{digits[k]}f} {unit[k]} is {beyond[i, k]:.2g} {unit[k]} beyond the "
+            f"joint limit, within the {tolerance[k]:g} {unit[k]} allowed for encoder noise; kept as read "
+            f"({int(near.sum())} reading(s) in this file beyond a limit by less than that)",
+            BrachycalWarning,
+            stacklevel=2,
+        )
     return q
 
 

@@ -1,4 +1,4 @@
-"""Calibration sessions, format ``brachycal-session/1`` (a folder; CONVENTIONS.md).
+"""Calibration sessions, format ``brachycal-session/1`` (a folder; ``docs/conventions.md``).
 
 - ``session.toml``: format, image spacing and size, the top-model tip on the right flange.
 - ``touches.csv``: ``tool,reference,trial,<15 joints>``; tools ``top_model``, ``needle``,
@@ -12,7 +12,6 @@ naming the file, row and column. Values are converted to SI on reading (mm → m
 
 from __future__ import annotations
 
-import hashlib
 import os
 import tomllib
 from collections.abc import Mapping
@@ -21,12 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
-from brachycal.data.csv_log import read_table, to_float
-from brachycal.data.joint_log import configurations_from_columns
+from brachycal.data.csv_log import read_table, table_configurations, to_float
 from brachycal.errors import InputError
-from brachycal.files import atomic_open
+from brachycal.files import OutputSet, atomic_open, output_set, sha256_file
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray
+from brachycal.validate import check_spacing_mm
 
 FORMAT = "brachycal-session/1"
 FILES = ("session.toml", "touches.csv", "axes.csv", "samples.csv")
@@ -73,10 +72,6 @@ class Session:
     inputs: dict[str, str] = field(default_factory=dict)
 
 
-def _sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
 def _read_toml(path: Path) -> tuple[FloatArray, np.ndarray, FloatArray]:
     try:
         config = tomllib.loads(path.read_text())
@@ -99,7 +94,9 @@ def _read_toml(path: Path) -> tuple[FloatArray, np.ndarray, FloatArray]:
             )
         return array
 
-    spacing_m = numbers("image", "spacing_mm", 2, True) * 1e-3
+    spacing_mm = numbers("image", "spacing_mm", 2, True)
+    # Plausible for ultrasound (0.005..2 mm/px): a spacing in metres typed as mm is named so.
+    spacing_m = check_spacing_mm(spacing_mm, "pixel spacing", file=path, column="image.spacing_mm") * 1e-3
     size = numbers("image", "size_px", 2, True)
     if np.any(size != np.round(size)):
         raise InputError("image size must be whole pixels", file=path, column="image.size_px")
@@ -122,12 +119,6 @@ def _labels(
     return out
 
 
-def _joints(path: Path, robot: Robot, header: list[str], rows: list[int], records: list[list[str]]) -> FloatArray:
-    names = [h for h in header if h in robot.joint_names or h == "torso_joint_b2"]
-    values = to_float(path, header, rows, records, names)
-    return configurations_from_columns(robot, names, values, source=str(path), rows=rows)
-
-
 def _read_touches(path: Path, robot: Robot) -> dict[tuple[str, str], Touches]:
     header, rows, records = read_table(path, ["tool", "reference", "trial"])
     tools = _labels(path, header, rows, records, "tool", TOUCH_TOOLS)
@@ -136,7 +127,7 @@ def _read_touches(path: Path, robot: Robot) -> dict[tuple[str, str], Touches]:
     for row, trial in zip(rows, trials, strict=True):
         if not (trial >= 1 and trial == round(trial)):
             raise InputError(f"trial must be a whole number from 1, got {trial:g}", file=path, row=row, column="trial")
-    q = _joints(path, robot, header, rows, records)
+    q = table_configurations(path, robot, header, rows, records)
     seen: dict[tuple[str, str, int], int] = {}
     for row, key in zip(rows, zip(tools, references, trials.astype(int), strict=True), strict=True):
         if key in seen:
@@ -173,7 +164,7 @@ def _read_axes(path: Path, robot: Robot) -> dict[str, dict[str, FloatArray]]:
     header, rows, records = read_table(path, ["tool", "point"])
     tools = _labels(path, header, rows, records, "tool", AXES_TOOLS)
     points = _labels(path, header, rows, records, "point", AXES_POINTS)
-    q = _joints(path, robot, header, rows, records)
+    q = table_configurations(path, robot, header, rows, records)
     axes: dict[str, dict[str, FloatArray]] = {tool: {} for tool in AXES_TOOLS}
     for row, tool, point, config in zip(rows, tools, points, q, strict=True):
         if point in axes[tool]:
@@ -207,7 +198,7 @@ def _read_samples(path: Path, robot: Robot, size_px: np.ndarray) -> tuple[list[s
             raise InputError(
                 f"{uv[i, axis]:g} is outside the image (0..{size_px[axis] - 1} px)", file=path, row=rows[i], column=name
             )
-    q = _joints(path, robot, header, rows, records)
+    q = table_configurations(path, robot, header, rows, records)
     if len(ids) < 3:
         raise InputError(f"{len(ids)} samples: at least 3 with non-collinear image points are needed", file=path)
     centred = uv - uv.mean(axis=0)
@@ -239,7 +230,7 @@ def read_session(folder: str | os.PathLike[str], robot: Robot) -> Session:
         samples_q=samples_q,
         uv_px=uv,
         joint_names=robot.joint_names,
-        inputs={name: _sha256(folder / name) for name in FILES},
+        inputs={name: sha256_file(folder / name) for name in FILES},
     )
 
 
@@ -247,31 +238,36 @@ def _q_fields(q: FloatArray) -> str:
     return ",".join(repr(float(x)) for x in q)
 
 
-def write_session(session: Session, folder: str | os.PathLike[str], *, force: bool = False) -> Path:
-    """Write a session folder (each file atomically); the folder is created if needed."""
+def write_session(
+    session: Session, folder: str | os.PathLike[str], *, force: bool = False, outputs: OutputSet | None = None
+) -> Path:
+    """Write a session folder (:data:`FILES`, all or nothing); the folder is created if needed.
+
+    With ``outputs`` (a command's :class:`~brachycal.files.OutputSet`) the files join that set.
+    """
     folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
     joints = ",".join(session.joint_names)
     su, sv = (float(v) for v in session.spacing_m * 1e3)
     tip = ", ".join(repr(float(v)) for v in session.p_ER_Mtip * 1e3)
-    with atomic_open(folder / "session.toml", force=force) as f:
-        f.write(
-            f'format = "{FORMAT}"\n\n[image]\nspacing_mm = [{su!r}, {sv!r}]     # (s_u, s_v)\n'
-            f"size_px = [{int(session.size_px[0])}, {int(session.size_px[1])}]         # (width, height)\n\n"
-            f"[top_model]\ntip_in_flange_mm = [{tip}]   # p_ER_Mtip\n"
-        )
-    with atomic_open(folder / "touches.csv", force=force) as f:
-        f.write(f"tool,reference,trial,{joints}\n")
-        for (tool, reference), touches in session.touches.items():
-            for trial, q in zip(touches.trials, touches.q, strict=True):
-                f.write(f"{tool},{reference},{int(trial)},{_q_fields(q)}\n")
-    with atomic_open(folder / "axes.csv", force=force) as f:
-        f.write(f"tool,point,{joints}\n")
-        for tool, points in session.axes.items():
-            for point, q in points.items():
-                f.write(f"{tool},{point},{_q_fields(q)}\n")
-    with atomic_open(folder / "samples.csv", force=force) as f:
-        f.write(f"sample,{joints},u_px,v_px\n")
-        for sample, q, (u, v) in zip(session.sample_ids, session.samples_q, session.uv_px, strict=True):
-            f.write(f"{sample},{_q_fields(q)},{float(u)!r},{float(v)!r}\n")
+    with output_set(outputs, force=force) as out:
+        with atomic_open(out.path(folder / "session.toml", make_parents=True), force=force) as f:
+            f.write(
+                f'format = "{FORMAT}"\n\n[image]\nspacing_mm = [{su!r}, {sv!r}]     # (s_u, s_v)\n'
+                f"size_px = [{int(session.size_px[0])}, {int(session.size_px[1])}]         # (width, height)\n\n"
+                f"[top_model]\ntip_in_flange_mm = [{tip}]   # p_ER_Mtip\n"
+            )
+        with atomic_open(out.path(folder / "touches.csv", make_parents=True), force=force) as f:
+            f.write(f"tool,reference,trial,{joints}\n")
+            for (tool, reference), touches in session.touches.items():
+                for trial, q in zip(touches.trials, touches.q, strict=True):
+                    f.write(f"{tool},{reference},{int(trial)},{_q_fields(q)}\n")
+        with atomic_open(out.path(folder / "axes.csv", make_parents=True), force=force) as f:
+            f.write(f"tool,point,{joints}\n")
+            for tool, points in session.axes.items():
+                for point, q in points.items():
+                    f.write(f"{tool},{point},{_q_fields(q)}\n")
+        with atomic_open(out.path(folder / "samples.csv", make_parents=True), force=force) as f:
+            f.write(f"sample,{joints},u_px,v_px\n")
+            for sample, q, (u, v) in zip(session.sample_ids, session.samples_q, session.uv_px, strict=True):
+                f.write(f"{sample},{_q_fields(q)},{float(u)!r},{float(v)!r}\n")
     return folder

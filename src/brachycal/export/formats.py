@@ -26,12 +26,21 @@ from numpy.typing import ArrayLike
 
 from brachycal.calibration.image_to_probe import ImageCalibration
 from brachycal.errors import InputError
-from brachycal.files import atomic_open
+from brachycal.files import OutputSet, atomic_open, output_set
 from brachycal.model.names import LEFT_FLANGE, NEEDLE_TIP, PROBE_TIP, RIGHT_FLANGE, US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, make_transform, to_position_quaternion
 
 LPS = np.diag([-1.0, -1.0, 1.0, 1.0])
+EXPORT_FILES = (
+    "sda10f_calibrated.urdf",
+    "ImageToProbe.tfm",
+    "ProbeToLeftFlange.tfm",
+    "NeedleTipToRightFlange.tfm",
+    "PlusCoordinateDefinitions.xml",
+    "static_transforms.yaml",
+)
+"""The files :func:`write_exports` writes into its folder, in this order."""
 
 
 def calibrated_robot(robot: Robot, T_ER_Ntip: ArrayLike, T_EL_Ptip: ArrayLike, image: ImageCalibration) -> Robot:
@@ -150,24 +159,28 @@ def write_exports(
     folder: str | os.PathLike[str],
     *,
     force: bool = False,
+    outputs: OutputSet | None = None,
 ) -> list[Path]:
-    """Write every export into ``folder``; returns the files written."""
+    """Write every export (:data:`EXPORT_FILES`) into ``folder`` (created if needed), all or nothing.
+
+    With ``outputs`` (a command's :class:`~brachycal.files.OutputSet`) the files join that set and
+    are committed with it; without, they are committed together on return. Returns the files'
+    final paths.
+    """
     folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    files = [
-        calibrated_robot(robot, T_ER_Ntip, T_EL_Ptip, image).write_urdf(folder / "sda10f_calibrated.urdf", force=force)
-    ]
-    for name, M in (
-        ("ImageToProbe.tfm", image_to_probe_mm(image)),
-        ("ProbeToLeftFlange.tfm", _mm(T_EL_Ptip)),
-        ("NeedleTipToRightFlange.tfm", _mm(T_ER_Ntip)),
-    ):
-        files.append(write_itk_transform(M, folder / name, force=force))
-    for name, text in (
-        ("PlusCoordinateDefinitions.xml", plus_coordinate_definitions(T_ER_Ntip, T_EL_Ptip, image)),
-        ("static_transforms.yaml", ros_static_transforms(T_ER_Ntip, T_EL_Ptip, image)),
-    ):
-        with atomic_open(folder / name, force=force) as f:
-            f.write(text)
-        files.append(folder / name)
-    return files
+    with output_set(outputs, force=force) as out:
+        staged = {name: out.path(folder / name, make_parents=True) for name in EXPORT_FILES}
+        calibrated_robot(robot, T_ER_Ntip, T_EL_Ptip, image).write_urdf(staged["sda10f_calibrated.urdf"], force=force)
+        for name, M in (
+            ("ImageToProbe.tfm", image_to_probe_mm(image)),
+            ("ProbeToLeftFlange.tfm", _mm(T_EL_Ptip)),
+            ("NeedleTipToRightFlange.tfm", _mm(T_ER_Ntip)),
+        ):
+            write_itk_transform(M, staged[name], force=force)
+        for name, text in (
+            ("PlusCoordinateDefinitions.xml", plus_coordinate_definitions(T_ER_Ntip, T_EL_Ptip, image)),
+            ("static_transforms.yaml", ros_static_transforms(T_ER_Ntip, T_EL_Ptip, image)),
+        ):
+            with atomic_open(staged[name], force=force) as f:
+                f.write(text)
+    return [folder / name for name in EXPORT_FILES]

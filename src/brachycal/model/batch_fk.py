@@ -1,11 +1,16 @@
-"""Vectorised forward kinematics compiled from a Pinocchio model.
+"""Vectorised forward kinematics compiled from a Pinocchio model: the optional fast path.
 
 Pinocchio evaluates one configuration per call; a joint log has 10⁵ of them. This module reads
 the kinematic tree out of the Pinocchio model once (joint placements, joint axes, frame
 placements) and then evaluates a whole batch with NumPy, sharing the common part of the chains
-(the torso). It supports the joints serial arms are made of, revolute and prismatic about any
-axis (the bounded 1-DoF joint types of a URDF); others, such as continuous joints, raise ``NotImplementedError``. Tests
-check it against Pinocchio's own per-sample evaluation to 1e-12 m.
+(the torso). It compiles the joints serial arms are made of: revolute, continuous and prismatic
+about any axis (kinds and axes from :mod:`brachycal.model.joints`). For any other joint (mimic,
+planar, floating) it raises ``NotImplementedError`` and :class:`~brachycal.model.robot.Robot` falls
+back to Pinocchio's own per-configuration evaluation. Tests check it against that evaluation to
+1e-12 m.
+
+Input is Pinocchio's configuration vector, so a continuous joint arrives as ``(cos q, sin q)``
+and costs no trigonometry here.
 
 Why it is fast: a revolute joint about unit axis ``a`` rotates by ``P Rz(q) Pᵀ`` with a constant
 ``P`` whose third column is ``a``. So a chain step is ``R_parent @ C1 @ Rz(q) @ C2`` with constant
@@ -20,13 +25,15 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from brachycal.model.joints import JointInfo, joint_info
 from brachycal.se3 import FloatArray
 
 
 @dataclass(frozen=True)
 class _Joint:
     parent: int  # Pinocchio index of the parent joint (0 = universe)
-    q_index: int  # column of this joint's value in a configuration
+    q_index: int  # column of this joint's value (of its cosine for a continuous joint) in a configuration
+    unbounded: bool  # continuous joint: columns q_index, q_index + 1 hold (cos q, sin q)
     p_place: FloatArray  # (3,) joint origin in the parent joint frame, metres
     C1: FloatArray  # (3, 3) R_place @ P
     C2: FloatArray | None  # (3, 3) Pᵀ, None when P is the identity
@@ -45,22 +52,21 @@ def _basis_with_z(axis: FloatArray) -> FloatArray:
     return np.column_stack([x, np.cross(axis, x), axis])
 
 
-def _compile_joint(model: pin.Model, jid: int) -> _Joint:
-    jmodel = model.joints[jid]
-    if jmodel.nq != 1 or jmodel.nv != 1:
-        raise NotImplementedError(f"{model.names[jid]!r} ({jmodel.shortname()})")
-    jdata = jmodel.createData()
-    jmodel.calc(jdata, np.zeros(model.nq))
-    S = np.asarray(jdata.S).reshape(6)
-    linear, angular = S[:3], S[3:]
-    placement = model.jointPlacements[jid]
+def _compile_joint(model: pin.Model, info: JointInfo) -> _Joint:
+    if info.kind not in ("revolute", "continuous", "prismatic"):
+        raise NotImplementedError(f"{info.name!r} ({info.kind})")
+    assert info.axis is not None  # the one-axis kinds have one
+    placement = model.jointPlacements[info.jid]
     R_place = np.array(placement.rotation)
-    common = dict(parent=int(model.parents[jid]), q_index=int(jmodel.idx_q), p_place=np.array(placement.translation))
-    if np.allclose(angular, 0.0):
-        return _Joint(**common, C1=R_place, C2=None, prismatic_dir=R_place @ linear)
-    if not np.allclose(linear, 0.0):
-        raise NotImplementedError(f"{model.names[jid]!r} is neither revolute nor prismatic")
-    P = _basis_with_z(angular / np.linalg.norm(angular))
+    common = dict(
+        parent=int(model.parents[info.jid]),
+        q_index=info.idx_q,
+        unbounded=info.kind == "continuous",
+        p_place=np.array(placement.translation),
+    )
+    if info.kind == "prismatic":
+        return _Joint(**common, C1=R_place, C2=None, prismatic_dir=R_place @ info.axis)
+    P = _basis_with_z(info.axis)
     identity = np.array_equal(P, np.eye(3))
     return _Joint(**common, C1=R_place @ P, C2=None if identity else P.T.copy(), prismatic_dir=None)
 
@@ -80,21 +86,22 @@ class BatchForwardKinematics:
     ``(3, N)``) so that every element-wise operation runs over contiguous memory.
 
     Args:
-        model: a Pinocchio model whose joints are all 1-DoF revolute or prismatic.
+        model: a Pinocchio model whose joints are all revolute, continuous or prismatic.
 
     Raises:
-        NotImplementedError: the model has another joint type.
+        NotImplementedError: the model has another joint type (the caller falls back to Pinocchio).
     """
 
     def __init__(self, model: pin.Model) -> None:
         self._model = model
-        self._joints = {jid: _compile_joint(model, jid) for jid in range(1, model.njoints)}
+        self._joints = {jid: _compile_joint(model, joint_info(model, jid)) for jid in range(1, model.njoints)}
 
     def joint_poses(self, Q: FloatArray, joint_ids: set[int]) -> dict[int, tuple[FloatArray, FloatArray]]:
         """Poses of the given joints and of their ancestors.
 
         Args:
-            Q: ``(N, nq)`` configurations, radians (metres for prismatic joints).
+            Q: ``(N, model.nq)`` Pinocchio configurations: radians (metres for prismatic joints;
+                ``(cos, sin)`` for continuous ones).
             joint_ids: Pinocchio joint indices wanted.
 
         Returns:
@@ -119,7 +126,7 @@ class BatchForwardKinematics:
             if j.prismatic_dir is not None:
                 poses[jid] = (R_mid, p + q * (j.prismatic_dir @ R_parent))
                 continue
-            c, s = np.cos(q), np.sin(q)
+            c, s = (q, Q[:, j.q_index + 1]) if j.unbounded else (np.cos(q), np.sin(q))
             x, y = R_mid[:, 0].copy(), R_mid[:, 1].copy()
             R_mid[:, 0] = c * x + s * y
             R_mid[:, 1] = c * y - s * x
@@ -127,7 +134,7 @@ class BatchForwardKinematics:
         return poses
 
     def frame_poses(self, frame_ids: list[int], Q: FloatArray) -> FloatArray:
-        """``(F, N, 4, 4)`` poses of Pinocchio frames in the root frame for ``(N, nq)`` configurations."""
+        """``(F, N, 4, 4)`` poses of Pinocchio frames in the root frame for ``(N, model.nq)`` configurations."""
         Q = np.ascontiguousarray(Q, dtype=float)
         frames = [self._model.frames[fid] for fid in frame_ids]
         poses = self.joint_poses(Q, {int(f.parentJoint) for f in frames})

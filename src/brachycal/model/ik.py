@@ -13,9 +13,10 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike
 
-from brachycal.errors import InputError
+from brachycal.errors import InputError, SolverError
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray
+from brachycal.validate import check_finite, check_transform
 
 
 def solve_ik(
@@ -47,12 +48,27 @@ def solve_ik(
         tol: norm of the remaining error (metres and radians).
 
     Raises:
-        InputError: no solution found (unreachable target or joint limits).
+        InputError: a bad request (unknown frame, a target that is not a rigid transform, joints or
+            start that do not fit the model); retrying cannot help, so callers must not catch it.
+        SolverError: no configuration found (unreachable target or joint limits); a caller may
+            retry with another target or start.
     """
+    robot.frame_id(frame)  # an unknown frame is the caller's mistake: InputError before any solve
     joints = list(joints)
-    target = np.asarray(T_base_target, dtype=float)
+    if not joints or any(not 0 <= j < robot.nq for j in joints):
+        raise InputError(f"joint indices must be in [0, {robot.nq}), got {joints}")
+    if position_only:
+        target = check_finite(T_base_target, "IK target")
+        if target.shape != (4, 4):
+            raise InputError(f"IK target must be a 4x4 transform, got shape {target.shape}")
+    else:
+        target = check_transform(T_base_target, "IK target")
+        if target.shape != (4, 4):
+            raise InputError(f"IK target must be one 4x4 transform, got shape {target.shape}")
+    start = check_finite(q0, "IK start configuration").copy()
+    if start.shape != (robot.nq,):
+        raise InputError(f"IK start configuration must have {robot.nq} joints, got shape {start.shape}")
     rng = np.random.default_rng(seed)
-    start = np.asarray(q0, dtype=float).copy()
     lo, hi = robot.lower[joints] + margin, robot.upper[joints] - margin
     for attempt in range(restarts + 1):
         q = start.copy()
@@ -61,7 +77,11 @@ def solve_ik(
         solved = _dls(robot, frame, target, q, joints, lo, hi, position_only, tol)
         if solved is not None:
             return solved
-    raise InputError(f"no configuration places {frame} at the target (unreachable or outside the joint limits)")
+    where = np.round(target[:3, 3], 4).tolist()
+    raise SolverError(
+        f"IK found no configuration that places {frame} at {where} m in base_link "
+        f"({'position' if position_only else 'pose'}, {restarts + 1} starts; unreachable or outside the joint limits)"
+    )
 
 
 def _dls(

@@ -6,8 +6,17 @@ is built from it, a calibrated robot is a new :class:`Robot` whose tool joints c
 text back out for ROS/MoveIt.
 
 Configurations are arrays in :attr:`Robot.joint_names` order (for the bundled SDA10F:
-:data:`brachycal.model.names.JOINT_NAMES`, torso then left arm then right arm), in radians.
+:data:`brachycal.model.names.JOINT_NAMES`, torso then left arm then right arm), in radians
+(metres for prismatic joints): one number per degree of freedom, as joint logs carry them. A
+continuous joint is one unbounded angle, a mimic joint has no column (it follows its leader, as
+the URDF says); :mod:`brachycal.model.joints` lists every joint type.
 Poses are ``T_base_frame`` arrays of shape ``(4, 4)`` or ``(N, 4, 4)``, metres.
+
+Forward kinematics has two back ends, chosen once per model when it is built
+(:attr:`Robot.fk_backend`): ``"batch"``, the vectorised NumPy path of
+:mod:`brachycal.model.batch_fk`, when it can compile every joint (revolute, continuous,
+prismatic: serial arms, the SDA10F); otherwise ``"pinocchio"``, Pinocchio's own evaluation one
+configuration at a time (mimic, planar, floating joints). Both give the same poses to 1e-12 m.
 """
 
 from __future__ import annotations
@@ -24,6 +33,7 @@ from brachycal.errors import InputError
 from brachycal.files import atomic_open, bundled
 from brachycal.model import urdf_text
 from brachycal.model.batch_fk import BatchForwardKinematics
+from brachycal.model.joints import ONE_AXIS, Coordinates, UnsupportedJoint
 from brachycal.se3 import FloatArray, inverse, make_transform
 
 #: Configurations evaluated per block by the batch path: bounds the working memory (~2 MiB
@@ -54,20 +64,27 @@ class Robot:
         self.base_dir = Path(base_dir)
         self.source = source
         try:
-            self.model: pin.Model = pin.buildModelFromXML(urdf_xml)
+            # mimic=True: a mimic joint follows its leader, as the URDF says, instead of becoming an axis of its own.
+            self.model: pin.Model = pin.buildModelFromXML(urdf_xml, mimic=True)
         except Exception as exc:  # Pinocchio raises plain RuntimeError/ValueError
             raise InputError(f"Pinocchio cannot load this URDF ({exc})", file=source) from None
-        self.joint_names: tuple[str, ...] = tuple(self.model.names[1:])
-        self.lower: FloatArray = np.array(self.model.lowerPositionLimit)
-        self.upper: FloatArray = np.array(self.model.upperPositionLimit)
-        self.velocity_limit: FloatArray = np.array(self.model.velocityLimit)
+        try:
+            self._coordinates = Coordinates(self.model)
+        except UnsupportedJoint as exc:  # unreachable from a URDF today; kept so a new Pinocchio type cannot crash
+            raise InputError(f"unsupported joint {exc}", file=source) from None
+        #: Names of the configuration columns (joint names; ``<joint>.x`` etc. for planar and floating joints).
+        self.joint_names: tuple[str, ...] = self._coordinates.names
+        #: ``(nq,)`` limits of each coordinate (``±inf`` for continuous, planar and floating joints).
+        self.lower: FloatArray = self._coordinates.lower
+        self.upper: FloatArray = self._coordinates.upper
+        self.velocity_limit: FloatArray = self._coordinates.velocity
+        #: ``(nq,)`` bool: the coordinate is a length (metres), not an angle (radians).
+        self.in_metres: np.ndarray = self._coordinates.in_metres
         self._data = self.model.createData()
         try:
-            self._batch = BatchForwardKinematics(self.model)
-        except NotImplementedError as exc:
-            raise InputError(
-                f"unsupported joint {exc}; brachycal handles revolute and prismatic joints", file=source
-            ) from None
+            self._batch: BatchForwardKinematics | None = BatchForwardKinematics(self.model)
+        except NotImplementedError:  # a joint the fast path does not compile: Pinocchio evaluates it
+            self._batch = None
 
     # --- construction -------------------------------------------------------------------
     @classmethod
@@ -83,7 +100,19 @@ class Robot:
     # --- names and configurations -------------------------------------------------------
     @property
     def nq(self) -> int:
-        return int(self.model.nq)
+        """Number of configuration coordinates (Pinocchio's ``model.nq`` may differ; see the module docstring)."""
+        return len(self.joint_names)
+
+    @property
+    def fk_backend(self) -> str:
+        """``"batch"`` (vectorised NumPy path) or ``"pinocchio"`` (one Pinocchio call per configuration)."""
+        return "batch" if self._batch is not None else "pinocchio"
+
+    def to_pinocchio(self, Q: ArrayLike) -> FloatArray:
+        """``(N, model.nq)`` Pinocchio configurations of ``(N, nq)`` configurations (the same array if equal)."""
+        Q = np.asarray(Q, dtype=float)
+        self._check_shape(Q)
+        return self._coordinates.to_pinocchio(Q)
 
     @property
     def frame_names(self) -> tuple[str, ...]:
@@ -111,7 +140,7 @@ class Robot:
         return dict(zip(self.joint_names, q.tolist(), strict=True))
 
     def neutral(self) -> FloatArray:
-        """``(nq,)`` all-zero configuration (the vendor's home pose)."""
+        """``(nq,)`` all-zero configuration (the vendor's home pose; Pinocchio's neutral configuration)."""
         return np.zeros(self.nq)
 
     def within_limits(self, q: ArrayLike, margin: float = 0.0) -> np.ndarray:
@@ -122,13 +151,13 @@ class Robot:
 
     # --- kinematics ---------------------------------------------------------------------
     def fk(self, frame: str, q: ArrayLike) -> FloatArray:
-        """``T_base_frame``: ``(4, 4)`` for ``q`` of shape ``(nq,)``, ``(N, 4, 4)`` for ``(N, nq)``."""
+        """``T_base_frame``: ``(4, 4)`` for ``q`` of shape ``(nq,)``, ``(N, 4, 4)`` for ``(N, nq)``.
+
+        Same back end for one configuration as for many (:attr:`fk_backend`).
+        """
         q = np.asarray(q, dtype=float)
         if q.ndim == 1:
-            fid = self.frame_id(frame)
-            self._check_shape(q[None])
-            pin.forwardKinematics(self.model, self._data, q)
-            return np.array(pin.updateFramePlacement(self.model, self._data, fid).homogeneous)
+            return self.fk_frames([frame], q[None])[0, 0]
         return self.fk_frames([frame], q)[0]
 
     def fk_frames(
@@ -139,17 +168,18 @@ class Robot:
     ) -> FloatArray:
         """``(F, N, 4, 4)`` poses ``T_base_frame`` of several frames for ``(N, nq)`` configurations.
 
-        Vectorised over configurations (see :mod:`brachycal.model.batch_fk`), evaluated in blocks
-        of :data:`CHUNK`; ``progress(n)`` is called with the number of configurations done after
-        each block.
+        Evaluated by :attr:`fk_backend` (vectorised over configurations on the batch path, see
+        :mod:`brachycal.model.batch_fk`) in blocks of :data:`CHUNK`; ``progress(n)`` is called with
+        the number of configurations done after each block.
         """
         Q = np.asarray(Q, dtype=float)
         self._check_shape(Q)
         ids = [self.frame_id(f) for f in frames]
+        evaluate = self._batch.frame_poses if self._batch is not None else self._pinocchio_frame_poses
         out = np.empty((len(ids), Q.shape[0], 4, 4))
         for start in range(0, Q.shape[0], CHUNK):
             block = Q[start : start + CHUNK]
-            out[:, start : start + len(block)] = self._batch.frame_poses(ids, block)
+            out[:, start : start + len(block)] = evaluate(ids, self._coordinates.to_pinocchio(block))
             if progress is not None:
                 progress(len(block))
         return out
@@ -157,12 +187,16 @@ class Robot:
     def fk_frames_loop(self, frames: Sequence[str], Q: ArrayLike) -> FloatArray:
         """Same as :meth:`fk_frames`, one Pinocchio call per configuration (the reference path)."""
         Q = np.asarray(Q, dtype=float)
-        ids = [self.frame_id(f) for f in frames]
-        out = np.empty((len(ids), Q.shape[0], 4, 4))
+        self._check_shape(Q)
+        return self._pinocchio_frame_poses([self.frame_id(f) for f in frames], self._coordinates.to_pinocchio(Q))
+
+    def _pinocchio_frame_poses(self, frame_ids: list[int], Q_pin: FloatArray) -> FloatArray:
+        """``(F, N, 4, 4)`` frame poses for ``(N, model.nq)`` Pinocchio configurations, one call each."""
+        out = np.empty((len(frame_ids), Q_pin.shape[0], 4, 4))
         model, data = self.model, self._data
-        for i, q in enumerate(Q):
+        for i, q in enumerate(Q_pin):
             pin.forwardKinematics(model, data, q)
-            for k, fid in enumerate(ids):
+            for k, fid in enumerate(frame_ids):
                 out[k, i] = pin.updateFramePlacement(model, data, fid).homogeneous
         return out
 
@@ -199,12 +233,18 @@ class Robot:
         return Robot(urdf_text.to_text(root), base_dir=self.base_dir, source=self.source)
 
     def joint_axis(self, name: str) -> FloatArray:
-        """``(3,)`` unit axis of a 1-DoF joint in its own frame (rotation axis, or slide direction)."""
-        jmodel = self.model.joints[self.model.getJointId(name)]
-        jdata = jmodel.createData()
-        jmodel.calc(jdata, np.zeros(self.nq))
-        S = np.asarray(jdata.S).reshape(6)
-        return S[3:].copy() if np.any(S[3:]) else S[:3].copy()
+        """``(3,)`` unit axis of a one-axis joint in its own frame (rotation axis, or slide direction).
+
+        Raises:
+            InputError: no such joint, or a joint without one axis (planar, floating, mimic).
+        """
+        try:
+            joint = self._coordinates.joint(name)
+        except KeyError:
+            raise InputError(f"unknown joint {name!r}", file=self.source) from None
+        if joint.kind not in ONE_AXIS or joint.axis is None:
+            raise InputError(f"joint {name!r} is {joint.kind}: it has no single axis", file=self.source)
+        return joint.axis.copy()
 
     def with_joint_offsets(self, offsets_rad: Mapping[str, float]) -> Robot:
         """A robot whose revolute joints read ``q`` where this one reads ``q + offset``.

@@ -15,15 +15,19 @@ from dataclasses import dataclass
 
 import mink
 import numpy as np
+import qpsolvers
 from numpy.typing import ArrayLike
 
+from brachycal.errors import InputError, SolverError
 from brachycal.model.collision import collision_link_pairs
-from brachycal.model.names import NEEDLE_TIP, PROBE_TIP
+from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, READY
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray
+from brachycal.validate import check_finite, check_int, check_range, check_transform
 
-#: A comfortable stance for the calibration (both arms bent forward), radians, model order.
-READY = np.array([0.0, 0.3, -1.0, 0.0, -1.3, 0.0, -0.6, 0.0, 0.3, -1.0, 0.0, -1.3, 0.0, -0.6, 0.0])
+#: The QP solver of each differential-IK step (qpsolvers' name).
+QP_SOLVER = "daqp"
+
 
 
 @dataclass(frozen=True)
@@ -40,6 +44,15 @@ class IKSettings:
         posture_cost: weight of the comfortable-stance task (small: a tie-breaker).
         finish_radius_m: once both tips are this close, the posture task is dropped so the
             tools can reach their targets exactly.
+
+    Every setting must be finite and in range: margins in [0, 0.15 m] and [0, 50 deg] (a little
+    above the largest :class:`~brachycal.planning.verify.Thresholds`, since the IK keeps more
+    than the check asks; the thresholds set the floors a plan must keep), ``dt`` in (0, 1] s,
+    ``max_iterations`` in [1, 100000], tolerances in (0, 1 mm] and (0, 0.1 rad], ``posture_cost``
+    in [0, 1], ``finish_radius_m`` in [0, 0.1 m].
+
+    Raises:
+        InputError: a setting is NaN, infinite or out of range.
     """
 
     collision_margin_m: float = 0.012
@@ -50,6 +63,17 @@ class IKSettings:
     angle_tol_rad: float = 1e-7
     posture_cost: float = 1e-3
     finish_radius_m: float = 5e-3
+
+    def __post_init__(self) -> None:
+        check_range(self.collision_margin_m, "IK collision margin", low=0.0, high=0.15, unit="m")
+        check_range(self.joint_margin_rad, "IK joint margin", low=0.0, high=float(np.radians(50.0)), unit="rad")
+        check_range(self.dt, "IK time step", low=0.0, high=1.0, low_open=True, unit="s")
+        check_int(self.max_iterations, "IK iterations", low=1, high=100_000)
+        check_range(self.position_tol_m, "IK position tolerance", low=0.0, high=1e-3, low_open=True, unit="m")
+        check_range(self.angle_tol_rad, "IK angle tolerance", low=0.0, high=0.1, low_open=True, unit="rad")
+        # The posture task is a tie-breaker next to the tool tasks' unit weights.
+        check_range(self.posture_cost, "IK posture cost", low=0.0, high=1.0)
+        check_range(self.finish_radius_m, "IK finish radius", low=0.0, high=0.1, unit="m")
 
 
 @dataclass(frozen=True)
@@ -93,9 +117,30 @@ class DualArmIK:
         ]
 
     def solve(self, q_start: ArrayLike, T_base_needle: FloatArray, T_base_probe: FloatArray) -> IKOutcome:
-        """Move from ``q_start`` until both tools reach their targets (or the iterations run out)."""
+        """Move from ``q_start`` until both tools reach their targets (or the iterations run out).
+
+        Args:
+            q_start: ``(nq,)`` start configuration, radians, model order.
+            T_base_needle, T_base_probe: ``(4, 4)`` targets of the needle tip and the probe tip in
+                ``base_link`` (metres).
+
+        Returns:
+            The last configuration, whether it converged, and the remaining errors; running out of
+            iterations is an outcome (``converged=False``), not an error.
+
+        Raises:
+            InputError: a start or target that is not finite, or not a rigid transform.
+            SolverError: the QP of an iteration has no solution (its constraints contradict each
+                other, e.g. a start already inside the collision margin); the message names the
+                iteration and the targets.
+        """
         s = self.settings
-        self.configuration.update(np.asarray(q_start, dtype=float).copy())
+        q = check_finite(q_start, "IK start configuration")
+        if q.shape != (self.robot.nq,):
+            raise InputError(f"IK start configuration must have {self.robot.nq} joints, got shape {q.shape}")
+        T_base_needle = check_transform(T_base_needle, "needle target")
+        T_base_probe = check_transform(T_base_probe, "probe target")
+        self.configuration.update(q.copy())
         self.needle_task.set_target(_se3(T_base_needle))
         self.probe_task.set_target(_se3(T_base_probe))
         # The posture task is soft: kept on, it would leave the tools a little off target (its
@@ -105,7 +150,7 @@ class DualArmIK:
         for iteration in range(1, s.max_iterations + 1):
             if pos_err < s.finish_radius_m and len(tasks) == 3:
                 tasks = tasks[:2]
-            velocity = mink.solve_ik(self.configuration, tasks, s.dt, "daqp", damping=1e-9, limits=self.limits)
+            velocity = self._step(tasks, iteration, T_base_needle, T_base_probe)
             self.configuration.integrate_inplace(velocity, s.dt)
             e_needle = self.needle_task.compute_error(self.configuration)
             e_probe = self.probe_task.compute_error(self.configuration)
@@ -114,3 +159,41 @@ class DualArmIK:
             if pos_err < s.position_tol_m and ang_err < s.angle_tol_rad:
                 return IKOutcome(self.configuration.q.copy(), True, iteration, pos_err, ang_err)
         return IKOutcome(self.configuration.q.copy(), False, s.max_iterations, pos_err, ang_err)
+
+    def _step(self, tasks: list, iteration: int, T_base_needle: FloatArray, T_base_probe: FloatArray) -> FloatArray:
+        """One differential-IK velocity, ``(nv,)`` rad/s; a QP without solution becomes :class:`SolverError`."""
+        try:
+            velocity = mink.solve_ik(
+                self.configuration, tasks, self.settings.dt, QP_SOLVER, damping=1e-9, limits=self.limits
+            )
+        # mink raises NoSolutionFound when the QP solver reports failure; older mink versions assert on a
+        # missing solution instead (AssertionError), and qpsolvers raises its own errors on a bad problem.
+        except (mink.NoSolutionFound, qpsolvers.exceptions.QPError, AssertionError) as exc:
+            raise SolverError(
+                f"dual-arm IK: the QP solver {QP_SOLVER} found no joint velocity at iteration {iteration} "
+                f"moving {NEEDLE_TIP} to {_where(T_base_needle)} m and {PROBE_TIP} to {_where(T_base_probe)} m "
+                f"in base_link (joint limits with a {self.settings.joint_margin_rad:g} rad margin, velocity limits "
+                f"and a {self.settings.collision_margin_m * 1e3:g} mm collision margin cannot all hold"
+                f"{self._outside_limits()}): {exc or type(exc).__name__}"
+            ) from exc
+        if velocity is None or not np.all(np.isfinite(velocity)):
+            raise SolverError(
+                f"dual-arm IK: the QP solver {QP_SOLVER} returned no finite joint velocity at iteration {iteration} "
+                f"moving {NEEDLE_TIP} to {_where(T_base_needle)} m and {PROBE_TIP} to {_where(T_base_probe)} m"
+            )
+        return velocity
+
+    def _outside_limits(self) -> str:
+        """``"; outside its limits: <joints>"`` for the joints of the current configuration beyond their limits."""
+        q = self.configuration.q
+        names = [
+            n
+            for n, v, lo, hi in zip(self.robot.joint_names, q, self.robot.lower, self.robot.upper, strict=True)
+            if not lo <= v <= hi
+        ]
+        return f"; outside its limits: {', '.join(names)}" if names else ""
+
+
+def _where(T: FloatArray) -> list[float]:
+    """The translation of a target, metres, rounded to 0.1 mm for a message."""
+    return np.round(np.asarray(T)[:3, 3], 4).tolist()

@@ -8,14 +8,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from brachycal.errors import SolverError
 from brachycal.model.collision import ClearanceChecker, collision_link_pairs
-from brachycal.model.names import US_IMAGE
+from brachycal.model.names import READY, US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.planning import order as ordering
-from brachycal.planning.dual_arm_ik import READY, DualArmIK, IKSettings
+from brachycal.planning.dual_arm_ik import DualArmIK, IKSettings
 from brachycal.planning.spec import PlanSpec
 from brachycal.planning.verify import PoseCheck, PoseVerifier, Thresholds
 from brachycal.se3 import FloatArray
+from brachycal.validate import check_range
 
 
 @dataclass(frozen=True)
@@ -37,6 +39,10 @@ class PlannedPose:
 
 @dataclass(frozen=True)
 class Infeasible:
+    """A grid point without a verified pose: ``reasons`` from the check (``reach``, ``direction``,
+    ``plane``, ``fov``, ``limit``, ``collision``) or ``solver`` (the IK's QP had no solution), and a
+    one-line ``detail``."""
+
     point: GridPoint
     reasons: tuple[str, ...]
     detail: str
@@ -105,6 +111,7 @@ def plan_poses(
         speed_scale: fraction of the vendor's velocity limits for the motion-time estimate.
         progress: called with 1 after each grid point.
     """
+    check_range(speed_scale, "speed scale", low=0.0, high=1.0, low_open=True)
     start = time.perf_counter()
     ik = DualArmIK(robot, settings)
     verifier = PoseVerifier(robot, spec, ClearanceChecker(robot, collision_link_pairs(robot)), thresholds)
@@ -127,14 +134,20 @@ def plan_poses(
                 )
             )
         else:
-            outcome = ik.solve(q, spec.needle_pose(point.p_base), spec.probe_pose(point.normal_offset_m, T_Ptip_I))
-            check = verifier.check(outcome.q, point.p_base)
-            if outcome.converged and check.ok:
-                feasible.append(PlannedPose(point, outcome.q, check, outcome.iterations))
-                q = outcome.q
+            try:
+                outcome = ik.solve(q, spec.needle_pose(point.p_base), spec.probe_pose(point.normal_offset_m, T_Ptip_I))
+            except SolverError as exc:
+                # The QP of one step had no solution: this point has no pose and the plan goes on from
+                # the last good one (solver failures only; bad input propagates).
+                infeasible.append(Infeasible(point, ("solver",), str(exc)))
             else:
-                reasons = check.failures if outcome.converged else _reasons_for_failed_ik(check, settings)
-                infeasible.append(Infeasible(point, reasons, _detail(check, outcome.position_error_m)))
+                check = verifier.check(outcome.q, point.p_base)
+                if outcome.converged and check.ok:
+                    feasible.append(PlannedPose(point, outcome.q, check, outcome.iterations))
+                    q = outcome.q
+                else:
+                    reasons = check.failures if outcome.converged else _reasons_for_failed_ik(check, settings)
+                    infeasible.append(Infeasible(point, reasons, _detail(check, outcome.position_error_m)))
         if progress is not None:
             progress(1)
     motion, visit = _order(feasible, robot, speed_scale, solve_order, points)

@@ -17,7 +17,28 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from brachycal.errors import InputError
+from brachycal.imaging.pixels import DEFAULT_IMAGE_SIZE_PX, DEFAULT_SPACING_M, image_points, pixels
 from brachycal.se3 import FloatArray, inverse, make_transform
+from brachycal.validate import (
+    MAX_GRID_POINTS,
+    MAX_IMAGE_PX,
+    check_direction,
+    check_int,
+    check_range,
+    check_spacing_m,
+    check_vector,
+)
+
+#: Cube edge, metres: at least 1 mm (a smaller cube puts grid points a few pixels apart, below what
+#: 1 px annotation noise resolves), at most 0.5 m (far more than an image or a prostate covers).
+EDGE_RANGE_M = (1e-3, 0.5)
+#: Largest |coordinate| of the cube centre in ``base_link``, metres: four times the SDA10F's reach
+#: (about 1.2 m per arm from the torso); a larger value is a unit slip (millimetres as metres).
+MAX_CENTRE_M = 5.0
+#: Deepest sector field of view, metres: ultrasound images reach about 0.3 m at most.
+MAX_SECTOR_DEPTH_M = 0.5
+#: Largest margin the grid pixels may be asked to keep inside the field of view, metres.
+MAX_FOV_MARGIN_M = 0.05
 
 
 @dataclass(frozen=True)
@@ -30,9 +51,16 @@ class SectorFOV:
         angle_rad: full opening angle, symmetric about the image's +v (depth) direction.
     """
 
-    apex_px: tuple[float, float] = (540.0, 0.0)
+    apex_px: tuple[float, float] = (DEFAULT_IMAGE_SIZE_PX[0] / 2, 0.0)
     radius_m: float = 0.070
     angle_rad: float = np.radians(120.0)
+
+    def __post_init__(self) -> None:
+        # The apex of a convex probe may lie above the image (v < 0), so both signs are allowed.
+        check_vector(self.apex_px, "sector apex (px)", 2, low=-MAX_IMAGE_PX, high=MAX_IMAGE_PX, unit="px")
+        check_range(self.radius_m, "sector depth", low=0.0, high=MAX_SECTOR_DEPTH_M, low_open=True, unit="m")
+        # Up to 180 deg: the distance to the straight edges below assumes half the angle <= 90 deg.
+        check_range(self.angle_rad, "sector angle", low=0.0, high=np.pi, low_open=True, unit="rad")
 
     def margin_to_edge(self, uv_px: ArrayLike, spacing_m: ArrayLike) -> FloatArray:
         """``(N,)`` distance in metres from each pixel to the sector's edge; negative outside."""
@@ -56,8 +84,14 @@ class SectorFOV:
 class RectFOV:
     """Rectangular field of view of a linear probe: ``[u_min, u_max] × [v_min, v_max]`` pixels."""
 
-    u_range_px: tuple[float, float] = (0.0, 1079.0)
-    v_range_px: tuple[float, float] = (0.0, 719.0)
+    u_range_px: tuple[float, float] = (0.0, DEFAULT_IMAGE_SIZE_PX[0] - 1.0)
+    v_range_px: tuple[float, float] = (0.0, DEFAULT_IMAGE_SIZE_PX[1] - 1.0)
+
+    def __post_init__(self) -> None:
+        for axis, bounds in (("u", self.u_range_px), ("v", self.v_range_px)):
+            lo, hi = check_vector(bounds, f"rectangle {axis} range", 2, low=-0.5, high=MAX_IMAGE_PX, unit="px")
+            if not lo < hi:
+                raise InputError(f"rectangle {axis} range must go from low to high, got {lo:g}..{hi:g} px")
 
     def margin_to_edge(self, uv_px: ArrayLike, spacing_m: ArrayLike) -> FloatArray:
         uv = np.atleast_2d(np.asarray(uv_px, float))
@@ -72,10 +106,7 @@ class RectFOV:
 
 
 def _unit(v: ArrayLike, name: str) -> FloatArray:
-    v = np.asarray(v, dtype=float)
-    if v.shape != (3,) or not np.all(np.isfinite(v)) or np.linalg.norm(v) < 1e-9:
-        raise InputError(f"{name} must be a non-zero 3-vector, got {v.tolist()}")
-    return v / np.linalg.norm(v)
+    return check_direction(v, name)
 
 
 @dataclass(frozen=True)
@@ -96,6 +127,14 @@ class PlanSpec:
         offsets_m: ``(N, 3)`` sample points as offsets from the cube centre along the image's
             lateral, depth and normal axes, metres — a design other than the regular grid
             (``points_per_axis`` and ``edge_m`` then only describe the cube for targets).
+
+    Every setting is checked on construction (NaN and infinity always refused): centre within
+    :data:`MAX_CENTRE_M` of the base, edge in :data:`EDGE_RANGE_M`, 2 to 20 points per axis,
+    non-zero directions with depth and lateral not parallel, centre pixel in [-0.5, 10000], a
+    plausible ultrasound spacing (0.005..2 mm/px, given in metres), margin in [0, 50 mm].
+
+    Raises:
+        InputError: naming the setting, its range and the value given.
     """
 
     cube_centre_m: FloatArray = field(default_factory=lambda: np.array([0.80, 0.10, 1.05]))
@@ -107,18 +146,35 @@ class PlanSpec:
     image_depth_dir: FloatArray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0]))
     image_lateral_dir: FloatArray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
     centre_px: tuple[float, float] = (540.0, 221.0)
-    spacing_m: FloatArray = field(default_factory=lambda: np.array([0.19e-3, 0.19e-3]))
+    spacing_m: FloatArray = field(default_factory=lambda: np.array(DEFAULT_SPACING_M))
     fov: SectorFOV | RectFOV = field(default_factory=SectorFOV)
     fov_margin_m: float = 0.002
     offsets_m: FloatArray | None = None
 
     def __post_init__(self) -> None:
-        if not (self.edge_m > 0 and np.isfinite(self.edge_m)):
-            raise InputError(f"cube edge must be positive, got {self.edge_m}")
-        if self.points_per_axis < 2:
-            raise InputError(f"points per axis must be at least 2, got {self.points_per_axis}")
-        if not np.all(np.isfinite(self.cube_centre_m)) or np.shape(self.cube_centre_m) != (3,):
-            raise InputError(f"cube centre must be 3 finite numbers, got {np.asarray(self.cube_centre_m).tolist()}")
+        """Refuse any setting that is not finite and in range (every check fails on NaN).
+
+        Raises:
+            InputError: naming the setting, its accepted range and the value given.
+        """
+        check_vector(self.cube_centre_m, "cube centre", 3, low=-MAX_CENTRE_M, high=MAX_CENTRE_M, unit="m")
+        check_range(self.edge_m, "cube edge", low=EDGE_RANGE_M[0], high=EDGE_RANGE_M[1], unit="m")
+        check_int(self.points_per_axis, "points per axis", low=2, high=MAX_GRID_POINTS)
+        _unit(self.insertion_dir, "insertion direction")
+        self.image_axes()  # both image directions non-zero and not parallel
+        check_vector(self.centre_px, "centre pixel", 2, low=-0.5, high=MAX_IMAGE_PX, unit="px")
+        check_spacing_m(self.spacing_m, "pixel spacing")
+        if not isinstance(self.fov, (SectorFOV, RectFOV)):
+            raise InputError(f"field of view must be a SectorFOV or a RectFOV, got {type(self.fov).__name__}")
+        check_range(self.fov_margin_m, "field-of-view margin", low=0.0, high=MAX_FOV_MARGIN_M, unit="m")
+        if self.offsets_m is not None:
+            offsets = np.asarray(self.offsets_m, dtype=float)
+            if offsets.ndim != 2 or offsets.shape[1] != 3 or not 1 <= len(offsets) <= MAX_GRID_POINTS**3:
+                raise InputError(
+                    f"sample offsets must be (N, 3) with 1 <= N <= {MAX_GRID_POINTS**3}, got {offsets.shape}"
+                )
+            if not np.all(np.abs(offsets) <= EDGE_RANGE_M[1]):  # also refuses NaN
+                raise InputError(f"sample offsets must be finite and within {EDGE_RANGE_M[1]:g} m of the cube centre")
 
     def image_axes(self) -> FloatArray:
         """``R_base_image (3, 3)`` of the reference probe pose: columns x (u), y (v), z = x × y."""
@@ -146,13 +202,13 @@ class PlanSpec:
             offsets = steps[index]  # (N, 3) along image x, y, z
         R = self.image_axes()
         p_base = self.cube_centre_m + offsets @ R.T
-        uv = np.asarray(self.centre_px) + offsets[:, :2] / self.spacing_m
+        uv = np.asarray(self.centre_px) + pixels(offsets, self.spacing_m)
         return index, p_base, uv, offsets[:, 2]
 
     def image_pose(self, normal_offset_m: float) -> FloatArray:
         """``T_base_image (4, 4)`` for a layer: the cube centre at :attr:`centre_px`, shifted along the normal."""
         R = self.image_axes()
-        centre_in_image = np.array([self.centre_px[0] * self.spacing_m[0], self.centre_px[1] * self.spacing_m[1], 0.0])
+        centre_in_image = image_points(self.centre_px, self.spacing_m)[0]
         origin = self.cube_centre_m + normal_offset_m * R[:, 2] - R @ centre_in_image
         return make_transform(R, origin)
 

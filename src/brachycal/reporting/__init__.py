@@ -1,5 +1,86 @@
-"""Reports for people: the paper's tables and figures."""
+"""Reports for people: the paper's tables and figures, the plan figure, the 3D scene, the HTML report.
 
-from brachycal.reporting.tables import chain_summary, table_i, table_ii, table_iii, targeting_table
+Tables return text (millimetres and degrees, as their heads say). Every figure has a builder that
+returns a matplotlib ``Figure`` (``*_figure``; neither touches pyplot, the backend or
+``rcParams``) and a function that saves it (:func:`save_figure` and the functions named after the
+figure, which write through :mod:`brachycal.files`). The 3D scene (:func:`robot_scene`,
+:func:`scene_figure`, :func:`render_png`, :func:`save_glb`) loads trimesh on first use.
+"""
 
-__all__ = ["chain_summary", "table_i", "table_ii", "table_iii", "targeting_table"]
+from typing import TYPE_CHECKING, Any
+
+from brachycal.reporting.demo_report import DEMO_REPORT_FILES, demo_text, write_demo_report
+from brachycal.reporting.figures import (
+    error_histogram,
+    error_histogram_figure,
+    method_comparison,
+    method_comparison_figure,
+    points_3d,
+    points_3d_figure,
+    residuals_per_sample,
+    residuals_per_sample_figure,
+    save_figure,
+    study_figure,
+)
+from brachycal.reporting.html_report import REPORT_FILES, write_report
+from brachycal.reporting.plan_figure import plan_figure, plot_plan
+from brachycal.reporting.tables import (
+    chain_summary,
+    design_table,
+    plan_text,
+    study_table,
+    table_i,
+    table_ii,
+    table_iii,
+    targeting_table,
+    uncertainty_table,
+)
+
+if TYPE_CHECKING:
+    from brachycal.reporting.scene import TOOL_FRAMES, render_png, robot_scene, save_glb, scene_figure
+
+#: Names of :mod:`brachycal.reporting.scene`, imported when first used (trimesh takes ~0.6 s to load).
+_SCENE = ("TOOL_FRAMES", "render_png", "robot_scene", "save_glb", "scene_figure")
+
+
+def __getattr__(name: str) -> Any:
+    if name in _SCENE:
+        from brachycal.reporting import scene
+
+        return getattr(scene, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+__all__ = [
+    "DEMO_REPORT_FILES",
+    "REPORT_FILES",
+    "TOOL_FRAMES",
+    "chain_summary",
+    "demo_text",
+    "design_table",
+    "error_histogram",
+    "error_histogram_figure",
+    "method_comparison",
+    "method_comparison_figure",
+    "plan_figure",
+    "plan_text",
+    "plot_plan",
+    "points_3d",
+    "points_3d_figure",
+    "render_png",
+    "residuals_per_sample",
+    "residuals_per_sample_figure",
+    "robot_scene",
+    "save_figure",
+    "save_glb",
+    "scene_figure",
+    "study_figure",
+    "study_table",
+    "table_i",
+    "table_ii",
+    "table_iii",
+    "targeting_table",
+    "uncertainty_table",
+    "write_demo_report",
+    "write_report",
+]

@@ -1,31 +1,42 @@
-"""Figures of a calibration, after the paper's Figs. 10 and 11, plus the targeting error."""
+"""Figures of a calibration, after the paper's Figs. 10 and 11, plus the targeting error and a study.
+
+Every figure has a builder that returns a :class:`matplotlib.figure.Figure` (shown by Jupyter when
+it is a cell's last value, or with ``display(fig)``) and a function that saves it. Neither touches
+pyplot or the backend: a bare ``Figure`` renders through the Agg canvas matplotlib picks for the
+file's format, so the caller's backend, open figures and ``rcParams`` stay as they were.
+"""
 
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
+from matplotlib.figure import Figure
 from numpy.typing import ArrayLike
 
-from brachycal.calibration.image_to_probe import METHOD_LABELS
+from brachycal.calibration.image_to_probe import ALL_LABELS, METHOD_LABELS
 from brachycal.calibration.metrics import ErrorStats
+from brachycal.files import atomic_path
 
 
-def _pyplot():
-    import matplotlib
+def save_figure(fig: Figure, path: str | os.PathLike[str], *, dpi: int) -> None:
+    """Save ``fig`` as ``path`` (format from its suffix) atomically.
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    An existing file is replaced, as matplotlib does; a command claims its figures up front
+    (and refuses existing ones without ``--force``) and passes the staging path. A bare
+    ``Figure`` (what the builders here return) needs no closing; a pyplot figure stays open, as
+    pyplot's state is its owner's.
+    """
+    with atomic_path(path, force=True) as staged:
+        fig.savefig(staged, dpi=dpi)
 
-    return plt
 
-
-def error_histogram(stats: ErrorStats, path: str | os.PathLike[str], title: str) -> Path:
+def error_histogram_figure(stats: ErrorStats, title: str) -> Figure:
     """Fig. 11: histogram of per-sample error magnitudes (mm) with MAE and RMSE marked."""
-    plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(6, 3.8))
+    fig = Figure(figsize=(6, 3.8), layout="tight")
+    ax = fig.add_subplot()
     errors = stats.errors_m * 1e3
     ax.hist(errors, bins=np.linspace(0, max(errors.max() * 1.05, 1e-6), 17), color="tab:blue", edgecolor="white")
     ax.axvline(stats.mae_mm, color="k", ls="--", lw=1, label=f"MAE {stats.mae_mm:.2f} mm")
@@ -34,17 +45,20 @@ def error_histogram(stats: ErrorStats, path: str | os.PathLike[str], title: str)
     ax.set_ylabel("samples")
     ax.set_title(title)
     ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return fig
+
+
+def error_histogram(stats: ErrorStats, path: str | os.PathLike[str], title: str) -> Path:
+    """Save :func:`error_histogram_figure` as ``path`` (PNG at 110 dpi for a ``.png``)."""
+    save_figure(error_histogram_figure(stats, title), path, dpi=110)
     return Path(path)
 
 
-def points_3d(p_real_m: ArrayLike, p_cal_m: ArrayLike, path: str | os.PathLike[str], title: str) -> Path:
-    """Fig. 10 (e): real needle tips and their calibrated estimates in ``base_link`` (mm)."""
-    plt = _pyplot()
+def points_3d_figure(p_real_m: ArrayLike, p_cal_m: ArrayLike, title: str) -> Figure:
+    """Fig. 10 (e): real needle tips ``(N, 3)`` and their calibrated estimates ``(N, 3)``, metres in
+    ``base_link``, drawn in millimetres."""
     real, cal = np.asarray(p_real_m) * 1e3, np.asarray(p_cal_m) * 1e3
-    fig = plt.figure(figsize=(6, 5))
+    fig = Figure(figsize=(6, 5), layout="tight")
     ax = fig.add_subplot(projection="3d")
     ax.scatter(*real.T, s=16, color="tab:blue", label="real (robot, right arm)")
     ax.scatter(*cal.T, s=16, marker="^", color="tab:orange", label="calibrated (image, left arm)")
@@ -55,30 +69,36 @@ def points_3d(p_real_m: ArrayLike, p_cal_m: ArrayLike, path: str | os.PathLike[s
     ax.set_zlabel("z (mm)")
     ax.set_title(title)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return fig
+
+
+def points_3d(p_real_m: ArrayLike, p_cal_m: ArrayLike, path: str | os.PathLike[str], title: str) -> Path:
+    """Save :func:`points_3d_figure` as ``path``."""
+    save_figure(points_3d_figure(p_real_m, p_cal_m, title), path, dpi=110)
     return Path(path)
 
 
-def method_comparison(stats: Mapping[str, ErrorStats], path: str | os.PathLike[str], title: str) -> Path:
+def method_comparison_figure(stats: Mapping[str, ErrorStats], title: str) -> Figure:
     """Box plot of per-target errors (mm) for each method."""
-    plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(7, 3.8))
+    fig = Figure(figsize=(7, 3.8), layout="tight")
+    ax = fig.add_subplot()
     ax.boxplot([s.errors_m * 1e3 for s in stats.values()], showmeans=True)
     ax.set_xticks(range(1, len(stats) + 1), [METHOD_LABELS.get(m, m) for m in stats], rotation=15)
     ax.set_ylabel("error (mm)")
     ax.set_title(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return fig
+
+
+def method_comparison(stats: Mapping[str, ErrorStats], path: str | os.PathLike[str], title: str) -> Path:
+    """Save :func:`method_comparison_figure` as ``path``."""
+    save_figure(method_comparison_figure(stats, title), path, dpi=110)
     return Path(path)
 
 
-def residuals_per_sample(stats: Mapping[str, ErrorStats], sample_ids: list[str], path: str | os.PathLike[str]) -> Path:
+def residuals_per_sample_figure(stats: Mapping[str, ErrorStats], sample_ids: Sequence[str]) -> Figure:
     """Leave-one-out error of every sample (mm), one line per method."""
-    plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(9, 3.6))
+    fig = Figure(figsize=(9, 3.6), layout="tight")
+    ax = fig.add_subplot()
     x = np.arange(len(sample_ids))
     for method, s in stats.items():
         ax.plot(x, s.errors_m * 1e3, marker=".", lw=0.8, label=METHOD_LABELS.get(method, method))
@@ -87,7 +107,47 @@ def residuals_per_sample(stats: Mapping[str, ErrorStats], sample_ids: list[str],
     ax.set_ylabel("LOO error (mm)")
     ax.set_title("Residual per sample (leave-one-out)")
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return fig
+
+
+def residuals_per_sample(stats: Mapping[str, ErrorStats], sample_ids: list[str], path: str | os.PathLike[str]) -> Path:
+    """Save :func:`residuals_per_sample_figure` as ``path``."""
+    save_figure(residuals_per_sample_figure(stats, sample_ids), path, dpi=110)
     return Path(path)
+
+
+def study_figure(summary: Sequence[Mapping[str, object]]) -> Figure:
+    """``brachycal study``: leave-one-out MAE and end-to-end targeting MAE (mm, mean ± SD over seeds)
+    against the number of samples, one line per method and setting.
+
+    Args:
+        summary: rows of :func:`brachycal.simulation.study.summarise`.
+    """
+    fig = Figure(figsize=(11, 4), layout="tight")
+    axes = fig.subplots(1, 2, sharey=True)
+
+    def setting(s: Mapping[str, object]) -> tuple:
+        return s["method"], s["annotation_px"], s["edge_mm"], s["sound_speed"], s["outlier_rate"]
+
+    for key in sorted({setting(s) for s in summary}):
+        method, ann, edge, sound, _ = key
+        rows = sorted((s for s in summary if setting(s) == key), key=lambda s: s["samples"])
+        n = np.array([s["samples"] for s in rows])
+        label = f"{ALL_LABELS[method]}, {ann:g} px, {edge:g} mm" + ("" if sound else ", tissue")
+        for ax, figure in zip(axes, ("loo_mae_mm", "target_mae_mm"), strict=True):
+            ax.errorbar(
+                n,
+                [s[f"{figure}_mean"] for s in rows],
+                yerr=[s[f"{figure}_sd"] for s in rows],
+                marker="o",
+                capsize=3,
+                label=label,
+            )
+    axes[0].set_title("leave-one-out MAE (what a lab sees)")
+    axes[1].set_title("end-to-end targeting MAE (truth)")
+    for ax in axes:
+        ax.set_xlabel("samples")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("mm")
+    axes[1].legend(fontsize=7)
+    return fig

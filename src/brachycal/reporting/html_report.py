@@ -17,6 +17,7 @@ from brachycal.calibration.image_to_probe import METHOD_LABELS
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.sequential import CalibrationResult, loo_points
 from brachycal.data.session import Session
+from brachycal.files import OutputSet, atomic_open, output_set, staged_destination
 from brachycal.model.robot import Robot
 from brachycal.reporting.figures import error_histogram, points_3d, residuals_per_sample
 from brachycal.reporting.tables import chain_summary, table_i, table_ii
@@ -24,11 +25,14 @@ from brachycal.reporting.tables import chain_summary, table_i, table_ii
 STYLE = """body{font-family:system-ui,sans-serif;max-width:980px;margin:2em auto;color:#222}
 pre{background:#f6f6f6;padding:1em;overflow-x:auto}img{max-width:100%}td,th{padding:2px 8px;text-align:left}
 h1{font-size:1.5em}h2{font-size:1.2em;margin-top:2em}"""
+REPORT_FILES = ("report.html", "loo_histogram.png", "loo_per_sample.png", "points_3d.png")
+"""The files :func:`write_report` writes into its folder."""
 
 
 def _img(path: Path) -> str:
     data = base64.b64encode(path.read_bytes()).decode()
-    return f'<p><img alt="{html.escape(path.stem)}" src="data:image/png;base64,{data}"></p>'
+    name = staged_destination(path) or path  # the figure's own name, not its staging file's
+    return f'<p><img alt="{html.escape(name.stem)}" src="data:image/png;base64,{data}"></p>'
 
 
 def write_report(
@@ -38,21 +42,41 @@ def write_report(
     robot: Robot,
     session_path: str = "",
     chain=None,
+    *,
+    force: bool = False,
+    outputs: OutputSet | None = None,
 ) -> Path:
-    """Write ``folder/report.html`` (and its PNG figures); returns the HTML path."""
+    """Write ``folder/report.html`` and its PNG figures (:data:`REPORT_FILES`); returns the HTML path.
+
+    The folder is created if needed; existing files are replaced only with ``force``. All or
+    nothing: with ``outputs`` (a command's :class:`~brachycal.files.OutputSet`) the files join that
+    set and are committed with it; without, they are committed together on return.
+    """
     folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
+    with output_set(outputs, force=force) as out:
+        staged = {name: out.path(folder / name, make_parents=True) for name in REPORT_FILES}
+        _write_report(staged, result, session, robot, session_path, chain, force)
+    return folder / "report.html"
+
+
+def _write_report(
+    staged: dict[str, Path],
+    result: CalibrationResult,
+    session: Session,
+    robot: Robot,
+    session_path: str,
+    chain,
+    force: bool,
+) -> None:
     best = min(result.loocv, key=lambda m: result.loocv[m].rmse_mm)
     p_real, p_cal = loo_points(session, robot, result, best)
     label = METHOD_LABELS[best]
     figures = [
         error_histogram(
-            ErrorStats.between(p_real, p_cal), folder / "loo_histogram.png", f"Leave-one-out errors ({label})"
+            ErrorStats.between(p_real, p_cal), staged["loo_histogram.png"], f"Leave-one-out errors ({label})"
         ),
-        residuals_per_sample(
-            {m: s for m, s in result.loocv.items()}, session.sample_ids, folder / "loo_per_sample.png"
-        ),
-        points_3d(p_real, p_cal, folder / "points_3d.png", f"Real and calibrated points ({label}, LOO)"),
+        residuals_per_sample({m: s for m, s in result.loocv.items()}, session.sample_ids, staged["loo_per_sample.png"]),
+        points_3d(p_real, p_cal, staged["points_3d.png"], f"Real and calibrated points ({label}, LOO)"),
     ]
     parts = [
         "<!DOCTYPE html><html><head><meta charset='utf-8'><title>brachycal calibration report</title>",
@@ -79,6 +103,5 @@ def write_report(
         *(f"<tr><td>{html.escape(k)}</td><td><code>{v}</code></td></tr>" for k, v in result.inputs.items()),
         "</table></body></html>",
     ]
-    path = folder / "report.html"
-    path.write_text("\n".join(parts))
-    return path
+    with atomic_open(staged["report.html"], force=force) as handle:
+        handle.write("\n".join(parts))

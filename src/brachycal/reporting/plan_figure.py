@@ -6,18 +6,16 @@ import os
 from pathlib import Path
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from brachycal.planning.plan import Plan
+from brachycal.reporting.figures import save_figure
 
 
-def plot_plan(plan: Plan, path: str | os.PathLike[str]) -> Path:
-    """Save a two-panel PNG: 3D grid and path (mm), and expected pixels over the field of view."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig = plt.figure(figsize=(11, 4.8))
+def plan_figure(plan: Plan) -> Figure:
+    """Two panels: the needle-tip targets in ``base_link`` (mm) with the visiting path, and the
+    expected needle-tip pixels over the field of view (infeasible points marked in red)."""
+    fig = Figure(figsize=(11, 4.8), layout="tight")
     ax = fig.add_subplot(1, 2, 1, projection="3d")
     if plan.poses:
         p = np.array([pose.point.p_base for pose in plan.poses]) * 1e3
@@ -48,7 +46,10 @@ def plot_plan(plan: Plan, path: str | os.PathLike[str]) -> Path:
     ax2.set_aspect("equal")
     ax2.set_title("image coverage")
     ax2.legend(loc="lower right", fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return fig
+
+
+def plot_plan(plan: Plan, path: str | os.PathLike[str]) -> Path:
+    """Save :func:`plan_figure` as ``path`` (a PNG for ``.png``)."""
+    save_figure(plan_figure(plan), path, dpi=110)
     return Path(path)

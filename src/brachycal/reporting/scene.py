@@ -3,7 +3,8 @@
 Built with yourdfpy/trimesh from the same URDF the kinematics use (the vendor's light collision
 meshes), so what is drawn is what is computed. It can be shown in a notebook
 (``scene.show()``), saved as a self-contained binary glTF (``.glb``, opens in any glTF viewer,
-Blender, 3D Slicer), or rendered to a PNG with matplotlib (no OpenGL needed).
+Blender, 3D Slicer), or drawn by matplotlib (no OpenGL needed) as a figure
+(:func:`scene_figure`) or a PNG (:func:`render_png`), without touching pyplot or the backend.
 """
 
 from __future__ import annotations
@@ -17,11 +18,15 @@ from pathlib import Path
 import numpy as np
 import trimesh
 import yourdfpy
+from matplotlib.figure import Figure
 from numpy.typing import ArrayLike
 
+from brachycal.files import atomic_path
+from brachycal.imaging.pixels import DEFAULT_IMAGE_SIZE_PX, DEFAULT_SPACING_M, image_points
 from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
 from brachycal.model.robot import Robot
-from brachycal.se3 import FloatArray, transform_points
+from brachycal.reporting.figures import save_figure
+from brachycal.se3 import transform_points
 
 TOOL_FRAMES = (NEEDLE_TIP, PROBE_TIP, US_IMAGE)
 
@@ -31,8 +36,8 @@ def robot_scene(
     q: ArrayLike,
     *,
     frames: Sequence[str] = TOOL_FRAMES,
-    image_size_px: tuple[int, int] | None = (1080, 720),
-    spacing_m: ArrayLike = (0.19e-3, 0.19e-3),
+    image_size_px: tuple[int, int] | None = DEFAULT_IMAGE_SIZE_PX,
+    spacing_m: ArrayLike = DEFAULT_SPACING_M,
     points_m: ArrayLike | None = None,
 ) -> trimesh.Scene:
     """The robot at ``q`` (``(nq,)``), axes on ``frames``, the image rectangle, optional points ``(K, 3)``."""
@@ -57,8 +62,8 @@ def robot_scene(
         scene.add_geometry(rod, node_name=f"{tool}_rod", geom_name=f"{tool}_rod")
     if image_size_px is not None:
         w, h = image_size_px
-        corners = np.array([[0, 0], [w, 0], [w, h], [0, h]], dtype=float) * np.asarray(spacing_m)
-        p = transform_points(robot.fk(US_IMAGE, q), np.column_stack([corners, np.zeros(4)]))
+        corners_px = np.array([[0, 0], [w, 0], [w, h], [0, h]], dtype=float)
+        p = transform_points(robot.fk(US_IMAGE, q), image_points(corners_px, spacing_m))
         plane = trimesh.Trimesh(vertices=p, faces=[[0, 1, 2], [0, 2, 3], [2, 1, 0], [3, 2, 0]], process=False)
         plane.visual.face_colors = [255, 160, 0, 120]
         scene.add_geometry(plane, node_name="us_image_plane", geom_name="us_image_plane")
@@ -72,27 +77,30 @@ def robot_scene(
 
 
 def save_glb(scene: trimesh.Scene, path: str | os.PathLike[str]) -> Path:
-    """Write the scene as one self-contained binary glTF file."""
-    Path(path).write_bytes(scene.export(file_type="glb"))
+    """Write the scene as one self-contained binary glTF file (atomically; replaces an existing one)."""
+    data = scene.export(file_type="glb")
+    with atomic_path(path, force=True) as staged:
+        staged.write_bytes(data)
     return Path(path)
 
 
-def render_png(
+def scene_figure(
     scene: trimesh.Scene,
-    path: str | os.PathLike[str],
     *,
     elevation: float = 20.0,
     azimuth: float = -60.0,
-    zoom_to: FloatArray | None = None,
-) -> Path:
-    """A matplotlib rendering of the scene's triangles (flat shaded), as a PNG."""
-    import matplotlib
+    zoom_to: ArrayLike | None = None,
+) -> Figure:
+    """A matplotlib drawing of the scene's triangles (flat shaded), axes in metres.
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    Args:
+        scene: from :func:`robot_scene`.
+        elevation, azimuth: view angles, degrees (matplotlib's ``view_init``).
+        zoom_to: ``(2, 3)`` low and high corners of the box to show, metres; default the whole scene.
+    """
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    fig = plt.figure(figsize=(7, 6))
+    fig = Figure(figsize=(7, 6), layout="tight")
     ax = fig.add_subplot(projection="3d")
     light = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
     lows, highs = [], []
@@ -112,7 +120,7 @@ def render_png(
         ax.add_collection3d(Poly3DCollection(triangles, facecolors=np.column_stack([colours, alpha]), linewidths=0))
         lows.append(vertices.min(axis=0))
         highs.append(vertices.max(axis=0))
-    low, high = (np.min(lows, axis=0), np.max(highs, axis=0)) if zoom_to is None else zoom_to
+    low, high = (np.min(lows, axis=0), np.max(highs, axis=0)) if zoom_to is None else np.asarray(zoom_to, float)
     centre, half = (low + high) / 2, np.max(high - low) / 2
     for setter, c in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), centre, strict=True):
         setter(c - half, c + half)
@@ -121,7 +129,17 @@ def render_png(
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_zlabel("z (m)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    return fig
+
+
+def render_png(
+    scene: trimesh.Scene,
+    path: str | os.PathLike[str],
+    *,
+    elevation: float = 20.0,
+    azimuth: float = -60.0,
+    zoom_to: ArrayLike | None = None,
+) -> Path:
+    """Save :func:`scene_figure` as the PNG ``path`` (100 dpi)."""
+    save_figure(scene_figure(scene, elevation=elevation, azimuth=azimuth, zoom_to=zoom_to), path, dpi=100)
     return Path(path)

@@ -1,6 +1,12 @@
-"""Tables I and II in the paper's layout, with a max column and the sample counts added."""
+"""Tables for people: the paper's Tables I–III (with a max column and the sample counts added),
+the predicted uncertainties, the whole chain's summary, the targeting error on the twin.
+
+Every function returns text (millimetres and degrees, as the column heads say); none prints.
+"""
 
 from __future__ import annotations
+
+import numpy as np
 
 from brachycal.calibration.image_to_probe import METHOD_LABELS
 from brachycal.calibration.metrics import ErrorStats
@@ -57,7 +63,7 @@ def chain_summary(report, sample_ids: list[str]) -> str:
     fit = report.fit
     evidence = report.choice.evidence()
     lines = [
-        "WHOLE-CHAIN CALIBRATION (one robust least-squares problem over all data)",
+        "WHOLE-CHAIN CALIBRATION (one least-squares problem over all data, gross outliers left out)",
         f"image model: {fit.model}  (8-fold cross-validated RMSE, mm: "
         + ", ".join(f"{m} {e['cv_rmse_mm']:.3f}±{e['se_mm']:.3f}" for m, e in evidence.items())
         + ")",
@@ -72,13 +78,9 @@ def chain_summary(report, sample_ids: list[str]) -> str:
         )
     spacing = fit.image.spacing_m * 1e3
     lines.append(f"pixel spacing: {spacing[0]:.5f} x {spacing[1]:.5f} mm/px")
-    sigma = fit.sigma_m
-    lines.append(
-        f"noise levels from the residuals: touches {sigma['touch'] * 1e3:.3f} mm, axes moves "
-        f"{sigma['axes'] * 1e3:.3f} mm, images {sigma['image'] * 1e3:.3f} mm (per coordinate)"
-    )
+    lines.append(f"noise levels (SD per coordinate): {fit.noise_text()}")
     flagged = [s for s, f in zip(sample_ids, fit.outliers, strict=True) if f]
-    lines.append(f"outlier images: {', '.join(flagged) if flagged else 'none'}")
+    lines.append(f"outlier images (left out of the fit): {', '.join(flagged) if flagged else 'none'}")
     lines.append(
         f"predicted landing error (RMS) over the sample poses: mean {report.predicted_cube_mm.mean():.3f} mm, "
         f"max {report.predicted_cube_mm.max():.3f} mm; over the image at the central pose: "
@@ -107,4 +109,37 @@ def table_iii(stats: dict[str, ErrorStats], n_targets: int) -> str:
         _header("Method", width),
     ]
     lines += [_row(label, s, width) for label, s in stats.items()]
+    return "\n".join(lines)
+
+
+def uncertainty_table(result: CalibrationResult) -> str:
+    """Predicted uncertainties (1 SD) of the sequential estimates, as the conditioning checks computed them."""
+    lines = [
+        "PREDICTED UNCERTAINTY (1 SD; tips from the trials' spread, rotations from the moves' lengths at "
+        f"{result.needle.rotation.point_sd_m * 1e3:.2g} mm positioning noise, registrations from their residual)",
+        "reference tips: " + ", ".join(f"{ref} {tip.sd_m * 1e3:.3f} mm" for ref, tip in result.reference_tips.items()),
+    ]
+    for name, tool in (("needle", result.needle), ("probe", result.probe)):
+        tip = f"tip {tool.tip.sd_m * 1e3:.3f} mm, " if tool.tip is not None else ""
+        rotation = tool.rotation
+        lines.append(
+            f"{name}: {tip}rotation {rotation.rotation_sd_deg:.2f} deg, axes angle "
+            f"{rotation.axes_angle_deg:.2f} +- {rotation.axes_angle_sd_deg:.2f} deg"
+        )
+    width = 26
+    lines.append(
+        f"{'Registration algorithms':<{width}} {'noise (mm)':>10} {'rot. (deg)':>10} {'origin (mm)':>11} "
+        f"{'samples (mm)':>12} {'at 50 mm':>9}"
+    )
+    for method, calibration in result.image.items():
+        u = calibration.uncertainty
+        if u is None:
+            continue
+        row = (
+            f"{METHOD_LABELS[method]:<{width}} {u.noise_sd_m * 1e3:10.3f} {u.rotation_sd_deg:10.3f} "
+            f"{u.origin_sd_m * 1e3:11.3f} {u.samples_sd_m * 1e3:12.3f} {u.reach_sd_m * 1e3:9.3f}"
+        )
+        if np.any(u.spacing_sd_m > 0):
+            row += f"   spacing SD {u.spacing_sd_m[0] * 1e3:.5f} x {u.spacing_sd_m[1] * 1e3:.5f} mm/px"
+        lines.append(row)
     return "\n".join(lines)

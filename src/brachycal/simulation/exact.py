@@ -19,14 +19,15 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from brachycal.data.session import Session, Touches
-from brachycal.errors import InputError
+from brachycal.errors import SolverError
+from brachycal.imaging.pixels import DEFAULT_IMAGE_SIZE_PX, DEFAULT_SPACING_M, image_points
 from brachycal.model.ik import solve_ik
-from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, TOP_MODEL_TIP, US_IMAGE
+from brachycal.model.names import LEFT_ARM, NEEDLE_TIP, PROBE_TIP, READY, RIGHT_ARM, TOP_MODEL_TIP, US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, make_transform, transform_points
 
-LEFT = list(range(1, 8))
-RIGHT = list(range(8, 15))
+#: The arms' axes in a configuration (:data:`brachycal.model.names.LEFT_ARM`, ``RIGHT_ARM``).
+LEFT, RIGHT = LEFT_ARM, RIGHT_ARM
 
 #: The probe pose of the samples: shaft (z) along +x of base_link, image lateral (x) along +z.
 R_BASE_PROBE = np.column_stack([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]])
@@ -75,10 +76,10 @@ def default_truth(robot: Robot, spacing_scale: tuple[float, float] = (1.0, 1.0))
 
     Args:
         robot: the nominal model.
-        spacing_scale: true spacing = nominal 0.19 mm/pixel × this, per axis (e.g. 1.04 axially
-            for water at room temperature).
+        spacing_scale: true spacing = the nominal :data:`~brachycal.imaging.DEFAULT_SPACING_M`
+            (0.19 mm/pixel) × this, per axis (e.g. 1.04 axially for water at room temperature).
     """
-    nominal = np.array([0.19e-3, 0.19e-3])
+    nominal = np.array(DEFAULT_SPACING_M)
     return SessionTruth(
         T_ER_Ntip=_nudge(robot.tool_transform(NEEDLE_TIP)[1], [0.02, -0.015, 0.03], [1.5e-3, -2.0e-3, 3.0e-3]),
         T_EL_Ptip=_nudge(robot.tool_transform(PROBE_TIP)[1], [-0.01, 0.02, -0.025], [-2.0e-3, 1.0e-3, -1.5e-3]),
@@ -88,7 +89,7 @@ def default_truth(robot: Robot, spacing_scale: tuple[float, float] = (1.0, 1.0))
         p_ER_Mtip=np.array([0.0, 0.0, 0.150]),
         p_R_Rtip1=np.array([0.75, -0.05, 0.85]),
         p_R_Rtip2=np.array([0.72, 0.08, 0.85]),
-        size_px=np.array([1080, 720]),
+        size_px=np.array(DEFAULT_IMAGE_SIZE_PX),
     )
 
 
@@ -107,14 +108,20 @@ def touch(
 
     Like an operator, it turns the approach about the vertical when one direction is out of the
     arm's reach (up to ±60° in 20° steps).
+
+    Raises:
+        SolverError: no approach direction reaches the tip.
     """
     for turn in (0.0, 20.0, -20.0, 40.0, -40.0, 60.0, -60.0):
         try:
             T = make_transform(_approach(k, n, turn), p_R)
             return solve_ik(robot, frame, T, q0, arm, margin=0.05, restarts=10, seed=seed)
-        except InputError:
+        except SolverError:  # unreachable this way: turn the approach (input errors propagate)
             continue
-    raise InputError(f"{frame} cannot touch the reference tip at {np.round(p_R, 4).tolist()} m")
+    raise SolverError(
+        f"{frame} cannot touch the reference tip at {np.round(p_R, 4).tolist()} m in base_link "
+        f"(trial {k + 1} of {n}, approach turned up to ±60°)"
+    )
 
 
 #: The tools that touch the reference tips: session name, their frame, the arm's joints. The
@@ -132,6 +139,9 @@ def axes_moves(
 
     The orientation is turned about the vertical (as in :func:`touch`) until all three points
     are reachable; p2 and p3 start from p1's joints so the arm stays in one posture.
+
+    Raises:
+        SolverError: no orientation makes all three points reachable.
     """
     for turn in (0.0, 20.0, -20.0, 40.0, -40.0, 60.0, -60.0):
         R = _approach(0, 1, turn)
@@ -146,9 +156,12 @@ def axes_moves(
                     robot, frame, make_transform(R, p1 + move_m * R[:, 2]), q1, arm, margin=0.05, restarts=10, seed=seed
                 ),
             }
-        except InputError:
+        except SolverError:  # unreachable this way: turn the approach (input errors propagate)
             continue
-    raise InputError(f"{frame} cannot make the three-point moves from {np.round(p1, 4).tolist()} m")
+    raise SolverError(
+        f"{frame} cannot make the three-point moves ({move_m * 1e3:g} mm) from {np.round(p1, 4).tolist()} m "
+        "in base_link (orientation turned up to ±60°)"
+    )
 
 
 def exact_session(
@@ -171,12 +184,10 @@ def exact_session(
         seed: seed of the IK restarts.
 
     Raises:
-        InputError: a pose of the set-up is unreachable.
+        SolverError: a pose of the set-up is unreachable.
     """
     physical = truth.robot(robot)
-    q_home = np.zeros(robot.nq)
-    q_home[LEFT] = [0.3, -1.0, 0.0, -1.3, 0.0, -0.6, 0.0]
-    q_home[RIGHT] = [0.3, -1.0, 0.0, -1.3, 0.0, -0.6, 0.0]
+    q_home = READY.copy()
     ik = dict(margin=0.05, restarts=50, seed=seed)
 
     touches = {}
@@ -202,7 +213,7 @@ def exact_session(
         T_R_I = physical.fk(US_IMAGE, q)
         for u in us:
             for v in vs:
-                p_R = transform_points(T_R_I, [u * truth.spacing_m[0], v * truth.spacing_m[1], 0.0])
+                p_R = transform_points(T_R_I, image_points((u, v), truth.spacing_m)[0])
                 q = solve_ik(physical, NEEDLE_TIP, make_transform(R_BASE_NEEDLE, p_R), q, RIGHT, **ik)
                 ids.append(f"s{len(ids) + 1:03d}")
                 configs.append(q.copy())

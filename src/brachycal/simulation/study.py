@@ -20,16 +20,43 @@ import numpy as np
 
 from brachycal.calibration import calibrate
 from brachycal.calibration.chain import cross_validate, fit_chain, select_model
+from brachycal.calibration.image_to_probe import METHODS
 from brachycal.errors import InputError
 from brachycal.model.robot import Robot
 from brachycal.planning import PlanSpec
+from brachycal.planning.spec import EDGE_RANGE_M
 from brachycal.simulation.targeting import targeting_error
-from brachycal.simulation.twin import TwinConfig, simulate
+from brachycal.simulation.twin import MAX_ANNOTATION_SD_PX, MAX_OUTLIER_RATE, TwinConfig, simulate
+from brachycal.validate import (
+    MAX_GRID_POINTS,
+    MAX_SEEDS,
+    MAX_TARGETS,
+    MAX_WORKERS,
+    check_int,
+    check_probability,
+    check_range,
+    check_seed,
+)
+
+#: Most simulated sessions one sweep may ask for: each takes seconds to minutes, so 10000 is days
+#: of computing on a workstation; more is a typo (and its list of runs alone could fill memory).
+MAX_STUDY_RUNS = 10_000
+
+#: Methods a study can run: the sequential registrations and the whole-chain fit.
+STUDY_METHODS = (*METHODS, "chain")
 
 
 @dataclass(frozen=True)
 class RunParams:
-    """Parameters of one run (all plain values, so runs can be shipped to other processes)."""
+    """Parameters of one run (all plain values, so runs can be shipped to other processes).
+
+    Checked on construction, so a bad sweep is refused before any run starts: seed in [0, 2**32),
+    points per axis in [2, 20], edge in [1, 500] mm, annotation noise in [0, 50] px, outlier rate
+    in [0, 0.5], methods among :data:`STUDY_METHODS` (at least one), targets in [1, 100000].
+
+    Raises:
+        InputError: naming the parameter, its range and the value given.
+    """
 
     seed: int
     points_per_axis: int
@@ -39,6 +66,19 @@ class RunParams:
     outlier_rate: float
     methods: tuple[str, ...]
     targets: int
+
+    def __post_init__(self) -> None:
+        check_seed(self.seed, "seed")
+        check_int(self.points_per_axis, "points per axis", low=2, high=MAX_GRID_POINTS)
+        check_range(self.edge_mm, "cube edge", low=EDGE_RANGE_M[0] * 1e3, high=EDGE_RANGE_M[1] * 1e3, unit="mm")
+        check_range(self.annotation_px, "annotation noise", low=0.0, high=MAX_ANNOTATION_SD_PX, unit="px")
+        if not isinstance(self.sound_speed, (bool, np.bool_)):
+            raise InputError(f"sound_speed must be True or False, got {self.sound_speed!r}")
+        check_probability(self.outlier_rate, "outlier rate", high=MAX_OUTLIER_RATE)
+        unknown = [m for m in self.methods if m not in STUDY_METHODS]
+        if not self.methods or unknown or isinstance(self.methods, str):
+            raise InputError(f"methods must be a tuple of {', '.join(STUDY_METHODS)}, got {self.methods!r}")
+        check_int(self.targets, "targets", low=1, high=MAX_TARGETS)
 
 
 def sweep(
@@ -51,7 +91,31 @@ def sweep(
     methods: tuple[str, ...] = ("kabsch", "scaled_uv"),
     targets: int = 30,
 ) -> list[RunParams]:
-    """Every combination, seeds innermost (the order rows are reported in)."""
+    """Every combination, seeds innermost (the order rows are reported in).
+
+    ``seeds`` is a count in [1, 1000]; each list needs at least one value; the sweep has at most
+    :data:`MAX_STUDY_RUNS` runs; every run's parameters are checked (:class:`RunParams`) before
+    this returns.
+
+    Raises:
+        InputError: a count or a value out of range, or an empty list.
+    """
+    check_int(seeds, "seeds", low=1, high=MAX_SEEDS)
+    for name, values in (
+        ("points", points),
+        ("edges", edges_mm),
+        ("annotation noises", annotation_px),
+        ("sound speeds", sound_speed),
+        ("outlier rates", outlier_rates),
+    ):
+        if len(values) == 0:
+            raise InputError(f"the list of {name} is empty")
+    total = seeds * len(points) * len(edges_mm) * len(annotation_px) * len(sound_speed) * len(outlier_rates)
+    if total > MAX_STUDY_RUNS:
+        raise InputError(
+            f"the sweep has {total} simulated sessions (seeds x every combination); at most {MAX_STUDY_RUNS} "
+            "(each takes seconds to minutes): sweep fewer values or seeds"
+        )
     combos = itertools.product(points, edges_mm, annotation_px, sound_speed, outlier_rates, range(seeds))
     return [RunParams(seed, p, e, a, s, o, methods, targets) for p, e, a, s, o, seed in combos]
 
@@ -122,7 +186,12 @@ def run_study(
         workers: local processes (default: all cores; 1 runs serially in this process).
         scheduler: address of a Dask distributed scheduler (``tcp://host:8786``) to run on instead.
         progress: called with 1 as each run finishes.
+
+    Raises:
+        InputError: ``workers`` is not a whole number in [1, 256].
     """
+    if workers is not None:
+        check_int(workers, "workers", low=1, high=MAX_WORKERS)
 
     def tick(rows: list[dict[str, object]]) -> list[dict[str, object]]:
         if progress is not None:

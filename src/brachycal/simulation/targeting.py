@@ -19,13 +19,14 @@ from scipy.spatial.transform import Rotation
 
 from brachycal.calibration.image_to_probe import ImageCalibration, predict_base
 from brachycal.calibration.metrics import ErrorStats
-from brachycal.errors import InputError
+from brachycal.errors import SolverError
+from brachycal.imaging.pixels import image_points, pixels
 from brachycal.model.ik import solve_ik
-from brachycal.model.names import LEFT_FLANGE, NEEDLE_TIP, US_IMAGE
+from brachycal.model.names import LEFT_ARM, LEFT_FLANGE, NEEDLE_TIP, RIGHT_ARM, US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, make_transform
-from brachycal.simulation.exact import LEFT, RIGHT
-from brachycal.simulation.twin import STREAMS, Twin, _streams
+from brachycal.simulation.twin import STREAMS, Twin, streams
+from brachycal.validate import MAX_TARGETS, check_int
 
 
 @dataclass(frozen=True)
@@ -46,7 +47,7 @@ class TargetingResult:
 def random_targets(twin: Twin, n: int) -> FloatArray:
     """``(n, 3)`` points uniformly inside the planning cube, in ``base_link`` (seeded by the twin)."""
     spec = twin.config.spec
-    rng = _streams(twin.config.seed)[STREAMS[-1]]
+    rng = streams(twin.config.seed)[STREAMS[-1]]
     offsets = rng.uniform(-0.5, 0.5, size=(n, 3)) * spec.edge_m
     return spec.cube_centre_m + offsets @ spec.image_axes().T
 
@@ -63,7 +64,11 @@ def targeting_error(
 
     ``software`` is the robot model the software computes and commands with (default: the
     nominal URDF; a calibration that corrects joint offsets passes its corrected model).
+
+    Raises:
+        SolverError: a target is out of reach from all five nearest sample poses.
     """
+    check_int(n_targets, "number of targets", low=1, high=MAX_TARGETS)
     aim = _Aim(twin, software or twin.nominal, T_ER_Ntip, T_EL_Ptip, image)
     targets = random_targets(twin, n_targets)
     landed = np.empty_like(targets)
@@ -77,7 +82,7 @@ def targeting_error(
             try:
                 landed[k], uv[k], q_read[k] = aim.land(target, twin.true_samples_q[nearest])
                 break
-            except InputError:
+            except SolverError:  # unreachable from this start: try the next (input errors propagate)
                 if attempt == len(starts) - 1:
                     raise
     return TargetingResult(targets, landed, ErrorStats.between(targets, landed), uv, q_read)
@@ -105,9 +110,9 @@ class _Aim:
         twin, spec, truth = self.twin, self.twin.config.spec, self.twin.truth
         # The probe images the target at the pixel the cube geometry puts it (true spacing).
         offset = self.R_image.T @ (target - spec.cube_centre_m)
-        uv = np.asarray(spec.centre_px) + offset[:2] / truth.spacing_m
-        origin = target - self.R_image @ [uv[0] * truth.spacing_m[0], uv[1] * truth.spacing_m[1], 0.0]
-        q_true = solve_ik(twin.physical, US_IMAGE, make_transform(self.R_image, origin), q_start, LEFT, **self.ik)
+        uv = np.asarray(spec.centre_px) + pixels(offset, truth.spacing_m)[0]
+        origin = target - self.R_image @ image_points(uv, truth.spacing_m)[0]
+        q_true = solve_ik(twin.physical, US_IMAGE, make_transform(self.R_image, origin), q_start, LEFT_ARM, **self.ik)
         q_read = q_true.copy()
         if twin.config.encoder_noise:
             q_read += self.read_rng.normal(scale=twin.config.encoder_sd_rad, size=q_true.shape)
@@ -117,9 +122,9 @@ class _Aim:
         R_needle = self.nominal_cal.fk(NEEDLE_TIP, q_start)[:3, :3]
         turn, _ = Rotation.align_vectors([self.direction], [R_needle[:, 2]])
         T_command = make_transform(turn.as_matrix() @ R_needle, p_software)
-        q_command = solve_ik(self.nominal_cal, NEEDLE_TIP, T_command, q_read, RIGHT, **self.ik)
+        q_command = solve_ik(self.nominal_cal, NEEDLE_TIP, T_command, q_read, RIGHT_ARM, **self.ik)
         q_executed = q_true.copy()
-        q_executed[RIGHT] = q_command[RIGHT]
+        q_executed[RIGHT_ARM] = q_command[RIGHT_ARM]
         q_seen = q_read.copy()
-        q_seen[RIGHT] = q_command[RIGHT]
+        q_seen[RIGHT_ARM] = q_command[RIGHT_ARM]
         return twin.physical.fk(NEEDLE_TIP, q_executed)[:3, 3], uv, q_seen

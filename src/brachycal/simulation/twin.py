@@ -37,29 +37,75 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from brachycal.data.session import Session, Touches
+from brachycal.errors import InputError
+from brachycal.imaging.pixels import SCANNER_SOUND_SPEED_M_S, image_points
 from brachycal.model.ik import solve_ik
-from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
+from brachycal.model.names import LEFT_ARM, NEEDLE_TIP, PROBE_TIP, READY, US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.planning import PlanSpec, plan_poses
 from brachycal.se3 import FloatArray, make_transform, transform_points
 from brachycal.simulation.exact import (
     AXES_START,
-    LEFT,
-    RIGHT,
     TOUCH_TOOLS,
     SessionTruth,
     axes_moves,
     default_truth,
     touch,
 )
+from brachycal.validate import MAX_IMAGE_PX, check_int, check_range, check_seed, check_vector
 
+#: The twin's random streams, one per error source (and the targets of the targeting error).
 STREAMS = ("robot", "tools", "jog", "encoder", "beam", "annotation", "outliers", "targets")
-SCANNER_SOUND_SPEED = 1540.0
+
+#: Largest annotation noise SD, pixels: at 50 px (~1 cm at 0.19 mm/px) an image no longer locates
+#: the needle tip at all; a larger value is a typo.
+MAX_ANNOTATION_SD_PX = 50.0
+#: Largest fraction of gross annotation outliers: beyond half, no robust estimator can tell the
+#: outliers from the good samples (their breakdown point is at most 50 %).
+MAX_OUTLIER_RATE = 0.5
+#: Speeds of sound the twin may use, m/s: the media an ultrasound image shows (fat ~1450, water
+#: 1482, soft tissue 1540, muscle ~1580) lie well inside; bone and air are not imaged.
+SOUND_SPEED_RANGE_M_S = (1000.0, 2000.0)
+
+#: Range of each numeric noise setting of :class:`TwinConfig` (all SDs >= 0). The upper ends are
+#: typo guards some 100 times the defaults: beyond them the touches and IK of the twin are no
+#: longer a calibration session (millimetres of link error, centimetres of jog).
+_RANGES: dict[str, tuple[float, float, str]] = {
+    "link_offset_sd_m": (0.0, 1e-2, "m"),
+    "link_tilt_sd_rad": (0.0, 0.1, "rad"),
+    "joint_offset_sd_rad": (0.0, 0.1, "rad"),
+    "encoder_sd_rad": (0.0, 1e-2, "rad"),
+    "jog_sd_m": (0.0, 1e-2, "m"),
+    "annotation_sd_px": (0.0, MAX_ANNOTATION_SD_PX, "px"),
+    "sound_speed_m_s": (*SOUND_SPEED_RANGE_M_S, "m/s"),
+    "beam_thickness_m": (0.0, 1e-2, "m"),
+    "outlier_rate": (0.0, MAX_OUTLIER_RATE, ""),
+    "tool_offset_sd_m": (0.0, 0.05, "m"),
+    "tool_tilt_sd_rad": (0.0, 0.2, "rad"),
+}
+_SWITCHES = (
+    "kinematic_error",
+    "encoder_noise",
+    "jog_error",
+    "annotation_noise",
+    "sound_speed",
+    "out_of_plane",
+    "outliers",
+)
 
 
 @dataclass(frozen=True)
 class TwinConfig:
-    """Noise sources of the twin (see the module docstring for what each one models)."""
+    """Noise sources of the twin (see the module docstring for what each one models).
+
+    Every setting is checked on construction: the switches must be ``True``/``False``, the seed
+    in [0, 2**32), each SD finite and within its range (``_RANGES``: from 0 up to about 100
+    times its default), the sound speed in [1000, 2000] m/s, the outlier rate in [0, 0.5], the
+    outlier sizes 0 <= low <= high px, 1 to 100 trials.
+
+    Raises:
+        InputError: naming the setting, its range and the value given.
+    """
 
     seed: int = 0
     kinematic_error: bool = True
@@ -84,6 +130,20 @@ class TwinConfig:
     trials: int = 3
     spec: PlanSpec = field(default_factory=PlanSpec)
 
+    def __post_init__(self) -> None:
+        check_seed(self.seed, "twin seed")
+        for name in _SWITCHES:
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise InputError(f"twin setting {name} must be True or False, got {getattr(self, name)!r}")
+        for name, (low, high, unit) in _RANGES.items():
+            check_range(getattr(self, name), f"twin setting {name}", low=low, high=high, unit=unit)
+        low, high = check_vector(self.outlier_px, "twin setting outlier_px", 2, low=0.0, high=MAX_IMAGE_PX, unit="px")
+        if not low <= high:
+            raise InputError(f"twin setting outlier_px must be (low, high) with low <= high, got {self.outlier_px}")
+        check_int(self.trials, "twin setting trials", low=1, high=100)
+        if not isinstance(self.spec, PlanSpec):
+            raise InputError(f"twin setting spec must be a PlanSpec, got {type(self.spec).__name__}")
+
     def without_noise(self) -> TwinConfig:
         """The same set-up with every noise source off (the tools keep their offsets from nominal)."""
         return replace(
@@ -100,7 +160,7 @@ class TwinConfig:
     @property
     def axial_scale(self) -> float:
         """True depth per displayed depth: sound speed in the medium over the scanner's assumption."""
-        return self.sound_speed_m_s / SCANNER_SOUND_SPEED if self.sound_speed else 1.0
+        return self.sound_speed_m_s / SCANNER_SOUND_SPEED_M_S if self.sound_speed else 1.0
 
 
 @dataclass(frozen=True)
@@ -128,7 +188,9 @@ class Twin:
     outlier: np.ndarray
 
 
-def _streams(seed: int) -> dict[str, np.random.Generator]:
+def streams(seed: int) -> dict[str, np.random.Generator]:
+    """The twin's random streams for ``seed`` (:data:`STREAMS`): one generator per error source, so
+    switching one source off leaves the others' draws unchanged."""
     children = np.random.SeedSequence(seed).spawn(len(STREAMS))
     return {name: np.random.default_rng(child) for name, child in zip(STREAMS, children, strict=True)}
 
@@ -168,9 +230,9 @@ def simulate(nominal: Robot, config: TwinConfig = TwinConfig()) -> Twin:
     """Simulate one calibration session.
 
     Raises:
-        InputError: a pose of the set-up is unreachable for the physical robot.
+        SolverError: a pose of the set-up is unreachable for the physical robot.
     """
-    rng = _streams(config.seed)
+    rng = streams(config.seed)
     truth = _truth(nominal, config, rng["tools"])
     physical = truth.robot(physical_kinematics(nominal, config, rng["robot"]))
 
@@ -180,8 +242,7 @@ def simulate(nominal: Robot, config: TwinConfig = TwinConfig()) -> Twin:
     def jog() -> FloatArray:
         return rng["jog"].normal(scale=config.jog_sd_m, size=3) if config.jog_error else np.zeros(3)
 
-    q_home = np.zeros(nominal.nq)
-    q_home[LEFT] = q_home[RIGHT] = [0.3, -1.0, 0.0, -1.3, 0.0, -0.6, 0.0]
+    q_home = READY.copy()
     touches = {}
     for reference, p_R in (("rtip1", truth.p_R_Rtip1), ("rtip2", truth.p_R_Rtip2)):
         for tool, frame, arm in TOUCH_TOOLS:
@@ -208,9 +269,9 @@ def simulate(nominal: Robot, config: TwinConfig = TwinConfig()) -> Twin:
         tip = physical.fk(NEEDLE_TIP, q)[:3, 3]
         R_image = physical.fk(US_IMAGE, q)[:3, :3]
         u, v = pose.point.uv_px
-        origin = tip - R_image @ [u * truth.spacing_m[0], v * truth.spacing_m[1], e]
+        origin = tip - R_image @ image_points((u, v), truth.spacing_m, e)[0]
         # The adjustment is small; the physical arm may use its whole range (the plan kept margins).
-        q = solve_ik(physical, US_IMAGE, make_transform(R_image, origin), q, LEFT, margin=0.0, restarts=0)
+        q = solve_ik(physical, US_IMAGE, make_transform(R_image, origin), q, LEFT_ARM, margin=0.0, restarts=0)
         true_q.append(q)
         uv.append((u, v))
     true_q, uv = np.array(true_q), np.array(uv, dtype=float)
@@ -235,12 +296,6 @@ def simulate(nominal: Robot, config: TwinConfig = TwinConfig()) -> Twin:
         joint_names=nominal.joint_names,
     )
     return Twin(session, truth, physical, nominal, config, true_q, offsets, outlier)
-
-
-def true_image_point(truth: SessionTruth, uv_px: FloatArray) -> FloatArray:
-    """``p_I (N, 3)`` of pixels under the true spacing."""
-    uv = np.atleast_2d(uv_px)
-    return np.column_stack([uv * truth.spacing_m, np.zeros(len(uv))])
 
 
 def tip_in_image(twin: Twin, k: int) -> FloatArray:

@@ -16,15 +16,18 @@ from pathlib import Path
 
 import numpy as np
 
+from brachycal.data.session import FILES as SESSION_FILES
 from brachycal.data.session import read_session, write_session
 from brachycal.errors import InputError
-from brachycal.files import atomic_open
+from brachycal.files import OutputSet, output_set, write_json
 from brachycal.model.robot import Robot
 from brachycal.planning import PlanSpec, SectorFOV
 from brachycal.simulation.exact import SessionTruth
 from brachycal.simulation.twin import Twin, TwinConfig
 
 FORMAT = "brachycal-truth/1"
+TWIN_FILES = (*SESSION_FILES, "physical_robot.urdf", "truth.json")
+"""The files :func:`write_twin` writes into its folder."""
 
 
 def _config_json(config: TwinConfig) -> dict:
@@ -43,10 +46,23 @@ def _config_json(config: TwinConfig) -> dict:
     return {k: (list(v) if isinstance(v, tuple) else v) for k, v in out.items()}
 
 
-def write_twin(twin: Twin, folder: str | os.PathLike[str], *, force: bool = False) -> Path:
-    """Write the session and its truth to ``folder``."""
-    folder = write_session(twin.session, folder, force=force)
-    twin.physical.write_urdf(folder / "physical_robot.urdf", force=force)
+def write_twin(
+    twin: Twin, folder: str | os.PathLike[str], *, force: bool = False, outputs: OutputSet | None = None
+) -> Path:
+    """Write the session and its truth to ``folder`` (created if needed): :data:`TWIN_FILES`.
+
+    All or nothing: with ``outputs`` (a command's :class:`~brachycal.files.OutputSet`) the files
+    join that set and are committed with it; without, they are committed together on return.
+    """
+    folder = Path(folder)
+    with output_set(outputs, force=force) as out:
+        write_session(twin.session, folder, force=force, outputs=out)
+        twin.physical.write_urdf(out.path(folder / "physical_robot.urdf", make_parents=True), force=force)
+        write_json(out.path(folder / "truth.json", make_parents=True), _truth_json(twin), indent=1)
+    return folder
+
+
+def _truth_json(twin: Twin) -> dict:
     t = twin.truth
     payload = {
         "format": FORMAT,
@@ -62,10 +78,7 @@ def write_twin(twin: Twin, folder: str | os.PathLike[str], *, force: bool = Fals
         "out_of_plane_m": twin.out_of_plane_m.tolist(),
         "outlier": twin.outlier.tolist(),
     }
-    with atomic_open(folder / "truth.json", force=force) as handle:
-        json.dump(payload, handle, indent=1)
-        handle.write("\n")
-    return folder
+    return payload
 
 
 def read_twin(folder: str | os.PathLike[str], nominal: Robot) -> Twin:
@@ -95,6 +108,7 @@ def read_twin(folder: str | os.PathLike[str], nominal: Robot) -> Twin:
     )
     settings["outlier_px"] = tuple(settings["outlier_px"])
     config = TwinConfig(**settings, spec=spec)
+    session = read_session(folder, nominal)
     truth = SessionTruth(
         T_ER_Ntip=np.array(raw["ER_T_Ntip"]),
         T_EL_Ptip=np.array(raw["EL_T_Ptip"]),
@@ -104,9 +118,8 @@ def read_twin(folder: str | os.PathLike[str], nominal: Robot) -> Twin:
         p_ER_Mtip=np.array(raw["top_model_tip_m"]),
         p_R_Rtip1=np.array(raw["reference_tips_m"]["rtip1"]),
         p_R_Rtip2=np.array(raw["reference_tips_m"]["rtip2"]),
-        size_px=np.array([1080, 720]),
+        size_px=session.size_px.copy(),  # the simulated images' size, as the session states it
     )
-    session = read_session(folder, nominal)
     physical = Robot.load(folder / "physical_robot.urdf")
     return Twin(
         session,

@@ -1,0 +1,157 @@
+"""Pivot calibration of a pose-list file, and its result file ``brachycal-pivot/1`` (JSON).
+
+:func:`pivot_from_file` reads a pose list (:mod:`brachycal.data.pose_list`), runs the estimator
+of :mod:`brachycal.calibration.pivot` and hashes the input; :func:`write_pivot` writes the result
+and :func:`read_pivot` reads it back. Lengths are in the units of the poses, which the file
+records (``units``: ``"m"`` or ``"mm"``); ``tip_in_tool`` is the tip in the tool's (marker's or
+flange's) frame, ``pivot_in_reference`` the fixed pivot point in the reference frame.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from brachycal.calibration.pivot import PivotResult, pivot_algebraic, pivot_robust
+from brachycal.data.pose_list import read_pose_list
+from brachycal.errors import DegenerateDataError, InputError
+from brachycal.files import sha256_file, write_json
+from brachycal.se3 import FloatArray
+
+FORMAT = "brachycal-pivot/1"
+#: Estimators by name (``brachycal pivot --method``).
+PIVOT_METHODS = {"algebraic": pivot_algebraic, "robust": pivot_robust}
+#: Units a pose list's translations may be in.
+UNITS = ("m", "mm")
+
+
+@dataclass(frozen=True)
+class PivotCalibration:
+    """A pivot calibration of one pose list: the estimate, the poses' names, the units, the input hash.
+
+    Attributes:
+        result: the estimate (tip, pivot, residuals, inliers, predicted SDs), in ``units``.
+        pose_names: ``(N,)`` each pose's key (the list's first column) or file row.
+        units: ``"m"`` or ``"mm"``, the units of the poses' translations and so of every length here.
+        inputs: file name → SHA-256 of the pose list.
+    """
+
+    result: PivotResult
+    pose_names: list[str]
+    units: str
+    inputs: dict[str, str]
+
+    @property
+    def outliers(self) -> list[str]:
+        """Names of the poses the estimator left out (none for the algebraic method)."""
+        return [name for name, inlier in zip(self.pose_names, self.result.inliers, strict=True) if not inlier]
+
+    def to_json(self) -> dict[str, object]:
+        """The ``brachycal-pivot/1`` payload (lengths in :attr:`units`)."""
+        r = self.result
+        return {
+            "format": FORMAT,
+            "method": r.method,
+            "units": self.units,
+            "tip_in_tool": r.p_marker_tip.tolist(),
+            "pivot_in_reference": r.p_ref_pivot.tolist(),
+            "rms_per_axis": r.rms_per_axis,
+            "rms_3d": r.rms_3d,
+            # Predicted 3D SDs from the residual and the rotations' spread (brachycal.calibration.pivot).
+            "tip_sd": r.tip_sd,
+            "pivot_sd": r.pivot_sd,
+            "noise_sd_per_axis": r.noise_sd,
+            "rotation_spread_deg": r.rotation_spread_deg,
+            "n_poses": len(self.pose_names),
+            "n_inliers": int(r.inliers.sum()),
+            "outliers": self.outliers,
+            "inputs": self.inputs,
+        }
+
+
+def pivot_from_file(path: str | os.PathLike[str], method: str = "algebraic", units: str = "m") -> PivotCalibration:
+    """Pivot calibration of the pose list at ``path`` with ``method`` (:data:`PIVOT_METHODS`).
+
+    Args:
+        path: CSV pose list (``[key,]m00,…,m33``; :func:`~brachycal.data.pose_list.read_pose_list`).
+        method: ``"algebraic"`` (linear least squares) or ``"robust"`` (soft-L1 loss, flags outliers).
+        units: the units of the poses' translations, recorded with the result (nothing is converted).
+
+    Raises:
+        InputError: the file cannot be read, a matrix is not rigid, an unknown method or unit.
+        DegenerateDataError: the poses cannot determine the tip (naming the file).
+    """
+    if method not in PIVOT_METHODS:
+        raise InputError(f"unknown pivot method {method!r}; choose from {', '.join(PIVOT_METHODS)}")
+    if units not in UNITS:
+        raise InputError(f"units must be one of {', '.join(UNITS)}, got {units!r}")
+    names, T, _ = read_pose_list(path)
+    try:
+        result = PIVOT_METHODS[method](T)
+    except DegenerateDataError as exc:  # name the file the poses came from
+        raise DegenerateDataError(exc.problem, file=path) from None
+    return PivotCalibration(result, names, units, {Path(path).name: sha256_file(path)})
+
+
+def write_pivot(calibration: PivotCalibration, path: str | os.PathLike[str], *, force: bool = False) -> Path:
+    """Write ``calibration`` as ``brachycal-pivot/1`` JSON, all or nothing (never NaN).
+
+    Raises:
+        OutputError: the file exists (without ``force``), cannot be written, or holds a NaN.
+    """
+    return write_json(path, calibration.to_json(), force=force)
+
+
+@dataclass(frozen=True)
+class StoredPivot:
+    """What a ``brachycal-pivot/1`` file holds (lengths in ``units``).
+
+    Attributes:
+        p_tool_tip: ``(3,)`` the tip in the tool's frame.
+        p_reference_pivot: ``(3,)`` the pivot point in the reference frame.
+        units: ``"m"`` or ``"mm"``.
+        raw: the whole payload (residuals, predicted SDs, outliers, input hashes).
+    """
+
+    p_tool_tip: FloatArray
+    p_reference_pivot: FloatArray
+    units: str
+    raw: dict
+
+
+def read_pivot(path: str | os.PathLike[str]) -> StoredPivot:
+    """Read a ``brachycal-pivot/1`` file back.
+
+    Raises:
+        InputError: not readable JSON, another format, or a point that is not three finite numbers
+            (naming the file and the key).
+    """
+    path = Path(path)
+    try:
+        raw = json.loads(path.read_text())
+    except OSError as exc:
+        raise InputError(f"cannot read ({exc.strerror})", file=path) from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"not valid JSON ({exc})", file=path) from None
+    if not isinstance(raw, dict) or raw.get("format") != FORMAT:
+        found = raw.get("format") if isinstance(raw, dict) else None
+        raise InputError(f"format is {found!r}, expected {FORMAT!r}", file=path, column="format")
+    if raw.get("units") not in UNITS:
+        raise InputError(
+            f"units must be one of {', '.join(UNITS)}, got {raw.get('units')!r}", file=path, column="units"
+        )
+
+    def point(key: str) -> FloatArray:
+        try:
+            p = np.array(raw.get(key), dtype=float)
+        except (TypeError, ValueError):
+            p = np.empty(0)
+        if p.shape != (3,) or not np.all(np.isfinite(p)):
+            raise InputError("must be three finite numbers", file=path, column=key)
+        return p
+
+    return StoredPivot(point("tip_in_tool"), point("pivot_in_reference"), raw["units"], raw)

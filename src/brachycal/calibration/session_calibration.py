@@ -1,0 +1,81 @@
+"""A session folder calibrated end to end: read, the paper's sequential method, optionally the chain.
+
+What ``brachycal calibrate`` runs: :func:`calibrate_folder` reads and validates the session
+(:func:`~brachycal.data.session.read_session`), calibrates it step by step
+(:func:`~brachycal.calibration.sequential.calibrate`, Tables I and II) and, if asked, solves the
+whole chain from that start (:func:`~brachycal.calibration.chain_report.calibrate_chain`).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from brachycal.calibration.chain_report import ChainReport, calibrate_chain
+from brachycal.calibration.image_to_probe import METHODS
+from brachycal.calibration.sequential import CalibrationResult, calibrate
+from brachycal.data.session import Session, read_session
+from brachycal.errors import DegenerateDataError
+from brachycal.model.robot import Robot
+
+
+@dataclass(frozen=True)
+class SessionCalibration:
+    """A calibrated session folder (SI units throughout).
+
+    Attributes:
+        session: the session as read and validated.
+        result: the sequential method's estimates and figures (Tables I and II).
+        chain: the whole-chain method's, if it was asked for (else None).
+    """
+
+    session: Session
+    result: CalibrationResult
+    chain: ChainReport | None = None
+
+
+def calibrate_folder(
+    folder: str | os.PathLike[str],
+    robot: Robot,
+    methods: tuple[str, ...] = METHODS,
+    *,
+    chain: bool = False,
+    bootstrap_replicates: int = 0,
+    joint_offsets: bool = False,
+    progress: Callable[[int], None] | None = None,
+) -> SessionCalibration:
+    """Read the session in ``folder`` and calibrate it.
+
+    Args:
+        folder: a ``brachycal-session/1`` folder.
+        robot: the kinematic model (flange poses; its ``us_image`` is ICP's prior).
+        methods: image-to-probe methods to fit and cross-validate (:data:`METHODS`).
+        chain: also solve the whole chain (image model by cross-validation, uncertainty).
+        bootstrap_replicates, joint_offsets, progress: for the chain
+            (:func:`~brachycal.calibration.chain_report.calibrate_chain`).
+
+    Raises:
+        InputError: the session is malformed (naming file, row and column).
+        DegenerateDataError: the data cannot determine an estimate; names the session's file
+            inside ``folder``.
+    """
+    session = read_session(folder, robot)
+    try:
+        result = calibrate(session, robot, methods)
+    except DegenerateDataError as exc:  # the calibration names the session file; say which folder it is in
+        if exc.file is None or Path(exc.file).is_absolute() or Path(exc.file).parent != Path():
+            raise
+        raise DegenerateDataError(exc.problem, file=Path(folder) / exc.file) from None
+    report = None
+    if chain:
+        report = calibrate_chain(
+            session,
+            robot,
+            result,
+            bootstrap_replicates=bootstrap_replicates,
+            joint_offsets=joint_offsets,
+            progress=progress,
+        )
+    return SessionCalibration(session, result, report)
