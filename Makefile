@@ -14,11 +14,13 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks examples urdf
+	$(BIN)/mypy
 	$(BIN)/python -m pytest
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks examples urdf
 	$(BIN)/ruff format --check src tests benchmarks examples urdf
+	$(BIN)/mypy
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/fk_throughput.py
@@ -34,4 +36,4 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 clean:
-	rm -rf $(VENV) demo_output .pytest_cache .hypothesis .ruff_cache
+	rm -rf $(VENV) demo_output .pytest_cache .hypothesis .ruff_cache .mypy_cache

@@ -1,17 +1,20 @@
 """Every figure the README claims about the whole-chain method, measured on the twin over seeds.
 
-Run: ``.venv/bin/python benchmarks/chain_checks.py [RUNS] [OUTLIER_SEEDS]`` (defaults 40 and 20;
-about 15 minutes on one core). Prints:
+Run: ``.venv/bin/python benchmarks/chain_checks.py [RUNS] [OUTLIER_SEEDS] [--coverage-only]``
+(defaults 40 and 20; ``--coverage-only``: section 1 without the bootstrap, about 15 minutes on a
+busy 2-core machine). Prints:
 
-1. **Coverage** of the stated 95 % intervals over RUNS twin sessions (seeds 100…), on the default
-   twin and on a twin whose robot is exactly the URDF (``kinematic_error=False``: the premise of
-   the covariance, which contains the session's noise but not the robot model's own error). For
-   the speed of sound (interval), the needle and probe tips (the 3D 95 % ellipsoid, χ²₃; and each
-   coordinate, covariance and bootstrap percentile intervals), and the landing error (the 3D
-   ellipsoid of the predicted covariance at 20 targets per session: the first target, one per
-   session, and all of them; "calibration part" aims with exact joint readings, "total" with the
-   twin's encoder noise). Each rate k/n comes with its Wilson 95 % range, next to the range a
-   calibrated 95 % interval gives over n runs; the standardised errors' SD (1 when calibrated).
+1. **Coverage** of the stated 95 % intervals over RUNS twin sessions (seeds 100…): on the default
+   twin with the robot accuracy stated at the twin's own level (the default, :data:`STATED`),
+   stated 2x too small, and not stated (the session's noise alone); and on a twin whose robot is
+   exactly the URDF (``kinematic_error=False``), stated 0. For the speed of sound (interval), the
+   needle and probe tips (the 3D 95 % ellipsoid, χ²₃; and each coordinate, covariance and, for the
+   default statement, bootstrap percentile intervals), and the landing error (the 3D ellipsoid of
+   the predicted covariance at 20 targets per session: the first target, one per session, and all
+   of them; "calibration part" aims with exact joint readings and leaves the readings' noise out of
+   the prediction, "total" with the twin's encoder noise and in the prediction). Each rate k/n
+   comes with its Wilson 95 % range, next to the range a calibrated 95 % interval gives over n
+   runs; the standardised errors' SD (1 when calibrated).
 2. **Outliers**: 10 % gross annotation mistakes against the clean session of the same seed
    (seeds 0…OUTLIER_SEEDS−1): the targeting-error ratio's distribution, and whether the flagged
    images are exactly the mistakes.
@@ -31,7 +34,7 @@ import numpy as np
 from scipy.stats import binom, norm
 
 from brachycal.calibration import calibrate
-from brachycal.calibration.chain import fit_chain, select_model
+from brachycal.calibration.chain import DEFAULT_ROBOT_ACCURACY, RobotAccuracy, fit_chain, select_model
 from brachycal.calibration.chain_report import WARN_LANDING_RMS_MM
 from brachycal.calibration.uncertainty import bootstrap, inside_ellipsoid, interval, landing_covariance
 from brachycal.model import Robot
@@ -63,9 +66,26 @@ def rate(label: str, k: int, n: int, binomial: bool = True) -> str:
     )
 
 
-def one_session(robot: Robot, seed: int, kinematic_error: bool, with_bootstrap: bool) -> dict:
+#: Stated robot accuracies of the coverage runs: the twin's own level (default), the same stated
+#: 2x too small, and none (the session's noise alone).
+STATED = {
+    "stated = the twin's": DEFAULT_ROBOT_ACCURACY,
+    "stated 2x too small": RobotAccuracy(
+        DEFAULT_ROBOT_ACCURACY.translation_sd_m / 2,
+        DEFAULT_ROBOT_ACCURACY.rotation_sd_rad / 2,
+        DEFAULT_ROBOT_ACCURACY.encoder_sd_rad / 2,
+        "half the twin's",
+    ),
+    "noise only (no robot term)": None,
+}
+
+
+def one_session(
+    robot: Robot, seed: int, kinematic_error: bool, with_bootstrap: bool, accuracy: RobotAccuracy | None
+) -> dict:
     twin = simulate(robot, replace(TwinConfig(seed=seed), kinematic_error=kinematic_error))
-    fit = fit_chain(twin.session, robot, calibrate(twin.session, robot, ("scaled_uv",)), "sound_speed")
+    initial = calibrate(twin.session, robot, ("scaled_uv",))
+    fit = fit_chain(twin.session, robot, initial, "sound_speed", robot_accuracy=accuracy)
     truth = twin.truth
     out: dict = {}
     low, high = interval(fit, "scale")
@@ -96,18 +116,22 @@ def one_session(robot: Robot, seed: int, kinematic_error: bool, with_bootstrap: 
     exact_reading = replace(twin, config=replace(twin.config, encoder_noise=False))
     for part, tw in (("calibration", exact_reading), ("total", twin)):
         hit = targeting_error(tw, fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image, TARGETS)
-        C = landing_covariance(fit, robot, twin.session.spacing_m, hit.q_read, hit.uv_px)
+        C = landing_covariance(fit, robot, twin.session.spacing_m, hit.q_read, hit.uv_px, encoder_noise=part == "total")
         inside = inside_ellipsoid(hit.landed_m - hit.targets_m, C, LEVEL)
         out[f"landing_{part}_first"] = bool(inside[0])
         out[f"landing_{part}_all"] = int(inside.sum())
     return out
 
 
-def coverage(robot: Robot, runs: int) -> None:
-    for kinematic_error in (True, False):
+def coverage(robot: Robot, runs: int, with_bootstrap: bool = True) -> None:
+    scenarios = [(True, label, accuracy) for label, accuracy in STATED.items()]
+    exact = RobotAccuracy(0.0, 0.0, DEFAULT_ROBOT_ACCURACY.encoder_sd_rad, "exact geometry, the twin's encoder noise")
+    scenarios.append((False, "geometry stated exact", exact))
+    for kinematic_error, label, accuracy in scenarios:
         title = "default twin" if kinematic_error else "twin whose robot is exactly the URDF (kinematic_error=False)"
-        print(f"\n1. COVERAGE OF STATED 95 % INTERVALS, {runs} sessions (seeds 100..{99 + runs}), {title}:")
-        rows = [one_session(robot, 100 + i, kinematic_error, kinematic_error) for i in range(runs)]
+        print(f"\n1. COVERAGE OF STATED 95 % INTERVALS, {runs} sessions (seeds 100..{99 + runs}), {title}, {label}:")
+        boot = with_bootstrap and kinematic_error and accuracy is DEFAULT_ROBOT_ACCURACY
+        rows = [one_session(robot, 100 + i, kinematic_error, boot, accuracy) for i in range(runs)]
 
         def count(key: str, rows: list[dict] = rows) -> int:
             return int(sum(r[key] for r in rows))
@@ -127,13 +151,13 @@ def coverage(robot: Robot, runs: int) -> None:
                 f"  {'':<46} RMS error x, y, z {np.sqrt((errors**2).mean(0)).round(3).tolist()} mm; "
                 f"stated SD {np.sqrt((sds**2).mean(0)).round(3).tolist()} mm"
             )
-            if kinematic_error:
+            if boot:
                 half = np.array([r[f"{tool}_boot_halfwidth_mm"] for r in rows])
                 print(
                     rate(f"{tool} tip, bootstrap ({BOOTSTRAP}) each coordinate", count(f"{tool}_boot_coords"), 3 * runs)
                     + f"; half-widths {half.min():.3f}..{half.max():.3f} mm"
                 )
-        if kinematic_error:
+        if boot:
             print(rate(f"speed of sound, bootstrap ({BOOTSTRAP})", count("c_boot_in"), runs))
         for part in ("calibration", "total"):
             print(rate(f"landing, {part} part, first target", count(f"landing_{part}_first"), runs))
@@ -222,7 +246,10 @@ if __name__ == "__main__":
     warnings.simplefilter("ignore", ConditioningWarning)  # the sequential start's grey-zone notes
     start = time.perf_counter()
     robot = Robot.load()
-    coverage(robot, int(sys.argv[1]) if len(sys.argv) > 1 else 40)
-    outliers_and_targeting(robot, int(sys.argv[2]) if len(sys.argv) > 2 else 20)
-    joint_offsets(robot)
+    coverage_only = "--coverage-only" in sys.argv  # coverage without the bootstrap, sections 2-5 skipped
+    numbers = [a for a in sys.argv[1:] if not a.startswith("--")]
+    coverage(robot, int(numbers[0]) if numbers else 40, with_bootstrap=not coverage_only)
+    if not coverage_only:
+        outliers_and_targeting(robot, int(numbers[1]) if len(numbers) > 1 else 20)
+        joint_offsets(robot)
     print(f"\n({time.perf_counter() - start:.0f} s)")

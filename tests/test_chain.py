@@ -17,21 +17,31 @@ from scipy.stats import chi2
 
 from brachycal.calibration import calibrate
 from brachycal.calibration.chain import (
+    DEFAULT_ROBOT_ACCURACY,
     MODELS,
     ROTATION_SD_LIMIT,
-    _Data,
-    _jacobian,
-    _Layout,
-    _residuals,
+    ChainData,
+    ParameterLayout,
+    RobotAccuracy,
     _start,
+    chain_jacobian,
+    chain_residuals,
     fit_chain,
     identifiable_joint_offsets,
+    robot_jacobian,
     select_model,
 )
 from brachycal.calibration.chain_report import WARN_LANDING_RMS_MM, calibrate_chain
-from brachycal.calibration.uncertainty import bootstrap, interval, landing_covariance
+from brachycal.calibration.uncertainty import (
+    bootstrap,
+    interval,
+    landing_covariance,
+    landing_jacobian,
+    landing_robot_jacobians,
+)
 from brachycal.cli.main import main
-from brachycal.errors import DegenerateDataError
+from brachycal.errors import DegenerateDataError, InputError
+from brachycal.se3 import make_transform
 from brachycal.simulation.design import grid_offsets, optimal_offsets
 from brachycal.simulation.targeting import targeting_error
 from brachycal.simulation.twin import TwinConfig, simulate
@@ -58,22 +68,22 @@ def test_noise_free_twin_every_image_model_is_exact(robot):
 
 def test_analytic_jacobian_matches_central_differences(robot, stretched):
     twin, sequential = stretched
-    data = _Data.of(twin.session, robot)
+    data = ChainData.of(twin.session, robot)
     rng = np.random.default_rng(0)
     sigma = {"touch": 1e-4, "axes": 2e-4, "image": 3e-4}
     use = rng.random(len(twin.session.uv_px)) > 0.2
     for model in MODELS:
-        layout = _Layout(model)
+        layout = ParameterLayout(model)
         x, base = _start(sequential, layout, data.spacing_m)
         for name in ("rot_ER_Ntip", "rot_EL_Ptip", "rot_Ptip_I"):  # away from the start: J_l(ω) ≠ I matters
             x[layout.blocks()[name]] += rng.normal(scale=0.05, size=3)
         step = 1e-6
 
         def r(x: np.ndarray, layout=layout, base=base) -> np.ndarray:
-            return _residuals(x, layout, data, base, sigma, use)
+            return chain_residuals(x, layout, data, base, sigma, use)
 
         numeric = np.column_stack([(r(x + step * e) - r(x - step * e)) / (2 * step) for e in np.eye(len(x))])
-        analytic = _jacobian(x, layout, data, base, sigma, use)
+        analytic = chain_jacobian(x, layout, data, base, sigma, use)
         # Central differences are exact to ~1e-10 of the largest entry here (step² × curvature,
         # rounding / step); a wrong term would be off by its own size.
         assert np.abs(analytic - numeric).max() < 1e-8 * np.abs(numeric).max(), model
@@ -149,10 +159,13 @@ def _parameter_errors(fit, truth) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(errors), G @ fit.covariance @ G.T
 
 
+EXACT_ROBOT = RobotAccuracy(0.0, 0.0, 0.0, "exact")
+
+
 def test_stated_uncertainty_is_calibrated_on_both_sides(robot):
-    """Standardised errors over 8 sessions of a twin whose robot is exactly its model (the
-    covariance's premise: it carries the session's noise, not the robot model's own error; the
-    default twin's coverage, with that error, is the benchmark's section 1).
+    """Standardised errors over 8 sessions of a twin whose robot is exactly its model, stated so
+    (robot accuracy 0: the covariance is the session's noise alone; the default twin, with robot
+    error stated at its level, is :func:`test_stated_uncertainty_with_robot_error_is_calibrated`).
 
     Under the model, each session's 19 parameter errors (tips, reference tips, depth scale, image
     frame) give d² ~ χ²₁₉ and each session's landing error at one target d² ~ χ²₃, independent across
@@ -164,7 +177,8 @@ def test_stated_uncertainty_is_calibrated_on_both_sides(robot):
     runs, parameter_d2, landing_d2, parameter_dof = 8, 0.0, 0.0, 0
     for seed in range(10, 10 + runs):
         twin = simulate(robot, replace(TwinConfig(seed=seed), kinematic_error=False))
-        fit = fit_chain(twin.session, robot, calibrate(twin.session, robot, ("scaled_uv",)), "sound_speed")
+        initial = calibrate(twin.session, robot, ("scaled_uv",))
+        fit = fit_chain(twin.session, robot, initial, "sound_speed", robot_accuracy=EXACT_ROBOT)
         error, C = _parameter_errors(fit, twin.truth)
         parameter_d2 += error @ np.linalg.solve(C, error)
         parameter_dof += len(error)
@@ -180,9 +194,108 @@ def test_stated_uncertainty_is_calibrated_on_both_sides(robot):
     assert low <= landing_d2 <= high, landing_d2 / (3 * runs)
 
 
-def test_bootstrap_sees_the_touches(robot, stretched):
+def test_stated_uncertainty_with_robot_error_is_calibrated(robot):
+    """The default twin (its physical robot off its URDF by 0.03 mm / 0.003° per joint, the default
+    stated accuracy): the covariance with the robot term must cover the tips, reference tips,
+    depth scale and image frame, and the landing error when aiming with noisy joint readings.
+
+    The same χ² argument as above (Σd² ~ χ²₁₅₂ and χ²₂₄ over 8 sessions, two-sided 99 % bounds).
+    Without the robot term the tips' errors are 1.3-2× their noise-only SD
+    (``benchmarks/chain_checks.py``): the bound fails that covariance, and one stated 2× too small.
+    """
+    runs, parameter_d2, landing_d2, parameter_dof, noise_only_d2 = 8, 0.0, 0.0, 0, 0.0
+    for seed in range(20, 20 + runs):
+        twin = simulate(robot, TwinConfig(seed=seed))
+        initial = calibrate(twin.session, robot, ("scaled_uv",))
+        fit = fit_chain(twin.session, robot, initial, "sound_speed")
+        error, C = _parameter_errors(fit, twin.truth)
+        parameter_d2 += error @ np.linalg.solve(C, error)
+        noise_only = fit_chain(twin.session, robot, initial, "sound_speed", robot_accuracy=None)  # as before
+        noise_only_d2 += error @ np.linalg.solve(_parameter_errors(noise_only, twin.truth)[1], error)
+        parameter_dof += len(error)
+        hit = targeting_error(twin, fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image, 1)  # encoder noise when aiming
+        C_land = landing_covariance(fit, robot, twin.session.spacing_m, hit.q_read, hit.uv_px)[0]
+        e = hit.landed_m[0] - hit.targets_m[0]
+        landing_d2 += e @ np.linalg.solve(C_land, e)
+    low, high = chi2.ppf([0.005, 0.995], parameter_dof)
+    assert low <= parameter_d2 <= high, (parameter_d2 / parameter_dof, low / parameter_dof, high / parameter_dof)
+    assert noise_only_d2 > high, noise_only_d2 / parameter_dof  # the robot term is what makes it right
+    low, high = chi2.ppf([0.005, 0.995], 3 * runs)
+    assert low <= landing_d2 <= high, landing_d2 / (3 * runs)
+
+
+def test_robot_jacobian_matches_a_perturbed_urdf(robot, stretched):
+    """``J_c`` (flange poses moved by each joint origin's twist) against the residuals of robots
+    whose URDF origins are rewritten (:meth:`Robot.with_joint_origins`, the twin's way): torso,
+    both arms, translations and rotations. Measured agreement ~1e-9 relative; 1e-6 leaves room
+    for the URDF text's rounding while failing any wrong frame, sign or ancestry (order-1 errors).
+    """
     twin, sequential = stretched
     fit = fit_chain(twin.session, robot, sequential, "sound_speed")
+    J_c = robot_jacobian(twin.session, robot, fit)
+    layout, keep, step = ParameterLayout(fit.model), ~fit.outliers, 1e-6
+
+    def residuals(moved_robot) -> np.ndarray:
+        return chain_residuals(fit.x, layout, ChainData.of(twin.session, moved_robot), fit.base, fit.sigma_m, keep)
+
+    for j, d in [(0, 0), (0, 4), (3, 1), (5, 5), (10, 2), (12, 3), (14, 5)]:
+        name, sides = robot.joint_names[j], []
+        for sign in (1, -1):
+            xi = np.zeros(6)
+            xi[d] = sign * step
+            motion = make_transform(Rotation.from_rotvec(xi[3:]).as_matrix(), xi[:3])
+            sides.append(residuals(robot.with_joint_origins({name: robot.joint_origin(name) @ motion})))
+        independent = (sides[0] - sides[1]) / (2 * step)
+        column = J_c[:, 6 * j + d]
+        assert np.linalg.norm(column - independent) < 1e-6 * np.linalg.norm(column), (name, d)
+    # The landing's robot Jacobian (analytic) is the image residual's: the same numbers as J_c's image rows.
+    L_c, _ = landing_robot_jacobians(fit, robot, twin.session.spacing_m, twin.session.samples_q, twin.session.uv_px)
+    image_rows = J_c[-3 * int(keep.sum()) :].reshape(-1, 3, J_c.shape[1]) * fit.sigma_m["image"]
+    assert np.abs(L_c[keep] - image_rows).max() < 1e-6 * np.abs(image_rows).max()
+
+
+def test_robot_term_vanishes_with_zero_accuracy_and_scales_with_its_square(robot, stretched):
+    twin, sequential = stretched
+    q, uv = twin.session.samples_q[:5], twin.session.uv_px[:5]
+    exact = fit_chain(twin.session, robot, sequential, "sound_speed", robot_accuracy=EXACT_ROBOT)
+    assert np.array_equal(exact.covariance, exact.noise_covariance)
+    G = landing_jacobian(exact, robot, twin.session.spacing_m, q, uv)
+    no_robot = landing_covariance(exact, robot, twin.session.spacing_m, q, uv, encoder_noise=False)
+    assert np.allclose(no_robot, G @ exact.noise_covariance @ np.swapaxes(G, 1, 2), rtol=1e-12, atol=0)
+    default = fit_chain(twin.session, robot, sequential, "sound_speed")
+    double = fit_chain(
+        twin.session,
+        robot,
+        sequential,
+        "sound_speed",
+        robot_accuracy=RobotAccuracy(
+            2 * DEFAULT_ROBOT_ACCURACY.translation_sd_m,
+            2 * DEFAULT_ROBOT_ACCURACY.rotation_sd_rad,
+            2 * DEFAULT_ROBOT_ACCURACY.encoder_sd_rad,
+        ),
+    )
+    plain = fit_chain(twin.session, robot, sequential, "sound_speed", robot_accuracy=None)
+    assert np.allclose(exact.covariance, plain.covariance, rtol=0, atol=1e-9 * np.abs(plain.covariance).max())
+    assert np.array_equal(default.x, exact.x)  # the stated accuracy changes the intervals, never the estimate
+    # The robot's error seen in the residuals (the touches' spread) is not counted twice: each
+    # group keeps the share of its residual variance the stated accuracy does not explain.
+    assert all(0.0 <= double.noise_share[g] <= default.noise_share[g] <= 1.0 for g in default.noise_share)
+    assert default.noise_share["touch"] < 0.9
+    term = default.covariance - default.noise_covariance
+    assert np.linalg.eigvalsh(term).min() > -1e-12 * np.abs(term).max()  # a covariance: only ever widens
+    # Linear in Σ_c: twice the SDs, four times the term (to rounding: 1e-9 of it).
+    assert np.allclose(double.covariance - double.noise_covariance, 4 * term, rtol=0, atol=1e-9 * np.abs(term).max())
+    k = default.block("p_EL_Ptip")  # the probe tip is what the robot's error moves most (left arm vs right)
+    assert np.trace(term[k, k]) > 0.5 * np.trace(default.noise_covariance[k, k])
+    with pytest.raises(InputError, match="translation SD"):
+        RobotAccuracy(-1e-5)
+
+
+def test_bootstrap_sees_the_touches(robot, stretched):
+    twin, sequential = stretched
+    # Resampling the session sees its residuals (noise and the robot error they show), not the
+    # stated robot accuracy: compared with the covariance of the residuals' levels alone.
+    fit = fit_chain(twin.session, robot, sequential, "sound_speed", robot_accuracy=None)
     boot = bootstrap(twin.session, robot, fit, 200, seed=1)
     for name in ("p_ER_Ntip", "p_EL_Ptip", "sound_speed_m_s"):
         lo, hi = boot.interval(name)
@@ -271,6 +384,10 @@ def test_calibrate_chain_cli_and_locate_with_joint_offsets(tmp_path, capsys):
                 "--joint-offsets",
                 "--bootstrap",
                 "5",
+                "--robot-accuracy-mm",
+                "0.1",
+                "--robot-accuracy-deg",
+                "0.01",
                 "--quiet",
             ]
         )
@@ -285,6 +402,9 @@ def test_calibrate_chain_cli_and_locate_with_joint_offsets(tmp_path, capsys):
     chain = raw["chain"]
     assert chain["model"] in MODELS and set(chain["model_selection"]["evidence"]) == set(MODELS)
     assert chain["joint_offsets_rad"] and "bootstrap_spacing_m" in chain["intervals_95"]
+    stated = chain["robot_accuracy"]  # what the intervals assumed, as given on the command line
+    assert (stated["joint_translation_sd_mm"], stated["joint_rotation_sd_deg"]) == pytest.approx((0.1, 0.01))
+    assert "robot accuracy" in chain["intervals_contain"] or "robot_accuracy" in chain["intervals_contain"]
     assert "bootstrap_p_ER_Ntip" in chain["intervals_95"] and "bootstrap_p_EL_Ptip" in chain["intervals_95"]
     assert chain["noise"]["axes"]["source"] == "assumed" and chain["noise"]["image"]["source"] == "residuals"
     assert chain["conditioning"]["rcond"] > chain["conditioning"]["rcond_limit"]

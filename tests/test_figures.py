@@ -19,10 +19,11 @@ TESTS = Path(__file__).parent
 
 def every_figure(folder: Path) -> list[Figure]:
     """Build every figure of the library and save each through its save function into ``folder``."""
+    from brachycal import reporting
     from brachycal.calibration.metrics import ErrorStats
     from brachycal.model import Robot
     from brachycal.planning import PlanSpec, plan_poses
-    from brachycal.reporting import figures, plan_figure, scene
+    from brachycal.reporting import figures, scene
 
     rng = np.random.default_rng(0)
     p_real = rng.normal(scale=0.02, size=(12, 3))
@@ -53,7 +54,7 @@ def every_figure(folder: Path) -> list[Figure]:
         figures.method_comparison_figure(stats, "t"),
         figures.residuals_per_sample_figure(stats, ids),
         figures.study_figure(summary),
-        plan_figure.plan_figure(plan),
+        reporting.plan_figure(plan),
         scene.scene_figure(the_scene),
     ]
     figures.error_histogram(stats["kabsch"], folder / "hist.png", "t")
@@ -61,7 +62,7 @@ def every_figure(folder: Path) -> list[Figure]:
     figures.method_comparison(stats, folder / "methods.png", "t")
     figures.residuals_per_sample(stats, ids, folder / "residuals.png")
     figures.save_figure(built[4], folder / "study.png", dpi=50)
-    plan_figure.plot_plan(plan, folder / "plan.png")
+    reporting.plot_plan(plan, folder / "plan.png")
     scene.render_png(the_scene, folder / "scene.png")
     return built
 

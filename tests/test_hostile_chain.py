@@ -87,6 +87,27 @@ CASES = [
 ]
 
 
+def copied(tmp: Path) -> None:
+    shutil.copytree(ROOT / "examples" / "twin_session", tmp / "session")
+
+
+SEQUENTIAL = ["calibrate", "{tmp}/session", "--out", "{tmp}/result.json", "--quiet"]
+# The stated robot accuracy: a finite SD from 0 up to the typo guards (10 mm, 1 deg), chain only.
+CASES += [
+    Case("robot-accuracy-mm-negative", [*CHAIN, "--robot-accuracy-mm", "-0.03"], ("--robot-accuracy-mm",), copied),
+    Case("robot-accuracy-mm-nan", [*CHAIN, "--robot-accuracy-mm", "nan"], ("--robot-accuracy-mm",), copied),
+    Case("robot-accuracy-mm-huge", [*CHAIN, "--robot-accuracy-mm", "50"], ("--robot-accuracy-mm", "10"), copied),
+    Case("robot-accuracy-deg-inf", [*CHAIN, "--robot-accuracy-deg", "inf"], ("--robot-accuracy-deg",), copied),
+    Case("robot-accuracy-deg-huge", [*CHAIN, "--robot-accuracy-deg", "5"], ("--robot-accuracy-deg", "1"), copied),
+    Case(
+        "robot-accuracy-without-chain",
+        [*SEQUENTIAL, "--robot-accuracy-mm", "0.1"],
+        ("--robot-accuracy-mm", "--method chain"),
+        copied,
+    ),
+]
+
+
 @pytest.mark.parametrize("case", CASES, ids=lambda c: c.id)
 def test_chain_refuses_samples_that_cannot_determine_it(case: Case, tmp_path: Path) -> None:
     check_refusal(case, tmp_path)

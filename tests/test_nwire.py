@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -178,3 +179,37 @@ def test_cli(tmp_path, capsys):
     assert np.allclose(payload["affine_spacing_mm"], [0.08033, 0.07446], atol=1e-5)
     assert main(["nwire", str(plus(FRAMES)), str(plus(FRAMES)), "--out", str(tmp_path / "x.json")]) == 2
     assert "no N-wire patterns" in capsys.readouterr().err
+
+
+def test_frame_or_configuration_without_a_transform_is_refused_naming_it():
+    """A segmented frame built in code without a tracker reading, or a configuration without the
+    phantom registration, is one InputError naming the file and the frame — not a TypeError from
+    multiplying by None (nor a KeyError)."""
+    T_marker_image = make_transform(np.eye(3), [0.02, -0.01, 0.03])
+    config, frames, _ = simulate_nwire(
+        T_marker_image, np.array([0.19e-3, 0.19e-3]), (1080, 720), NWireSimConfig().without_noise()
+    )
+    calibration = calibrate_nwire(*wire_point_pairs(config, frames)[:2], 0.19e-3)
+    k = next(i for i, f in enumerate(frames) if f.ok)
+    for field, reading in (
+        ("T_tracker_probe", "ProbeToTrackerTransform"),
+        ("T_tracker_reference", "ReferenceToTrackerTransform"),
+    ):
+        broken = list(frames)
+        broken[k] = dataclasses.replace(frames[k], source="frames.xml", label="CalibrationData Frame", **{field: None})
+        where = rf"^frames\.xml, CalibrationData Frame {frames[k].index}: segmented frame has no {reading} tracker"
+        with pytest.raises(InputError, match=where):
+            wire_point_pairs(config, broken)
+        with pytest.raises(InputError, match=where):
+            wire_errors_2d(calibration, config, broken)
+    unregistered = dataclasses.replace(
+        config,
+        source="device_set.xml",
+        transforms={key: T for key, T in config.transforms.items() if key[0] != "Phantom"},
+    )
+    for refused in (
+        lambda: wire_point_pairs(unregistered, frames),
+        lambda: wire_errors_2d(calibration, unregistered, frames),
+    ):
+        with pytest.raises(InputError, match=r"^device_set\.xml: the configuration has no Phantom->Reference"):
+            refused()

@@ -131,5 +131,5 @@ def test_cli_writes_result_and_refuses_bad_rows(tmp_path, capsys):
     bad.write_text("\n".join(lines) + "\n")
     assert main(["pivot", str(bad), "--out", str(tmp_path / "b.json")]) == 2
     err = capsys.readouterr().err
-    assert "bad.csv, row 7: rotation part is not a proper orthonormal matrix" in err and err.count("\n") == 1
+    assert "bad.csv, row 7: matrix is not a rigid transform" in err and err.count("\n") == 1
     assert not (tmp_path / "b.json").exists()

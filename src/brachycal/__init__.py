@@ -1,9 +1,14 @@
 """brachycal: calibration of an ultrasound-guided dual-arm robot for prostate brachytherapy.
 
-Layers, from the bottom: :mod:`brachycal.se3` (rigid transforms), :mod:`brachycal.model` (the
-SDA10F with its tool frames, kinematics on Pinocchio), :mod:`brachycal.data` (joint logs and pose
-tables), :mod:`brachycal.cli` (the ``brachycal`` command). Units are SI (metres, radians,
-seconds); ``T_a_b`` is the pose of frame b in frame a.
+Import from the subpackages, bottom layer first: :mod:`brachycal.model` (the SDA10F with its tool
+frames, kinematics on Pinocchio), :mod:`brachycal.data` (joint logs, sessions, pose tables, PLUS
+files), :mod:`brachycal.imaging` (pixels ↔ points of the image frame), :mod:`brachycal.calibration`
+(the estimators and result files), :mod:`brachycal.planning` (sample poses),
+:mod:`brachycal.simulation` (exact sessions, the digital twin), :mod:`brachycal.reporting` (tables,
+figures, reports), :mod:`brachycal.export` (URDF, Slicer, PLUS, ROS); foundations:
+:mod:`brachycal.se3` (rigid transforms), :mod:`brachycal.errors`, :mod:`brachycal.files` (the
+output writer), :mod:`brachycal.validate`. Units are SI (metres, radians, seconds); ``T_a_b`` is
+the pose of frame b in frame a (``p_a = T_a_b @ p_b``); see ``docs/conventions.md``.
 """
 
 from brachycal.data import JointLog, read_joint_log, write_pose_table

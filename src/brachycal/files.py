@@ -364,7 +364,7 @@ def _lock(destination: Path) -> tuple[Path, int]:
 
 
 def _unlock(claim: _Claim) -> None:
-    if claim.lock_fd is None:
+    if claim.lock_fd is None or claim.lock_path is None:  # _lock sets both or neither
         return
     with contextlib.suppress(OSError):
         os.unlink(claim.lock_path)  # while still holding it: see _lock
@@ -526,8 +526,17 @@ def sha256_bytes(data: bytes | str) -> str:
 
 
 def sha256_file(path: str | os.PathLike[str]) -> str:
-    """Hex SHA-256 of a file's bytes (the provenance results and reports record for each input)."""
-    return sha256_bytes(Path(path).read_bytes())
+    """Hex SHA-256 of a file's bytes, or of a folder's files (a ROS 2 bag): each file's path
+    relative to the folder, a NUL byte and its bytes, in sorted order. The provenance results and
+    reports record for each input."""
+    path = Path(path)
+    if not path.is_dir():
+        return sha256_bytes(path.read_bytes())
+    digest = hashlib.sha256()
+    for item in sorted(p for p in path.rglob("*") if p.is_file()):
+        digest.update(str(item.relative_to(path)).encode() + b"\0")
+        digest.update(item.read_bytes())
+    return digest.hexdigest()
 
 
 def bundled(*parts: str) -> Path:

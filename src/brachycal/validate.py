@@ -368,7 +368,7 @@ def parse_number_list(
         raise InputError(f"{_where(name)}must be {count} comma-separated numbers, got {len(items)} in {text!r}")
     if len(items) > max_items:
         raise InputError(f"{_where(name)}takes at most {max_items} values, got {len(items)}")
-    values = []
+    values: list[int | float] = []
     for k, item in enumerate(items, start=1):
         label = f"{name} value {k}".strip() if len(items) > 1 else name
         if not item:

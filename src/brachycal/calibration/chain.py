@@ -52,17 +52,27 @@ data only see it through the reference tips, which are unknown too) and each arm
 (its offset is a turn about the flange axis, which the tool transforms absorb). The others are
 estimated with a weak prior (0.01° SD) that keeps poorly excited ones near zero.
 
-What the covariance does not contain: the robot model's own error (the physical robot's joint
-origins differ from the URDF's). Where the session's data see it (the spread of touches across
-poses, of images across the cube) it is in the noise levels; where they cannot (e.g. an offset of
-the left arm against the right one, which the probe-tip touches cannot tell from the probe tip)
-it is not. ``benchmarks/chain_checks.py`` measures both on the twin.
+The robot model's own error (consider covariance, :class:`RobotAccuracy`): the physical robot's
+joint origins differ from the URDF's. Where the session's data see it (the spread of touches
+across poses, of images across the cube) it is in the noise levels; where they cannot (e.g. an
+offset of the left arm against the right one, which the probe-tip touches cannot tell from the
+probe tip) it shifts the estimate without any trace in the residuals. With a stated accuracy —
+each joint's origin off by a small motion ``c_j`` (translation ``v``, rotation ``ω`` about the
+origin's own axes, plus a zero offset about the joint axis: the model
+:func:`brachycal.simulation.twin.physical_kinematics` draws from), ``Σ_c`` its covariance — the
+estimate's sensitivity is ``S = (JᵀJ)⁻¹ Jᵀ J_c`` (``J_c`` the normalised residuals' Jacobian with
+respect to the 6 components of every ``c_j``, :func:`robot_jacobian`) and the stated covariance
+``(JᵀJ)⁻¹ + S Σ_c Sᵀ``. (Sign: ``c`` is the physical robot's deviation from the model; at the true
+parameters the model's residuals are ``−J_c c``, so the estimate moves by ``+(JᵀJ)⁻¹Jᵀ J_c c``;
+the sign matters for the landing error, where this shift and ``c``'s direct effect partly cancel.)
+``benchmarks/chain_checks.py`` measures the coverage on the twin.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -72,11 +82,13 @@ from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.sequential import CalibrationResult
 from brachycal.data.session import Session
 from brachycal.errors import DegenerateDataError, InputError
+from brachycal.imaging import SCANNER_SOUND_SPEED_M_S
 from brachycal.model.names import LEFT_FLANGE, RIGHT_FLANGE
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, make_transform, transform_points
+from brachycal.validate import check_range
 
-SCANNER_SOUND_SPEED = 1540.0
+SCANNER_SOUND_SPEED = SCANNER_SOUND_SPEED_M_S  # one home: brachycal.imaging
 MODELS = ("rigid", "similarity", "scaled_uv", "sound_speed")
 #: Starting noise levels (metres per coordinate) of the residual groups; also the level assumed
 #: for a group with too few residual degrees of freedom to estimate its own.
@@ -95,11 +107,11 @@ MIN_NOISE_DOF = 8.0
 RESOLUTION_M = 1e-6
 #: Reciprocal condition number (smallest over largest singular value of the normalised Jacobian
 #: with unit-norm columns) below which a combination of the unknowns counts as undetermined. The
-#: Jacobian is analytic (exact to rounding), but with joint offsets it comes from forward
-#: differences with relative steps of ~1.5e-8, whose entries carry relative errors of that order:
-#: a singular value 1e-8 of the largest cannot be told from zero. An exactly degenerate session
-#: (every sample at one pose) measures ~1e-17; sessions that span the prostate cube 7e-3–2e-2
-#: (twin seeds 0–19, `benchmarks/chain_checks.py`).
+#: Jacobian is analytic, exact to rounding: an exactly degenerate session (every sample at one
+#: pose) measures ~1e-17, sessions that span the prostate cube 7e-3–2e-2 (twin seeds 0–19,
+#: `benchmarks/chain_checks.py`); 1e-8 sits far from both, and the grey zone between is left to
+#: the rotation check below. (Joint offsets' columns come from forward differences, relative
+#: errors ~1e-7, but their prior keeps them determined whatever the data.)
 RCOND_LIMIT = 1e-8
 #: Largest accepted SD (rad) of a fitted rotation (largest axis of its 3×3 covariance). The
 #: intervals and the predicted landing error are linearisations; the second-order term of a
@@ -110,8 +122,76 @@ RCOND_LIMIT = 1e-8
 ROTATION_SD_LIMIT = 0.05
 
 
+#: Largest stated per-joint placement error (typo guards, 100 times issue 19's 0.1 mm / 0.01° for
+#: real arms): beyond them the URDF does not describe the robot and no linearisation holds.
+MAX_ROBOT_TRANSLATION_SD_M = 1e-2
+MAX_ROBOT_ROTATION_SD_RAD = np.radians(1.0)
+MAX_ENCODER_SD_RAD = 1e-2
+
+
+@dataclass(frozen=True)
+class RobotAccuracy:
+    """How far the physical robot is from its URDF, as stated by the user (not estimated).
+
+    Per joint, independent and zero-mean: the joint's origin is off by a translation of
+    ``translation_sd_m`` SD per axis (metres) and a rotation of ``rotation_sd_rad`` SD per axis
+    (radians, about the origin's own axes), and its zero by ``rotation_sd_rad`` SD about its axis
+    (the model the twin draws its physical robot from). ``encoder_sd_rad`` is the SD of each joint
+    reading (radians): it enters the landing error when aiming (the probe arm's and torso's
+    readings place the target).
+
+    Defaults (:data:`DEFAULT_ROBOT_ACCURACY`): the twin's well-built arm, 0.03 mm / 0.003° per
+    joint and 2e-5 rad per reading. The vendor states ±0.1 mm repeatability (not accuracy), and
+    arms off their URDF by 0.1 mm / 0.01° per joint are common (issue 19): state the arm's own
+    figures when known; a figure stated too small gives intervals too narrow.
+
+    Raises:
+        InputError: a value is negative, not finite, or beyond the typo guards above.
+    """
+
+    translation_sd_m: float = 3e-5
+    rotation_sd_rad: float = float(np.radians(0.003))
+    encoder_sd_rad: float = 2e-5
+    source: str = "default: the twin's well-built arm (0.03 mm / 0.003 deg per joint, 2e-5 rad per reading)"
+
+    def __post_init__(self) -> None:
+        check_range(
+            self.translation_sd_m, "robot accuracy (translation SD)", low=0.0, high=MAX_ROBOT_TRANSLATION_SD_M, unit="m"
+        )
+        check_range(
+            self.rotation_sd_rad, "robot accuracy (rotation SD)", low=0.0, high=MAX_ROBOT_ROTATION_SD_RAD, unit="rad"
+        )
+        check_range(self.encoder_sd_rad, "robot accuracy (encoder SD)", low=0.0, high=MAX_ENCODER_SD_RAD, unit="rad")
+
+    def covariance(self, robot: Robot) -> FloatArray:
+        """``(6 nq, 6 nq)`` covariance of the joints' origin errors ``(v, ω)`` in :func:`robot_jacobian`'s
+        order (metres², radians²): the zero offset adds ``rotation_sd²`` along each joint's axis."""
+        blocks = []
+        for name in robot.joint_names:
+            axis = robot.joint_axis(name)
+            block = np.zeros((6, 6))
+            block[:3, :3] = self.translation_sd_m**2 * np.eye(3)
+            block[3:, 3:] = self.rotation_sd_rad**2 * (np.eye(3) + np.outer(axis, axis))
+            blocks.append(block)
+        out = np.zeros((6 * len(blocks), 6 * len(blocks)))
+        for j, block in enumerate(blocks):
+            out[6 * j : 6 * j + 6, 6 * j : 6 * j + 6] = block
+        return out
+
+    def as_json(self) -> dict[str, object]:
+        return {
+            "joint_translation_sd_mm": self.translation_sd_m * 1e3,
+            "joint_rotation_sd_deg": float(np.degrees(self.rotation_sd_rad)),
+            "encoder_sd_deg": float(np.degrees(self.encoder_sd_rad)),
+            "source": self.source,
+        }
+
+
+DEFAULT_ROBOT_ACCURACY = RobotAccuracy()
+
+
 #: Blocks of the parameter vector: name → (first index, length) for the fixed part; the scale
-#: factors and joint offsets follow (see :meth:`_Layout.blocks`).
+#: factors and joint offsets follow (see :meth:`ParameterLayout.blocks`).
 _FIXED_BLOCKS = {
     "p_ER_Ntip": (0, 3),
     "rot_ER_Ntip": (3, 3),
@@ -139,7 +219,7 @@ ROTATIONS = ("rot_ER_Ntip", "rot_EL_Ptip", "rot_Ptip_I")
 
 
 @dataclass(frozen=True)
-class _Data:
+class ChainData:
     """Flange poses of every datum, computed once (the model's forward kinematics)."""
 
     p_ER_Mtip: FloatArray
@@ -154,7 +234,7 @@ class _Data:
     spacing_m: FloatArray
 
     @classmethod
-    def of(cls, session: Session, robot: Robot, offsets: FloatArray | None = None) -> _Data:
+    def of(cls, session: Session, robot: Robot, offsets: FloatArray | None = None) -> ChainData:
         shift = np.zeros(robot.nq) if offsets is None else offsets
 
         def fk(flange: str, q: FloatArray) -> FloatArray:
@@ -204,13 +284,13 @@ class _Data:
         return 3 * len(self.touch_tool)
 
     def group_rows(self, n_images: int) -> dict[str, slice]:
-        """Rows of each residual group in :func:`_residuals` with ``n_images`` samples used."""
+        """Rows of each residual group in :func:`chain_residuals` with ``n_images`` samples used."""
         t = self.n_touch_rows
         return {"touch": slice(0, t), "axes": slice(t, t + 8), "image": slice(t + 8, t + 8 + 3 * n_images)}
 
 
 @dataclass(frozen=True)
-class _Layout:
+class ParameterLayout:
     model: str
     offset_joints: tuple[int, ...] = ()
 
@@ -272,10 +352,10 @@ def finite_difference_steps(x: FloatArray) -> FloatArray:
 _AXES_MOVES = ((1, 1, [0, 2]), (2, 2, [0, 1]))
 
 
-def _residuals(
+def chain_residuals(
     x: FloatArray,
-    layout: _Layout,
-    data: _Data,
+    layout: ParameterLayout,
+    data: ChainData,
     base: dict,
     sigma: dict[str, float],
     samples: np.ndarray,
@@ -293,7 +373,7 @@ def _residuals(
     return np.concatenate(parts)
 
 
-def _image_residuals(data: _Data, T_ER_Ntip: FloatArray, T_EL_I: FloatArray, spacing: FloatArray) -> FloatArray:
+def _image_residuals(data: ChainData, T_ER_Ntip: FloatArray, T_EL_I: FloatArray, spacing: FloatArray) -> FloatArray:
     p_I = np.column_stack([data.uv_px * spacing, np.zeros(len(data.uv_px))])
     return transform_points(data.T_R_ER, T_ER_Ntip[:3, 3]) - transform_points(data.T_R_EL @ T_EL_I, p_I)
 
@@ -317,10 +397,10 @@ def _left_jacobian(rotvec: FloatArray) -> FloatArray:
     return np.eye(3) + 0.5 * (np.sin(half) / half) ** 2 * K + (angle - np.sin(angle)) / angle**3 * K @ K
 
 
-def _jacobian(
-    x: FloatArray, layout: _Layout, data: _Data, base: dict, sigma: dict[str, float], samples: np.ndarray
+def chain_jacobian(
+    x: FloatArray, layout: ParameterLayout, data: ChainData, base: dict, sigma: dict[str, float], samples: np.ndarray
 ) -> FloatArray:
-    """Analytic Jacobian ``(M, P)`` of :func:`_residuals` (layouts without joint offsets).
+    """Analytic Jacobian ``(M, P)`` of :func:`chain_residuals` (layouts without joint offsets).
 
     A rotation ``R = exp(ω) R_base`` moves a vector ``b`` by ``d(R b) = −[R b]× J_l(ω) dω``.
     """
@@ -379,6 +459,115 @@ def _jacobian(
     return J
 
 
+def joint_twists(robot: Robot, Q: FloatArray, flange: str) -> FloatArray:
+    """``(N, nq, 6, 6)``: how a small motion of each joint's origin moves ``flange``.
+
+    ``W[n, j] @ (v, ω)`` is the world twist ``(v_w, ω_w)`` (metres, radians, in ``base_link``) of
+    the flange at configuration ``Q[n]`` when joint ``j``'s origin is moved by ``exp((v, ω))``
+    on its right (in the origin's own frame, before the joint's turn: the parameterisation of
+    :meth:`Robot.with_joint_origins` and of the twin's physical robot): any point ``p`` fixed to the
+    flange moves by ``v_w + ω_w × p``. Zero for joints not between the base and the flange. A zero
+    offset of joint ``j`` is the motion ``(0, axis_j)``.
+    """
+    import pinocchio as pin
+
+    model = robot.model
+    data = model.createData()
+    support = set(model.supports[model.frames[robot.frame_id(flange)].parentJoint])
+    ids = [model.getJointId(name) for name in robot.joint_names]
+    Q = np.atleast_2d(np.asarray(Q, dtype=float))
+    out = np.zeros((len(Q), len(ids), 6, 6))
+    for n, q in enumerate(robot.to_pinocchio(Q)):
+        pin.forwardKinematics(model, data, q)
+        for j, jid in enumerate(ids):
+            if jid not in support:
+                continue
+            T = data.oMi[model.parents[jid]] * model.jointPlacements[jid]  # the origin's frame, before the turn
+            R, t = T.rotation, T.translation
+            out[n, j, :3, :3] = R
+            out[n, j, :3, 3:] = _skew(t) @ R  # v_w = R v + t × (R ω)
+            out[n, j, 3:, 3:] = R
+    return out
+
+
+def _moved(T: FloatArray, twist: FloatArray, step: float) -> FloatArray:
+    """``(n, 4, 4)`` poses ``T`` moved by the world twists ``step · twist`` ``(n, 6)`` (first order exact)."""
+    from scipy.spatial.transform import Rotation
+
+    turn = Rotation.from_rotvec(step * twist[:, 3:]).as_matrix()
+    out = T.copy()
+    out[:, :3, :3] = turn @ T[:, :3, :3]
+    out[:, :3, 3] = np.einsum("nij,nj->ni", turn, T[:, :3, 3]) + step * twist[:, :3]
+    return out
+
+
+#: Step of the central differences in :func:`robot_jacobian` (metres / radians of origin motion).
+#: Curvature error ~step² (1e-12 relative), rounding ~1e-16 m / (1e-6 · 1e-4 m noise level) ~1e-6
+#: relative of the smallest columns; both far below the 1e-3 agreement the tests ask of it.
+ROBOT_STEP = 1e-6
+
+
+def _robot_jacobian(
+    session: Session,
+    robot: Robot,
+    layout: ParameterLayout,
+    x: FloatArray,
+    base: dict,
+    sigma: dict[str, float],
+    keep: np.ndarray,
+) -> FloatArray:
+    """``(M, 6 nq)`` Jacobian of :func:`chain_residuals` with respect to every joint's origin motion
+    ``(v, ω)`` (joint-major, :func:`joint_twists`' order), by central differences of the flange
+    poses moved by :func:`joint_twists` (the residuals themselves are evaluated exactly)."""
+    offsets = layout.offsets(x, robot.nq)
+    data = ChainData.of(session, robot, offsets)
+
+    def twists(q: FloatArray, flange: str) -> FloatArray:
+        return joint_twists(robot, np.atleast_2d(q) + offsets, flange)
+
+    refs = ("rtip1", "rtip2")
+    W: dict[str, Any] = {  # per data group: twists (an array, or one per reference tip)
+        "top": [twists(session.touches["top_model", r].q, RIGHT_FLANGE) for r in refs],
+        "needle": [twists(session.touches["needle", r].q, RIGHT_FLANGE) for r in refs],
+        "probe": [twists(session.touches["probe", r].q, LEFT_FLANGE) for r in refs],
+        "needle_axes": twists(np.array([session.axes["needle"][p] for p in ("p1", "p2", "p3")]), RIGHT_FLANGE),
+        "probe_axes": twists(np.array([session.axes["probe"][p] for p in ("p1", "p2", "p3")]), LEFT_FLANGE),
+        "T_R_ER": twists(session.samples_q, RIGHT_FLANGE),
+        "T_R_EL": twists(session.samples_q, LEFT_FLANGE),
+    }
+
+    def moved(j: int, d: int, step: float) -> ChainData:
+        def touches(name: str) -> list[tuple[int, FloatArray]]:
+            return [(k, _moved(T, w[:, j, :, d], step)) for (k, T), w in zip(getattr(data, name), W[name], strict=True)]
+
+        return replace(
+            data,
+            top=touches("top"),
+            needle=touches("needle"),
+            probe=touches("probe"),
+            **{
+                name: _moved(getattr(data, name), W[name][:, j, :, d], step)
+                for name in ("needle_axes", "probe_axes", "T_R_ER", "T_R_EL")
+            },
+        )
+
+    columns = []
+    for j in range(robot.nq):
+        for d in range(6):
+            plus = chain_residuals(x, layout, moved(j, d, ROBOT_STEP), base, sigma, keep)
+            minus = chain_residuals(x, layout, moved(j, d, -ROBOT_STEP), base, sigma, keep)
+            columns.append((plus - minus) / (2 * ROBOT_STEP))
+    return np.column_stack(columns)
+
+
+def robot_jacobian(session: Session, robot: Robot, fit: ChainFit) -> FloatArray:
+    """``(M, 6 nq)`` ``J_c``: the fit's normalised residuals (its final problem: its noise levels,
+    its samples) differentiated with respect to every joint's origin motion ``(v, ω)`` (metres,
+    radians; joint-major in ``robot.joint_names`` order; see :func:`joint_twists`)."""
+    layout = ParameterLayout(fit.model, tuple(robot.joint_names.index(n) for n in fit.joint_offsets_rad))
+    return _robot_jacobian(session, robot, layout, fit.x, fit.base, fit.sigma_m, ~fit.outliers)
+
+
 @dataclass(frozen=True)
 class NoiseLevel:
     """A residual group's noise level and where it comes from.
@@ -421,14 +610,22 @@ class ChainFit:
         sound_speed_m_s: the implied speed of sound (from the depth scale; None for rigid).
         p_R_Rtip: ``(2, 3)`` reference tips.
         sigma_m: noise level per residual group (touch, axes, image), metres per coordinate.
-        covariance: ``(P, P)`` of the parameter vector (metres, radians, scale factors): ``(JᵀJ)⁻¹`` of
-            the final fit, the session's noise (not the robot model's own error; module docstring).
+        covariance: ``(P, P)`` of the parameter vector (metres, radians, scale factors): the session's
+            noise ``(JᵀJ)⁻¹`` of the final fit plus, with a stated robot accuracy, the robot model's
+            own error ``S Σ_c Sᵀ`` (module docstring).
         x: ``(P,)`` parameter vector (increments of rotations about the starting rotations).
         outliers: ``(N,)`` image samples flagged as gross errors and left out of the final fit.
         image_residuals: ``(N, 3)`` per-sample residual of the final fit, metres (flagged included).
         joint_offsets_rad: estimated joint zero offsets (empty unless asked for).
         noise: per group, the noise level with its degrees of freedom and source.
         conditioning: the conditioning figures of the final fit.
+        noise_covariance: ``(P, P)`` the session's noise part ``(JᵀJ)⁻¹`` alone.
+        robot_sensitivity: ``(P, 6 nq)`` ``S = ∂x̂/∂c``: how the estimate moves with the physical
+            joints' origin errors ``c`` (None without a stated robot accuracy).
+        robot_covariance: ``(6 nq, 6 nq)`` ``Σ_c`` of the stated accuracy (None without one).
+        robot_accuracy: the stated accuracy (None: the robot term was not computed).
+        noise_share: per group, the fraction of its residual variance left to the session's noise
+            once the stated robot accuracy's expected part is taken out (:func:`_noise_share`).
     """
 
     model: str
@@ -446,6 +643,11 @@ class ChainFit:
     joint_offsets_rad: dict[str, float] = field(default_factory=dict)
     noise: dict[str, NoiseLevel] = field(default_factory=dict)
     conditioning: Conditioning | None = None
+    noise_covariance: FloatArray | None = None
+    robot_sensitivity: FloatArray | None = None
+    robot_covariance: FloatArray | None = None
+    robot_accuracy: RobotAccuracy | None = None
+    noise_share: dict[str, float] = field(default_factory=dict)
 
     def offsets(self, joint_names: tuple[str, ...]) -> FloatArray:
         """``(nq,)`` estimated joint zero offsets (zeros unless estimated), radians."""
@@ -458,14 +660,14 @@ class ChainFit:
     def T_EL_I(self, x: FloatArray | None = None) -> FloatArray:
         """``(4, 4)`` the image frame on the left flange, ``T_EL_Ptip @ T_Ptip_I``, at ``x`` (default the
         estimate): what the image samples determine, whatever the probe-tip frame's convention."""
-        layout = _Layout(self.model)
+        layout = ParameterLayout(self.model)
         at = self.x if x is None else np.asarray(x, dtype=float)
         _, T_EL_Ptip, T_Ptip_I, _, _ = layout.unpack(at[: layout.size], self.base, np.ones(2))
         return T_EL_Ptip @ T_Ptip_I
 
     def block(self, name: str) -> slice:
         """The slice of parameter ``name`` (see :data:`BLOCK_LABELS`) in ``x`` and ``covariance``."""
-        s = _Layout(self.model).blocks()[name]
+        s = ParameterLayout(self.model).blocks()[name]
         return slice(s.start, len(self.x)) if name == "joint_offsets" else s
 
     def noise_text(self) -> str:
@@ -476,7 +678,7 @@ class ChainFit:
         )
 
 
-def _start(initial: CalibrationResult, layout: _Layout, nominal_spacing: FloatArray) -> tuple[FloatArray, dict]:
+def _start(initial: CalibrationResult, layout: ParameterLayout, nominal_spacing: FloatArray) -> tuple[FloatArray, dict]:
     image = initial.image.get("scaled_uv") or next(iter(initial.image.values()))
     base = {
         "R_ER_Ntip": initial.T_ER_Ntip[:3, :3],
@@ -503,7 +705,7 @@ def _start(initial: CalibrationResult, layout: _Layout, nominal_spacing: FloatAr
 OFFSET_PRIOR_SD = np.radians(0.01)
 
 
-def _leverages(J: FloatArray) -> FloatArray:
+def leverages(J: FloatArray) -> FloatArray:
     """Diagonal of the hat matrix ``J (JᵀJ)⁺ Jᵀ`` (rows' leverages), from an SVD of ``J``."""
     norms = np.linalg.norm(J, axis=0)
     live = norms > 0  # the hat matrix does not depend on the columns' scales: equilibrate them
@@ -526,7 +728,7 @@ def _noise_levels(
     correction applied to 1.4826 × the median absolute residual. Groups with fewer than
     :data:`MIN_NOISE_DOF` residual degrees of freedom take an assumed level (see the module).
     """
-    h = _leverages(J)
+    h = leverages(J)
     out: dict[str, NoiseLevel] = {}
     for g in GROUPS:
         raw = normalised[rows[g]] * sigma[g]
@@ -554,6 +756,37 @@ def _noise_levels(
     return out
 
 
+def _noise_share(
+    normalised: FloatArray,
+    J: FloatArray,
+    J_c: FloatArray,
+    robot_covariance: FloatArray,
+    rows: dict[str, slice],
+    noise: dict[str, NoiseLevel],
+) -> dict[str, float]:
+    """Each group's residual variance that the session's noise explains, as a fraction of its level.
+
+    The residuals of the weighted problem are ``(I − H)(n + J_c c)``: the robot's error adds
+    ``Σ_i [(I − H) J_c Σ_c J_cᵀ (I − H)]_ii`` (expected) to a group's residual sum of squares, on top
+    of the noise's ``σ² (n_g − Σ h_ii)``. The noise levels estimated from the residuals (the fit's
+    weights) contain both; the share ``(RSS_g − robot_g) / RSS_g`` (floored at 0: a stated accuracy
+    that explains all the scatter leaves no noise) is what the noise part of the covariance keeps,
+    so the robot's error is not counted twice. Groups with an assumed level keep it whole.
+    """
+    norms = np.linalg.norm(J, axis=0)
+    live = norms > 0
+    U, s, _ = np.linalg.svd(J[:, live] / norms[live], full_matrices=False)
+    U = U[:, s > s[0] * RCOND_LIMIT]
+    M = J_c - U @ (U.T @ J_c)  # (I − H) J_c
+    robot_rows = np.einsum("ij,jk,ik->i", M, robot_covariance, M)
+    out = {}
+    for g, part in rows.items():
+        rss = float(np.sum(normalised[part] ** 2))
+        keep = noise[g].source == "residuals" and rss > 0
+        out[g] = max(0.0, 1.0 - float(robot_rows[part].sum()) / rss) if keep else 1.0
+    return out
+
+
 def fit_chain(
     session: Session,
     robot: Robot,
@@ -563,6 +796,7 @@ def fit_chain(
     samples: np.ndarray | None = None,
     rounds: int = 2,
     joint_offsets: bool = False,
+    robot_accuracy: RobotAccuracy | None = DEFAULT_ROBOT_ACCURACY,
 ) -> ChainFit:
     """Solve the whole chain with one image model (robust stage, then the final fit without outliers).
 
@@ -574,39 +808,54 @@ def fit_chain(
         samples: ``(N,)`` bool mask of image samples to use (for cross-validation; default all).
         rounds: robust solves, each re-estimating the groups' noise levels from the previous residuals.
         joint_offsets: also estimate the zero offsets of the joints this session identifies.
+        robot_accuracy: the robot's stated accuracy, whose effect on the estimate is added to its
+            covariance (module docstring); None leaves it out (cross-validation: estimates only).
 
     Raises:
         DegenerateDataError: the data do not determine the unknowns (:func:`check_conditioning`).
     """
     if model not in MODELS:
         raise InputError(f"unknown image model {model!r}; choose from {', '.join(MODELS)}")
-    data = _Data.of(session, robot)
+    data = ChainData.of(session, robot)
     joints: tuple[int, ...] = ()
     if joint_offsets:
-        first = fit_chain(session, robot, initial, model, samples=samples, rounds=rounds)
+        first = fit_chain(session, robot, initial, model, samples=samples, rounds=rounds, robot_accuracy=None)
         ratios = identifiable_joint_offsets(session, robot, first)
         joints = tuple(k for k, name in enumerate(robot.joint_names) if ratios[name] > 0.05)
-    layout = _Layout(model, joints)
+    layout = ParameterLayout(model, joints)
     x, base = _start(initial, layout, data.spacing_m)
     use = np.ones(len(data.uv_px), dtype=bool) if samples is None else np.asarray(samples, dtype=bool)
     sigma = dict(INITIAL_SIGMA)
     offsets_block = layout.blocks()["joint_offsets"]
 
-    def data_at(x: FloatArray) -> _Data:
-        return _Data.of(session, robot, layout.offsets(x, robot.nq)) if joints else data
+    def data_at(x: FloatArray) -> ChainData:
+        return ChainData.of(session, robot, layout.offsets(x, robot.nq)) if joints else data
 
     def solve(x: FloatArray, keep: np.ndarray, loss: str, tol: float = 1e-10):
         def residual(x: FloatArray) -> FloatArray:
-            r = _residuals(x, layout, data_at(x), base, sigma, keep)
+            r = chain_residuals(x, layout, data_at(x), base, sigma, keep)
             return np.concatenate([r, x[offsets_block] / OFFSET_PRIOR_SD]) if joints else r
 
         def jacobian(x: FloatArray) -> FloatArray:
-            return _jacobian(x, layout, data, base, sigma, keep)
+            at = data_at(x)
+            J = chain_jacobian(x, layout, at, base, sigma, keep)  # zero in the joint offsets' columns
+            if not joints:
+                return J
+            # Joint offsets move the flange poses: their columns by forward differences (steps of
+            # 1e-7 rad, where rounding and curvature both stay below 1e-7 of the derivative).
+            r0 = chain_residuals(x, layout, at, base, sigma, keep)
+            for column in range(offsets_block.start, offsets_block.stop):
+                shifted = x.copy()
+                shifted[column] += 1e-7
+                J[:, column] = (chain_residuals(shifted, layout, data_at(shifted), base, sigma, keep) - r0) / 1e-7
+            prior = np.zeros((len(joints), len(x)))
+            prior[:, offsets_block] = np.eye(len(joints)) / OFFSET_PRIOR_SD
+            return np.vstack([J, prior])
 
         return least_squares(
             residual,
             x,
-            jac="2-point" if joints else jacobian,  # joint offsets move the flange poses: by differences
+            jac=jacobian,
             method="trf",
             loss=loss,
             f_scale=1.0,
@@ -646,7 +895,23 @@ def fit_chain(
         outliers = again
     fit = solve(x, keep, "linear", tol=1e-15)  # the estimate: to the last digit (the others only weight and flag)
     x = fit.x
-    conditioning, covariance = check_conditioning(fit.jac, layout, session, keep)
+    conditioning, noise_covariance = check_conditioning(fit.jac, layout, session, keep)
+    covariance, sensitivity, robot_covariance, share = noise_covariance, None, None, {}
+    if robot_accuracy is not None:
+        J_c = _robot_jacobian(session, robot, layout, x, base, sigma, keep)
+        J_c = np.vstack([J_c, np.zeros((len(fit.jac) - len(J_c), J_c.shape[1]))])  # the offsets' prior rows
+        # The data come from the physical robot, model + c: at the truth the model's residuals are
+        # −J_c c, and least squares moves the estimate by −(JᵀJ)⁻¹Jᵀ(−J_c c) = S c.
+        sensitivity = noise_covariance @ (fit.jac.T @ J_c)
+        robot_covariance = robot_accuracy.covariance(robot)
+        share = _noise_share(fit.fun, fit.jac, J_c, robot_covariance, data.group_rows(int(keep.sum())), noise)
+        rows = np.ones(len(fit.fun))
+        for g, part in data.group_rows(int(keep.sum())).items():
+            rows[part] = share[g]
+        # Sandwich: the weights stay the residuals' levels (the estimate does not depend on the
+        # stated accuracy); the noise part uses each group's noise alone, the robot's part apart.
+        noise_covariance = noise_covariance @ (fit.jac.T * rows) @ fit.jac @ noise_covariance
+        covariance = noise_covariance + sensitivity @ robot_covariance @ sensitivity.T
     T_ER_Ntip, T_EL_Ptip, T_Ptip_I, rtips, spacing = layout.unpack(x, base, data.spacing_m)
     residuals = _image_residuals(data_at(x), T_ER_Ntip, T_EL_Ptip @ T_Ptip_I, spacing)
     sound = None if model in ("rigid",) else float(SCANNER_SOUND_SPEED * spacing[1] / data.spacing_m[1])
@@ -667,11 +932,16 @@ def fit_chain(
         offsets,
         noise,
         conditioning,
+        noise_covariance,
+        sensitivity,
+        robot_covariance,
+        robot_accuracy,
+        share,
     )
 
 
 def check_conditioning(
-    J: FloatArray, layout: _Layout, session: Session, used: np.ndarray
+    J: FloatArray, layout: ParameterLayout, session: Session, used: np.ndarray
 ) -> tuple[Conditioning, FloatArray]:
     """Refuse a fit whose data do not determine its unknowns; else return its covariance.
 
@@ -711,7 +981,7 @@ def check_conditioning(
         name: float(np.sqrt(max(np.linalg.eigvalsh(covariance[blocks[name], blocks[name]]).max(), 0.0)))
         for name in ROTATIONS
     }
-    worst = max(rotation_sd, key=rotation_sd.get)
+    worst = max(rotation_sd, key=lambda name: rotation_sd[name])
     if rotation_sd[worst] > ROTATION_SD_LIMIT:
         _refuse(
             blocks,
@@ -763,12 +1033,12 @@ def cross_validate(
     n = len(session.uv_px)
     order = np.random.default_rng(seed).permutation(n)
     errors = np.empty(n)
-    data = _Data.of(session, robot)
+    data = ChainData.of(session, robot)
     for fold in range(folds):
         held = np.zeros(n, dtype=bool)
         held[order[fold::folds]] = True
         try:
-            fit = fit_chain(session, robot, initial, model, samples=~held, rounds=1)
+            fit = fit_chain(session, robot, initial, model, samples=~held, rounds=1, robot_accuracy=None)
         except DegenerateDataError as exc:
             left_out = ", ".join(session.sample_ids[i] for i in np.flatnonzero(held)[:3])
             raise DegenerateDataError(f"{model} cross-validation without sample(s) {left_out}: {exc.problem}") from None
@@ -819,7 +1089,7 @@ def select_model(
     flagged = None
     for m in sorted(models, key=lambda m: -COMPLEXITY[m]):
         try:
-            flagged = fit_chain(session, robot, initial, m).outliers
+            flagged = fit_chain(session, robot, initial, m, robot_accuracy=None).outliers
             break
         except DegenerateDataError as exc:
             undetermined[m] = exc.problem
@@ -854,22 +1124,22 @@ def identifiable_joint_offsets(
     returned number is the part left outside that span (0: fully confounded, 1: independent).
     A joint offset is identifiable from this session when that part exceeds ``tolerance``.
     """
-    layout = _Layout(fit.model)
+    layout = ParameterLayout(fit.model)
     use = np.ones(len(session.uv_px), dtype=bool)
-    data = _Data.of(session, robot)
+    data = ChainData.of(session, robot)
     sigma = fit.sigma_m
 
-    def residuals(data_k: _Data) -> FloatArray:
-        return _residuals(fit.x[: layout.size], layout, data_k, fit.base, sigma, use)
+    def residuals(data_k: ChainData) -> FloatArray:
+        return chain_residuals(fit.x[: layout.size], layout, data_k, fit.base, sigma, use)
 
     r0 = residuals(data)
-    J = _jacobian(fit.x[: layout.size], layout, data, fit.base, sigma, use)
+    J = chain_jacobian(fit.x[: layout.size], layout, data, fit.base, sigma, use)
     Q, _ = np.linalg.qr(J)
     out = {}
     step = 1e-6
     for k, name in enumerate(robot.joint_names):
         shifted = _shift_joint(session, k, step)
-        column = (residuals(_Data.of(shifted, robot)) - r0) / step
+        column = (residuals(ChainData.of(shifted, robot)) - r0) / step
         norm_column = np.linalg.norm(column)
         out[name] = 0.0 if norm_column == 0 else float(np.linalg.norm(column - Q @ (Q.T @ column)) / norm_column)
     return out
@@ -893,10 +1163,10 @@ def information_blocks(session: Session, robot: Robot, fit: ChainFit) -> tuple[F
     moves, and each image sample's Jacobian block (normalised by the noise levels), so that a
     design's information is ``I_fixed + Σ_selected J_iᵀ J_i``.
     """
-    layout = _Layout(fit.model)
-    data = _Data.of(session, robot)
+    layout = ParameterLayout(fit.model)
+    data = ChainData.of(session, robot)
     use = np.ones(len(session.uv_px), dtype=bool)
-    J = _jacobian(fit.x[: layout.size], layout, data, fit.base, fit.sigma_m, use)
+    J = chain_jacobian(fit.x[: layout.size], layout, data, fit.base, fit.sigma_m, use)
     n_images = 3 * len(session.uv_px)
     fixed = J[:-n_images]
     return fixed.T @ fixed, J[-n_images:].reshape(len(session.uv_px), 3, layout.size)

@@ -25,12 +25,14 @@ import numpy as np
 from scipy.stats import norm
 
 from brachycal.calibration.chain import (
+    DEFAULT_ROBOT_ACCURACY,
     OUTLIER_THRESHOLD,
     RCOND_LIMIT,
     ROTATION_SD_LIMIT,
     SCANNER_SOUND_SPEED,
     ChainFit,
     ModelChoice,
+    RobotAccuracy,
     cross_validate,
     fit_chain,
     select_model,
@@ -74,9 +76,10 @@ class ChainReport:
     def intervals(self, level: float = 0.95) -> dict[str, dict[str, object]]:
         """Intervals at ``level`` of the quantities a user asks about.
 
-        From the covariance (normal theory; what the session's noise leaves uncertain, see
-        :mod:`brachycal.calibration.chain` for what it does not contain), and with a bootstrap
-        its percentile intervals under ``bootstrap_<name>``.
+        From the covariance (normal theory: the session's noise and, with a stated robot accuracy,
+        the robot model's own error; see :mod:`brachycal.calibration.chain`), and with a bootstrap
+        its percentile intervals under ``bootstrap_<name>`` (the session's noise only: resampling
+        the session cannot see the robot's error).
         """
         z = norm.ppf(0.5 + level / 2)
         sd = self.fit.parameter_sd()
@@ -117,10 +120,15 @@ def calibrate_chain(
     *,
     bootstrap_replicates: int = 0,
     joint_offsets: bool = False,
+    robot_accuracy: RobotAccuracy | None = DEFAULT_ROBOT_ACCURACY,
     map_step_px: float = 60.0,
     progress: Callable[[int], None] | None = None,
 ) -> ChainReport:
     """Run the whole-chain method on a session (see the module docstring).
+
+    ``robot_accuracy``: the robot's stated kinematic accuracy, included in the intervals and the
+    predicted landing error (:class:`~brachycal.calibration.chain.RobotAccuracy`; None: the
+    session's noise alone).
 
     Raises:
         DegenerateDataError: the data do not determine the chain.
@@ -130,7 +138,7 @@ def calibrate_chain(
             in the image.
     """
     choice = select_model(session, robot, initial)
-    fit = fit_chain(session, robot, initial, choice.model, joint_offsets=joint_offsets)
+    fit = fit_chain(session, robot, initial, choice.model, joint_offsets=joint_offsets, robot_accuracy=robot_accuracy)
     loocv = cross_validate(session, robot, initial, choice.model, folds=len(session.uv_px))
     cube = predicted_rms_mm(landing_covariance(fit, robot, session.spacing_m, session.samples_q, session.uv_px))
     width, height = session.size_px
@@ -176,7 +184,11 @@ def chain_json(report: ChainReport, sample_ids: list[str]) -> dict:
         "flagged samples are left out of the final fit",
         "fitted_samples": int((~fit.outliers).sum()),
         "intervals_95": report.intervals(),
-        "intervals_contain": "the session's noise, not the robot model's own error (see the README)",
+        "intervals_contain": "the session's noise and the stated robot accuracy (robot_accuracy; see the README)"
+        if fit.robot_accuracy is not None
+        else "the session's noise, not the robot model's own error (see the README)",
+        "robot_accuracy": None if fit.robot_accuracy is None else fit.robot_accuracy.as_json(),
+        "noise_share_after_robot": fit.noise_share,
         "conditioning": {
             "rcond": conditioning.rcond if conditioning else None,
             "rcond_limit": RCOND_LIMIT,

@@ -397,7 +397,7 @@ def leave_one_out_points(
     p_Ptip = probe_points(T_R_ER, T_R_EL, p_ER_Ntip, T_EL_Ptip)
     p_real = transform_points(T_R_ER, np.asarray(p_ER_Ntip))
     p_cal = np.empty_like(p_real)
-    starts = None
+    starts: list[FloatArray] | None = None
     if method == "icp" and T_Ptip_I_init is not None:
         # Each fold starts from the all-sample fit (found from many starts): a fold differs by one
         # sample, so its fit lies next to it; restarting every fold from 48 orientations would

@@ -1,4 +1,4 @@
-"""Accuracy figures of the paper, eqs. (10)–(12) with the errata of CONVENTIONS.md.
+"""Accuracy figures of the paper, eqs. (10)–(12) with the errata of ``docs/conventions.md``.
 
 For per-sample errors ``e_i = ‖P_real(i) − P_cal(i)‖``: MAE = mean(e), RMSE = sqrt(mean(e²)),
 SD = population standard deviation of e (so RMSE² = MAE² + SD², as every row of the paper's

@@ -23,6 +23,7 @@ u/v pixel spacings (the constrained model), with 3D outlier rejection.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -92,23 +93,58 @@ def check_wire_names(config: PlusConfig, frame: SegmentedFrame) -> None:
     raise InputError(message, file=frame.source, row=frame.index, row_label=frame.label)
 
 
-def wire_point_pairs(config: PlusConfig, frames: list[SegmentedFrame]) -> tuple[FloatArray, FloatArray, np.ndarray]:
-    """Middle-wire pairs of all usable frames: ``(uv_px (K, 2), p_probe_m (K, 3), frame (K,))``.
+def _phantom_registration(config: PlusConfig) -> FloatArray:
+    """``T_reference_phantom (4, 4)``, metres: the configuration's Phantom→Reference transform.
 
-    Every frame with segmentation status OK contributes one pair per N-wire pattern; its wire names
-    must be the configuration's (:func:`check_wire_names`).
+    Raises:
+        InputError: naming the configuration file, when it has none.
     """
     T_reference_phantom = config.transforms.get(("Phantom", "Reference"))
     if T_reference_phantom is None:
         raise InputError(
             "the configuration has no Phantom->Reference transform (phantom registration)", file=config.source
         )
+    return T_reference_phantom
+
+
+def _T_probe_phantom(frame: SegmentedFrame, T_reference_phantom: FloatArray) -> FloatArray:
+    """``T_probe_phantom (4, 4)``, metres, of a segmented (OK) frame, from its two tracker readings.
+
+    The readers always fill both readings of an OK frame; a frame built in code may not, and the
+    product with a missing reading is no pose.
+
+    Raises:
+        InputError: naming the frame's file and frame, when a tracker reading is missing.
+    """
+    T_tracker_probe, T_tracker_reference = frame.T_tracker_probe, frame.T_tracker_reference
+    if T_tracker_probe is None or T_tracker_reference is None:
+        missing = "ProbeToTrackerTransform" if T_tracker_probe is None else "ReferenceToTrackerTransform"
+        raise InputError(
+            f"segmented frame has no {missing} tracker reading",
+            file=frame.source,
+            row=frame.index,
+            row_label=frame.label,
+        )
+    return inverse(T_tracker_probe) @ T_tracker_reference @ T_reference_phantom
+
+
+def wire_point_pairs(config: PlusConfig, frames: list[SegmentedFrame]) -> tuple[FloatArray, FloatArray, np.ndarray]:
+    """Middle-wire pairs of all usable frames: ``(uv_px (K, 2), p_probe_m (K, 3), frame (K,))``.
+
+    Every frame with segmentation status OK contributes one pair per N-wire pattern; its wire names
+    must be the configuration's (:func:`check_wire_names`).
+
+    Raises:
+        InputError: the configuration has no Phantom→Reference transform; an OK frame lacks a
+            tracker reading or has wire names other than the configuration's.
+    """
+    T_reference_phantom = _phantom_registration(config)
     uv, p_probe, frame_of = [], [], []
     for frame in frames:
         if not frame.ok:
             continue
         check_wire_names(config, frame)
-        T_probe_phantom = inverse(frame.T_tracker_probe) @ frame.T_tracker_reference @ T_reference_phantom
+        T_probe_phantom = _T_probe_phantom(frame, T_reference_phantom)
         for pattern in config.patterns:
             names = [w.name for w in pattern]
             if not np.linalg.norm(frame.points_px[names[2]] - frame.points_px[names[0]]) > 0.0:
@@ -157,7 +193,8 @@ def _lsq_reject(design: FloatArray, target: FloatArray, reject_sd: float) -> tup
     """Least squares with PLUS's rejection: drop equations with |d − mean d| ≥ k σ, refit, repeat."""
     keep = np.ones(len(target), dtype=bool)
     while True:
-        x = np.linalg.lstsq(design[keep], target[keep], rcond=None)[0]
+        # float64 in, float64 out: NumPy's stubs widen lstsq's result to floating[Any].
+        x = cast(FloatArray, np.linalg.lstsq(design[keep], target[keep], rcond=None)[0])
         d = design @ x - target
         sigma = d[keep].std()
         new = keep & (np.abs(d - d[keep].mean()) < reject_sd * sigma)
@@ -247,10 +284,11 @@ def wire_errors_2d(
     pixel compared with the segmented point.
 
     Raises:
-        InputError: a frame's wire names differ from the configuration's, or a wire has no
+        InputError: the configuration has no Phantom→Reference transform, a frame lacks a tracker
+            reading, a frame's wire names differ from the configuration's, or a wire has no
             usable point in any frame (its statistics would be NaN).
     """
-    T_reference_phantom = config.transforms[("Phantom", "Reference")]
+    T_reference_phantom = _phantom_registration(config)
     if model == "affine":
         T_image_probe = np.linalg.inv(calibration.affine)
         to_px = np.eye(2)
@@ -262,9 +300,7 @@ def wire_errors_2d(
         if not frame.ok:
             continue
         check_wire_names(config, frame)
-        T_image_phantom = (
-            T_image_probe @ inverse(frame.T_tracker_probe) @ frame.T_tracker_reference @ T_reference_phantom
-        )
+        T_image_phantom = T_image_probe @ _T_probe_phantom(frame, T_reference_phantom)
         for pattern in config.patterns:
             for wire in pattern:
                 if wire.name not in frame.points_px:

@@ -14,7 +14,6 @@ frames and the per-wire 2D errors in pixels, and the SHA-256 of both inputs.
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,6 +30,7 @@ from brachycal.calibration.nwire import (
     wire_errors_2d,
     wire_point_pairs,
 )
+from brachycal.data.json_files import read_format_json
 from brachycal.data.plus_files import read_plus_config, read_segmented_frames
 from brachycal.errors import InputError
 from brachycal.files import sha256_file, write_json
@@ -220,15 +220,7 @@ def read_nwire(path: str | os.PathLike[str]) -> StoredNWire:
             (naming the file and the key).
     """
     path = Path(path)
-    try:
-        raw = json.loads(path.read_text())
-    except OSError as exc:
-        raise InputError(f"cannot read ({exc.strerror})", file=path) from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"not valid JSON ({exc})", file=path) from None
-    if not isinstance(raw, dict) or raw.get("format") != FORMAT:
-        found = raw.get("format") if isinstance(raw, dict) else None
-        raise InputError(f"format is {found!r}, expected {FORMAT!r}", file=path, column="format")
+    raw = read_format_json(path, FORMAT)
 
     def matrix(key: str) -> FloatArray:
         try:
@@ -243,7 +235,10 @@ def read_nwire(path: str | os.PathLike[str]) -> StoredNWire:
         T = check_transform(matrix("T_Probe_Image"), "matrix")
     except InputError as exc:  # restated with the file and the key
         raise InputError(exc.problem, file=path, column="T_Probe_Image") from None
-    spacing_m = check_spacing_mm(raw.get("spacing_mm"), "pixel spacing", file=path, column="spacing_mm") * 1e-3
+    spacing_mm = raw.get("spacing_mm")
+    if spacing_mm is None:
+        raise InputError("missing: expected the pixel spacing (s_u, s_v) in mm", file=path, column="spacing_mm")
+    spacing_m = check_spacing_mm(spacing_mm, "pixel spacing", file=path, column="spacing_mm") * 1e-3
     affine = matrix("affine_mm")
     affine[:3, :] *= 1e-3
     return StoredNWire(T, spacing_m, affine, raw)

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -161,7 +162,8 @@ def pivot_algebraic(T_ref_marker: ArrayLike) -> PivotResult:
     """Algebraic one-step least squares over ``(N, 4, 4)`` poses."""
     T = _check(T_ref_marker)
     A, b = _system(T)
-    x = np.linalg.lstsq(A, b, rcond=None)[0]
+    # float64 in, float64 out: NumPy's stubs widen linalg results to floating[Any].
+    x = cast(FloatArray, np.linalg.lstsq(A, b, rcond=None)[0])
     return _result(T, x, np.ones(len(T), dtype=bool), "algebraic")
 
 
@@ -174,7 +176,9 @@ def pivot_robust(T_ref_marker: ArrayLike, outlier_threshold: float = 3.0) -> Piv
     """
     T = _check(T_ref_marker)
     A, b = _system(T)
-    start = _result(T, np.linalg.lstsq(A, b, rcond=None)[0], np.ones(len(T), dtype=bool), "algebraic")
+    # float64 in, float64 out: NumPy's stubs widen linalg results to floating[Any].
+    x0 = cast(FloatArray, np.linalg.lstsq(A, b, rcond=None)[0])
+    start = _result(T, x0, np.ones(len(T), dtype=bool), "algebraic")
     scale = max(1.4826 * float(np.median(start.residuals)) / np.sqrt(3.0), 1e-12)
     fit = least_squares(
         lambda x: A @ x - b,

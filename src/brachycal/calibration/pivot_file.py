@@ -9,7 +9,6 @@ flange's) frame, ``pivot_in_reference`` the fixed pivot point in the reference f
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from brachycal.calibration.pivot import PivotResult, pivot_algebraic, pivot_robust
+from brachycal.data.json_files import read_format_json
 from brachycal.data.pose_list import read_pose_list
 from brachycal.errors import DegenerateDataError, InputError
 from brachycal.files import sha256_file, write_json
@@ -131,15 +131,7 @@ def read_pivot(path: str | os.PathLike[str]) -> StoredPivot:
             (naming the file and the key).
     """
     path = Path(path)
-    try:
-        raw = json.loads(path.read_text())
-    except OSError as exc:
-        raise InputError(f"cannot read ({exc.strerror})", file=path) from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"not valid JSON ({exc})", file=path) from None
-    if not isinstance(raw, dict) or raw.get("format") != FORMAT:
-        found = raw.get("format") if isinstance(raw, dict) else None
-        raise InputError(f"format is {found!r}, expected {FORMAT!r}", file=path, column="format")
+    raw = read_format_json(path, FORMAT)
     if raw.get("units") not in UNITS:
         raise InputError(
             f"units must be one of {', '.join(UNITS)}, got {raw.get('units')!r}", file=path, column="units"

@@ -35,6 +35,7 @@ isotropic noise of SD ``σ`` per coordinate on the residuals ``r_i = R S p_i + t
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -441,5 +442,6 @@ def fit_uncertainty(
         scale=S.copy(),
         noise_sd_m=float(np.sqrt(np.sum(residual**2) / dof)),
         dof=dof,
-        cov_unit=np.linalg.inv(J.T @ J),
+        # float64 in, float64 out: NumPy's stubs widen linalg results to floating[Any].
+        cov_unit=cast(FloatArray, np.linalg.inv(J.T @ J)),
     )

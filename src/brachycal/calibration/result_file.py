@@ -8,7 +8,6 @@ names, the tool-axes angles, and the software versions that produced it.
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,6 +16,7 @@ import numpy as np
 
 from brachycal.calibration.image_to_probe import METHODS, ImageCalibration
 from brachycal.calibration.sequential import CalibrationResult
+from brachycal.data.json_files import read_format_json
 from brachycal.errors import InputError
 from brachycal.files import write_json
 from brachycal.model.robot import Robot
@@ -144,15 +144,7 @@ def _matrix(value: object, path: Path, key: str) -> FloatArray:
 def read_result(path: str | os.PathLike[str]) -> StoredCalibration:
     """Read a result file back; refuses anything that is not a valid ``brachycal-result/1``."""
     path = Path(path)
-    try:
-        raw = json.loads(path.read_text())
-    except OSError as exc:
-        raise InputError(f"cannot read ({exc.strerror})", file=path) from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"not valid JSON ({exc})", file=path) from None
-    if not isinstance(raw, dict) or raw.get("format") != FORMAT:
-        found = raw.get("format") if isinstance(raw, dict) else None
-        raise InputError(f"format is {found!r}, expected {FORMAT!r}", file=path, column="format")
+    raw = read_format_json(path, FORMAT)
     transforms = raw.get("transforms", {})
     images = transforms.get("Ptip_T_I", {}) if isinstance(transforms, dict) else {}
     if not isinstance(images, dict) or not images:
@@ -182,12 +174,15 @@ def _image_size(raw: dict, path: Path) -> tuple[int, int] | None:
     if image is None:
         return None
     size = image.get("size_px") if isinstance(image, dict) else None
+    refusal = InputError(
+        f"must be two whole numbers of pixels in [1, {MAX_IMAGE_PX}] (width, height), got {size!r}",
+        file=path,
+        column="image.size_px",
+    )
+    if not isinstance(size, list):  # JSON: anything else is not two numbers
+        raise refusal
     try:
         width, height = (check_int(n, "image size", low=1, high=MAX_IMAGE_PX) for n in size)
     except (TypeError, ValueError):  # InputError is a ValueError: restate it with the place
-        raise InputError(
-            f"must be two whole numbers of pixels in [1, {MAX_IMAGE_PX}] (width, height), got {size!r}",
-            file=path,
-            column="image.size_px",
-        ) from None
+        raise refusal from None
     return width, height

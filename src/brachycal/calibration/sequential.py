@@ -121,7 +121,8 @@ def _tool(session: Session, robot: Robot, tool: str, rtip1: TipEstimate) -> Tool
     )
     axes = session.axes[tool]
     with _data_of("axes.csv"):
-        rotation = tool_rotation(*(robot.fk(flange, axes[p]) for p in ("p1", "p2", "p3")), p_E_tool, tool=tool)
+        T_R_E_p1, T_R_E_p2, T_R_E_p3 = (robot.fk(flange, axes[p]) for p in ("p1", "p2", "p3"))
+        rotation = tool_rotation(T_R_E_p1, T_R_E_p2, T_R_E_p3, p_E_tool, tool=tool)
     return ToolCalibration(make_transform(rotation.R_E_tool, p_E_tool), validation, rotation, tip)
 
 

@@ -13,6 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from brachycal.calibration.chain import DEFAULT_ROBOT_ACCURACY, RobotAccuracy
 from brachycal.calibration.chain_report import ChainReport, calibrate_chain
 from brachycal.calibration.image_to_probe import METHODS
 from brachycal.calibration.sequential import CalibrationResult, calibrate
@@ -45,6 +46,7 @@ def calibrate_folder(
     bootstrap_replicates: int = 0,
     joint_offsets: bool = False,
     progress: Callable[[int], None] | None = None,
+    robot_accuracy: RobotAccuracy | None = DEFAULT_ROBOT_ACCURACY,
 ) -> SessionCalibration:
     """Read the session in ``folder`` and calibrate it.
 
@@ -53,7 +55,7 @@ def calibrate_folder(
         robot: the kinematic model (flange poses; its ``us_image`` is ICP's prior).
         methods: image-to-probe methods to fit and cross-validate (:data:`METHODS`).
         chain: also solve the whole chain (image model by cross-validation, uncertainty).
-        bootstrap_replicates, joint_offsets, progress: for the chain
+        bootstrap_replicates, joint_offsets, progress, robot_accuracy: for the chain
             (:func:`~brachycal.calibration.chain_report.calibrate_chain`).
 
     Raises:
@@ -77,5 +79,6 @@ def calibrate_folder(
             bootstrap_replicates=bootstrap_replicates,
             joint_offsets=joint_offsets,
             progress=progress,
+            robot_accuracy=robot_accuracy,
         )
     return SessionCalibration(session, result, report)

@@ -3,8 +3,8 @@
 The top-model, whose tip ``p_ER_Mtip`` on the right flange is known from its CAD and test
 report, locates a fixed reference tip in ``base_link`` (eq. 4). The needle tip (right flange)
 and the probe tip (left flange) are then touched to the same reference tip (eqs. 5, 6), and
-each tip follows from ``inv(T_R_E) @ p_R_Rtip``, averaged over the trials (CONVENTIONS.md,
-"Estimator details"). Validation (Table I) touches a second reference tip with both the tool and
+each tip follows from ``inv(T_R_E) @ p_R_Rtip``, averaged over the trials (``docs/conventions.md``,
+"How the paper's estimators are computed"). Validation (Table I) touches a second reference tip with both the tool and
 the top-model, trial by trial.
 
 Error propagation (what the conditioning checks and the predicted uncertainties rest on). A touch
@@ -64,8 +64,11 @@ TIP_SD_WARN_M = 5e-4
 
 
 class _Touches(Protocol):
-    trials: np.ndarray
-    q: FloatArray
+    # Read-only (properties): a frozen dataclass such as data.session.Touches satisfies it.
+    @property
+    def trials(self) -> np.ndarray: ...
+    @property
+    def q(self) -> FloatArray: ...
 
 
 @dataclass(frozen=True)

@@ -5,9 +5,18 @@ Landing error model (linearised): aiming the needle at an image point, the softw
 is there; the physical tip lands at ``p̂ + R_R_ER (p_ER_Ntip − p̂_ER_Ntip)``. So the landing error
 is ``e ≈ G δθ`` with ``G = ∂p/∂θ − R_R_ER ∂p_ER_Ntip/∂θ``, and its covariance ``G Σ Gᵀ`` follows
 from the parameter covariance ``Σ`` of the fit (from its Jacobian, with the noise levels the fit
-estimated). This is the calibration's part of the landing error: the robot's own errors when it
-executes a target (encoder noise of the probe arm's reading, say) come on top of it;
-``benchmarks/chain_checks.py`` measures both on the twin.
+estimated).
+
+With a stated robot accuracy (:class:`~brachycal.calibration.chain.RobotAccuracy`) two more terms
+enter. The joints' origin errors ``c`` move the estimate by ``S c`` and, at the aiming pose, move
+the physical needle tip and the physical target by ``L_c c`` (``L_c`` the image residual
+``T_R_ER p_N − T_R_EL T_EL_I p_I`` differentiated with respect to ``c`` at the aiming joints and
+pixel: the software computes and commands with the URDF); the two are correlated, so
+``e ≈ G δθ_noise + (G S + L_c) c``. And the joint readings when aiming (torso and probe arm; the
+needle arm's joints are the commanded ones) place the target with encoder noise ``n``:
+``e_n = −L_q n`` (``L_q`` the same residual differentiated with respect to those joints). The
+landing covariance is ``G Σ_noise Gᵀ + (G S + L_c) Σ_c (G S + L_c)ᵀ + σ_enc² L_q L_qᵀ``.
+``benchmarks/chain_checks.py`` measures its coverage on the twin.
 
 Bootstrap (:func:`bootstrap`): each replicate refits the final least-squares problem of the chain
 on resampled data, every group that informs a reported quantity resampled: the image samples are
@@ -30,22 +39,24 @@ from scipy.stats import chi2, norm
 
 from brachycal.calibration.chain import (
     SCANNER_SOUND_SPEED,
+    ChainData,
     ChainFit,
-    _Data,
-    _jacobian,
-    _Layout,
-    _leverages,
-    _residuals,
+    ParameterLayout,
+    chain_jacobian,
+    chain_residuals,
     finite_difference_steps,
+    joint_twists,
+    leverages,
 )
 from brachycal.data.session import Session
-from brachycal.model.names import LEFT_FLANGE, RIGHT_FLANGE
+from brachycal.errors import InputError
+from brachycal.model.names import LEFT_FLANGE, RIGHT_ARM, RIGHT_FLANGE
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, transform_points
 
 
-def _layout(fit: ChainFit, robot: Robot) -> _Layout:
-    return _Layout(fit.model, tuple(robot.joint_names.index(n) for n in fit.joint_offsets_rad))
+def _layout(fit: ChainFit, robot: Robot) -> ParameterLayout:
+    return ParameterLayout(fit.model, tuple(robot.joint_names.index(n) for n in fit.joint_offsets_rad))
 
 
 def _landing(
@@ -61,15 +72,62 @@ def _landing(
 
 
 def landing_covariance(
-    fit: ChainFit, robot: Robot, nominal_spacing: ArrayLike, q: ArrayLike, uv_px: ArrayLike
+    fit: ChainFit,
+    robot: Robot,
+    nominal_spacing: ArrayLike,
+    q: ArrayLike,
+    uv_px: ArrayLike,
+    *,
+    encoder_noise: bool = True,
 ) -> FloatArray:
     """``(M, 3, 3)`` covariance (m²) of the landing error at pixels ``(M, 2)`` seen with joints ``(M, nq)``.
 
-    The calibration's part (see the module docstring). The needle arm's orientation is taken from
-    ``q`` (its right-arm joints).
+    The session's noise, and with the fit's stated robot accuracy the robot model's error and (if
+    ``encoder_noise``) the joint readings' noise when aiming (see the module docstring). The
+    needle arm's orientation is taken from ``q`` (its right-arm joints).
     """
     G = landing_jacobian(fit, robot, nominal_spacing, q, uv_px)
-    return G @ fit.covariance @ np.swapaxes(G, 1, 2)
+    if fit.robot_accuracy is None:
+        return G @ fit.covariance @ np.swapaxes(G, 1, 2)
+    if fit.noise_covariance is None or fit.robot_sensitivity is None or fit.robot_covariance is None:
+        raise InputError("the chain fit states a robot accuracy but carries no robot term: refit it")
+    C = G @ fit.noise_covariance @ np.swapaxes(G, 1, 2)
+    L_c, L_q = landing_robot_jacobians(fit, robot, nominal_spacing, q, uv_px)
+    A = G @ fit.robot_sensitivity + L_c
+    C = C + A @ fit.robot_covariance @ np.swapaxes(A, 1, 2)
+    if encoder_noise:
+        C = C + fit.robot_accuracy.encoder_sd_rad**2 * L_q @ np.swapaxes(L_q, 1, 2)
+    return C
+
+
+def landing_robot_jacobians(
+    fit: ChainFit, robot: Robot, nominal_spacing: ArrayLike, q: ArrayLike, uv_px: ArrayLike
+) -> tuple[FloatArray, FloatArray]:
+    """``L_c (M, 3, 6 nq)`` and ``L_q (M, 3, nq)``: the image residual ``T_R_ER p_N − T_R_EL T_EL_I p_I``
+    (metres) at joints ``q (M, nq)`` and pixels ``uv_px (M, 2)`` differentiated with respect to every
+    joint's origin motion ``(v, ω)`` (:func:`~brachycal.calibration.chain.joint_twists`) and to the
+    joint readings (zero for the needle arm's joints, which are commanded, not read)."""
+    layout = _layout(fit, robot)
+    q = np.atleast_2d(np.asarray(q, dtype=float)) + layout.offsets(fit.x, robot.nq)
+    uv = np.atleast_2d(np.asarray(uv_px, dtype=float))
+    T_ER_Ntip, T_EL_Ptip, T_Ptip_I, _, spacing = layout.unpack(fit.x, fit.base, np.asarray(nominal_spacing, float))
+    p_needle = transform_points(robot.fk(RIGHT_FLANGE, q), T_ER_Ntip[:3, 3])
+    p_I = np.column_stack([uv * spacing, np.zeros(len(uv))])
+    p_image = transform_points(robot.fk(LEFT_FLANGE, q) @ T_EL_Ptip @ T_Ptip_I, p_I)
+
+    def moves(W: FloatArray, p: FloatArray) -> FloatArray:  # (M, nq, 6, 6) twists -> (M, 3, 6 nq) point motions
+        v, w = W[:, :, :3, :], W[:, :, 3:, :]
+        motion = v - np.cross(p[:, None, :, None], w, axis=2)  # ω × p = −p × ω, per twist column
+        return motion.transpose(0, 2, 1, 3).reshape(len(p), 3, -1)
+
+    L_c = moves(joint_twists(robot, q, RIGHT_FLANGE), p_needle) - moves(joint_twists(robot, q, LEFT_FLANGE), p_image)
+    axes = np.concatenate([[0, 0, 0], np.zeros(3)])
+    read = [k for k in range(robot.nq) if k not in RIGHT_ARM]
+    L_q = np.zeros((len(q), 3, robot.nq))
+    for k in read:  # a reading's error turns the joint about its axis: the motion (0, axis)
+        axes[3:] = robot.joint_axis(robot.joint_names[k])
+        L_q[:, :, k] = L_c[:, :, 6 * k : 6 * k + 6] @ axes
+    return L_c, L_q
 
 
 def landing_jacobian(
@@ -135,17 +193,17 @@ def bootstrap(
     held at their values.
     """
     rng = np.random.default_rng(seed)
-    layout = _Layout(fit.model)
+    layout = ParameterLayout(fit.model)
     x0 = fit.x[: layout.size]
-    data = _Data.of(session, robot, fit.offsets(robot.joint_names))
+    data = ChainData.of(session, robot, fit.offsets(robot.joint_names))
     used = np.flatnonzero(~fit.outliers)
     all_used = np.ones(len(used), dtype=bool)
     rows = data.group_rows(len(used))
     # Touch residuals (metres) at the estimate, leverage-corrected so that their spread is the noise's.
     kept = replace(data, T_R_ER=data.T_R_ER[used], T_R_EL=data.T_R_EL[used], uv_px=data.uv_px[used])
-    r0 = _residuals(x0, layout, kept, fit.base, fit.sigma_m, all_used)
-    J = _jacobian(x0, layout, kept, fit.base, fit.sigma_m, all_used)
-    h = _leverages(J)[rows["touch"]]
+    r0 = chain_residuals(x0, layout, kept, fit.base, fit.sigma_m, all_used)
+    J = chain_jacobian(x0, layout, kept, fit.base, fit.sigma_m, all_used)
+    h = leverages(J)[rows["touch"]]
     touch = (r0[rows["touch"]] / np.sqrt(np.clip(1.0 - h, 1e-6, None))).reshape(-1, 3) * fit.sigma_m["touch"]
     touch -= touch.mean(axis=0)
     out: dict[str, list] = {"spacing_m": [], "p_ER_Ntip": [], "p_EL_Ptip": [], "sound_speed_m_s": []}
@@ -157,9 +215,9 @@ def bootstrap(
         epsilon = touch[rng.integers(0, len(touch), size=len(touch))].ravel()
         shift[rows["touch"]] = epsilon / fit.sigma_m["touch"] - r0[rows["touch"]]
         solution = least_squares(
-            lambda x, d=drawn, s=shift: _residuals(x, layout, d, fit.base, fit.sigma_m, all_used) + s,
+            lambda x, d=drawn, s=shift: chain_residuals(x, layout, d, fit.base, fit.sigma_m, all_used) + s,
             x0,
-            jac=lambda x, d=drawn, s=shift: _jacobian(x, layout, d, fit.base, fit.sigma_m, all_used),
+            jac=lambda x, d=drawn, s=shift: chain_jacobian(x, layout, d, fit.base, fit.sigma_m, all_used),
             method="trf",
             x_scale="jac",
             xtol=1e-12,

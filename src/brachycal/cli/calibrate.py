@@ -5,13 +5,20 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import numpy as np
+
 from brachycal.calibration import METHODS, calibrate_folder, write_result
+from brachycal.calibration.chain import (
+    DEFAULT_ROBOT_ACCURACY,
+    MAX_ROBOT_ROTATION_SD_RAD,
+    MAX_ROBOT_TRANSLATION_SD_M,
+    RobotAccuracy,
+)
 from brachycal.cli.common import add_urdf_option, load_robot, progress_bar
 from brachycal.errors import InputError
 from brachycal.files import OutputSet, sha256_bytes
-from brachycal.reporting import chain_summary, table_i, table_ii, uncertainty_table
-from brachycal.reporting.html_report import REPORT_FILES, write_report
-from brachycal.validate import bounded_int, name_list
+from brachycal.reporting import REPORT_FILES, chain_summary, table_i, table_ii, uncertainty_table, write_report
+from brachycal.validate import bounded_int, finite_float, name_list
 
 #: Most bootstrap refits --bootstrap takes: a 95% percentile interval is settled by ~2000; 10000
 #: refits of the chain already take hours, so a larger count is a typo.
@@ -28,8 +35,9 @@ separate u/v pixel spacings, each evaluated by leave-one-out cross-validation (T
 With --method chain, the whole chain is also solved as one least-squares problem over all the
 data (touches, axes moves, images; gross image outliers flagged and left out), the image model
 (rigid, similarity, scaled u/v, or speed of sound) chosen by cross-validation, with 95% intervals
-of the session's noise (coverage on the twin: benchmarks/chain_checks.py, see the README) and the
-predicted landing error over the sample poses and the image; data that cannot determine the chain
+of the session's noise and the robot's stated kinematic accuracy (--robot-accuracy-mm/-deg;
+coverage on the twin: benchmarks/chain_checks.py, see the README) and the predicted landing error
+over the sample poses and the image; data that cannot determine the chain
 are refused. The result then carries the chain's transforms.
 
 The result (brachycal-result/1, JSON, metres) and the report are written together, all or
@@ -65,6 +73,23 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="with --method chain: also estimate the joint zero offsets this session identifies",
     )
+    millimetres = finite_float(low=0.0, high=MAX_ROBOT_TRANSLATION_SD_M * 1e3, unit="mm")
+    parser.add_argument(
+        "--robot-accuracy-mm",
+        type=millimetres,
+        metavar="SD",
+        help="with --method chain: the robot's stated accuracy, each joint origin's translation SD per axis, "
+        f"{millimetres.rule} (default {DEFAULT_ROBOT_ACCURACY.translation_sd_m * 1e3:g}, a well-built arm; "
+        "real arms are often 0.1); included in the intervals and the predicted landing error",
+    )
+    degrees = finite_float(low=0.0, high=float(np.degrees(MAX_ROBOT_ROTATION_SD_RAD)), unit="deg")
+    parser.add_argument(
+        "--robot-accuracy-deg",
+        type=degrees,
+        metavar="SD",
+        help="with --method chain: each joint origin's rotation SD per axis and zero-offset SD, "
+        f"{degrees.rule} (default {np.degrees(DEFAULT_ROBOT_ACCURACY.rotation_sd_rad):g}; real arms often 0.01)",
+    )
     replicates = bounded_int(low=0, high=MAX_BOOTSTRAP)
     parser.add_argument(
         "--bootstrap",
@@ -80,10 +105,31 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser.set_defaults(run=run)
 
 
+def _robot_accuracy(args: argparse.Namespace) -> RobotAccuracy:
+    """The stated robot accuracy: the options given, the defaults for the others."""
+    if args.robot_accuracy_mm is None and args.robot_accuracy_deg is None:
+        return DEFAULT_ROBOT_ACCURACY
+    mm = args.robot_accuracy_mm if args.robot_accuracy_mm is not None else DEFAULT_ROBOT_ACCURACY.translation_sd_m * 1e3
+    deg = (
+        args.robot_accuracy_deg
+        if args.robot_accuracy_deg is not None
+        else float(np.degrees(DEFAULT_ROBOT_ACCURACY.rotation_sd_rad))
+    )
+    return RobotAccuracy(
+        mm * 1e-3,
+        float(np.radians(deg)),
+        DEFAULT_ROBOT_ACCURACY.encoder_sd_rad,
+        f"--robot-accuracy-mm {mm:g} --robot-accuracy-deg {deg:g} (encoder SD: the default)",
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     if args.method != "chain" and (args.bootstrap or args.joint_offsets):
         option = "--bootstrap" if args.bootstrap else "--joint-offsets"
         raise InputError(f"{option} needs --method chain (the sequential method has no bootstrap or joint offsets)")
+    if args.method != "chain" and (args.robot_accuracy_mm is not None or args.robot_accuracy_deg is not None):
+        option = "--robot-accuracy-mm" if args.robot_accuracy_mm is not None else "--robot-accuracy-deg"
+        raise InputError(f"{option} needs --method chain (the sequential method states no robot term)")
     with OutputSet(force=args.force) as outputs:
         staged_result = outputs.claim(args.out, label="--out")
         if args.report:
@@ -99,6 +145,7 @@ def run(args: argparse.Namespace) -> int:
                 bootstrap_replicates=args.bootstrap,
                 joint_offsets=args.joint_offsets,
                 progress=bar.update,
+                robot_accuracy=_robot_accuracy(args),
             )
         result, chain, session = calibrated.result, calibrated.chain, calibrated.session
         print(table_i(result))

@@ -3,15 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import csv
 from pathlib import Path
 
-import numpy as np
-
 from brachycal.cli.common import progress_bar
-from brachycal.files import OutputSet, atomic_open
+from brachycal.files import OutputSet, write_csv
 from brachycal.model import Robot
-from brachycal.simulation.design import DESIGNS, MECHANICAL_MINUTES, SECONDS_PER_SAMPLE, evaluate_design
+from brachycal.reporting import design_table
+from brachycal.simulation import DESIGNS, compare_designs
 from brachycal.validate import MAX_SEEDS, bounded_int, name_list
 
 HELP = "compare sample designs (4x4x4, 3x3x3, random, optimal) by predicted targeting error per robot minute"
@@ -48,35 +46,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    designs = args.designs  # checked by argparse: known, none empty, no repeats
     out = Path(args.out)
     with OutputSet(force=args.force) as outputs:
         staged = outputs.claim(out / "design.csv", make_parents=True)
-        robot = Robot.load()
-        rows = []
-        with progress_bar(len(designs) * args.seeds, "designs", args.quiet) as bar:
-            for design in designs:
-                for seed in range(args.seeds):
-                    rows.append(evaluate_design(robot, design, seed))
-                    bar.update(1)
-        with atomic_open(staged) as handle:
-            writer = csv.DictWriter(handle, fieldnames=list(rows[0]), lineterminator="\n")
-            writer.writeheader()
-            writer.writerows(rows)
-    print(f"time model: {MECHANICAL_MINUTES:g} min mechanical + {SECONDS_PER_SAMPLE:g} s per sample + motion")
-    print(
-        f"{'design':<12} {'samples':>7} {'minutes':>8} {'predicted RMS (mm)':>19} {'actual RMS (mm)':>16} "
-        f"{'information/min':>16}"
-    )
-    for design in designs:
-        group = [r for r in rows if r["design"] == design]
-        mean = {
-            k: float(np.mean([r[k] for r in group]))
-            for k in ("robot_minutes", "predicted_rms_mm", "actual_rms_mm", "information_per_minute")
-        }
-        print(
-            f"{design:<12} {group[0]['samples']:>7} {mean['robot_minutes']:>8.1f} {mean['predicted_rms_mm']:>19.3f} "
-            f"{mean['actual_rms_mm']:>16.3f} {mean['information_per_minute']:>16.2f}"
-        )
+        with progress_bar(len(args.designs) * args.seeds, "designs", args.quiet) as bar:
+            rows = compare_designs(Robot.load(), args.designs, args.seeds, progress=bar.update)
+        write_csv(staged, rows)
+    print(design_table(rows))
     print(f"wrote {out / 'design.csv'}")
     return 0

@@ -5,12 +5,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from brachycal.calibration import read_result
-from brachycal.calibration.image_to_probe import ALL_LABELS
+from brachycal.calibration import ALL_LABELS, read_result
 from brachycal.cli.common import add_urdf_option, load_robot
 from brachycal.errors import InputError
-from brachycal.export import write_exports
-from brachycal.export.formats import EXPORT_FILES
+from brachycal.export import EXPORT_FILES, write_exports
 from brachycal.files import OutputSet
 
 HELP = "export a result: calibrated URDF, 3D Slicer/ITK transforms, PLUS CoordinateDefinitions, ROS static TFs"

@@ -6,8 +6,7 @@ import argparse
 from pathlib import Path
 
 from brachycal.cli.common import add_urdf_option, load_robot, progress_bar
-from brachycal.data import DEFAULT_TOPIC, read_joint_log, write_pose_table
-from brachycal.data.csv_log import read_table, to_float
+from brachycal.data import DEFAULT_TOPIC, read_joint_log, read_times, write_pose_table
 from brachycal.files import OutputSet
 from brachycal.validate import name_list
 
@@ -61,9 +60,7 @@ def run(args: argparse.Namespace) -> int:
         staged = outputs.claim(out, label="--out")
         log = read_joint_log(args.log, robot, args.topic)
         if args.times:
-            path = Path(args.times)
-            header, rows, records = read_table(path, ["time"])
-            times = to_float(path, header, rows, records, ["time"])[:, 0]
+            times = read_times(args.times)
             Q = log.interpolate(times)
         else:
             times, Q = log.time, log.q

@@ -3,14 +3,10 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from brachycal.calibration import read_result
-from brachycal.calibration.image_to_probe import ALL_LABELS
-from brachycal.calibration.sequential import locate
+from brachycal.calibration import ALL_LABELS, locate, read_result
 from brachycal.cli.common import add_urdf_option, load_robot
-from brachycal.data.csv_log import read_table, to_float
-from brachycal.data.joint_log import configurations_from_columns
+from brachycal.data import read_configurations
 from brachycal.errors import InputError
 from brachycal.validate import MAX_IMAGE_PX, check_pixel, number_list
 
@@ -60,14 +56,7 @@ def run(args: argparse.Namespace) -> int:
             f"the result has no method {args.method!r} (it has {', '.join(stored.image)})", file=args.result
         )
     robot = stored.software_robot(load_robot(args))
-    path = Path(args.joints)
-    header, rows, records = read_table(path, [])
-    names = [h for h in header if h in robot.joint_names or h == "torso_joint_b2"]
-    if not records:
-        raise InputError("no configurations", file=path)
-    Q = configurations_from_columns(
-        robot, names, to_float(path, header, rows, records, names), source=str(path), rows=rows
-    )
+    rows, Q = read_configurations(args.joints, robot)
     print("row,x,y,z")
     for row, q in zip(rows, Q, strict=True):
         p = locate(robot, q, uv, stored.T_EL_Ptip, stored.image[args.method])[0]

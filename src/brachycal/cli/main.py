@@ -12,7 +12,7 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 
 from brachycal import __version__
-from brachycal.cli import calibrate, demo, design, export, fk, locate, model, nwire, pivot, plan, study
+from brachycal.cli import calibrate, demo, design, export, fk, locate, model, nwire, pivot, plan, session, study
 from brachycal.errors import BrachycalError
 
 DESCRIPTION = """\
@@ -27,6 +27,8 @@ start here:
   brachycal fk LOG --frames needle_tip,probe_tip --out poses.csv
                                       tool poses from a joint log (CSV or ROS bag)
   brachycal plan --out plan.csv        plan the 4x4x4 calibration sample poses
+  brachycal session build LOG --marks marks.csv --images images.csv --out SESSION
+                                      a session folder from a lab's recording (joint log, marks, frames)
   brachycal calibrate SESSION --out result.json
                                       calibrate a session folder (Tables I and II)
   brachycal locate RESULT JOINTS --uv U,V
@@ -54,7 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"brachycal {__version__}")
     sub = parser.add_subparsers(title="commands", metavar="COMMAND", required=True, parser_class=OneLineParser)
-    for module in (demo, model, fk, plan, calibrate, locate, export, pivot, nwire, study, design):
+    for module in (demo, model, fk, plan, session, calibrate, locate, export, pivot, nwire, study, design):
         module.add_parser(sub)
     return parser
 
@@ -89,7 +91,10 @@ def _command_environment() -> Iterator[None]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as exc:  # --help, --version, or a usage error (already printed, one line)
+        return exc.code if isinstance(exc.code, int) else 2
     try:
         with _command_environment():
             return int(args.run(args) or 0)

@@ -7,7 +7,7 @@ import argparse
 import numpy as np
 
 from brachycal.cli.common import add_urdf_option, load_robot
-from brachycal.model.names import TOOL_FRAME_PARENTS
+from brachycal.model import TOOL_FRAME_PARENTS
 from brachycal.se3 import to_xyz_rpy
 
 HELP = "joints, limits and tool frames of the robot model"

@@ -9,14 +9,23 @@ from pathlib import Path
 
 import numpy as np
 
-from brachycal.calibration import read_result
-from brachycal.calibration.image_to_probe import ALL_LABELS
+from brachycal.calibration import ALL_LABELS, read_result
 from brachycal.cli.common import add_urdf_option, load_robot, progress_bar
 from brachycal.errors import InputError
+from brachycal.export import calibrated_robot
 from brachycal.files import OutputSet
-from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
-from brachycal.planning import IKSettings, PlanSpec, RectFOV, SectorFOV, Thresholds, plan_poses
-from brachycal.planning.output import infeasible_path, write_infeasible, write_plan
+from brachycal.imaging import DEFAULT_SPACING_M
+from brachycal.planning import (
+    IKSettings,
+    PlanSpec,
+    RectFOV,
+    SectorFOV,
+    Thresholds,
+    infeasible_path,
+    plan_poses,
+    write_infeasible,
+    write_plan,
+)
 from brachycal.planning.spec import EDGE_RANGE_M, MAX_CENTRE_M, MAX_SECTOR_DEPTH_M
 from brachycal.planning.verify import (
     MAX_COLLISION_MARGIN_M,
@@ -24,7 +33,7 @@ from brachycal.planning.verify import (
     MIN_COLLISION_MARGIN_M,
     MIN_JOINT_MARGIN_RAD,
 )
-from brachycal.reporting.plan_figure import plot_plan
+from brachycal.reporting import plan_text, plot_plan
 from brachycal.validate import (
     MAX_GRID_POINTS,
     MAX_IMAGE_PX,
@@ -59,26 +68,48 @@ example:
 """
 
 
+def _pair(values) -> str:
+    """Numbers as an option's text: ``540,221``."""
+    return ",".join(f"{float(v):g}" for v in values)
+
+
+def _mm_pair(values_m) -> str:
+    return _pair(float(v) * 1e3 for v in values_m)
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
         "plan", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    d = PlanSpec()
     parser.add_argument("--out", required=True, metavar="CSV", help="plan file to write")
-    g = parser.add_argument_group("grid")
+    defaults = PlanSpec()  # the planner's defaults are the options' defaults (one home)
+    _grid_options(parser.add_argument_group("grid"), defaults)
+    _imaging_options(parser.add_argument_group("imaging"), defaults)
+    _tool_options(parser.add_argument_group("tools and safety"))
+    o = parser.add_argument_group("output")
+    o.add_argument("--figure", metavar="PNG", help="figure path (default: --out with .png; never --out itself)")
+    o.add_argument("--allow-partial", action="store_true", help="write the plan even if some points are infeasible")
+    o.add_argument("--force", action="store_true", help="replace existing outputs")
+    o.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.set_defaults(run=run)
+
+
+def _grid_options(g: argparse._ArgumentGroup, d: PlanSpec) -> None:
     centre = number_list(count=3, low=-MAX_CENTRE_M * 1e3, high=MAX_CENTRE_M * 1e3, unit="mm")
     g.add_argument(
         "--centre-mm",
         type=centre,
-        default="800,100,1050",
+        default=_mm_pair(d.cube_centre_m),
         metavar="X,Y,Z",
-        help=f"cube centre in base_link, {centre.rule} (default 800,100,1050)",
+        help=f"cube centre in base_link, {centre.rule} (default {_mm_pair(d.cube_centre_m)})",
     )
     edge = finite_float(low=EDGE_RANGE_M[0] * 1e3, high=EDGE_RANGE_M[1] * 1e3, unit="mm")
-    g.add_argument("--edge-mm", type=edge, default=40.0, help=f"cube edge, {edge.rule} (default 40)")
+    edge_mm = f"{d.edge_m * 1e3:g}"
+    g.add_argument("--edge-mm", type=edge, default=edge_mm, help=f"cube edge, {edge.rule} (default {edge_mm})")
     points = bounded_int(low=2, high=MAX_GRID_POINTS)
+    n = d.points_per_axis
     g.add_argument(
-        "--points", type=points, default=4, help=f"grid points per axis, {points.rule} (default 4: 64 poses)"
+        "--points", type=points, default=n, help=f"grid points per axis, {points.rule} (default {n}: {n**3} poses)"
     )
     g.add_argument(
         "--insertion",
@@ -87,14 +118,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="DX,DY,DZ",
         help="needle direction in base_link (default: forward, 35 deg towards the left)",
     )
-    i = parser.add_argument_group("imaging")
+
+
+def _imaging_options(i: argparse._ArgumentGroup, d: PlanSpec) -> None:
+    sector_fov, rect_fov = SectorFOV(), RectFOV()
     i.add_argument(
-        "--image-depth", type=direction, default="1,0,0", metavar="DX,DY,DZ", help="image +v (depth) in base_link"
+        "--image-depth",
+        type=direction,
+        default=_pair(d.image_depth_dir),
+        metavar="DX,DY,DZ",
+        help="image +v (depth) in base_link",
     )
     i.add_argument(
         "--image-lateral",
         type=direction,
-        default="0,0,1",
+        default=_pair(d.image_lateral_dir),
         metavar="DX,DY,DZ",
         help="image +u (lateral) in base_link, not parallel to --image-depth",
     )
@@ -102,34 +140,43 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     i.add_argument(
         "--centre-px",
         type=pixel,
-        default="540,221",
+        default=_pair(d.centre_px),
         metavar="U,V",
-        help=f"pixel where the cube centre shows, {pixel.rule} (default 540,221)",
+        help=f"pixel where the cube centre shows, {pixel.rule} (default {_pair(d.centre_px)})",
     )
     i.add_argument(
         "--spacing-mm",
         type=spacing_mm,
         metavar="SU,SV",
-        help=f"pixel spacing, {spacing_mm.rule} (default: the result's, else 0.19,0.19)",
+        help=f"pixel spacing, {spacing_mm.rule} (default: the result's, else {_mm_pair(d.spacing_m)})",
     )
     i.add_argument("--fov", choices=("sector", "rect"), default="sector", help="field of view shape")
     apex = number_list(count=2, low=-MAX_IMAGE_PX, high=MAX_IMAGE_PX, unit="px")
     i.add_argument(
-        "--sector-apex-px", type=apex, default="540,0", metavar="U,V", help=f"sector apex, {apex.rule} (default 540,0)"
+        "--sector-apex-px",
+        type=apex,
+        default=_pair(sector_fov.apex_px),
+        metavar="U,V",
+        help=f"sector apex, {apex.rule} (default {_pair(sector_fov.apex_px)})",
     )
     depth = finite_float(low=0.0, high=MAX_SECTOR_DEPTH_M * 1e3, low_open=True, unit="mm")
-    i.add_argument("--sector-depth-mm", type=depth, default=70.0, help=f"sector depth, {depth.rule} (default 70)")
+    depth_mm, angle_deg = sector_fov.radius_m * 1e3, float(np.degrees(sector_fov.angle_rad))
+    i.add_argument(
+        "--sector-depth-mm", type=depth, default=depth_mm, help=f"sector depth, {depth.rule} (default {depth_mm:g})"
+    )
     angle = finite_float(low=0.0, high=180.0, low_open=True, unit="deg")
-    i.add_argument("--sector-angle-deg", type=angle, default=120.0, help=f"sector opening, {angle.rule} (default 120)")
+    i.add_argument("--sector-angle-deg", type=angle, help=f"sector opening, {angle.rule} (default {angle_deg:g})")
     rect = number_list(count=4, low=-0.5, high=MAX_IMAGE_PX, unit="px")
     i.add_argument(
         "--rect-px",
         type=rect,
-        default="0,1079,0,719",
+        default=_pair((*rect_fov.u_range_px, *rect_fov.v_range_px)),
         metavar="U0,U1,V0,V1",
         help=f"rectangle (with --fov rect), U0 < U1 and V0 < V1, {rect.rule}",
     )
-    t = parser.add_argument_group("tools and safety")
+
+
+def _tool_options(t: argparse._ArgumentGroup) -> None:
     t.add_argument("--result", metavar="JSON", help="plan with a calibration result's tool frames")
     t.add_argument(
         "--method",
@@ -160,12 +207,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=1.0,
         help=f"fraction of vendor speed for motion times, {speed.rule} (default 1)",
     )
-    o = parser.add_argument_group("output")
-    o.add_argument("--figure", metavar="PNG", help="figure path (default: --out with .png; never --out itself)")
-    o.add_argument("--allow-partial", action="store_true", help="write the plan even if some points are infeasible")
-    o.add_argument("--force", action="store_true", help="replace existing outputs")
-    o.add_argument("--quiet", action="store_true", help="no progress bar")
-    parser.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -189,9 +230,7 @@ def _run(args: argparse.Namespace, outputs: OutputSet) -> None:
         if args.method not in stored.image:
             raise InputError(f"the result has no method {args.method!r}", file=args.result)
         image = stored.image[args.method]
-        robot = stored.software_robot(robot).with_tool_transform(NEEDLE_TIP, stored.T_ER_Ntip)
-        robot = robot.with_tool_transform(PROBE_TIP, stored.T_EL_Ptip)
-        robot = robot.with_tool_transform(US_IMAGE, image.T_Ptip_I)
+        robot = calibrated_robot(stored.software_robot(robot), stored.T_ER_Ntip, stored.T_EL_Ptip, image)
         if args.spacing_mm is None:
             spec = replace(spec, spacing_m=image.spacing_m)
     n = args.points**3
@@ -199,7 +238,7 @@ def _run(args: argparse.Namespace, outputs: OutputSet) -> None:
         plan = plan_poses(
             robot, spec, settings=settings, thresholds=thresholds, speed_scale=args.speed_scale, progress=bar.update
         )
-    _report(plan)
+    print(plan_text(plan))
     if plan.infeasible and not args.allow_partial:
         counts = Counter(reason for item in plan.infeasible for reason in item.reasons)
         summary = ", ".join(f"{k}: {v}" for k, v in counts.most_common())
@@ -217,8 +256,8 @@ def _run(args: argparse.Namespace, outputs: OutputSet) -> None:
 
 def _settings(args: argparse.Namespace) -> tuple[PlanSpec, IKSettings, Thresholds]:
     """The planner's inputs from the options (each already range-checked by argparse), with the
-    checks that involve two options; the spacing is --spacing-mm's or 0.19 mm/px (a --result's
-    replaces the latter once the result is read).
+    checks that involve two options; the spacing is --spacing-mm's or the scanner's nominal
+    (:data:`~brachycal.imaging.DEFAULT_SPACING_M`; a --result's replaces it once the result is read).
 
     Raises:
         InputError: naming the options that do not go together.
@@ -227,14 +266,17 @@ def _settings(args: argparse.Namespace) -> tuple[PlanSpec, IKSettings, Threshold
         raise InputError("--image-depth and --image-lateral are parallel; the image plane needs two directions")
     if args.fov == "sector":
         fov: SectorFOV | RectFOV = SectorFOV(
-            tuple(args.sector_apex_px), args.sector_depth_mm * 1e-3, np.radians(args.sector_angle_deg)
+            tuple(args.sector_apex_px),
+            args.sector_depth_mm * 1e-3,
+            # Unset: SectorFOV's own default, exactly (not a round trip through degrees).
+            SectorFOV().angle_rad if args.sector_angle_deg is None else np.radians(args.sector_angle_deg),
         )
     else:
         u0, u1, v0, v1 = args.rect_px
         if not (u0 < u1 and v0 < v1):
             raise InputError(f"--rect-px must be U0,U1,V0,V1 with U0 < U1 and V0 < V1, got {u0:g},{u1:g},{v0:g},{v1:g}")
         fov = RectFOV((u0, u1), (v0, v1))
-    spacing = np.array([0.19, 0.19]) if args.spacing_mm is None else args.spacing_mm
+    spacing_m = np.array(DEFAULT_SPACING_M) if args.spacing_mm is None else args.spacing_mm * 1e-3
     spec = PlanSpec(
         cube_centre_m=args.centre_mm * 1e-3,
         edge_m=args.edge_mm * 1e-3,
@@ -243,7 +285,7 @@ def _settings(args: argparse.Namespace) -> tuple[PlanSpec, IKSettings, Threshold
         image_depth_dir=args.image_depth,
         image_lateral_dir=args.image_lateral,
         centre_px=tuple(args.centre_px),
-        spacing_m=spacing * 1e-3,
+        spacing_m=spacing_m,
         fov=fov,
     )
     margin = args.collision_margin_mm * 1e-3
@@ -252,30 +294,3 @@ def _settings(args: argparse.Namespace) -> tuple[PlanSpec, IKSettings, Threshold
     settings = IKSettings(collision_margin_m=margin + 2e-3, joint_margin_rad=joint_margin + 0.01)
     thresholds = Thresholds(collision_margin_m=margin, joint_margin_rad=joint_margin)
     return spec, settings, thresholds
-
-
-def _report(plan) -> None:
-    n = len(plan.poses) + len(plan.infeasible)
-    print(f"planned {len(plan.poses)} of {n} poses in {plan.solve_time_s:.2f} s")
-    for item in plan.infeasible:
-        p = item.point
-        print(
-            f"  infeasible {p.name} at ({', '.join(f'{x * 1e3:.1f}' for x in p.p_base)}) mm, "
-            f"pixel ({p.uv_px[0]:.0f}, {p.uv_px[1]:.0f}): {'+'.join(item.reasons)} — {item.detail}"
-        )
-    if plan.poses:
-        checks = [pose.check for pose in plan.poses]
-        print(
-            f"  worst tip error {max(c.position_error_m for c in checks) * 1e3:.6f} mm, needle direction "
-            f"{np.degrees(max(c.direction_error_rad for c in checks)):.6f} deg, image plane "
-            f"{max(c.plane_distance_m for c in checks) * 1e3:.6f} mm"
-        )
-        print(
-            f"  smallest clearance {plan.min_clearance_m * 1e3:.1f} mm, smallest joint margin "
-            f"{np.degrees(min(c.joint_margin_rad for c in checks)):.1f} deg"
-        )
-        m = plan.motion_time_s
-        print(
-            f"  motion at {plan.speed_scale:g} x vendor speed: optimised {m['optimised']:.1f} s, "
-            f"serpentine {m['serpentine']:.1f} s, raster {m['raster']:.1f} s"
-        )

@@ -3,17 +3,16 @@
 from __future__ import annotations
 
 import argparse
-import csv
 import os
 from pathlib import Path
 
-from brachycal.calibration.image_to_probe import ALL_LABELS as METHOD_LABELS
 from brachycal.cli.common import progress_bar
-from brachycal.files import OutputSet, atomic_open
+from brachycal.files import OutputSet, write_csv
+from brachycal.imaging import SCANNER_SOUND_SPEED_M_S
 from brachycal.planning.spec import EDGE_RANGE_M
-from brachycal.reporting.figures import save_figure, study_figure
+from brachycal.reporting import save_figure, study_figure, study_table
 from brachycal.simulation.study import MAX_STUDY_RUNS, STUDY_METHODS, RunParams, run_study, summarise, sweep
-from brachycal.simulation.twin import MAX_ANNOTATION_SD_PX, MAX_OUTLIER_RATE
+from brachycal.simulation.twin import MAX_ANNOTATION_SD_PX, MAX_OUTLIER_RATE, TwinConfig
 from brachycal.validate import (
     MAX_GRID_POINTS,
     MAX_SEEDS,
@@ -74,7 +73,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--sound",
         choices=("water", "tissue", "both"),
         default="water",
-        help="speed of sound: water (1482 m/s, default), tissue (= scanner's 1540), or both",
+        help=f"speed of sound: water ({TwinConfig().sound_speed_m_s:.0f} m/s, default), tissue (= scanner's "
+        f"{SCANNER_SOUND_SPEED_M_S:.0f}), or both",
     )
     rates = number_list(low=0.0, high=MAX_OUTLIER_RATE)
     parser.add_argument(
@@ -140,29 +140,7 @@ def _run(args: argparse.Namespace, files: list[Path], runs: list[RunParams]) -> 
     with progress_bar(len(runs), "sessions", args.quiet) as bar:
         rows = run_study(runs, workers=args.workers, scheduler=args.scheduler, progress=bar.update)
     summary = summarise(rows)
-    _write_csv(files[0], rows)
-    _write_csv(files[1], summary)
+    write_csv(files[0], rows, float_format=".6f")
+    write_csv(files[1], summary, float_format=".6f")
     save_figure(study_figure(summary), files[2], dpi=110)
-    _print(summary)
-
-
-def _write_csv(path: Path, rows: list[dict]) -> None:
-    with atomic_open(path) as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]), lineterminator="\n")
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({k: (f"{v:.6f}" if isinstance(v, float) else v) for k, v in row.items()})
-
-
-def _print(summary: list[dict]) -> None:
-    print(
-        f"{'samples':>7} {'edge':>5} {'ann.px':>6} {'sound':>6} {'outl.':>5} {'method':<22} "
-        f"{'LOO MAE (mm)':>14} {'target MAE (mm)':>16} {'target max':>11}"
-    )
-    for s in summary:
-        print(
-            f"{s['samples']:>7} {s['edge_mm']:>5g} {s['annotation_px']:>6g} "
-            f"{'water' if s['sound_speed'] else 'tissue':>6} {s['outlier_rate']:>5g} {METHOD_LABELS[s['method']]:<22} "
-            f"{s['loo_mae_mm_mean']:>7.3f} ± {s['loo_mae_mm_sd']:.3f} {s['target_mae_mm_mean']:>8.3f} ± "
-            f"{s['target_mae_mm_sd']:.3f} {s['target_max_mm_mean']:>11.3f}"
-        )
+    print(study_table(summary))

@@ -1,4 +1,16 @@
-"""Data in and out: joint logs (CSV, ROS 1/2 bags) and pose tables."""
+"""Data in and out: every file format brachycal reads or writes, read into SI units and validated.
+
+Joint logs (CSV, ROS 1 and ROS 2 bags: :func:`read_joint_log`, a :class:`JointLog` of times in
+seconds and configurations in radians, model joint order); tables of configurations and of times
+(:func:`read_configurations`, :func:`read_times`); pose tables (:func:`write_pose_table`,
+:func:`read_pose_table`: metres in ``base_link``, quaternions x, y, z, w); calibration sessions
+(:func:`read_session`, :func:`write_session`: a :class:`Session`); a lab's recording (marks, image
+frames, Slicer markups) built into a session (:func:`build_session_from_files`); pose lists of tracked tools
+(:func:`read_pose_list`); PLUS files (:func:`read_plus_config`, :func:`read_segmented_frames`,
+:func:`read_coordinate_definitions`, :func:`read_sequence_header`: millimetres in, metres out).
+Every reader refuses bad input with one :class:`~brachycal.errors.InputError` naming the file,
+row and column.
+"""
 
 from __future__ import annotations
 
@@ -6,9 +18,42 @@ import os
 from pathlib import Path
 
 from brachycal.data.bags import DEFAULT_TOPIC, is_bag, read_bag_log, write_bag_log
-from brachycal.data.csv_log import read_csv_log
-from brachycal.data.joint_log import JointLog, joint_log_from_columns
+from brachycal.data.csv_log import read_configurations, read_csv_log, read_times
+from brachycal.data.joint_log import JointLog, joint_columns, joint_log_from_columns
+from brachycal.data.plus_files import (
+    PlusConfig,
+    SegmentedFrame,
+    Wire,
+    read_coordinate_definitions,
+    read_plus_config,
+    read_segmented_frames,
+    read_sequence_header,
+)
+from brachycal.data.pose_list import read_pose_list
 from brachycal.data.pose_table import read_pose_table, write_pose_table
+from brachycal.data.recording import (
+    Frame,
+    Mark,
+    StillWindow,
+    read_bag_marks,
+    read_images,
+    read_marks,
+    read_slicer_markups,
+    still_configuration,
+)
+from brachycal.data.session import Session, Touches, read_session, read_session_toml, write_session
+from brachycal.data.session_build import (
+    BuildReport,
+    ImageSettings,
+    PlannedSamples,
+    SessionBuild,
+    StillSettings,
+    build_session,
+    build_session_from_files,
+    read_plan,
+    session_settings,
+    write_build,
+)
 from brachycal.errors import InputError
 from brachycal.model.robot import Robot
 
@@ -25,13 +70,47 @@ def read_joint_log(path: str | os.PathLike[str], robot: Robot, topic: str = DEFA
 
 __all__ = [
     "DEFAULT_TOPIC",
+    "BuildReport",
+    "Frame",
+    "ImageSettings",
     "JointLog",
+    "Mark",
+    "PlannedSamples",
+    "PlusConfig",
+    "SegmentedFrame",
+    "Session",
+    "SessionBuild",
+    "StillSettings",
+    "StillWindow",
+    "Touches",
+    "Wire",
+    "build_session",
+    "build_session_from_files",
     "is_bag",
+    "joint_columns",
     "joint_log_from_columns",
     "read_bag_log",
+    "read_bag_marks",
+    "read_configurations",
+    "read_coordinate_definitions",
     "read_csv_log",
+    "read_images",
     "read_joint_log",
+    "read_marks",
+    "read_plan",
+    "read_plus_config",
+    "read_pose_list",
     "read_pose_table",
+    "read_segmented_frames",
+    "read_sequence_header",
+    "read_session",
+    "read_session_toml",
+    "read_slicer_markups",
+    "read_times",
+    "session_settings",
+    "still_configuration",
     "write_bag_log",
+    "write_build",
     "write_pose_table",
+    "write_session",
 ]

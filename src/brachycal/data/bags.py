@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -20,6 +21,9 @@ from numpy.typing import ArrayLike
 from brachycal.data.joint_log import JointLog, joint_log_from_columns
 from brachycal.errors import InputError
 from brachycal.model.robot import Robot
+
+if TYPE_CHECKING:  # the message's fields, for the type checker; rosbags is imported where it is used
+    from rosbags.typesys.stores.ros2_humble import sensor_msgs__msg__JointState as JointStateMsg
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 DEFAULT_TOPIC = "/joint_states"
@@ -70,7 +74,8 @@ def read_bag_log(path: str | os.PathLike[str], robot: Robot, topic: str = DEFAUL
             if connection.msgtype != JOINT_STATE:
                 raise InputError(f"topic {topic!r} carries {connection.msgtype}, expected {JOINT_STATE}", file=source)
         for number, (connection, bag_time, raw) in enumerate(reader.messages(connections=connections), start=1):
-            msg = reader.deserialize(raw, connection.msgtype)
+            # The connections were checked above to carry JOINT_STATE; rosbags returns `object`.
+            msg = cast("JointStateMsg", reader.deserialize(raw, connection.msgtype))
             stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
             these = list(msg.name)
             for k, name in enumerate(these):
@@ -153,11 +158,10 @@ def write_bag_log(
         connection = writer.add_connection(topic, JOINT_STATE, typestore=typestore)
         for k, (t, row) in enumerate(zip(time, q, strict=True)):
             ns = round(t * 1e9)
-            header_args = {"stamp": Time(sec=ns // 10**9, nanosec=ns % 10**9), "frame_id": ""}
-            if ros == 1:
-                header_args["seq"] = k
+            stamp = Time(sec=ns // 10**9, nanosec=ns % 10**9)
+            header = Header(seq=k, stamp=stamp, frame_id="") if ros == 1 else Header(stamp=stamp, frame_id="")
             msg = JointState(
-                header=Header(**header_args),
+                header=header,
                 name=list(joint_names),
                 position=row.copy(),
                 velocity=np.zeros(0),

@@ -76,6 +76,26 @@ def to_float(
         raise
 
 
+def unique_names(path: Path, header: list[str], rows: list[int], records: list[list[str]], column: str) -> list[str]:
+    """The values of ``column`` (``sample``, ``point``), stripped: each non-empty and each once.
+
+    Raises:
+        InputError: an empty name, or a name that appears twice (naming both rows).
+    """
+    k = header.index(column)
+    names = [fields[k].strip() for fields in records]
+    seen: dict[str, int] = {}
+    for row, name in zip(rows, names, strict=True):
+        if not name:
+            raise InputError(f"empty {column} name", file=path, row=row, column=column)
+        if name in seen:
+            raise InputError(
+                f"{column} {name!r} appears twice (also row {seen[name]})", file=path, row=row, column=column
+            )
+        seen[name] = row
+    return names
+
+
 def read_csv_log(path: str | os.PathLike[str], robot: Robot) -> JointLog:
     """Read and validate a CSV joint log.
 

@@ -151,7 +151,7 @@ def configurations_from_columns(
             raise fail("value is not a finite number", int(np.argmax(bad)), joint)
     too_big = np.abs(q) > DEGREES_THRESHOLD
     if too_big.any():
-        i, k = np.unravel_index(int(np.argmax(too_big)), q.shape)
+        i, k = (int(v) for v in np.unravel_index(int(np.argmax(too_big)), q.shape))
         raise fail(
             f"value {q[i, k]:g} looks like degrees (|value| > 2π); joint values are in radians",
             int(i),
@@ -163,7 +163,7 @@ def configurations_from_columns(
     beyond = np.maximum(robot.lower - q, q - robot.upper)  # > 0 outside the limits
     outside = beyond > tolerance
     if outside.any():
-        i, k = np.unravel_index(int(np.argmax(outside)), q.shape)
+        i, k = (int(v) for v in np.unravel_index(int(np.argmax(outside)), q.shape))
         raise fail(
             f"value {q[i, k]:.{digits[k]}f} {unit[k]} is outside the joint limits "
             f"[{robot.lower[k]:.{digits[k]}f}, {robot.upper[k]:.{digits[k]}f}] "
@@ -179,7 +179,7 @@ def configurations_from_columns(
                 raise fail(f"{mimic} must equal {leader} (it only mirrors it)", int(np.argmax(bad)), mimic)
     near = beyond > 0  # warned about only once the file is accepted: a refusal stays one line
     if near.any():
-        i, k = np.unravel_index(int(np.argmax(near)), q.shape)
+        i, k = (int(v) for v in np.unravel_index(int(np.argmax(near)), q.shape))
         where = f"{source}, {row_label} {int(rows[i])}, column {robot.joint_names[k]!r}"
         warnings.warn(
             f"{where}: value {q[i, k]:.{digits[k]}f} {unit[k]} is {beyond[i, k]:.2g} {unit[k]} beyond the "

@@ -156,7 +156,7 @@ def read_plus_config(path: str | os.PathLike[str]) -> PlusConfig:
     """
     path = Path(path)
     root = _parse(path)
-    patterns = []
+    patterns: list[tuple[Wire, Wire, Wire]] = []
     seen: set[str] = set()
     for k, pattern in enumerate(root.iter("Pattern")):
         if pattern.get("Type") != "NWire":
@@ -184,7 +184,7 @@ def read_plus_config(path: str | os.PathLike[str]) -> PlusConfig:
         if len(wires) != 3:
             raise InputError(f"N-wire pattern {k + 1} has {len(wires)} wires, expected 3", file=path)
         _check_n_shape(wires, _at(path, column=f"Pattern {k + 1}"))
-        patterns.append(tuple(wires))
+        patterns.append((wires[0], wires[1], wires[2]))
     if not patterns:
         raise InputError("no N-wire patterns in PhantomDefinition", file=path)
     definitions = _coordinate_definitions(root, path)

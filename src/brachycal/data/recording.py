@@ -34,6 +34,7 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -43,6 +44,9 @@ from brachycal.data.joint_log import JointLog
 from brachycal.errors import InputError
 from brachycal.se3 import FloatArray
 from brachycal.validate import check_range
+
+if TYPE_CHECKING:  # the message's fields, for the type checker; rosbags is imported where it is used
+    from rosbags.typesys.stores.ros2_humble import std_msgs__msg__String as StringMsg
 
 __all__ = [
     "AXES_POINTS",
@@ -121,7 +125,7 @@ class Mark:
         return f"{self.kind} mark {self.tool} {self.name}"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds arrays: compare fields, not objects
 class Frame:
     """One captured ultrasound frame.
 
@@ -130,6 +134,8 @@ class Frame:
         uv_px: ``(2,)`` annotated needle tip in pixels, or ``None`` when not annotated.
         sample: the sample's name if the file gives one, else ``None``.
         source, row: where it was read from (``images.csv`` row, header = row 1).
+        annotated_in: where the annotation came from when not from ``source`` (a markups file and
+            its control point), for messages.
     """
 
     time_s: float
@@ -137,9 +143,10 @@ class Frame:
     sample: str | None = None
     source: str = ""
     row: int = 0
+    annotated_in: str = ""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds arrays: compare fields, not objects
 class StillWindow:
     """The robot's configuration at a moment, from the still window around it.
 
@@ -178,9 +185,12 @@ def _at(log: JointLog, s: float) -> FloatArray:
     return log.q[k - 1] + w * (log.q[k] - log.q[k - 1])
 
 
-def _span_slopes(times: FloatArray, q: FloatArray, span_s: float, end: float) -> tuple[FloatArray, np.ndarray]:
+def _span_slopes(
+    times: FloatArray, q: FloatArray, span_s: float, end: float
+) -> tuple[FloatArray, np.ndarray, np.ndarray]:
     """Least-squares slopes ``(S, nq)`` of ``q`` over every span ``[t_k, t_k + span_s]`` that ends by
-    ``end``, and the number of readings ``(S,)`` in each (cumulative sums: one pass)."""
+    ``end``, the number of readings ``(S,)`` in each and the index ``k`` of each span's first
+    reading (cumulative sums: one pass)."""
     starts = np.flatnonzero(times + span_s <= end + 1e-12)
     ends = np.searchsorted(times, times[starts] + span_s + 1e-12, side="right")
     zero = np.zeros((1,))
@@ -196,7 +206,7 @@ def _span_slopes(times: FloatArray, q: FloatArray, span_s: float, end: float) ->
     denominator = n * s_tt - s_t * s_t
     with np.errstate(divide="ignore", invalid="ignore"):
         slopes = (n[:, None] * s_tq - s_t[:, None] * s_q) / denominator[:, None]
-    return slopes, ends - starts
+    return slopes, ends - starts, starts
 
 
 def still_configuration(
@@ -255,7 +265,7 @@ def still_configuration(
     times = log.time[i:j] - t  # relative: stamps near 1.7e9 s would lose digits in the sums
     readings = log.q[i:j]
     centre = readings.mean(axis=0) if len(readings) else np.zeros(nq)
-    slopes, counts = _span_slopes(times, readings - centre, speed_span_s, b - t)
+    slopes, counts, starts = _span_slopes(times, readings - centre, speed_span_s, b - t)
     if len(counts) == 0 or counts.min() < MIN_SPAN_READINGS:
         fewest = int(counts.min()) if len(counts) else len(times)
         raise InputError(
@@ -268,7 +278,7 @@ def still_configuration(
     if ratio.max() > 1.0:
         k = int(np.argmax(ratio))
         span_k = int(np.argmax(np.abs(slopes[:, k])))
-        moving_at = t + times[np.flatnonzero(times + speed_span_s <= b - t + 1e-12)[span_k]] + speed_span_s / 2
+        moving_at = t + times[starts[span_k]] + speed_span_s / 2
         raise InputError(
             f"the robot was moving at {when}: {log.joint_names[k]} at {speed[k]:.3g} {units[k]} "
             f"around {moving_at - t0:.2f} s into the log (still means at most {limit[k]:g} {units[k]} "
@@ -298,10 +308,11 @@ def _mark(time_s: float, kind: str, tool: str, name: str, *, source: str, row: i
     tools, names, what = (
         (TOUCH_TOOLS, REFERENCES, "reference tip") if kind == "touch" else (AXES_TOOLS, AXES_POINTS, "axes point")
     )
+    article = "a touch" if kind == "touch" else "an axes"
     if tool not in tools:
-        raise fail(f"unknown tool {tool!r} for a {kind} mark (expected {', '.join(tools)})", "tool")
+        raise fail(f"unknown tool {tool!r} for {article} mark (expected {', '.join(tools)})", "tool")
     if name not in names:
-        raise fail(f"unknown {what} {name!r} for a {kind} mark (expected {', '.join(names)})", "name")
+        raise fail(f"unknown {what} {name!r} for {article} mark (expected {', '.join(names)})", "name")
     return Mark(float(time_s), kind, tool, name, source, row, row_label)
 
 
@@ -369,7 +380,8 @@ def read_bag_marks(path: str | os.PathLike[str], topic: str) -> list[Mark]:
             if connection.msgtype != MARK_TYPE:
                 raise InputError(f"topic {topic!r} carries {connection.msgtype}, expected {MARK_TYPE}", file=source)
         for number, (connection, bag_time, raw) in enumerate(reader.messages(connections=connections), start=1):
-            text = str(reader.deserialize(raw, connection.msgtype).data)
+            # The connections were checked above to carry MARK_TYPE; rosbags returns `object`.
+            text = str(cast("StringMsg", reader.deserialize(raw, connection.msgtype)).data)
             fields = [f.strip() for f in text.split(",")]
             if len(fields) != 3:
                 raise InputError(
@@ -432,7 +444,7 @@ def read_images(
     for k, (time, row, fields) in enumerate(zip(times, rows, records, strict=True)):
         if not math.isfinite(time):
             raise InputError(f"time must be a finite number, got {time}", file=path, row=row, column="time")
-        sample = fields[k_sample].strip() or None if k_sample is not None else None
+        sample = (fields[k_sample].strip() or None) if k_sample is not None else None
         if sample is not None:
             if sample in seen:
                 raise InputError(
@@ -440,10 +452,10 @@ def read_images(
                 )
             seen[sample] = row
         if markups is not None:
-            uv = markups[k]
+            uv, annotated_in = markups[k], f"{markups_source or 'markups'}, control point {k + 1}"
         else:
-            uv = _uv_field(path, header, row, fields)
-        frames.append(Frame(float(time), uv, sample, str(path), row))
+            uv, annotated_in = _uv_field(path, header, row, fields), ""
+        frames.append(Frame(float(time), uv, sample, str(path), row, annotated_in))
     if not frames:
         raise InputError("no frames (expected one row per captured image)", file=path)
     return frames
@@ -457,8 +469,12 @@ def _uv_field(path: Path, header: list[str], row: int, fields: list[str]) -> Flo
     for column, value in text.items():
         if not value:
             other = "v_px" if column == "u_px" else "u_px"
-            raise InputError(f"empty while {other} is given (leave both empty for a frame not annotated)",
-                             file=path, row=row, column=column)  # fmt: skip
+            raise InputError(
+                f"empty while {other} is given (leave both empty for a frame not annotated)",
+                file=path,
+                row=row,
+                column=column,
+            )
         try:
             x = float(value)
         except ValueError:
@@ -522,18 +538,21 @@ def read_slicer_markups(path: str | os.PathLike[str], spacing_mm: ArrayLike) -> 
     if not isinstance(points, list) or not points:
         raise InputError("the point list has no control points (expected one per frame)", file=path)
     out: list[FloatArray | None] = []
+
+    def fail(message: str, row: int) -> InputError:
+        return InputError(message, file=path, row=row, row_label="control point")
+
     for k, point in enumerate(points, start=1):
         label = point.get("label", "") if isinstance(point, dict) else ""
-        where = {"file": path, "row": k, "row_label": "control point"}
         named = f" ({label!r})" if label else ""
         if not isinstance(point, dict):
-            raise InputError("is not an object", **where)
+            raise fail("is not an object", k)
         status = point.get("positionStatus", "defined")
         if status in ("undefined", "preview"):
             out.append(None)
             continue
         if status != "defined":
-            raise InputError(f"positionStatus {status!r}{named} is not defined, undefined or preview", **where)
+            raise fail(f"positionStatus {status!r}{named} is not defined, undefined or preview", k)
         position = point.get("position")
         if (
             not isinstance(position, list)
@@ -541,15 +560,15 @@ def read_slicer_markups(path: str | os.PathLike[str], spacing_mm: ArrayLike) -> 
             or not all(isinstance(x, int | float) and not isinstance(x, bool) for x in position)
             or not all(math.isfinite(x) for x in position)
         ):
-            raise InputError(f"position{named} must be three finite numbers, got {position!r}", **where)
+            raise fail(f"position{named} must be three finite numbers, got {position!r}", k)
         x, y, z = (float(v) * scale for v in position)
         if system == "RAS":
             x, y = -x, -y
         if abs(z) > spacing.min() / 2:
-            raise InputError(
+            raise fail(
                 f"point{named} lies {z:g} mm off the frame's plane: markups must be placed on the 2D frame "
                 "(origin at pixel (0, 0), identity directions)",
-                **where,
+                k,
             )
         out.append(np.array([x / spacing[0], y / spacing[1]]))
     return out

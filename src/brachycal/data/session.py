@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from brachycal.data.csv_log import read_table, table_configurations, to_float
+from brachycal.data.csv_log import read_table, table_configurations, to_float, unique_names
 from brachycal.errors import InputError
 from brachycal.files import OutputSet, atomic_open, output_set, sha256_file
 from brachycal.model.robot import Robot
@@ -104,6 +104,18 @@ def _read_toml(path: Path) -> tuple[FloatArray, np.ndarray, FloatArray]:
     return spacing_m, size.astype(int), tip_m
 
 
+def read_session_toml(path: str | os.PathLike[str]) -> tuple[FloatArray, np.ndarray, FloatArray]:
+    """Read and validate a ``session.toml`` alone (e.g. a template for ``brachycal session build``).
+
+    Returns:
+        ``spacing_m (2,)`` metres per pixel, ``size_px (2,)`` whole pixels, ``p_ER_Mtip (3,)`` metres.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("no such file", file=path)
+    return _read_toml(path)
+
+
 def _labels(
     path: Path, header: list[str], rows: list[int], records: list[list[str]], column: str, allowed: tuple[str, ...]
 ) -> list[str]:
@@ -179,17 +191,7 @@ def _read_axes(path: Path, robot: Robot) -> dict[str, dict[str, FloatArray]]:
 
 def _read_samples(path: Path, robot: Robot, size_px: np.ndarray) -> tuple[list[str], FloatArray, FloatArray]:
     header, rows, records = read_table(path, ["sample", "u_px", "v_px"])
-    k = header.index("sample")
-    ids = [fields[k].strip() for fields in records]
-    seen: dict[str, int] = {}
-    for row, sample in zip(rows, ids, strict=True):
-        if not sample:
-            raise InputError("empty sample name", file=path, row=row, column="sample")
-        if sample in seen:
-            raise InputError(
-                f"sample {sample!r} appears twice (also row {seen[sample]})", file=path, row=row, column="sample"
-            )
-        seen[sample] = row
+    ids = unique_names(path, header, rows, records, "sample")
     uv = to_float(path, header, rows, records, ["u_px", "v_px"])
     for axis, name in enumerate(("u_px", "v_px")):
         bad = ~np.isfinite(uv[:, axis]) | (uv[:, axis] < -0.5) | (uv[:, axis] > size_px[axis] - 0.5)

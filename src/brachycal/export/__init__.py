@@ -1,7 +1,15 @@
-"""Exports of a calibration into the tools labs use: URDF, 3D Slicer/ITK, PLUS, ROS."""
+"""Exports of a calibration into the tools labs use: URDF, 3D Slicer/ITK, PLUS, ROS.
+
+:func:`write_exports` writes all of them (:data:`EXPORT_FILES`) for a calibration (``T_ER_Ntip``,
+``T_EL_Ptip`` in metres, an :class:`~brachycal.calibration.ImageCalibration`); each format also
+has its own writer and, for round trips, a reader. Slicer/ITK and PLUS files are in millimetres
+(``ImageToProbe`` maps pixels and carries the spacing: :func:`image_to_probe_mm`), ROS in metres.
+"""
 
 from brachycal.export.formats import (
+    EXPORT_FILES,
     calibrated_robot,
+    image_to_probe_mm,
     plus_coordinate_definitions,
     read_itk_transform,
     read_ros_static_transforms,
@@ -11,7 +19,9 @@ from brachycal.export.formats import (
 )
 
 __all__ = [
+    "EXPORT_FILES",
     "calibrated_robot",
+    "image_to_probe_mm",
     "plus_coordinate_definitions",
     "read_itk_transform",
     "read_ros_static_transforms",

@@ -20,6 +20,7 @@ import io
 import os
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -89,7 +90,8 @@ def read_itk_transform(path: str | os.PathLike[str]) -> FloatArray:
     c = np.array(fields.get("FixedParameters", "0 0 0").split(), dtype=float)
     A, t = p[:9].reshape(3, 3), p[9:12]
     stored = make_transform(A, t + c - A @ c)  # ITK: y = A (x − c) + c + t
-    return np.linalg.inv(LPS @ stored @ LPS)
+    # float64 in, float64 out: NumPy's stubs widen linalg results to floating[Any].
+    return cast(FloatArray, np.linalg.inv(LPS @ stored @ LPS))
 
 
 def _matrix_text(M: FloatArray) -> str:

@@ -1,13 +1,25 @@
-"""The robot model: names, the Pinocchio-backed :class:`Robot`, batch kinematics."""
+"""The robot model: frame and joint names, the Pinocchio-backed :class:`Robot`, kinematics, IK, collisions.
 
+A configuration is ``(nq,)`` (or ``(N, nq)``) in :data:`JOINT_NAMES` order, radians; poses are
+``(4, 4)`` ``T_base_frame`` arrays in metres (``p_base = T @ p_frame``). :func:`solve_ik` places one
+frame with one arm's axes (:data:`LEFT_ARM`, :data:`RIGHT_ARM`); :data:`READY` is the stance
+planning and the simulated sessions start from; :func:`collision_link_pairs` and
+:class:`ClearanceChecker` keep the links apart.
+"""
+
+from brachycal.model.collision import ClearanceChecker, collision_link_pairs
+from brachycal.model.ik import solve_ik
 from brachycal.model.names import (
     BASE,
     CONTROLLER_JOINT_NAMES,
     JOINT_NAMES,
+    LEFT_ARM,
     LEFT_FLANGE,
     MIMIC_JOINTS,
     NEEDLE_TIP,
     PROBE_TIP,
+    READY,
+    RIGHT_ARM,
     RIGHT_FLANGE,
     TOOL_FRAME_PARENTS,
     TOP_MODEL_TIP,
@@ -19,14 +31,20 @@ __all__ = [
     "BASE",
     "CONTROLLER_JOINT_NAMES",
     "JOINT_NAMES",
+    "LEFT_ARM",
     "LEFT_FLANGE",
     "MIMIC_JOINTS",
     "NEEDLE_TIP",
     "PROBE_TIP",
+    "READY",
+    "RIGHT_ARM",
     "RIGHT_FLANGE",
     "TOOL_FRAME_PARENTS",
     "TOP_MODEL_TIP",
     "US_IMAGE",
+    "ClearanceChecker",
     "Robot",
     "bundled_urdf_path",
+    "collision_link_pairs",
+    "solve_ik",
 ]

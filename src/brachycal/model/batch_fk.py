@@ -58,17 +58,16 @@ def _compile_joint(model: pin.Model, info: JointInfo) -> _Joint:
     assert info.axis is not None  # the one-axis kinds have one
     placement = model.jointPlacements[info.jid]
     R_place = np.array(placement.rotation)
-    common = dict(
-        parent=int(model.parents[info.jid]),
-        q_index=info.idx_q,
-        unbounded=info.kind == "continuous",
-        p_place=np.array(placement.translation),
-    )
+    parent = int(model.parents[info.jid])
+    unbounded = info.kind == "continuous"
+    p_place = np.array(placement.translation)
     if info.kind == "prismatic":
-        return _Joint(**common, C1=R_place, C2=None, prismatic_dir=R_place @ info.axis)
+        return _Joint(parent, info.idx_q, unbounded, p_place, C1=R_place, C2=None, prismatic_dir=R_place @ info.axis)
     P = _basis_with_z(info.axis)
     identity = np.array_equal(P, np.eye(3))
-    return _Joint(**common, C1=R_place @ P, C2=None if identity else P.T.copy(), prismatic_dir=None)
+    return _Joint(
+        parent, info.idx_q, unbounded, p_place, C1=R_place @ P, C2=None if identity else P.T.copy(), prismatic_dir=None
+    )
 
 
 def _times_const(R: FloatArray, C: FloatArray) -> FloatArray:

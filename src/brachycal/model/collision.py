@@ -17,14 +17,25 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike
 
+from brachycal.errors import InputError
 from brachycal.files import bundled
 from brachycal.model.robot import Robot
 
 
 def srdf_disabled_pairs(path: Path | None = None) -> set[frozenset[str]]:
-    """Link pairs a MoveIt SRDF disables (``<disable_collisions>``); the bundled SDA10F's by default."""
-    root = ET.parse(path or bundled("urdf", "motoman_sda10f.srdf")).getroot()
-    return {frozenset((d.get("link1"), d.get("link2"))) for d in root.iter("disable_collisions")}
+    """Link pairs a MoveIt SRDF disables (``<disable_collisions>``); the bundled SDA10F's by default.
+
+    Raises:
+        InputError: naming the file, when a ``<disable_collisions>`` lacks ``link1`` or ``link2``.
+    """
+    source = path or bundled("urdf", "motoman_sda10f.srdf")
+    pairs: set[frozenset[str]] = set()
+    for element in ET.parse(source).getroot().iter("disable_collisions"):
+        link1, link2 = element.get("link1"), element.get("link2")
+        if not link1 or not link2:
+            raise InputError("a <disable_collisions> needs both link1 and link2", file=source)
+        pairs.add(frozenset((link1, link2)))
+    return pairs
 
 
 def _link_of(robot: Robot, geometry: pin.GeometryObject) -> str:

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from brachycal.errors import InputError
 from brachycal.files import atomic_open, bundled
@@ -108,6 +108,12 @@ class Robot:
         """``"batch"`` (vectorised NumPy path) or ``"pinocchio"`` (one Pinocchio call per configuration)."""
         return "batch" if self._batch is not None else "pinocchio"
 
+    @property
+    def joint_kinds(self) -> dict[str, str]:
+        """Each moving URDF joint's kind: ``revolute``, ``prismatic``, ``continuous``, ``planar``,
+        ``floating`` or ``mimic`` (:mod:`brachycal.model.joints`), by joint name, in model order."""
+        return {joint.name: joint.kind for joint in self._coordinates.joints}
+
     def to_pinocchio(self, Q: ArrayLike) -> FloatArray:
         """``(N, model.nq)`` Pinocchio configurations of ``(N, nq)`` configurations (the same array if equal)."""
         Q = np.asarray(Q, dtype=float)
@@ -143,8 +149,9 @@ class Robot:
         """``(nq,)`` all-zero configuration (the vendor's home pose; Pinocchio's neutral configuration)."""
         return np.zeros(self.nq)
 
-    def within_limits(self, q: ArrayLike, margin: float = 0.0) -> np.ndarray:
-        """Whether each configuration of ``(nq,)`` or ``(N, nq)`` is inside the limits by ``margin`` rad."""
+    def within_limits(self, q: ArrayLike, margin: float = 0.0) -> np.bool_ | NDArray[np.bool_]:
+        """Whether each configuration of ``(nq,)`` or ``(N, nq)`` is inside the limits by ``margin`` rad
+        (a NumPy bool for one configuration, ``(N,)`` bools for N)."""
         q = np.asarray(q, dtype=float)
         inside = (q >= self.lower + margin) & (q <= self.upper - margin)
         return inside.all(axis=-1)

@@ -56,9 +56,21 @@ def _write_origin(joint: ET.Element, T: FloatArray) -> None:
 
 
 def fixed_joint_transform(root: ET.Element, child: str, source: str) -> tuple[str, FloatArray]:
-    """``(parent link, T_parent_child (4, 4))`` of the fixed joint whose child is ``child``."""
+    """``(parent link, T_parent_child (4, 4))`` of the fixed joint whose child is ``child``.
+
+    Raises:
+        InputError: naming ``source``, when no fixed joint ends at ``child`` or that joint has no
+            ``<parent link="...">`` (a URDF that Pinocchio would refuse, but this text may not
+            have been through it).
+    """
     joint = _fixed_joint_to(root, child, source)
-    return joint.find("parent").get("link"), _read_origin(joint)
+    parent = joint.find("parent")
+    link = None if parent is None else parent.get("link")
+    if not link:
+        raise InputError(
+            f"the fixed joint {joint.get('name')!r} ending at frame {child!r} has no parent link", file=source
+        )
+    return link, _read_origin(joint)
 
 
 def set_fixed_joint_transform(root: ET.Element, child: str, T_parent_child: FloatArray, source: str) -> None:

@@ -1,6 +1,16 @@
-"""Planning the calibration sample poses (mink IK, Pinocchio checks, visiting order)."""
+"""Planning the calibration sample poses: the grid, dual-arm mink IK, Pinocchio/Coal checks, order.
 
-from brachycal.planning.dual_arm_ik import READY, DualArmIK, IKSettings
+:class:`PlanSpec` says what to plan (a cube of needle-tip targets in ``base_link``, metres; the
+image geometry in pixels; the insertion direction); :func:`plan_poses` solves one dual-arm pose
+per target (:class:`DualArmIK` with :class:`IKSettings`), checks each again
+(:class:`PoseVerifier` with :class:`Thresholds`) and orders them by motion time, returning a
+:class:`Plan`; :func:`write_plan` writes it as CSV (controller joint order, radians and degrees).
+:data:`READY` is the stance planning starts from (:data:`brachycal.model.READY`).
+"""
+
+from brachycal.model.names import READY
+from brachycal.planning.dual_arm_ik import DualArmIK, IKSettings
+from brachycal.planning.output import infeasible_path, write_infeasible, write_plan
 from brachycal.planning.plan import GridPoint, Infeasible, Plan, PlannedPose, grid_points, plan_poses
 from brachycal.planning.spec import PlanSpec, RectFOV, SectorFOV
 from brachycal.planning.verify import PoseCheck, PoseVerifier, Thresholds
@@ -20,5 +30,8 @@ __all__ = [
     "SectorFOV",
     "Thresholds",
     "grid_points",
+    "infeasible_path",
     "plan_poses",
+    "write_infeasible",
+    "write_plan",
 ]

@@ -29,7 +29,6 @@ from brachycal.validate import check_finite, check_int, check_range, check_trans
 QP_SOLVER = "daqp"
 
 
-
 @dataclass(frozen=True)
 class IKSettings:
     """Solver settings.
@@ -154,8 +153,8 @@ class DualArmIK:
             self.configuration.integrate_inplace(velocity, s.dt)
             e_needle = self.needle_task.compute_error(self.configuration)
             e_probe = self.probe_task.compute_error(self.configuration)
-            pos_err = max(np.linalg.norm(e_needle[:3]), np.linalg.norm(e_probe[:3]))
-            ang_err = max(np.linalg.norm(e_needle[3:5]), np.linalg.norm(e_probe[3:]))
+            pos_err = float(max(np.linalg.norm(e_needle[:3]), np.linalg.norm(e_probe[:3])))
+            ang_err = float(max(np.linalg.norm(e_needle[3:5]), np.linalg.norm(e_probe[3:])))
             if pos_err < s.position_tol_m and ang_err < s.angle_tol_rad:
                 return IKOutcome(self.configuration.q.copy(), True, iteration, pos_err, ang_err)
         return IKOutcome(self.configuration.q.copy(), False, s.max_iterations, pos_err, ang_err)

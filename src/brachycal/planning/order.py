@@ -25,10 +25,10 @@ def move_times(Q: ArrayLike, velocity_limit: ArrayLike, speed_scale: float = 1.0
 
 def path_time(order: ArrayLike, times: FloatArray, start: int | None = None) -> float:
     """Total seconds visiting ``order``; from node ``start`` first if given."""
-    order = list(order)
+    nodes: list[int] = np.asarray(order).tolist()
     if start is not None:
-        order = [start, *order]
-    return float(sum(times[a, b] for a, b in itertools.pairwise(order)))
+        nodes = [start, *nodes]
+    return float(sum(times[a, b] for a, b in itertools.pairwise(nodes)))
 
 
 def raster(index: ArrayLike) -> np.ndarray:

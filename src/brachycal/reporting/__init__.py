@@ -23,7 +23,7 @@ from brachycal.reporting.figures import (
     study_figure,
 )
 from brachycal.reporting.html_report import REPORT_FILES, write_report
-from brachycal.reporting.plan_figure import plan_figure, plot_plan
+from brachycal.reporting.plan_plot import plan_figure, plot_plan
 from brachycal.reporting.tables import (
     chain_summary,
     design_table,

@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -38,7 +39,8 @@ def error_histogram_figure(stats: ErrorStats, title: str) -> Figure:
     fig = Figure(figsize=(6, 3.8), layout="tight")
     ax = fig.add_subplot()
     errors = stats.errors_m * 1e3
-    ax.hist(errors, bins=np.linspace(0, max(errors.max() * 1.05, 1e-6), 17), color="tab:blue", edgecolor="white")
+    bins = np.linspace(0, max(errors.max() * 1.05, 1e-6), 17).tolist()  # matplotlib's stubs take a sequence
+    ax.hist(errors, bins=bins, color="tab:blue", edgecolor="white")
     ax.axvline(stats.mae_mm, color="k", ls="--", lw=1, label=f"MAE {stats.mae_mm:.2f} mm")
     ax.axvline(stats.rmse_mm, color="tab:red", ls=":", lw=1, label=f"RMSE {stats.rmse_mm:.2f} mm")
     ax.set_xlabel("error (mm)")
@@ -116,7 +118,7 @@ def residuals_per_sample(stats: Mapping[str, ErrorStats], sample_ids: list[str],
     return Path(path)
 
 
-def study_figure(summary: Sequence[Mapping[str, object]]) -> Figure:
+def study_figure(summary: Sequence[Mapping[str, Any]]) -> Figure:
     """``brachycal study``: leave-one-out MAE and end-to-end targeting MAE (mm, mean ± SD over seeds)
     against the number of samples, one line per method and setting.
 
@@ -126,7 +128,7 @@ def study_figure(summary: Sequence[Mapping[str, object]]) -> Figure:
     fig = Figure(figsize=(11, 4), layout="tight")
     axes = fig.subplots(1, 2, sharey=True)
 
-    def setting(s: Mapping[str, object]) -> tuple:
+    def setting(s: Mapping[str, Any]) -> tuple:
         return s["method"], s["annotation_px"], s["edge_mm"], s["sound_speed"], s["outlier_rate"]
 
     for key in sorted({setting(s) for s in summary}):

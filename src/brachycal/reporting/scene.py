@@ -20,6 +20,7 @@ import trimesh
 import yourdfpy
 from matplotlib.figure import Figure
 from numpy.typing import ArrayLike
+from trimesh.visual import ColorVisuals, TextureVisuals
 
 from brachycal.files import atomic_path
 from brachycal.imaging.pixels import DEFAULT_IMAGE_SIZE_PX, DEFAULT_SPACING_M, image_points
@@ -57,20 +58,19 @@ def robot_scene(
     ):
         # The end-effectors have no geometry in the URDF: draw each as a rod from flange to tip.
         a, b = robot.fk(flange, q)[:3, 3], robot.fk(tool, q)[:3, 3]
-        rod = trimesh.creation.cylinder(radius=0.004 if tool == NEEDLE_TIP else 0.009, segment=np.stack([a, b]))
-        rod.visual.face_colors = colour
+        radius = 0.004 if tool == NEEDLE_TIP else 0.009
+        rod = trimesh.creation.cylinder(radius=radius, segment=np.stack([a, b]), face_colors=colour)
         scene.add_geometry(rod, node_name=f"{tool}_rod", geom_name=f"{tool}_rod")
     if image_size_px is not None:
         w, h = image_size_px
         corners_px = np.array([[0, 0], [w, 0], [w, h], [0, h]], dtype=float)
         p = transform_points(robot.fk(US_IMAGE, q), image_points(corners_px, spacing_m))
-        plane = trimesh.Trimesh(vertices=p, faces=[[0, 1, 2], [0, 2, 3], [2, 1, 0], [3, 2, 0]], process=False)
-        plane.visual.face_colors = [255, 160, 0, 120]
+        faces = [[0, 1, 2], [0, 2, 3], [2, 1, 0], [3, 2, 0]]
+        plane = trimesh.Trimesh(vertices=p, faces=faces, process=False, face_colors=[255, 160, 0, 120])
         scene.add_geometry(plane, node_name="us_image_plane", geom_name="us_image_plane")
     if points_m is not None:
         for k, point in enumerate(np.atleast_2d(points_m)):
-            ball = trimesh.creation.icosphere(subdivisions=1, radius=0.0015)
-            ball.visual.face_colors = [200, 30, 30, 255]
+            ball = trimesh.creation.icosphere(subdivisions=1, radius=0.0015, face_colors=[200, 30, 30, 255])
             place = trimesh.transformations.translation_matrix(point)
             scene.add_geometry(ball, node_name=f"point_{k}", geom_name=f"point_{k}", transform=place)
     return scene
@@ -82,6 +82,16 @@ def save_glb(scene: trimesh.Scene, path: str | os.PathLike[str]) -> Path:
     with atomic_path(path, force=True) as staged:
         staged.write_bytes(data)
     return Path(path)
+
+
+def _face_colours(mesh: trimesh.Trimesh) -> np.ndarray:
+    """``(F, 4)`` RGBA (0–255) of each face; a textured mesh (a URDF may use one) by its texture's colours."""
+    visual = mesh.visual
+    if isinstance(visual, TextureVisuals):
+        visual = visual.to_color()
+    if visual is None:  # trimesh gives every Trimesh a visual; one built without has trimesh's default colour
+        visual = ColorVisuals(mesh)
+    return np.asarray(visual.face_colors)
 
 
 def scene_figure(
@@ -113,10 +123,11 @@ def scene_figure(
         triangles = vertices[mesh.faces]
         normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
         normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
-        base = np.asarray(mesh.visual.face_colors[:, :3], dtype=float) / 255.0
+        face_rgba = _face_colours(mesh)
+        base = np.asarray(face_rgba[:, :3], dtype=float) / 255.0
         shade = 0.45 + 0.55 * np.abs(normals @ light)
         colours = np.clip(base * shade[:, None], 0, 1)
-        alpha = mesh.visual.face_colors[:, 3] / 255.0
+        alpha = face_rgba[:, 3] / 255.0
         ax.add_collection3d(Poly3DCollection(triangles, facecolors=np.column_stack([colours, alpha]), linewidths=0))
         lows.append(vertices.min(axis=0))
         highs.append(vertices.max(axis=0))

@@ -6,11 +6,16 @@ Every function returns text (millimetres and degrees, as the column heads say); 
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+
 import numpy as np
 
-from brachycal.calibration.image_to_probe import METHOD_LABELS
+from brachycal.calibration.image_to_probe import ALL_LABELS, METHOD_LABELS
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.sequential import CalibrationResult
+from brachycal.imaging.pixels import SCANNER_SOUND_SPEED_M_S
+from brachycal.planning.plan import Plan
+from brachycal.simulation.design import MECHANICAL_MINUTES, SECONDS_PER_SAMPLE
 
 
 def _row(label: str, stats: ErrorStats, width: int) -> str:
@@ -74,11 +79,20 @@ def chain_summary(report, sample_ids: list[str]) -> str:
         c = intervals["sound_speed_m_s"]
         lines.append(
             f"speed of sound: {c['value'][0]:.1f} m/s (95% {c['low'][0]:.1f}..{c['high'][0]:.1f}); "
-            "the scanner assumes 1540"
+            f"the scanner assumes {SCANNER_SOUND_SPEED_M_S:.0f}"
         )
     spacing = fit.image.spacing_m * 1e3
     lines.append(f"pixel spacing: {spacing[0]:.5f} x {spacing[1]:.5f} mm/px")
     lines.append(f"noise levels (SD per coordinate): {fit.noise_text()}")
+    stated = fit.robot_accuracy
+    if stated is None:
+        lines.append("95% intervals and predicted landing error: the session's noise only (no robot accuracy stated)")
+    else:
+        lines.append(
+            "95% intervals and predicted landing error include the stated robot accuracy: "
+            f"{stated.translation_sd_m * 1e3:g} mm / {np.degrees(stated.rotation_sd_rad):g} deg per joint, "
+            f"joint readings {np.degrees(stated.encoder_sd_rad):.1e} deg ({stated.source})"
+        )
     flagged = [s for s, f in zip(sample_ids, fit.outliers, strict=True) if f]
     lines.append(f"outlier images (left out of the fit): {', '.join(flagged) if flagged else 'none'}")
     lines.append(
@@ -142,4 +156,74 @@ def uncertainty_table(result: CalibrationResult) -> str:
         if np.any(u.spacing_sd_m > 0):
             row += f"   spacing SD {u.spacing_sd_m[0] * 1e3:.5f} x {u.spacing_sd_m[1] * 1e3:.5f} mm/px"
         lines.append(row)
+    return "\n".join(lines)
+
+
+def design_table(rows: Sequence[Mapping[str, object]]) -> str:
+    """Sample designs compared (rows of :func:`~brachycal.simulation.design.compare_designs`): per
+    design the mean over seeds of robot minutes, predicted and actual RMS landing error (mm), and
+    information per minute."""
+    lines = [
+        f"time model: {MECHANICAL_MINUTES:g} min mechanical + {SECONDS_PER_SAMPLE:g} s per sample + motion",
+        f"{'design':<12} {'samples':>7} {'minutes':>8} {'predicted RMS (mm)':>19} {'actual RMS (mm)':>16} "
+        f"{'information/min':>16}",
+    ]
+    for design in dict.fromkeys(r["design"] for r in rows):
+        group = [r for r in rows if r["design"] == design]
+        mean = {
+            k: float(np.mean([r[k] for r in group]))
+            for k in ("robot_minutes", "predicted_rms_mm", "actual_rms_mm", "information_per_minute")
+        }
+        lines.append(
+            f"{design:<12} {group[0]['samples']:>7} {mean['robot_minutes']:>8.1f} {mean['predicted_rms_mm']:>19.3f} "
+            f"{mean['actual_rms_mm']:>16.3f} {mean['information_per_minute']:>16.2f}"
+        )
+    return "\n".join(lines)
+
+
+def study_table(summary: Sequence[Mapping[str, object]]) -> str:
+    """A study's summary (:func:`~brachycal.simulation.study.summarise`): per setting and method the
+    leave-one-out and targeting MAE (mean ± SD over seeds) and the mean largest targeting error, mm."""
+    lines = [
+        f"{'samples':>7} {'edge':>5} {'ann.px':>6} {'sound':>6} {'outl.':>5} {'method':<22} "
+        f"{'LOO MAE (mm)':>14} {'target MAE (mm)':>16} {'target max':>11}"
+    ]
+    for s in summary:
+        label = ALL_LABELS[str(s["method"])]
+        lines.append(
+            f"{s['samples']:>7} {s['edge_mm']:>5g} {s['annotation_px']:>6g} "
+            f"{'water' if s['sound_speed'] else 'tissue':>6} {s['outlier_rate']:>5g} {label:<22} "
+            f"{s['loo_mae_mm_mean']:>7.3f} ± {s['loo_mae_mm_sd']:.3f} {s['target_mae_mm_mean']:>8.3f} ± "
+            f"{s['target_mae_mm_sd']:.3f} {s['target_max_mm_mean']:>11.3f}"
+        )
+    return "\n".join(lines)
+
+
+def plan_text(plan: Plan) -> str:
+    """A plan in words: poses planned, the infeasible points with their reasons, the worst check
+    figures (tip error mm, needle direction deg, image plane mm), clearance, joint margin, motion time."""
+    n = len(plan.poses) + len(plan.infeasible)
+    lines = [f"planned {len(plan.poses)} of {n} poses in {plan.solve_time_s:.2f} s"]
+    for item in plan.infeasible:
+        p = item.point
+        lines.append(
+            f"  infeasible {p.name} at ({', '.join(f'{x * 1e3:.1f}' for x in p.p_base)}) mm, "
+            f"pixel ({p.uv_px[0]:.0f}, {p.uv_px[1]:.0f}): {'+'.join(item.reasons)} — {item.detail}"
+        )
+    if plan.poses:
+        checks = [pose.check for pose in plan.poses]
+        lines.append(
+            f"  worst tip error {max(c.position_error_m for c in checks) * 1e3:.6f} mm, needle direction "
+            f"{np.degrees(max(c.direction_error_rad for c in checks)):.6f} deg, image plane "
+            f"{max(c.plane_distance_m for c in checks) * 1e3:.6f} mm"
+        )
+        lines.append(
+            f"  smallest clearance {plan.min_clearance_m * 1e3:.1f} mm, smallest joint margin "
+            f"{np.degrees(min(c.joint_margin_rad for c in checks)):.1f} deg"
+        )
+        m = plan.motion_time_s
+        lines.append(
+            f"  motion at {plan.speed_scale:g} x vendor speed: optimised {m['optimised']:.1f} s, "
+            f"serpentine {m['serpentine']:.1f} s, raster {m['raster']:.1f} s"
+        )
     return "\n".join(lines)

@@ -1,19 +1,59 @@
-"""Simulated sessions with known truth: exact sessions, the digital twin, and how to judge them."""
+"""Simulated sessions with known truth: exact sessions, the digital twin, and how to judge them.
 
+- :func:`exact_session` — a noise-free session hiding a :class:`SessionTruth` (from
+  :func:`default_truth`): a calibration of it must return the truth to numerical precision.
+- :func:`simulate` — the digital twin (:class:`TwinConfig`: robot geometry error, encoder, jog,
+  annotation, speed of sound, beam thickness, outliers; each with a switch and its own seeded
+  stream) as a :class:`Twin`; :func:`write_twin` / :func:`read_twin` store it (:data:`TWIN_FILES`).
+- :func:`targeting_error` — the end-to-end targeting error of a calibration on the twin
+  (:class:`TargetingResult`, metres in ``base_link``); :func:`tracker_route` — the N-wire and
+  hand–eye route with an optical tracker on the same twin (:class:`NWireSimConfig`).
+- :func:`record` — the twin's session as a lab records it (:class:`Recording`: a 100 Hz joint log
+  with moves between the stops, marks, frames, the plan); :func:`write_recording` writes it
+  (:data:`RECORDING_FILES`, optionally a ROS 2 bag) for ``brachycal session build``.
+- :func:`run_demo` — ``brachycal demo`` (:class:`DemoRun`); :func:`sweep`, :func:`run_study`,
+  :func:`summarise` — ``brachycal study``; :func:`compare_designs`, :func:`evaluate_design` —
+  ``brachycal design`` (:data:`DESIGNS`).
+"""
+
+from brachycal.simulation.demo import DemoRun, run_demo
+from brachycal.simulation.design import DESIGNS, compare_designs, evaluate_design
 from brachycal.simulation.exact import SessionTruth, default_truth, exact_session
+from brachycal.simulation.nwire_twin import NWireSimConfig, TrackerRoute, tracker_route
+from brachycal.simulation.recording import RECORDING_FILES, Recording, RecordingConfig, record, write_recording
+from brachycal.simulation.study import STUDY_METHODS, RunParams, run_study, summarise, sweep
 from brachycal.simulation.targeting import TargetingResult, targeting_error
 from brachycal.simulation.twin import Twin, TwinConfig, simulate
-from brachycal.simulation.twin_files import read_twin, write_twin
+from brachycal.simulation.twin_files import TWIN_FILES, read_twin, write_twin
 
 __all__ = [
+    "DESIGNS",
+    "RECORDING_FILES",
+    "STUDY_METHODS",
+    "TWIN_FILES",
+    "DemoRun",
+    "NWireSimConfig",
+    "Recording",
+    "RecordingConfig",
+    "RunParams",
     "SessionTruth",
     "TargetingResult",
+    "TrackerRoute",
     "Twin",
     "TwinConfig",
+    "compare_designs",
     "default_truth",
+    "evaluate_design",
     "exact_session",
     "read_twin",
+    "record",
+    "run_demo",
+    "run_study",
     "simulate",
+    "summarise",
+    "sweep",
     "targeting_error",
+    "tracker_route",
+    "write_recording",
     "write_twin",
 ]

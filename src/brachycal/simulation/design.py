@@ -16,17 +16,20 @@ paper's: move, image, annotate), and the planned motion at a quarter of the vend
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 
 import numpy as np
 
 from brachycal.calibration import calibrate
 from brachycal.calibration.chain import fit_chain, information_blocks
-from brachycal.calibration.uncertainty import landing_jacobian, predicted_rms_mm
+from brachycal.calibration.uncertainty import landing_covariance, landing_jacobian, predicted_rms_mm
+from brachycal.errors import InputError
 from brachycal.model.robot import Robot
 from brachycal.planning import PlanSpec, plan_poses
 from brachycal.simulation.targeting import targeting_error
 from brachycal.simulation.twin import TwinConfig, simulate
+from brachycal.validate import MAX_SEEDS, check_int
 
 MECHANICAL_MINUTES = 5.0
 SECONDS_PER_SAMPLE = 10.0
@@ -93,9 +96,7 @@ def evaluate_design(robot: Robot, name: str, seed: int, targets: int = 30) -> di
     fit = fit_chain(twin.session, robot, result, "sound_speed")
     reference = simulate(robot, TwinConfig(seed=seed)).session  # the 4x4x4 poses: the cube's targets
     predicted = predicted_rms_mm(
-        landing_jacobian(fit, robot, twin.session.spacing_m, reference.samples_q, reference.uv_px)
-        @ fit.covariance[None]
-        @ np.swapaxes(landing_jacobian(fit, robot, twin.session.spacing_m, reference.samples_q, reference.uv_px), 1, 2)
+        landing_covariance(fit, robot, twin.session.spacing_m, reference.samples_q, reference.uv_px)
     )
     actual = targeting_error(twin, fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image, targets).stats
     minutes = MECHANICAL_MINUTES + (len(offsets) * SECONDS_PER_SAMPLE + plan.motion_time_s["optimised"]) / 60
@@ -110,3 +111,34 @@ def evaluate_design(robot: Robot, name: str, seed: int, targets: int = 30) -> di
         "actual_mae_mm": actual.mae_mm,
         "information_per_minute": 1.0 / (rms**2 * minutes),
     }
+
+
+def compare_designs(
+    robot: Robot,
+    designs: Sequence[str] = DESIGNS,
+    seeds: int = 3,
+    *,
+    progress: Callable[[int], None] | None = None,
+) -> list[dict[str, object]]:
+    """:func:`evaluate_design` for every design and seed ``0 .. seeds-1``: one row each, designs outermost.
+
+    Args:
+        robot: the nominal model.
+        designs: names among :data:`DESIGNS`, each once.
+        seeds: simulated sessions per design, in [1, 1000].
+        progress: called with 1 as each row is done.
+
+    Raises:
+        InputError: an unknown or repeated design, or a seed count out of range.
+    """
+    check_int(seeds, "seeds", low=1, high=MAX_SEEDS)
+    unknown = [d for d in designs if d not in DESIGNS]
+    if unknown or len(set(designs)) != len(designs) or not designs:
+        raise InputError(f"designs must be distinct names among {', '.join(DESIGNS)}, got {list(designs)!r}")
+    rows = []
+    for design in designs:
+        for seed in range(seeds):
+            rows.append(evaluate_design(robot, design, seed))
+            if progress is not None:
+                progress(1)
+    return rows

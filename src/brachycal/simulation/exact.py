@@ -13,6 +13,7 @@ plane through the needle's workspace, so the needle tips fill a volume.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -188,7 +189,7 @@ def exact_session(
     """
     physical = truth.robot(robot)
     q_home = READY.copy()
-    ik = dict(margin=0.05, restarts=50, seed=seed)
+    ik = functools.partial(solve_ik, margin=0.05, restarts=50, seed=seed)
 
     touches = {}
     for reference, p_R in (("rtip1", truth.p_R_Rtip1), ("rtip2", truth.p_R_Rtip2)):
@@ -203,18 +204,20 @@ def exact_session(
     width, height = truth.size_px
     us = np.linspace(0.3 * width, 0.75 * width, grid)
     vs = np.linspace(0.15 * height, 0.85 * height, grid)
-    ids, configs, uv = [], [], []
+    ids: list[str] = []
+    configs: list[FloatArray] = []
+    uv: list[tuple[float, float]] = []
     q = q_home.copy()
     for j in range(probe_poses):
         offset = (j - (probe_poses - 1) / 2) * 5e-3
         R_probe = Rotation.from_euler("x", 2.0 * (j - (probe_poses - 1) / 2), degrees=True).as_matrix()
         T_R_Ptip = make_transform(R_BASE_PROBE @ R_probe, P_BASE_PROBE + offset * R_BASE_PROBE[:, 1])
-        q = solve_ik(physical, PROBE_TIP, T_R_Ptip, q, LEFT, **ik)
+        q = ik(physical, PROBE_TIP, T_R_Ptip, q, LEFT)
         T_R_I = physical.fk(US_IMAGE, q)
         for u in us:
             for v in vs:
                 p_R = transform_points(T_R_I, image_points((u, v), truth.spacing_m)[0])
-                q = solve_ik(physical, NEEDLE_TIP, make_transform(R_BASE_NEEDLE, p_R), q, RIGHT, **ik)
+                q = ik(physical, NEEDLE_TIP, make_transform(R_BASE_NEEDLE, p_R), q, RIGHT)
                 ids.append(f"s{len(ids) + 1:03d}")
                 configs.append(q.copy())
                 uv.append((u, v))

@@ -219,7 +219,8 @@ def fcal2_phantom(rng: np.random.Generator | None = None, tolerance_sd_m: float 
         shift = rng.normal(scale=tolerance_sd_m, size=3) if rng is not None else 0.0
         return np.array(p_mm) * MM + shift
 
-    return [tuple(Wire(n, end(a), end(b)) for n, a, b in pattern) for pattern in FCAL2_WIRES_MM]
+    patterns = [[Wire(n, end(a), end(b)) for n, a, b in pattern] for pattern in FCAL2_WIRES_MM]
+    return [(w1, w2, w3) for w1, w2, w3 in patterns]
 
 
 def simulate_nwire(

@@ -203,8 +203,14 @@ def run_study(
     elif workers == 1:
         results = [tick(run_one(r)) for r in runs]
     else:
-        with ProcessPoolExecutor(max_workers=workers or os.cpu_count()) as pool:
+        pool = ProcessPoolExecutor(max_workers=workers or os.cpu_count())
+        try:
             results = [tick(rows) for rows in pool.map(run_one, runs)]
+        except BaseException:
+            # Interrupted (Ctrl-C, SIGTERM) or failed: drop the queued runs instead of finishing them.
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+        pool.shutdown()
     return [row for rows in results for row in rows]
 
 

@@ -12,6 +12,7 @@ samples share (a tool offset, a wrong pixel scale); this can.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -102,7 +103,7 @@ class _Aim:
         self.read_rng = np.random.default_rng(np.random.SeedSequence(twin.config.seed).spawn(len(STREAMS) + 1)[-1])
         # Joints may use their whole range here (the plan kept margins; a target between grid
         # points can need a little more); no random restarts far from the start pose.
-        self.ik = dict(margin=0.0, restarts=0)
+        self.ik = functools.partial(solve_ik, margin=0.0, restarts=0)
 
     def land(self, target: FloatArray, q_start: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Where the physical needle tip lands when aimed at ``target`` (metres, base_link), the
@@ -112,7 +113,7 @@ class _Aim:
         offset = self.R_image.T @ (target - spec.cube_centre_m)
         uv = np.asarray(spec.centre_px) + pixels(offset, truth.spacing_m)[0]
         origin = target - self.R_image @ image_points(uv, truth.spacing_m)[0]
-        q_true = solve_ik(twin.physical, US_IMAGE, make_transform(self.R_image, origin), q_start, LEFT_ARM, **self.ik)
+        q_true = self.ik(twin.physical, US_IMAGE, make_transform(self.R_image, origin), q_start, LEFT_ARM)
         q_read = q_true.copy()
         if twin.config.encoder_noise:
             q_read += self.read_rng.normal(scale=twin.config.encoder_sd_rad, size=q_true.shape)
@@ -122,7 +123,7 @@ class _Aim:
         R_needle = self.nominal_cal.fk(NEEDLE_TIP, q_start)[:3, :3]
         turn, _ = Rotation.align_vectors([self.direction], [R_needle[:, 2]])
         T_command = make_transform(turn.as_matrix() @ R_needle, p_software)
-        q_command = solve_ik(self.nominal_cal, NEEDLE_TIP, T_command, q_read, RIGHT_ARM, **self.ik)
+        q_command = self.ik(self.nominal_cal, NEEDLE_TIP, T_command, q_read, RIGHT_ARM)
         q_executed = q_true.copy()
         q_executed[RIGHT_ARM] = q_command[RIGHT_ARM]
         q_seen = q_read.copy()

@@ -246,11 +246,11 @@ def simulate(nominal: Robot, config: TwinConfig = TwinConfig()) -> Twin:
     touches = {}
     for reference, p_R in (("rtip1", truth.p_R_Rtip1), ("rtip2", truth.p_R_Rtip2)):
         for tool, frame, arm in TOUCH_TOOLS:
-            q = [
+            q_trials = [
                 touch(physical, frame, arm, p_R + jog(), k, config.trials, q_home, config.seed)
                 for k in range(config.trials)
             ]
-            touches[tool, reference] = Touches(np.arange(1, config.trials + 1), read(np.array(q)))
+            touches[tool, reference] = Touches(np.arange(1, config.trials + 1), read(np.array(q_trials)))
 
     axes = {
         tool: {
@@ -263,7 +263,8 @@ def simulate(nominal: Robot, config: TwinConfig = TwinConfig()) -> Twin:
     plan = plan_poses(nominal, config.spec)
     n = len(plan.poses)
     offsets = rng["beam"].uniform(-0.5, 0.5, size=n) * config.beam_thickness_m if config.out_of_plane else np.zeros(n)
-    true_q, uv = [], []
+    true_q_rows: list[FloatArray] = []
+    uv_rows: list[tuple[float, float]] = []
     for pose, e in zip(plan.poses, offsets, strict=True):
         q = pose.q.copy()
         tip = physical.fk(NEEDLE_TIP, q)[:3, 3]
@@ -272,9 +273,9 @@ def simulate(nominal: Robot, config: TwinConfig = TwinConfig()) -> Twin:
         origin = tip - R_image @ image_points((u, v), truth.spacing_m, e)[0]
         # The adjustment is small; the physical arm may use its whole range (the plan kept margins).
         q = solve_ik(physical, US_IMAGE, make_transform(R_image, origin), q, LEFT_ARM, margin=0.0, restarts=0)
-        true_q.append(q)
-        uv.append((u, v))
-    true_q, uv = np.array(true_q), np.array(uv, dtype=float)
+        true_q_rows.append(q)
+        uv_rows.append((u, v))
+    true_q, uv = np.array(true_q_rows), np.array(uv_rows, dtype=float)
     annotated = uv.copy()
     if config.annotation_noise:
         annotated += rng["annotation"].normal(scale=config.annotation_sd_px, size=uv.shape)

@@ -10,12 +10,12 @@ Together they let anyone judge a calibration of the session against the truth.
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 from pathlib import Path
 
 import numpy as np
 
+from brachycal.data.json_files import read_format_json
 from brachycal.data.session import FILES as SESSION_FILES
 from brachycal.data.session import read_session, write_session
 from brachycal.errors import InputError
@@ -85,14 +85,9 @@ def read_twin(folder: str | os.PathLike[str], nominal: Robot) -> Twin:
     """Read a twin written by :func:`write_twin` (the session is validated as usual)."""
     folder = Path(folder)
     path = folder / "truth.json"
-    try:
-        raw = json.loads(path.read_text())
-    except OSError:
-        raise InputError("no truth.json: not a simulated session", file=path) from None
-    except json.JSONDecodeError as exc:
-        raise InputError(f"not valid JSON ({exc})", file=path) from None
-    if raw.get("format") != FORMAT:
-        raise InputError(f"format is {raw.get('format')!r}, expected {FORMAT!r}", file=path, column="format")
+    if not path.is_file():
+        raise InputError("no truth.json: not a simulated session", file=path)
+    raw = read_format_json(path, FORMAT)
     settings = dict(raw["config"])
     spec = settings.pop("spec")
     spec = PlanSpec(

@@ -1,0 +1,160 @@
+"""``brachycal session build``: a lab's recording (joint log, marks, frames) → a session folder."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from brachycal.cli.common import add_urdf_option, load_robot
+from brachycal.data.bags import DEFAULT_TOPIC
+from brachycal.data.recording import MAX_SPEED_RAD_S, SPEED_SPAN_S, STILL_WINDOW_S
+from brachycal.data.session import FILES as SESSION_FILES
+from brachycal.data.session_build import (
+    MAX_STILL_SPEED_RAD_S,
+    MAX_WINDOW_S,
+    REPORT_FILES,
+    StillSettings,
+    build_session_from_files,
+    session_settings,
+    write_build,
+)
+from brachycal.errors import InputError
+from brachycal.files import OutputSet
+from brachycal.validate import MAX_IMAGE_PX, finite_float, number_list, spacing_mm
+
+HELP = "session folders: build one from a lab's recording (joint log, marks, frames)"
+BUILD_HELP = "build a session folder from a joint log, the operator's marks and the annotated frames"
+BUILD_DESCRIPTION = f"""\
+Turns what a lab records during a calibration into a session folder (brachycal-session/1) that
+`brachycal calibrate` reads:
+
+  LOG          the joint states: CSV (time,<15 joints>) or a ROS 1/2 bag (sensor_msgs/JointState)
+  --marks      marks.csv: time,kind,tool,name, one row per moment the operator marked:
+               touch,<top_model|needle|probe>,<rtip1|rtip2> or axes,<needle|probe>,<p1|p2|p3>;
+               trial numbers follow the order in time (or --marks-topic: the same as
+               std_msgs/String 'kind,tool,name' messages on a topic of the bag)
+  --images     images.csv: time,u_px,v_px[,sample], one row per captured frame with the needle
+               tip annotated (empty u_px,v_px: not annotated, skipped and reported); with
+               --markups, time[,sample] only and the tips from a 3D Slicer .mrk.json
+  --plan       the plan CSV of `brachycal plan`: frames without a sample name are paired with
+               the nearest planned pose, and the planned samples without a frame are reported
+
+The joints at each mark and frame are the mean of the log over a still window around its time
+(--still-window-s, default {STILL_WINDOW_S:g} s). The robot must be still over it: every joint
+slower than --max-speed-rad-s (default {MAX_SPEED_RAD_S:g} rad/s), judged by the slope of its
+readings over spans of --speed-span-s (default {SPEED_SPAN_S:g} s). A mark or annotated frame
+taken while the robot moved, or whose window is not inside the log, is refused, naming it and
+its time. session.toml comes from --template, each value replaced by --spacing-mm, --size-px,
+--top-model-tip-mm; without a template all three are needed.
+
+SESSION receives session.toml, touches.csv, axes.csv, samples.csv and the build report
+(build_report.json, build_report.csv: every mark and frame, its still window, readings, joint
+spread and speed, skipped frames and why, planned samples missing), all or nothing; existing
+files are replaced only with --force.
+
+examples:
+  brachycal session build log.csv --marks marks.csv --images images.csv --plan plan.csv \\
+      --template session.toml --out session
+  brachycal session build run.bag --marks-topic /marks --images frames.csv --markups tips.mrk.json \\
+      --spacing-mm 0.19,0.19 --size-px 1080,720 --top-model-tip-mm 0,0,150 --out session
+  brachycal calibrate session --out result.json
+"""
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser("session", help=HELP, description=HELP)
+    actions = parser.add_subparsers(title="actions", metavar="ACTION", required=True)
+    build = actions.add_parser(
+        "build", help=BUILD_HELP, description=BUILD_DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    build.add_argument("log", metavar="LOG", help="joint log: CSV file, ROS 1 .bag or ROS 2 bag folder")
+    marks = build.add_mutually_exclusive_group(required=True)
+    marks.add_argument("--marks", metavar="CSV", help="marks.csv (time,kind,tool,name)")
+    marks.add_argument("--marks-topic", metavar="TOPIC", help="read the marks from this std_msgs/String topic of LOG")
+    build.add_argument(
+        "--joints-topic",
+        default=DEFAULT_TOPIC,
+        metavar="TOPIC",
+        help=f"the sensor_msgs/JointState topic of a bag (default {DEFAULT_TOPIC})",
+    )
+    build.add_argument("--images", required=True, metavar="CSV", help="images.csv (time,u_px,v_px[,sample])")
+    build.add_argument(
+        "--markups", metavar="MRK_JSON", help="3D Slicer markups: one control point per row of --images, in order"
+    )
+    build.add_argument(
+        "--markups-spacing-mm",
+        type=spacing_mm,
+        metavar="SU,SV",
+        help="pixel spacing of the frames as loaded in Slicer, mm/px (default: the session's; 1,1 for plain images)",
+    )
+    build.add_argument("--plan", metavar="CSV", help="the plan CSV of `brachycal plan`")
+    build.add_argument("--template", metavar="TOML", help="a session.toml to start from")
+    build.add_argument("--spacing-mm", type=spacing_mm, metavar="SU,SV", help=f"pixel spacing, {spacing_mm.rule}")
+    size = number_list(count=2, kind=int, low=1, high=MAX_IMAGE_PX)
+    build.add_argument("--size-px", type=size, metavar="W,H", help=f"image width and height, {size.rule} px")
+    tip = number_list(count=3, low=-2000.0, high=2000.0, unit="mm")
+    build.add_argument(
+        "--top-model-tip-mm", type=tip, metavar="X,Y,Z", help=f"top-model tip on the right flange, {tip.rule}"
+    )
+    window = finite_float(low=0.0, high=MAX_WINDOW_S, low_open=True, unit="s")
+    build.add_argument(
+        "--still-window-s",
+        type=window,
+        default=STILL_WINDOW_S,
+        metavar="S",
+        help=f"still window around each mark and frame, {window.rule} (default {STILL_WINDOW_S:g})",
+    )
+    build.add_argument(
+        "--speed-span-s",
+        type=window,
+        default=SPEED_SPAN_S,
+        metavar="S",
+        help=f"span of each joint-speed estimate, at most the still window (default {SPEED_SPAN_S:g})",
+    )
+    speed = finite_float(low=0.0, high=MAX_STILL_SPEED_RAD_S, low_open=True, unit="rad/s")
+    build.add_argument(
+        "--max-speed-rad-s",
+        type=speed,
+        default=MAX_SPEED_RAD_S,
+        metavar="V",
+        help=f"largest joint speed of a still robot, {speed.rule} (default {MAX_SPEED_RAD_S:g})",
+    )
+    add_urdf_option(build)
+    build.add_argument("--out", required=True, metavar="SESSION", help="session folder to write (created if needed)")
+    build.add_argument("--force", action="store_true", help="replace the files of an existing session in SESSION")
+    build.set_defaults(run=run_build)
+
+
+def run_build(args: argparse.Namespace) -> int:
+    out = Path(args.out)
+    if args.speed_span_s > args.still_window_s:
+        raise InputError(
+            f"--speed-span-s {args.speed_span_s:g} s is longer than --still-window-s {args.still_window_s:g} s: "
+            "the speed is judged inside the window"
+        )
+    still = StillSettings(args.still_window_s, args.speed_span_s, args.max_speed_rad_s)
+    with OutputSet(force=args.force) as outputs:
+        for name in (*SESSION_FILES, *REPORT_FILES):
+            outputs.claim(out / name, make_parents=True, label="--out")
+        settings = session_settings(
+            args.template, spacing_mm=args.spacing_mm, size_px=args.size_px, top_model_tip_mm=args.top_model_tip_mm
+        )
+        robot = load_robot(args)
+        build = build_session_from_files(
+            args.log,
+            robot=robot,
+            images=args.images,
+            marks=args.marks,
+            marks_topic=args.marks_topic,
+            joints_topic=args.joints_topic,
+            markups=args.markups,
+            markups_spacing_mm=args.markups_spacing_mm,
+            plan=args.plan,
+            settings=settings,
+            still=still,
+        )
+        write_build(build, out, force=args.force, outputs=outputs)
+    print(build.report.summary())
+    print(f"\nwrote {out}: {', '.join((*SESSION_FILES, *REPORT_FILES))}")
+    print(f"next: brachycal calibrate {out} --out result.json")
+    return 0

@@ -1,0 +1,308 @@
+"""Hostile inputs to ``brachycal session build``: each refused with one line naming the file, the
+row (or message, or control point) and the problem — a mark taken while the robot moved, a frame
+outside the image, a session short of a touch, options that contradict each other — exit code 2,
+nothing written.
+
+Every case starts from a copy of one twin recording (a short one: 25 Hz, quick moves) in its own
+folder, with one defect.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hostile import Case, check_refusal
+
+from brachycal.model import Robot
+from brachycal.simulation import RecordingConfig, TwinConfig, record, write_recording
+
+BUILD = [
+    "session",
+    "build",
+    "{tmp}/joint_log.csv",
+    "--marks",
+    "{tmp}/marks.csv",
+    "--images",
+    "{tmp}/images.csv",
+    "--plan",
+    "{tmp}/plan.csv",
+    "--template",
+    "{tmp}/session.toml",
+    "--out",
+    "{tmp}/session",
+]
+#: The recording every case copies, and a moment in the middle of its fastest move.
+_SOURCE: dict[str, object] = {}
+
+
+@pytest.fixture(scope="module", autouse=True)
+def source(tmp_path_factory):
+    robot = Robot.load()
+    rec = record(robot, TwinConfig(seed=4), RecordingConfig(rate_hz=25.0, speed_scale=0.5, hold_s=1.6))
+    _SOURCE["folder"] = write_recording(rec, tmp_path_factory.mktemp("hostile_session") / "rec")
+    speed = np.abs(np.diff(rec.q_true, axis=0)).max(axis=1)
+    _SOURCE["moving"] = float(rec.time[int(np.argmax(speed))])
+    _SOURCE["end"] = float(rec.time[-1])
+    return _SOURCE
+
+
+def with_copy(*edits: Callable[[Path], None]):
+    """Copy the recording into the case's folder, then apply ``edits`` to it."""
+
+    def setup(tmp: Path) -> None:
+        for item in Path(_SOURCE["folder"]).iterdir():  # type: ignore[arg-type]
+            if item.is_file():
+                shutil.copyfile(item, tmp / item.name)
+        for edit in edits:
+            edit(tmp)
+
+    return setup
+
+
+def edit_csv(name: str, change: Callable[[list[str]], list[str]]):
+    """Rewrite ``name``'s lines (header included) with ``change``."""
+
+    def edit(tmp: Path) -> None:
+        path = tmp / name
+        path.write_text("\n".join(change(path.read_text().splitlines())) + "\n")
+
+    return edit
+
+
+def set_field(name: str, line: int, column: str, value: object):
+    """Set ``column`` of file line ``line`` (header = 1) of ``name``; ``"{moving}"``/``"{end}"`` are
+    the recording's moving moment and end."""
+
+    def change(lines: list[str]) -> list[str]:
+        header = lines[0].split(",")
+        fields = lines[line - 1].split(",")
+        fields[header.index(column)] = str(value).format(moving=_SOURCE["moving"], end=_SOURCE["end"])
+        lines[line - 1] = ",".join(fields)
+        return lines
+
+    return edit_csv(name, change)
+
+
+def drop_lines(name: str, keep: Callable[[str], bool]):
+    return edit_csv(name, lambda lines: [lines[0], *(line for line in lines[1:] if keep(line))])
+
+
+def images_without_uv(tmp: Path) -> None:
+    lines = (tmp / "images.csv").read_text().splitlines()
+    (tmp / "images.csv").write_text("time\n" + "\n".join(line.split(",")[0] for line in lines[1:]) + "\n")
+
+
+def markups(z_first: float = 0.0):
+    """A Slicer point list with one point per frame; the first ``z_first`` mm off the plane."""
+
+    def edit(tmp: Path) -> None:
+        count = len((tmp / "images.csv").read_text().splitlines()) - 1
+        points = [{"label": f"F-{k}", "position": [19.0, 19.0, z_first if k == 0 else 0.0]} for k in range(count)]
+        payload = {"markups": [{"type": "Fiducial", "coordinateSystem": "LPS", "controlPoints": points}]}
+        (tmp / "tips.mrk.json").write_text(json.dumps(payload))
+
+    return edit
+
+
+def write(name: str, text: str):
+    def edit(tmp: Path) -> None:
+        (tmp / name).parent.mkdir(exist_ok=True)
+        (tmp / name).write_text(text)
+
+    return edit
+
+
+def every_tenth_reading(tmp: Path) -> None:
+    lines = (tmp / "joint_log.csv").read_text().splitlines()
+    (tmp / "joint_log.csv").write_text("\n".join([lines[0], *lines[1::10]]) + "\n")
+
+
+MARKUPS = [*BUILD[:6], "{tmp}/images.csv", "--markups", "{tmp}/tips.mrk.json", *BUILD[7:]]
+
+CASES = [
+    # --- marks ------------------------------------------------------------------------------------
+    Case(
+        "mark-while-moving",
+        BUILD,
+        ("marks.csv, row 3", "touch mark top_model rtip1", "the robot was moving", "rad/s"),
+        with_copy(set_field("marks.csv", 3, "time", "{moving}")),
+    ),
+    Case(
+        "mark-after-the-log",
+        BUILD,
+        ("marks.csv, row 2", "outside the log's span"),
+        with_copy(set_field("marks.csv", 2, "time", "{end}5")),
+    ),
+    Case(
+        "mark-at-the-log-end",
+        BUILD,
+        ("marks.csv, row 2", "still window", "never extrapolated"),
+        with_copy(set_field("marks.csv", 2, "time", "{end}")),
+    ),
+    Case(
+        "unknown-kind",
+        BUILD,
+        ("marks.csv, row 4, column 'kind'", "unknown kind 'tuch'"),
+        with_copy(set_field("marks.csv", 4, "kind", "tuch")),
+    ),
+    Case(
+        "unknown-tool",
+        BUILD,
+        ("marks.csv, row 4, column 'tool'", "unknown tool 'needel'"),
+        with_copy(set_field("marks.csv", 4, "tool", "needel")),
+    ),
+    Case(
+        "unknown-name",
+        BUILD,
+        ("marks.csv, row 4, column 'name'", "unknown reference tip 'rtip3'"),
+        with_copy(set_field("marks.csv", 4, "name", "rtip3")),
+    ),
+    Case(
+        "time-not-a-number",
+        BUILD,
+        ("marks.csv, row 5, column 'time'", "'12:03' is not a number"),
+        with_copy(set_field("marks.csv", 5, "time", "12:03")),
+    ),
+    Case(
+        "no-probe-touches-on-rtip2",
+        BUILD,
+        ("marks.csv", "no touch mark of probe on rtip2"),
+        with_copy(drop_lines("marks.csv", lambda line: not line.endswith("touch,probe,rtip2"))),
+    ),
+    Case(
+        "one-needle-touch-short",
+        BUILD,
+        ("marks.csv", "unequal touches on rtip1", "needle 2"),
+        with_copy(edit_csv("marks.csv", lambda lines: [ln for k, ln in enumerate(lines) if k != 4])),
+    ),
+    Case(
+        "axes-point-twice",
+        BUILD,
+        ("marks.csv", "needle p1 is marked twice"),
+        with_copy(
+            edit_csv("marks.csv", lambda lines: [ln.replace("axes,needle,p2", "axes,needle,p1") for ln in lines])
+        ),
+    ),
+    Case("no-marks", BUILD, ("marks.csv", "no marks"), with_copy(write("marks.csv", "time,kind,tool,name\n"))),
+    # --- frames -----------------------------------------------------------------------------------
+    Case(
+        "frame-while-moving",
+        BUILD,
+        ("images.csv, row 3", "the robot was moving"),
+        with_copy(set_field("images.csv", 3, "time", "{moving}")),
+    ),
+    Case(
+        "pixel-outside-image",
+        BUILD,
+        ("images.csv, row 3", "v = 900 px is outside the 1080 x 720 px image"),
+        with_copy(set_field("images.csv", 3, "v_px", "900")),
+    ),
+    Case(
+        "u-without-v",
+        BUILD,
+        ("images.csv, row 3, column 'v_px'", "empty while u_px is given"),
+        with_copy(set_field("images.csv", 3, "v_px", "")),
+    ),
+    Case(
+        "sample-twice",
+        BUILD,
+        ("images.csv, row 3, column 'sample'", "sample 'g000' appears twice (also row 2)"),
+        with_copy(
+            edit_csv(
+                "images.csv",
+                lambda lines: [
+                    lines[0] + ",sample",
+                    *(f"{ln},{'g000' if k < 2 else f's{k}'}" for k, ln in enumerate(lines[1:])),
+                ],
+            )
+        ),
+    ),
+    Case(
+        "two-frames-only",
+        BUILD,
+        ("images.csv", "2 annotated frame(s) usable"),
+        with_copy(edit_csv("images.csv", lambda lines: lines[:3])),
+    ),
+    Case(
+        "markup-off-the-plane",
+        MARKUPS,
+        ("tips.mrk.json, control point 1", "0.7 mm off the frame's plane"),
+        with_copy(images_without_uv, markups(z_first=0.7)),
+    ),
+    Case(
+        "markups-and-uv-columns",
+        MARKUPS,
+        ("images.csv", "has u_px/v_px columns", "give them in one place"),
+        with_copy(markups()),
+    ),
+    # --- log and plan -----------------------------------------------------------------------------
+    Case("no-log", [*BUILD[:2], "{tmp}/missing.csv", *BUILD[3:]], ("missing.csv", "no such file"), with_copy()),
+    Case(
+        "sparse-log",
+        BUILD,
+        ("marks.csv, row 2", "too sparse", "speed span"),
+        with_copy(every_tenth_reading),
+    ),
+    Case(
+        "plan-in-degrees",
+        BUILD,
+        ("plan.csv, row 2, column 'arm_left_joint_2_l'", "looks like degrees"),
+        with_copy(set_field("plan.csv", 2, "arm_left_joint_2_l", "-57.3")),
+    ),
+    # --- options ----------------------------------------------------------------------------------
+    Case(
+        "marks-twice",
+        [*BUILD, "--marks-topic", "/marks"],
+        ("--marks-topic", "not allowed with argument --marks"),
+        with_copy(),
+    ),
+    Case(
+        "marks-topic-on-csv",
+        [*BUILD[:3], "--marks-topic", "/marks", *BUILD[5:]],
+        ("--marks-topic needs a ROS bag",),
+        with_copy(),
+    ),
+    Case(
+        "no-template-no-settings",
+        BUILD[:-4] + BUILD[-2:],
+        ("without a template session.toml", "--spacing-mm, --size-px, --top-model-tip-mm"),
+        with_copy(),
+    ),
+    Case(
+        "spacing-in-metres",
+        [*BUILD, "--spacing-mm", "0.00019,0.00019"],
+        ("--spacing-mm", "looks like a spacing in metres"),
+        with_copy(),
+    ),
+    Case("size-one-number", [*BUILD, "--size-px", "1080"], ("--size-px", "2 comma-separated"), with_copy()),
+    Case(
+        "span-longer-than-window",
+        [*BUILD, "--speed-span-s", "2"],
+        ("--speed-span-s 2 s is longer than --still-window-s 1 s",),
+        with_copy(),
+    ),
+    Case("still-speed-zero", [*BUILD, "--max-speed-rad-s", "0"], ("--max-speed-rad-s", "(0, 1]"), with_copy()),
+    Case("window-nan", [*BUILD, "--still-window-s", "nan"], ("--still-window-s", "finite"), with_copy()),
+    Case(
+        "template-wrong-format",
+        BUILD,
+        ("session.toml", "column 'format'", "brachycal-session/1"),
+        with_copy(edit_csv("session.toml", lambda lines: ['format = "brachycal-session/9"', *lines[1:]])),
+    ),
+    Case(
+        "session-exists",
+        BUILD,
+        ("session/session.toml", "already exists", "--force"),
+        with_copy(write("session/session.toml", "an earlier session\n")),
+    ),
+]
+
+
+@pytest.mark.parametrize("case", CASES, ids=lambda c: c.id)
+def test_session_build_refusals(case, tmp_path):
+    check_refusal(case, tmp_path)
