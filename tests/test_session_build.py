@@ -307,7 +307,7 @@ def test_ros2_bag_round_trip(robot, short, tmp_path, storage):
         entries_q(from_bag.session), entries_q(short.session), rtol=0, atol=5 * SIGMA / np.sqrt(25)
     )
     assert [e.what for e in from_bag.report.marks] == [e.what for e in from_csv.report.marks]
-    with pytest.raises(InputError, match=r"no marks topic '/marks' \(topics: /brachycal/marks, /joint_states\)"):
+    with pytest.raises(InputError, match=r"no topic '/marks' \(topics: /brachycal/marks, /joint_states\)"):
         build_session_from_files(
             folder / "bag", robot=robot, images=folder / "images.csv", marks_topic="/marks", settings=settings
         )

@@ -11,7 +11,7 @@ of its two positions is the joint's cannot be told.
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, cast
 
@@ -35,6 +35,46 @@ def is_bag(path: str | os.PathLike[str]) -> bool:
     return path.suffix in {".bag", ".db3", ".mcap"} or (path.is_dir() and (path / "metadata.yaml").exists())
 
 
+def bag_folder(path: str | os.PathLike[str]) -> Path:
+    """What rosbags opens: a ROS 1 ``.bag`` file, or a ROS 2 bag's folder (also given its ``.db3``/``.mcap``)."""
+    path = Path(path)
+    return path.parent if path.suffix in {".db3", ".mcap"} else path
+
+
+def bag_messages(path: str | os.PathLike[str], topic: str, msgtype: str) -> Iterator[tuple[str, int, int, object]]:
+    """The messages of one topic of a ROS 1 or ROS 2 bag, checked to be of type ``msgtype``.
+
+    Yields ``(source, number, bag_time_ns, message)``: the bag's path as errors name it, the
+    message's number on the topic (from 1), its receive time in nanoseconds, the deserialised
+    message. ``path`` is a ROS 1 ``.bag`` file or a ROS 2 bag folder (or its ``.db3``/``.mcap``).
+
+    Raises:
+        InputError: unreadable bag, no such topic, or the topic carries another message type.
+    """
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    path = bag_folder(path)
+    source = str(path)
+    try:
+        reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+        reader.open()
+    except Exception as exc:  # rosbags raises several unrelated types for unreadable input
+        raise InputError(f"not a readable ROS bag ({exc})", file=source) from None
+    try:
+        connections = [c for c in reader.connections if c.topic == topic]
+        if not connections:
+            topics = sorted({c.topic for c in reader.connections})
+            raise InputError(f"no topic {topic!r} (topics: {', '.join(topics) or 'none'})", file=source)
+        for connection in connections:
+            if connection.msgtype != msgtype:
+                raise InputError(f"topic {topic!r} carries {connection.msgtype}, expected {msgtype}", file=source)
+        for number, (connection, bag_time, raw) in enumerate(reader.messages(connections=connections), start=1):
+            yield source, number, bag_time, reader.deserialize(raw, connection.msgtype)
+    finally:
+        reader.close()
+
+
 def read_bag_log(path: str | os.PathLike[str], robot: Robot, topic: str = DEFAULT_TOPIC) -> JointLog:
     """Read and validate the joint states of a ROS 1 or ROS 2 bag.
 
@@ -50,68 +90,47 @@ def read_bag_log(path: str | os.PathLike[str], robot: Robot, topic: str = DEFAUL
         InputError: unreadable bag, missing topic, or any refusal of
             :func:`~brachycal.data.joint_log.joint_log_from_columns`.
     """
-    from rosbags.highlevel import AnyReader
-    from rosbags.typesys import Stores, get_typestore
-
-    path = Path(path)
-    if path.suffix in {".db3", ".mcap"}:
-        path = path.parent
-    source = str(path)
+    source = str(bag_folder(path))
     names: list[str] | None = None
     times: list[float] = []
     values: list[list[float]] = []
-    try:
-        reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
-        reader.open()
-    except Exception as exc:  # rosbags raises several unrelated types for unreadable input
-        raise InputError(f"not a readable ROS bag ({exc})", file=source) from None
-    try:
-        connections = [c for c in reader.connections if c.topic == topic]
-        if not connections:
-            topics = sorted({c.topic for c in reader.connections})
-            raise InputError(f"no topic {topic!r} (topics: {', '.join(topics) or 'none'})", file=source)
-        for connection in connections:
-            if connection.msgtype != JOINT_STATE:
-                raise InputError(f"topic {topic!r} carries {connection.msgtype}, expected {JOINT_STATE}", file=source)
-        for number, (connection, bag_time, raw) in enumerate(reader.messages(connections=connections), start=1):
-            # The connections were checked above to carry JOINT_STATE; rosbags returns `object`.
-            msg = cast("JointStateMsg", reader.deserialize(raw, connection.msgtype))
-            stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
-            these = list(msg.name)
-            for k, name in enumerate(these):
-                if name in these[:k]:  # which of the two positions is the joint's? Refuse, as the CSV reader does.
-                    raise InputError(
-                        f"joint {name!r} listed twice (names {these.index(name) + 1} and {k + 1} of the message)",
-                        file=source,
-                        row=number,
-                        row_label="message",
-                    )
-            if names is None:
-                names = these
-            elif these != names:
-                order = {n: k for k, n in enumerate(these)}
-                missing = [n for n in names if n not in order]
-                if missing:
-                    raise InputError(
-                        f"lacks joint(s) {', '.join(missing)} that earlier messages carry",
-                        file=source,
-                        row=number,
-                        row_label="message",
-                    )
-            position = np.asarray(msg.position, dtype=float)
-            if len(position) != len(these):
+    for source, number, bag_time, message in bag_messages(path, topic, JOINT_STATE):
+        # The topic was checked to carry JOINT_STATE; rosbags returns `object`.
+        msg = cast("JointStateMsg", message)
+        stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+        these = list(msg.name)
+        for k, name in enumerate(these):
+            if name in these[:k]:  # which of the two positions is the joint's? Refuse, as the CSV reader does.
                 raise InputError(
-                    f"has {len(these)} names but {len(position)} positions",
+                    f"joint {name!r} listed twice (names {these.index(name) + 1} and {k + 1} of the message)",
                     file=source,
                     row=number,
                     row_label="message",
                 )
-            if these != names:
-                position = position[[these.index(n) for n in names]]
-            times.append(stamp if stamp > 0 else bag_time * 1e-9)
-            values.append(position.tolist())
-    finally:
-        reader.close()
+        if names is None:
+            names = these
+        elif these != names:
+            order = {n: k for k, n in enumerate(these)}
+            missing = [n for n in names if n not in order]
+            if missing:
+                raise InputError(
+                    f"lacks joint(s) {', '.join(missing)} that earlier messages carry",
+                    file=source,
+                    row=number,
+                    row_label="message",
+                )
+        position = np.asarray(msg.position, dtype=float)
+        if len(position) != len(these):
+            raise InputError(
+                f"has {len(these)} names but {len(position)} positions",
+                file=source,
+                row=number,
+                row_label="message",
+            )
+        if these != names:
+            position = position[[these.index(n) for n in names]]
+        times.append(stamp if stamp > 0 else bag_time * 1e-9)
+        values.append(position.tolist())
     if names is None:
         raise InputError(f"topic {topic!r} has no messages", file=source)
     return joint_log_from_columns(

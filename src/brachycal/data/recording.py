@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
+from brachycal.data.bags import bag_folder, bag_messages
 from brachycal.data.csv_log import read_table, to_float
 from brachycal.data.joint_log import JointLog
 from brachycal.errors import InputError
@@ -358,41 +359,20 @@ def read_bag_marks(path: str | os.PathLike[str], topic: str) -> list[Mark]:
         InputError: unreadable bag, no such topic, another message type, or a message that is not
             three comma-separated fields (naming its number on the topic).
     """
-    from rosbags.highlevel import AnyReader
-    from rosbags.typesys import Stores, get_typestore
-
-    path = Path(path)
-    if path.suffix in {".db3", ".mcap"}:
-        path = path.parent
-    source = str(path)
-    try:
-        reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
-        reader.open()
-    except Exception as exc:  # rosbags raises several unrelated types for unreadable input
-        raise InputError(f"not a readable ROS bag ({exc})", file=source) from None
+    source = str(bag_folder(path))
     marks: list[Mark] = []
-    try:
-        connections = [c for c in reader.connections if c.topic == topic]
-        if not connections:
-            topics = sorted({c.topic for c in reader.connections})
-            raise InputError(f"no marks topic {topic!r} (topics: {', '.join(topics) or 'none'})", file=source)
-        for connection in connections:
-            if connection.msgtype != MARK_TYPE:
-                raise InputError(f"topic {topic!r} carries {connection.msgtype}, expected {MARK_TYPE}", file=source)
-        for number, (connection, bag_time, raw) in enumerate(reader.messages(connections=connections), start=1):
-            # The connections were checked above to carry MARK_TYPE; rosbags returns `object`.
-            text = str(cast("StringMsg", reader.deserialize(raw, connection.msgtype)).data)
-            fields = [f.strip() for f in text.split(",")]
-            if len(fields) != 3:
-                raise InputError(
-                    f"mark {text!r} is not 'kind,tool,name' (e.g. 'touch,needle,rtip1')",
-                    file=source,
-                    row=number,
-                    row_label="message",
-                )
-            marks.append(_mark(bag_time * 1e-9, *fields, source=source, row=number, row_label="message"))
-    finally:
-        reader.close()
+    for source, number, bag_time, message in bag_messages(path, topic, MARK_TYPE):
+        # The topic was checked to carry MARK_TYPE; rosbags returns `object`.
+        text = str(cast("StringMsg", message).data)
+        fields = [f.strip() for f in text.split(",")]
+        if len(fields) != 3:
+            raise InputError(
+                f"mark {text!r} is not 'kind,tool,name' (e.g. 'touch,needle,rtip1')",
+                file=source,
+                row=number,
+                row_label="message",
+            )
+        marks.append(_mark(bag_time * 1e-9, *fields, source=source, row=number, row_label="message"))
     if not marks:
         raise InputError(f"topic {topic!r} has no marks", file=source)
     return _in_time_order(marks)
