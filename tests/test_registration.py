@@ -45,13 +45,11 @@ def test_kabsch_and_horn_recover_exact_transforms(seed, kind, n):
         assert np.abs(T - T_true).max() < tolerance
 
 
-@settings(max_examples=60, deadline=None)
-@given(seeds, st.sampled_from(["general", "planar"]), st.integers(3, 70))
-def test_kabsch_horn_and_icp_agree_on_noisy_correspondences(seed, kind, n):
-    rng = np.random.default_rng(seed)
+def jittered_grid_pair(rng: np.random.Generator, kind: str, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(T_true, src, dst)``: ``n`` points of a jittered 5 cm grid (every point at least 3 cm from
+    the others, so nearest-neighbour pairing is unambiguous after a few millimetres of initial
+    error), planar or 3D, and their images under a random pose with 0.3 mm noise per coordinate."""
     T_true = random_pose(rng)
-    # A jittered 5 cm grid: every point at least 3 cm from the others, so that nearest-neighbour
-    # pairing is unambiguous after a few millimetres of initial error.
     if kind == "planar":
         cells = np.array([(i, j, 0) for i in range(9) for j in range(8)], dtype=float)
         jitter = rng.uniform(-0.2, 0.2, size=(n, 3)) * [1.0, 1.0, 0.0]
@@ -60,6 +58,14 @@ def test_kabsch_horn_and_icp_agree_on_noisy_correspondences(seed, kind, n):
         jitter = rng.uniform(-0.2, 0.2, size=(n, 3))
     src = (cells[rng.permutation(len(cells))[:n]] + jitter) * 0.05
     dst = transform_points(T_true, src) + rng.normal(scale=3e-4, size=(n, 3))
+    return T_true, src, dst
+
+
+@settings(max_examples=60, deadline=None)
+@given(seeds, st.sampled_from(["general", "planar"]), st.integers(3, 70))
+def test_kabsch_horn_and_icp_agree_on_noisy_correspondences(seed, kind, n):
+    rng = np.random.default_rng(seed)
+    T_true, src, dst = jittered_grid_pair(rng, kind, n)
     T_k = registration.kabsch(src, dst)
     T_h = registration.horn(src, dst)
     T_init = T_true @ make_transform(Rotation.from_rotvec([0.01, -0.01, 0.005]).as_matrix(), [1e-3, 0, -1e-3])
@@ -72,18 +78,10 @@ def test_kabsch_horn_and_icp_agree_on_noisy_correspondences(seed, kind, n):
 @settings(max_examples=25, deadline=None)
 @given(seeds, st.sampled_from(["general", "planar"]), st.integers(5, 70))
 def test_global_icp_agrees_with_kabsch_from_any_start(seed, kind, n):
-    # The same jittered grids and noise as above, but ICP is given a random prior (any rotation, a
+    # The jittered grids and noise of jittered_grid_pair, but ICP is given a random prior (any rotation, a
     # translation of ~0.2 m): its 48 principal-axes starts find the fit Kabsch finds with the pairs.
     rng = np.random.default_rng(seed)
-    T_true = random_pose(rng)
-    if kind == "planar":
-        cells = np.array([(i, j, 0) for i in range(9) for j in range(8)], dtype=float)
-        jitter = rng.uniform(-0.2, 0.2, size=(n, 3)) * [1.0, 1.0, 0.0]
-    else:
-        cells = np.array([(i, j, k) for i in range(5) for j in range(5) for k in range(3)], dtype=float)
-        jitter = rng.uniform(-0.2, 0.2, size=(n, 3))
-    src = (cells[rng.permutation(len(cells))[:n]] + jitter) * 0.05
-    dst = transform_points(T_true, src) + rng.normal(scale=3e-4, size=(n, 3))
+    _, src, dst = jittered_grid_pair(rng, kind, n)
     result = registration.icp_global(src, dst[::-1], random_pose(rng), tie_m=np.sqrt(3) * 3e-4)
     assert np.array_equal(result.match, np.arange(n)[::-1])
     assert np.abs(result.T - registration.kabsch(src, dst)).max() < 1e-9
