@@ -15,6 +15,20 @@ from typing import Any
 from brachycal.errors import InputError
 
 
+def read_json(path: str | os.PathLike[str]) -> Any:
+    """The JSON value in ``path``.
+
+    Raises:
+        InputError: the file cannot be read or is not valid JSON (or not UTF-8), naming the file.
+    """
+    try:
+        return json.loads(Path(path).read_text())
+    except OSError as exc:
+        raise InputError(f"cannot read ({exc.strerror})", file=path) from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"not valid JSON ({exc})", file=path) from None
+
+
 def read_format_json(path: str | os.PathLike[str], expected_format: str) -> dict[str, Any]:
     """The JSON object in ``path`` whose ``format`` is ``expected_format``.
 
@@ -23,12 +37,7 @@ def read_format_json(path: str | os.PathLike[str], expected_format: str) -> dict
             object, or is of another format (naming the file, and the ``format`` key).
     """
     path = Path(path)
-    try:
-        raw = json.loads(path.read_text())
-    except OSError as exc:
-        raise InputError(f"cannot read ({exc.strerror})", file=path) from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"not valid JSON ({exc})", file=path) from None
+    raw = read_json(path)
     if not isinstance(raw, dict) or raw.get("format") != expected_format:
         found = raw.get("format") if isinstance(raw, dict) else None
         raise InputError(f"format is {found!r}, expected {expected_format!r}", file=path, column="format")

@@ -28,7 +28,6 @@ no header), so record both on one machine's clock.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Sequence
@@ -42,6 +41,7 @@ from numpy.typing import ArrayLike
 from brachycal.data.bags import bag_folder, bag_messages
 from brachycal.data.csv_log import read_table, to_float
 from brachycal.data.joint_log import JointLog
+from brachycal.data.json_files import read_json
 from brachycal.errors import InputError
 from brachycal.se3 import FloatArray
 from brachycal.validate import check_range
@@ -490,12 +490,7 @@ def read_slicer_markups(path: str | os.PathLike[str], spacing_mm: ArrayLike) -> 
     """
     path = Path(path)
     spacing = np.asarray(spacing_mm, dtype=float)
-    try:
-        raw = json.loads(path.read_text())
-    except OSError as exc:
-        raise InputError(f"cannot read ({exc.strerror})", file=path) from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"not valid JSON ({exc})", file=path) from None
+    raw = read_json(path)
     markups = raw.get("markups") if isinstance(raw, dict) else None
     if not isinstance(markups, list) or len(markups) != 1 or not isinstance(markups[0], dict):
         count = len(markups) if isinstance(markups, list) else "no"
