@@ -24,7 +24,9 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/fk_throughput.py
+	$(BIN)/python benchmarks/fk_scale.py
 	$(BIN)/python benchmarks/calibrate_speed.py
+	$(BIN)/python benchmarks/startup.py
 	$(BIN)/python benchmarks/plan_speed.py
 	$(BIN)/python benchmarks/chain_checks.py
 	$(BIN)/python benchmarks/table3.py

@@ -1,37 +1,118 @@
-"""Full sequential calibration with leave-one-out for 64 samples and every method.
+"""Calibration speed on the 64-sample example session (``examples/twin_session``).
 
-Run: ``.venv/bin/python benchmarks/calibrate_speed.py``. Prints the best of five runs of
-:func:`brachycal.calibration.calibrate` on a 64-sample session (session reading excluded and
-timed separately), and the time per method. The paper's processing took under 1 s.
+Run: ``.venv/bin/python benchmarks/calibrate_speed.py``. Figures:
+
+- end to end, what a user waits for: ``brachycal calibrate examples/twin_session --method chain``
+  in a new process (start-up, imports, the sequential method, model choice by 8-fold
+  cross-validation over 4 image models, the final fit with the robot term, leave-one-out over 64
+  samples, predicted landing error, result file), no bootstrap, best of 3; recorded in
+  ``benchmarks/results.json`` beside its peer, the same command with the sequential method alone
+  (best of 3), against issue 13's goal :data:`GOAL_S`;
+- start-up: a new process importing what the command imports before it computes (best of 3);
+- in this process, the sequential method and the chain's stages (:func:`~brachycal.calibration.chain.select_model`, the
+  final :func:`~brachycal.calibration.chain.fit_chain`, the leave-one-out
+  :func:`~brachycal.calibration.chain.cross_validate`), best of 3, so that the end-to-end figure
+  can be read as start-up + sequential + chain (+ reading the session and writing the result).
+
+BLAS threads: on this 2-core machine the figures are measured as the command runs by default;
+run with ``OMP_NUM_THREADS=1`` to compare (the problems are small: one thread is as fast).
 """
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import tempfile
+import time
+from pathlib import Path
 
-from timing import best_of
+from timing import best_of, record
 
-from brachycal.calibration import METHODS, calibrate
-from brachycal.data.session import read_session, write_session
+from brachycal.calibration import calibrate
+from brachycal.calibration.chain import cross_validate, fit_chain, select_model
+from brachycal.data.session import read_session
 from brachycal.model import Robot
-from brachycal.simulation import default_truth, exact_session
+
+SESSION = Path(__file__).resolve().parents[1] / "examples" / "twin_session"
+#: Issue 13's goal for ``calibrate --method chain`` end to end without bootstrap, seconds.
+GOAL_S = 2.0
+
+
+def end_to_end(method: str, repeats: int = 3) -> float:
+    """Best wall time of ``brachycal calibrate`` on the example session with ``--method``, in a new
+    process, seconds."""
+    script = Path(sys.executable).with_name("brachycal")
+    command = [str(script)] if script.exists() else [sys.executable, "-m", "brachycal.cli.main"]
+    times = []
+    with tempfile.TemporaryDirectory() as tmp:
+        argv = ["calibrate", str(SESSION), "--out", str(Path(tmp) / "r.json"), "--method", method, "--force", "--quiet"]
+        for _ in range(repeats):
+            start = time.perf_counter()
+            subprocess.run(
+                [*command, *argv],
+                check=True,
+                stdout=subprocess.DEVNULL,
+            )
+            times.append(time.perf_counter() - start)
+    return min(times)
+
+
+#: What ``calibrate --method chain`` imports before it computes (the command line, the robot model, the
+#: sequential method and the chain, the tables): timed in a new process as the start-up part of the end-to-end figure.
+STARTUP_IMPORTS = (
+    "import brachycal.cli.main, brachycal.cli.calibrate, brachycal.model, "
+    "brachycal.calibration.session_calibration, brachycal.reporting.tables"
+)
+
+
+def startup(repeats: int = 3) -> float:
+    """Best wall time of a new Python process that only imports :data:`STARTUP_IMPORTS`, seconds."""
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        subprocess.run([sys.executable, "-c", STARTUP_IMPORTS], check=True)
+        times.append(time.perf_counter() - start)
+    return min(times)
+
+
+def stages(repeats: int = 3) -> None:
+    """Print the chain's stages timed in this process (best of ``repeats``)."""
+    robot = Robot.load()
+    session = read_session(SESSION, robot)
+    sequential_s = best_of(repeats, lambda: calibrate(session, robot))
+    result = calibrate(session, robot)
+    choice = select_model(session, robot, result)
+    fit = fit_chain(session, robot, result, choice.model)
+    n = len(session.uv_px)
+    timings = {
+        "sequential method (Tables I and II)": sequential_s,
+        "chain: model choice (4 models x 8 folds)": best_of(repeats, lambda: select_model(session, robot, result)),
+        "chain: final fit with the robot term": best_of(
+            repeats, lambda: fit_chain(session, robot, result, choice.model)
+        ),
+        f"chain: leave-one-out ({n} refits)": best_of(
+            repeats, lambda: cross_validate(session, robot, result, choice.model, folds=n, start=fit)
+        ),
+    }
+    print(f"new process, imports only (best of {repeats}): {startup(repeats):.2f} s")
+    print(f"in process, {n} samples (best of {repeats}):")
+    for name, seconds in timings.items():
+        print(f"  {name:<45} {seconds:6.2f} s")
 
 
 def main() -> None:
-    robot = Robot.load()
-    session = exact_session(robot, default_truth(robot))
-    with tempfile.TemporaryDirectory() as tmp:
-        write_session(session, tmp, force=True)
-        read_s = best_of(5, lambda: read_session(tmp, robot))
-    total = best_of(5, lambda: calibrate(session, robot))
-    print(f"sequential calibration, {len(session.sample_ids)} samples, all {len(METHODS)} methods with LOO-CV")
-    print(f"  total (tips, rotations, {len(METHODS)} fits + {len(METHODS)} x 64 LOO fits): {total * 1e3:.1f} ms")
-    print(f"  reading and validating the session folder: {read_s * 1e3:.1f} ms")
-    base = best_of(5, lambda: calibrate(session, robot, methods=()))
-    print(f"  tips and rotations alone: {base * 1e3:.1f} ms")
-    for method in METHODS:
-        t = best_of(5, lambda m=method: calibrate(session, robot, methods=(m,))) - base
-        print(f"  {method:<10} fit + 64 LOO fits: {t * 1e3:7.1f} ms")
+    stages()
+    sequential = end_to_end("sequential")
+    chain = end_to_end("chain")
+    record(
+        "calibrate: brachycal calibrate --method chain (64 samples) end to end",
+        chain,
+        "s",
+        goal=f"<= {GOAL_S} s",
+        met=chain <= GOAL_S,
+        peer="the sequential method alone (same command, --method sequential)",
+        peer_value=sequential,
+    )
 
 
 if __name__ == "__main__":

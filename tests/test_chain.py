@@ -23,7 +23,6 @@ from brachycal.calibration.chain import (
     ChainData,
     ParameterLayout,
     RobotAccuracy,
-    _start,
     chain_jacobian,
     chain_residuals,
     fit_chain,
@@ -74,7 +73,7 @@ def test_analytic_jacobian_matches_central_differences(robot, stretched):
     use = rng.random(len(twin.session.uv_px)) > 0.2
     for model in MODELS:
         layout = ParameterLayout(model)
-        x, base = _start(sequential, layout, data.spacing_m)
+        x, base = layout.start(sequential, data.spacing_m)
         for name in ("rot_ER_Ntip", "rot_EL_Ptip", "rot_Ptip_I"):  # away from the start: J_l(ω) ≠ I matters
             x[layout.blocks()[name]] += rng.normal(scale=0.05, size=3)
         step = 1e-6
@@ -438,7 +437,7 @@ def test_interval_of_a_named_block(robot, stretched):
 
 
 def test_a_model_the_data_cannot_determine_is_left_out_of_the_choice(robot, stretched, monkeypatch):
-    from brachycal.calibration import chain
+    from brachycal.calibration.chain import model_choice
     from brachycal.calibration.metrics import ErrorStats
 
     twin, sequential = stretched
@@ -456,15 +455,15 @@ def test_a_model_the_data_cannot_determine_is_left_out_of_the_choice(robot, stre
         return ErrorStats(np.full(n, {"rigid": 3e-4, "similarity": 2e-4}[model]) * (1 + np.arange(n) / n))
 
     fit = fit_chain(twin.session, robot, sequential, "rigid")
-    monkeypatch.setattr(chain, "fit_chain", fake_fit)
-    monkeypatch.setattr(chain, "cross_validate", fake_cv)
-    choice = chain.select_model(twin.session, robot, sequential)
+    monkeypatch.setattr(model_choice, "fit_chain", fake_fit)
+    monkeypatch.setattr(model_choice, "cross_validate", fake_cv)
+    choice = model_choice.select_model(twin.session, robot, sequential)
     assert set(choice.undetermined) == {"scaled_uv", "sound_speed"} and set(choice.cv) == {"rigid", "similarity"}
     assert choice.model == "similarity"  # the better of the determined ones (one SE apart)
 
     def refuse(*args, **kwargs):
         raise DegenerateDataError(refusal)
 
-    monkeypatch.setattr(chain, "cross_validate", refuse)  # no model left
+    monkeypatch.setattr(model_choice, "cross_validate", refuse)  # no model left
     with pytest.raises(DegenerateDataError, match="not determined"):
-        chain.select_model(twin.session, robot, sequential)
+        model_choice.select_model(twin.session, robot, sequential)

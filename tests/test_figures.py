@@ -36,6 +36,7 @@ def every_figure(folder: Path) -> list[Figure]:
             "edge_mm": 40.0,
             "sound_speed": True,
             "outlier_rate": 0.0,
+            "robot_error": "well-built",
             "samples": n,
             "loo_mae_mm_mean": 0.5,
             "loo_mae_mm_sd": 0.1,

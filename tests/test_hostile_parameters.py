@@ -203,6 +203,16 @@ CASES = [
     Case(
         "calibrate-joint-offsets-without-chain", [*CALIBRATE, "--joint-offsets"], ("--joint-offsets", "--method chain")
     ),
+    Case(
+        "calibrate-identify-robot-without-chain",
+        [*CALIBRATE, "--identify-robot"],
+        ("--identify-robot", "--method chain"),
+    ),
+    Case(
+        "calibrate-identify-robot-and-joint-offsets",
+        [*CALIBRATE, "--method", "chain", "--identify-robot", "--joint-offsets"],
+        ("--identify-robot", "--joint-offsets"),
+    ),
     Case("calibrate-unknown-method", [*CALIBRATE, "--methods", "kabsch,icpp"], ("--methods", "'icpp'")),
     Case("calibrate-empty-method", [*CALIBRATE, "--methods", "kabsch,,horn"], ("--methods", "empty")),
     Case("calibrate-repeated-method", [*CALIBRATE, "--methods", "horn,horn"], ("--methods", "twice")),
@@ -270,6 +280,7 @@ CASES = [
         },
     ),
     Case("study-unknown-method", [*STUDY, "--methods", "kabsch,icpp"], ("--methods", "'icpp'")),
+    Case("study-unknown-robot-error", [*STUDY, "--robot-error", "perfect"], ("--robot-error", "'perfect'")),
     Case(
         "study-sweep-too-large",
         [*STUDY, "--seeds", "1000", "--points", "2,3,4,5,6,7,8,9,10,11,12"],

@@ -11,7 +11,7 @@ from brachycal.calibration import METHODS, calibrate, read_result, write_result
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.sequential import locate
 from brachycal.calibration.tool_rotation import tool_rotation
-from brachycal.errors import ConditioningWarning
+from brachycal.errors import ConditioningWarning, InputError
 from brachycal.se3 import is_rigid, make_transform, transform_points
 from brachycal.simulation import default_truth, exact_session
 
@@ -150,3 +150,27 @@ def test_loocv_matches_an_independent_computation_on_noisy_annotations(robot, ex
     for method in ("kabsch", "horn"):
         assert np.abs(result.loocv[method].errors_m - np.array(errors)).max() < 1e-9
     assert 0.1 < result.loocv["kabsch"].mae_mm < 1.0  # 2 px of annotation noise at 0.19 mm/px
+
+
+def test_icp_folds_started_from_the_all_sample_fit_equal_a_fresh_global_start(robot, exact):
+    # calibrate() hands each method's all-sample fit to its leave-one-out (no second global ICP run
+    # of 49 starts); the folds must come out as when the leave-one-out finds that fit itself. Both
+    # run the same computation, so they agree to rounding (1e-12 m, far below the 1e-9 m of results).
+    from dataclasses import replace
+
+    from brachycal.calibration import image_to_probe
+    from brachycal.model.names import LEFT_FLANGE, RIGHT_FLANGE, US_IMAGE
+
+    rng = np.random.default_rng(7)
+    noisy = replace(exact, uv_px=exact.uv_px + rng.normal(scale=1.0, size=exact.uv_px.shape))
+    result = calibrate(noisy, robot, methods=("kabsch",))
+    T_R_ER, T_R_EL = robot.fk(RIGHT_FLANGE, noisy.samples_q), robot.fk(LEFT_FLANGE, noisy.samples_q)
+    p_ER_Ntip, prior = result.T_ER_Ntip[:3, 3], robot.tool_transform(US_IMAGE)[1]
+    p_Ptip = image_to_probe.probe_points(T_R_ER, T_R_EL, p_ER_Ntip, result.T_EL_Ptip)
+    full = image_to_probe.fit("icp", noisy.uv_px, p_Ptip, noisy.spacing_m, prior)
+    args = ("icp", noisy.uv_px, T_R_ER, T_R_EL, p_ER_Ntip, result.T_EL_Ptip, noisy.spacing_m, prior)
+    _, fresh = image_to_probe.leave_one_out_points(*args)
+    _, started = image_to_probe.leave_one_out_points(*args, full=full)
+    assert np.abs(started - fresh).max() < 1e-12
+    with pytest.raises(InputError, match="pass the icp fit"):
+        image_to_probe.leave_one_out_points(*args, full=result.image["kabsch"])

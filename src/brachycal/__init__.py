@@ -11,9 +11,16 @@ output writer), :mod:`brachycal.validate`. Units are SI (metres, radians, second
 the pose of frame b in frame a (``p_a = T_a_b @ p_b``); see ``docs/conventions.md``.
 """
 
-from brachycal.data import JointLog, read_joint_log, write_pose_table
-from brachycal.errors import InputError
-from brachycal.model import JOINT_NAMES, Robot
+from typing import TYPE_CHECKING
+
+from brachycal._lazy import attach
+
+if TYPE_CHECKING:  # imported on first use (Pinocchio takes ~0.5 s to load; `brachycal --help` needs none of it)
+    from brachycal.data import JointLog, read_joint_log, write_pose_table
+    from brachycal.errors import InputError
+    from brachycal.model import JOINT_NAMES, Robot
+
+__getattr__, __dir__ = attach(__name__, __file__)
 
 __version__ = "0.1.0"
 

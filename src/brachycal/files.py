@@ -139,7 +139,8 @@ class OutputSet:
         claim.staging = claim.staging.with_name(claim.staging.name + destination.suffix)
         self._claims[key] = claim
         self._labels[key] = label
-        claim.lock_path, claim.lock_fd = _lock(destination)
+        with _signals_deferred():  # an interrupt between creating the lock file and recording it would leak it
+            claim.lock_path, claim.lock_fd = _lock(destination)
         # Checked with the lock held: a brachycal writer that committed just before us is seen.
         if os.path.lexists(destination) and not self.force:
             raise OutputError("already exists; pass --force to replace it", file=destination)
@@ -321,6 +322,22 @@ def _refuse_special(destination: Path) -> None:
         else "not a regular file"
     )
     raise OutputError(f"is {kind}; an output must be a regular file (refused even with --force)", file=destination)
+
+
+@contextlib.contextmanager
+def _signals_deferred() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM back for a few system calls (delivered on exit, the mask restored):
+    the lock file must be recorded by its claim before an interrupt can unwind the command."""
+    import signal
+
+    if not hasattr(signal, "pthread_sigmask"):  # pragma: no cover - Windows
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 def _lock(destination: Path) -> tuple[Path, int]:

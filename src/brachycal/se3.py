@@ -12,7 +12,6 @@ import warnings
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial.transform import Rotation
 
 FloatArray = NDArray[np.float64]
 
@@ -45,12 +44,16 @@ def transform_points(T_a_b: ArrayLike, p_b: ArrayLike) -> FloatArray:
 
 def from_xyz_rpy(xyz: ArrayLike, rpy: ArrayLike) -> FloatArray:
     """URDF ``<origin xyz rpy>`` (metres; fixed-axis roll, pitch, yaw in radians) as ``(4, 4)``."""
+    from scipy.spatial.transform import Rotation  # here, not at the top: the CLI's --help and parsing stay SciPy-free
+
     R = Rotation.from_euler("xyz", np.asarray(rpy, dtype=float)).as_matrix()
     return make_transform(R, xyz)
 
 
 def to_xyz_rpy(T_a_b: ArrayLike) -> tuple[FloatArray, FloatArray]:
     """Inverse of :func:`from_xyz_rpy`: ``(xyz (3,), rpy (3,))`` of a ``(4, 4)`` transform."""
+    from scipy.spatial.transform import Rotation  # here, not at the top: the CLI's --help and parsing stay SciPy-free
+
     T = np.asarray(T_a_b, dtype=float)
     R = Rotation.from_matrix(T[:3, :3])
     with warnings.catch_warnings():
@@ -61,10 +64,13 @@ def to_xyz_rpy(T_a_b: ArrayLike) -> tuple[FloatArray, FloatArray]:
     # next to gimbal lock, where SciPy's answer can be off by up to ~1e-7 rad (30 nm at a 0.3 m
     # tool): a calibrated URDF must carry the calibrated transform exactly. Away from gimbal
     # lock it stops after one step; next to it the split between roll and yaw converges in a few.
+    previous = np.inf
     for _ in range(30):
         error = (R * Rotation.from_euler("xyz", rpy).inv()).as_rotvec()  # in the parent frame
-        if np.linalg.norm(error) < 1e-16:
+        size = float(np.linalg.norm(error))
+        if size < 1e-16 or size >= previous:  # exact, or down to rounding (no more progress)
             break
+        previous = size
         Rz = Rotation.from_euler("z", rpy[2]).as_matrix()
         Rzy = Rz @ Rotation.from_euler("y", rpy[1]).as_matrix()
         J = np.column_stack([Rzy[:, 0], Rz[:, 1], [0.0, 0.0, 1.0]])  # d(roll, pitch, yaw) -> ω
@@ -74,6 +80,8 @@ def to_xyz_rpy(T_a_b: ArrayLike) -> tuple[FloatArray, FloatArray]:
 
 def to_position_quaternion(T_a_b: ArrayLike) -> tuple[FloatArray, FloatArray]:
     """Position ``(*, 3)`` and unit quaternion ``(*, 4)`` in ROS order (x, y, z, w), ``w >= 0``."""
+    from scipy.spatial.transform import Rotation  # here, not at the top: the CLI's --help and parsing stay SciPy-free
+
     T = np.asarray(T_a_b, dtype=float)
     quat = Rotation.from_matrix(T[..., :3, :3].reshape(-1, 3, 3)).as_quat(canonical=True)
     return T[..., :3, 3].copy(), quat.reshape(*T.shape[:-2], 4)

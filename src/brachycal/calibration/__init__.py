@@ -15,44 +15,53 @@ Beyond the paper: the whole chain as one least-squares problem (:func:`calibrate
 :func:`fit_chain`, :func:`select_model`; its uncertainty with :func:`landing_covariance` and
 :func:`predicted_rms_mm`); pivot calibration (:func:`pivot_algebraic`, :func:`pivot_robust`, and
 of a pose-list file :func:`pivot_from_file`); N-wire phantom calibration from PLUS files
-(:func:`nwire_from_files`); hand–eye calibration (:func:`hand_eye`). Result files:
+(:func:`nwire_from_files`); hand–eye calibration (:func:`hand_eye`); the robot's own geometry
+identified with the chain (:func:`identify_robot`, :class:`RobotIdentification`,
+:func:`corrected_robot`, :func:`cross_validate_identification`). Result files:
 ``brachycal-result/1`` (:func:`write_result`, :func:`read_result`), ``brachycal-pivot/1``
 (:func:`write_pivot`, :func:`read_pivot`), ``brachycal-nwire/1`` (:func:`write_nwire`,
 :func:`read_nwire`).
 """
 
-from brachycal.calibration.chain import MODELS, ChainFit, fit_chain, select_model
-from brachycal.calibration.chain_report import ChainReport, calibrate_chain
-from brachycal.calibration.hand_eye import hand_eye
-from brachycal.calibration.image_to_probe import (
-    ALL_LABELS,
-    METHOD_LABELS,
-    METHODS,
-    PAPER_METHODS,
-    ImageCalibration,
-    PredictedUncertainty,
-)
-from brachycal.calibration.metrics import ErrorStats
-from brachycal.calibration.nwire import NWireCalibration, calibrate_nwire, wire_point_pairs
-from brachycal.calibration.nwire_file import NWireRun, StoredNWire, nwire_from_files, read_nwire, write_nwire
-from brachycal.calibration.pivot import PivotResult, pivot_algebraic, pivot_robust
-from brachycal.calibration.pivot_file import (
-    PIVOT_METHODS,
-    PivotCalibration,
-    StoredPivot,
-    pivot_from_file,
-    read_pivot,
-    write_pivot,
-)
-from brachycal.calibration.result_file import StoredCalibration, read_result, write_result
-from brachycal.calibration.sequential import CalibrationResult, ToolCalibration, calibrate, locate, loo_points
-from brachycal.calibration.session_calibration import SessionCalibration, calibrate_folder
-from brachycal.calibration.uncertainty import (
-    inside_ellipsoid,
-    landing_covariance,
-    landing_jacobian,
-    predicted_rms_mm,
-)
+from typing import TYPE_CHECKING
+
+from brachycal._lazy import attach
+
+if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need not load SciPy's optimisers
+    from brachycal.calibration.chain import MODELS, ChainFit, fit_chain, select_model
+    from brachycal.calibration.chain_report import ChainReport, calibrate_chain
+    from brachycal.calibration.hand_eye import hand_eye
+    from brachycal.calibration.image_to_probe import ImageCalibration, PredictedUncertainty
+    from brachycal.calibration.labels import ALL_LABELS, METHOD_LABELS, METHODS, PAPER_METHODS
+    from brachycal.calibration.metrics import ErrorStats
+    from brachycal.calibration.nwire import NWireCalibration, calibrate_nwire, wire_point_pairs
+    from brachycal.calibration.nwire_file import NWireRun, StoredNWire, nwire_from_files, read_nwire, write_nwire
+    from brachycal.calibration.pivot import PivotResult, pivot_algebraic, pivot_robust
+    from brachycal.calibration.pivot_file import (
+        PIVOT_METHODS,
+        PivotCalibration,
+        StoredPivot,
+        pivot_from_file,
+        read_pivot,
+        write_pivot,
+    )
+    from brachycal.calibration.result_file import StoredCalibration, read_result, write_result
+    from brachycal.calibration.robot_identification import (
+        RobotIdentification,
+        corrected_robot,
+        cross_validate_identification,
+        identify_robot,
+    )
+    from brachycal.calibration.sequential import CalibrationResult, ToolCalibration, calibrate, locate, loo_points
+    from brachycal.calibration.session_calibration import SessionCalibration, calibrate_folder
+    from brachycal.calibration.uncertainty import (
+        inside_ellipsoid,
+        landing_covariance,
+        landing_jacobian,
+        predicted_rms_mm,
+    )
+
+__getattr__, __dir__ = attach(__name__, __file__)
 
 __all__ = [
     "ALL_LABELS",
@@ -71,6 +80,7 @@ __all__ = [
     "PivotCalibration",
     "PivotResult",
     "PredictedUncertainty",
+    "RobotIdentification",
     "SessionCalibration",
     "StoredCalibration",
     "StoredNWire",
@@ -80,8 +90,11 @@ __all__ = [
     "calibrate_chain",
     "calibrate_folder",
     "calibrate_nwire",
+    "corrected_robot",
+    "cross_validate_identification",
     "fit_chain",
     "hand_eye",
+    "identify_robot",
     "inside_ellipsoid",
     "landing_covariance",
     "landing_jacobian",

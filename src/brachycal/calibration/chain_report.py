@@ -20,9 +20,9 @@ from __future__ import annotations
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
+from statistics import NormalDist
 
 import numpy as np
-from scipy.stats import norm
 
 from brachycal.calibration.chain import (
     DEFAULT_ROBOT_ACCURACY,
@@ -35,13 +35,20 @@ from brachycal.calibration.chain import (
     RobotAccuracy,
     cross_validate,
     fit_chain,
+    image_model,
     select_model,
 )
 from brachycal.calibration.metrics import ErrorStats
+from brachycal.calibration.robot_identification import (
+    IDENTIFICATION_FOLDS,
+    RobotIdentification,
+    choose_and_identify,
+    cross_validate_identification,
+)
 from brachycal.calibration.sequential import CalibrationResult
 from brachycal.calibration.uncertainty import Bootstrap, bootstrap, landing_covariance, predicted_rms_mm
 from brachycal.data.session import Session
-from brachycal.errors import ConditioningWarning
+from brachycal.errors import ConditioningWarning, InputError
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray
 
@@ -63,6 +70,12 @@ class ChainReport:
         fov_px: ``(G, 2)`` pixels of the image map; ``predicted_fov_mm`` ``(G,)`` its predicted RMS
             landing error (probe at the central sample pose).
         bootstrap: replicates, if requested.
+        identification: the identified robot, if requested (then ``fit`` is on the corrected robot).
+        identification_cv: image error at held-out configurations, ``(chain alone, with the
+            robot identified)`` (K-fold, each fold identifies the robot again), if identified.
+        joint_origins: ``{joint: {"urdf": (4, 4), "corrected": (4, 4)}}`` when the result corrects
+            the robot (identification or joint offsets): what the result file stores so that a
+            corrected URDF is recognised and never corrected twice.
     """
 
     choice: ModelChoice
@@ -72,6 +85,9 @@ class ChainReport:
     fov_px: FloatArray
     predicted_fov_mm: FloatArray
     bootstrap: Bootstrap | None
+    identification: RobotIdentification | None = None
+    identification_cv: tuple[ErrorStats, ErrorStats] | None = None
+    joint_origins: dict[str, dict[str, FloatArray]] | None = None
 
     def intervals(self, level: float = 0.95) -> dict[str, dict[str, object]]:
         """Intervals at ``level`` of the quantities a user asks about.
@@ -81,7 +97,7 @@ class ChainReport:
         its percentile intervals under ``bootstrap_<name>`` (the session's noise only: resampling
         the session cannot see the robot's error).
         """
-        z = norm.ppf(0.5 + level / 2)
+        z = NormalDist().inv_cdf(0.5 + level / 2)  # the standard library's: scipy.stats costs 0.5 s to import
         sd = self.fit.parameter_sd()
         fit = self.fit
         out: dict[str, dict[str, object]] = {}
@@ -89,9 +105,10 @@ class ChainReport:
             k = fit.block(name)
             out[key] = _bounds(fit.x[k] * 1e3, z * sd[k] * 1e3)
         k = fit.block("scale")
-        if fit.model != "rigid":
+        image = image_model(fit.model)
+        if image.n_scale:
             out["scale"] = _bounds(fit.x[k], z * sd[k])
-        if fit.model == "sound_speed":
+        if image.scale_is_sound_speed:
             out["sound_speed_m_s"] = _bounds(fit.x[k] * SCANNER_SOUND_SPEED, z * sd[k] * SCANNER_SOUND_SPEED)
         if self.bootstrap is not None:
             for name, values in self.bootstrap.values.items():
@@ -123,23 +140,43 @@ def calibrate_chain(
     robot_accuracy: RobotAccuracy | None = DEFAULT_ROBOT_ACCURACY,
     map_step_px: float = 60.0,
     progress: Callable[[int], None] | None = None,
+    identify: bool = False,
 ) -> ChainReport:
     """Run the whole-chain method on a session (see the module docstring).
 
     ``robot_accuracy``: the robot's stated kinematic accuracy, included in the intervals and the
     predicted landing error (:class:`~brachycal.calibration.chain.RobotAccuracy`; None: the
-    session's noise alone).
+    session's noise alone). With ``identify``, the robot's geometry is identified jointly with the
+    chain, that accuracy its prior (:mod:`brachycal.calibration.robot_identification`); the fit,
+    leave-one-out and predicted landing error are then on the corrected robot, and the K-fold
+    image error at held-out configurations is measured with and without identification.
 
     Raises:
         DegenerateDataError: the data do not determine the chain.
+        InputError: ``identify`` with joint offsets (it replaces them) or without a robot accuracy.
 
     Warns:
         ConditioningWarning: the predicted landing RMS exceeds :data:`WARN_LANDING_RMS_MM` somewhere
             in the image.
     """
-    choice = select_model(session, robot, initial)
-    fit = fit_chain(session, robot, initial, choice.model, joint_offsets=joint_offsets, robot_accuracy=robot_accuracy)
-    loocv = cross_validate(session, robot, initial, choice.model, folds=len(session.uv_px))
+    identification, identification_cv, joint_origins = None, None, None
+    if identify:
+        if joint_offsets:
+            raise InputError("robot identification replaces the joint offsets: ask for one or the other")
+        if robot_accuracy is None:
+            raise InputError("robot identification needs the robot's stated accuracy (its prior)")
+        choice, identification = choose_and_identify(session, robot, initial, robot_accuracy)
+        identification_cv = cross_validate_identification(session, robot, initial, choice.model, robot_accuracy)
+        fit, nominal, robot = identification.fit, robot, identification.robot(robot)
+        joint_origins = _origins(nominal, robot)
+    else:
+        choice = select_model(session, robot, initial)
+        fit = fit_chain(
+            session, robot, initial, choice.model, joint_offsets=joint_offsets, robot_accuracy=robot_accuracy
+        )
+        if fit.joint_offsets_rad:
+            joint_origins = _origins(robot, robot.with_joint_offsets(fit.joint_offsets_rad))
+    loocv = cross_validate(session, robot, initial, choice.model, folds=len(session.uv_px), start=fit)
     cube = predicted_rms_mm(landing_covariance(fit, robot, session.spacing_m, session.samples_q, session.uv_px))
     width, height = session.size_px
     grid = np.array([(u, v) for v in np.arange(0, height, map_step_px) for u in np.arange(0, width, map_step_px)])
@@ -160,7 +197,14 @@ def calibrate_chain(
     boot = None
     if bootstrap_replicates:
         boot = bootstrap(session, robot, fit, bootstrap_replicates, progress=progress)
-    return ChainReport(choice, fit, loocv, cube, grid, fov, boot)
+    return ChainReport(choice, fit, loocv, cube, grid, fov, boot, identification, identification_cv, joint_origins)
+
+
+def _origins(nominal: Robot, corrected: Robot) -> dict[str, dict[str, FloatArray]]:
+    return {
+        name: {"urdf": nominal.joint_origin(name), "corrected": corrected.joint_origin(name)}
+        for name in nominal.joint_names
+    }
 
 
 def chain_json(report: ChainReport, sample_ids: list[str]) -> dict:
@@ -208,4 +252,24 @@ def chain_json(report: ChainReport, sample_ids: list[str]) -> dict:
         },
         "bootstrap_replicates": 0 if report.bootstrap is None else len(next(iter(report.bootstrap.values.values()))),
         "joint_offsets_rad": fit.joint_offsets_rad,
+        **_robot_json(report),
     }
+
+
+def _robot_json(report: ChainReport) -> dict[str, object]:
+    out: dict[str, object] = {}
+    if report.identification is not None:
+        identified = report.identification.as_json()
+        if report.identification_cv is not None:
+            chain_alone, identified_cv = report.identification_cv
+            identified["held_out_configurations"] = {
+                "folds": IDENTIFICATION_FOLDS,
+                "image_rmse_mm": {"chain": chain_alone.rmse_mm, "chain_and_robot": identified_cv.rmse_mm},
+                "image_mae_mm": {"chain": chain_alone.mae_mm, "chain_and_robot": identified_cv.mae_mm},
+            }
+        out["robot_identification"] = identified
+    if report.joint_origins is not None:
+        out["robot_joint_origins"] = {
+            name: {kind: T.tolist() for kind, T in pair.items()} for name, pair in report.joint_origins.items()
+        }
+    return out

@@ -52,24 +52,18 @@ from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
 from brachycal.calibration import registration
+from brachycal.calibration.labels import ALL_LABELS as ALL_LABELS
+from brachycal.calibration.labels import METHOD_LABELS as METHOD_LABELS
+from brachycal.calibration.labels import METHODS as METHODS
+from brachycal.calibration.labels import PAPER_METHODS as PAPER_METHODS
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.errors import ConditioningWarning, DegenerateDataError, InputError
 from brachycal.imaging.pixels import image_points
 from brachycal.se3 import FloatArray, inverse, transform_points
 
-#: Methods in the order of Table II, with the paper's names.
-METHOD_LABELS: dict[str, str] = {
-    "icp": "ICP",
-    "kabsch": "Kabsch",
-    "horn": "Landmark (Horn)",
-    "similarity": "Similarity (1 scale)",
-    "scaled_uv": "Scaled u/v (2 scales)",
-}
-#: Labels of every image calibration a result can hold (the whole-chain method's included).
-ALL_LABELS: dict[str, str] = {**METHOD_LABELS, "chain": "Whole chain"}
-METHODS: tuple[str, ...] = tuple(METHOD_LABELS)
-#: The paper's three rigid methods.
-PAPER_METHODS: tuple[str, ...] = ("icp", "kabsch", "horn")
+# ALL_LABELS, METHOD_LABELS, METHODS, PAPER_METHODS: their home is the light calibration.labels (the
+# command line offers them before loading SciPy); imported ``as`` themselves, they stay names of this module.
+
 #: Scale model of each method (:data:`~brachycal.calibration.registration.SCALE_MODELS`).
 SCALE_MODEL = {"icp": "rigid", "kabsch": "rigid", "horn": "rigid", "similarity": "similarity", "scaled_uv": "uv"}
 
@@ -270,11 +264,13 @@ def _uncertainty(
     if model != "rigid":
         _check_spacing(method, fitted, spacing, np.broadcast_to(fit_unc.scale_sd(), (2,)), warn)
     centre = p_I.mean(axis=0)
-    directions = np.linalg.svd(p_I - centre)[2][:2]
+    directions = np.linalg.svd(p_I - centre, full_matrices=False)[2][:2]
     reach_points = centre + REACH_M * np.concatenate([directions, -directions])
+    # The SD at a point is proportional to the noise level: one propagation at unit noise serves both.
+    reach_unit = float(fit_unc.point_sd_m(reach_points, 1.0).max())
     # Refusal from the design alone (at the stated annotation noise): data that are merely noisy
     # still determine the fit, and are reported with the warning and the predicted figures.
-    reach_design = float(fit_unc.point_sd_m(reach_points, sigma_floor_m).max())
+    reach_design = sigma_floor_m * reach_unit
     if reach_design > MAX_REACH_SD_M:
         raise DegenerateDataError(
             f"{method}: the samples do not determine the image calibration: predicted error "
@@ -282,7 +278,8 @@ def _uncertainty(
             f"(> {MAX_REACH_SD_M * 1e3:g} mm) even at {sigma_floor_m * 1e3:.3g} mm annotation noise; spread the "
             "needle positions over the image and the probe poses"
         )
-    reach_check = max(reach_design, float(fit_unc.point_sd_m(reach_points).max()))
+    reach_fit = fit_unc.noise_sd_m * reach_unit
+    reach_check = max(reach_design, reach_fit)
     if warn and reach_check > WARN_REACH_SD_M:
         warnings.warn(
             f"{method}: the image calibration is poorly determined: predicted error {reach_check * 1e3:.3g} mm at "
@@ -303,8 +300,10 @@ def _uncertainty(
         rotation_sd_deg=float(np.degrees(fit_unc.rotation_sd_rad())),
         origin_sd_m=fit_unc.translation_sd_m(),
         spacing_sd_m=spacing_sd,
-        samples_sd_m=float(np.sqrt(np.mean(fit_unc.point_sd_m(p_I) ** 2))),
-        reach_sd_m=float(fit_unc.point_sd_m(reach_points).max()),
+        # Σ_i tr(J_i (JᵀJ)⁻¹ J_iᵀ) = tr(I_p) = p (the hat matrix's trace): the samples' mean variance
+        # is σ̂² p / N for every design, no propagation needed.
+        samples_sd_m=fit_unc.noise_sd_m * float(np.sqrt(fit_unc.cov_unit.shape[0] / len(p_I))),
+        reach_sd_m=reach_fit,
     )
 
 
@@ -388,8 +387,14 @@ def leave_one_out_points(
     T_EL_Ptip: ArrayLike,
     spacing_m: ArrayLike,
     T_Ptip_I_init: ArrayLike | None = None,
+    *,
+    full: ImageCalibration | None = None,
 ) -> tuple[FloatArray, FloatArray]:
-    """``(P_real (N, 3), P_cal (N, 3))`` in ``base_link``: each P_cal(i) from a fit without sample i."""
+    """``(P_real (N, 3), P_cal (N, 3))`` in ``base_link``: each P_cal(i) from a fit without sample i.
+
+    ``full``: for ICP, its fit on all the samples from the same prior (what :func:`fit` returned),
+    if already computed: it starts every fold, instead of a global ICP run (49 starts) again.
+    """
     uv = np.asarray(uv_px, dtype=float)
     T_R_ER, T_R_EL = np.asarray(T_R_ER), np.asarray(T_R_EL)
     if len(uv) < 4:
@@ -402,10 +407,17 @@ def leave_one_out_points(
         # Each fold starts from the all-sample fit (found from many starts): a fold differs by one
         # sample, so its fit lies next to it; restarting every fold from 48 orientations would
         # only find the all-sample fit's ties again, and the all-sample fit breaks those ties.
-        spacing = np.asarray(spacing_m, dtype=float)
-        sigma = ANNOTATION_SD_PX * float(spacing.max())
-        full = registration.icp_global(image_points(uv, spacing), p_Ptip, T_Ptip_I_init, tie_m=np.sqrt(3.0) * sigma)
-        T_Ptip_I_init, starts = full.T, []
+        if full is None:
+            spacing = np.asarray(spacing_m, dtype=float)
+            sigma = ANNOTATION_SD_PX * float(spacing.max())
+            T_full = registration.icp_global(
+                image_points(uv, spacing), p_Ptip, T_Ptip_I_init, tie_m=np.sqrt(3.0) * sigma
+            ).T
+        elif full.method != "icp":
+            raise InputError(f"leave-one-out of icp started from a {full.method} fit: pass the icp fit")
+        else:
+            T_full = full.T_Ptip_I
+        T_Ptip_I_init, starts = T_full, []
     keep = np.ones(len(uv), dtype=bool)
     for i in range(len(uv)):
         keep[i] = False
@@ -427,7 +439,12 @@ def leave_one_out(
     T_EL_Ptip: ArrayLike,
     spacing_m: ArrayLike,
     T_Ptip_I_init: ArrayLike | None = None,
+    *,
+    full: ImageCalibration | None = None,
 ) -> ErrorStats:
-    """Table II figures of one method: N fits on N−1 samples, each predicting the one left out."""
-    p_real, p_cal = leave_one_out_points(method, uv_px, T_R_ER, T_R_EL, p_ER_Ntip, T_EL_Ptip, spacing_m, T_Ptip_I_init)
+    """Table II figures of one method: N fits on N−1 samples, each predicting the one left out
+    (``full``: as in :func:`leave_one_out_points`)."""
+    p_real, p_cal = leave_one_out_points(
+        method, uv_px, T_R_ER, T_R_EL, p_ER_Ntip, T_EL_Ptip, spacing_m, T_Ptip_I_init, full=full
+    )
     return ErrorStats.between(p_real, p_cal)

@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from brachycal.calibration.labels import PIVOT_METHODS as PIVOT_METHOD_NAMES
+from brachycal.calibration.labels import POSE_UNITS
 from brachycal.calibration.pivot import PivotResult, pivot_algebraic, pivot_robust
 from brachycal.data.json_files import read_format_json
 from brachycal.data.pose_list import read_pose_list
@@ -24,9 +26,9 @@ from brachycal.se3 import FloatArray
 
 FORMAT = "brachycal-pivot/1"
 #: Estimators by name (``brachycal pivot --method``).
-PIVOT_METHODS = {"algebraic": pivot_algebraic, "robust": pivot_robust}
+PIVOT_METHODS = dict(zip(PIVOT_METHOD_NAMES, (pivot_algebraic, pivot_robust), strict=True))
 #: Units a pose list's translations may be in.
-UNITS = ("m", "mm")
+UNITS = POSE_UNITS
 
 
 @dataclass(frozen=True)

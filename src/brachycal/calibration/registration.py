@@ -11,7 +11,7 @@ All functions take corresponding points ``p_src (N, 3)`` and ``p_dst (N, 3)`` (m
   correspondences from an initial guess; each step is a Kabsch fit.
 - :func:`similarity`: rigid + one isotropic scale (Umeyama 1991).
 - :func:`scaled_uv`: rigid + separate pixel spacings (s_u, s_v) for image points, by
-  nonlinear least squares from a Kabsch start; needed when the speed of sound in the medium
+  nonlinear least squares (analytic Jacobian) from a Kabsch start; needed when the speed of sound in the medium
   differs from the scanner's assumption (the axial scale is off by a few per cent).
 
 Image points are planar (z = 0); all methods handle planar point sets. Collinear or too few
@@ -39,7 +39,6 @@ from typing import cast
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.optimize import least_squares
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
@@ -83,8 +82,15 @@ def kabsch(p_src: ArrayLike, p_dst: ArrayLike) -> FloatArray:
 
 def _kabsch(src: FloatArray, dst: FloatArray) -> FloatArray:
     """:func:`kabsch` of checked ``(N, 3)`` arrays."""
-    c_src, c_dst = src.mean(axis=0), dst.mean(axis=0)
-    H = (src - c_src).T @ (dst - c_dst)
+    c_src = src.mean(axis=0)
+    return _kabsch_centred(src - c_src, c_src, dst)
+
+
+def _kabsch_centred(a: FloatArray, c_src: FloatArray, dst: FloatArray) -> FloatArray:
+    """:func:`kabsch` of the source points given as their centroid ``c_src (3,)`` and the points
+    about it ``a (N, 3)`` (what ICP's iterations share)."""
+    c_dst = dst.mean(axis=0)
+    H = a.T @ (dst - c_dst)
     U, _, Vt = np.linalg.svd(H)
     d = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
     R = Vt.T @ np.diag([1.0, 1.0, d]) @ U.T
@@ -158,15 +164,23 @@ def icp(
     """
     src = check_geometry(p_src, "source points")
     dst = np.asarray(p_dst, dtype=float)
-    tree = cKDTree(dst)
-    T = np.asarray(T_init, dtype=float)
+    return _icp(src, dst, cKDTree(dst), np.asarray(T_init, dtype=float), max_iterations)
+
+
+def _icp(
+    src: FloatArray, dst: FloatArray, tree: cKDTree, T: FloatArray, max_iterations: int
+) -> tuple[FloatArray, int, np.ndarray]:
+    """:func:`icp` of checked ``(N, 3)`` and ``(M, 3)`` arrays with the targets' KD-tree ``tree``
+    (built once for all the starts of :func:`icp_global`)."""
+    c_src = src.mean(axis=0)
+    a = src - c_src
     match = np.full(len(src), -1)
     for iteration in range(1, max_iterations + 1):
         _, new_match = tree.query(transform_points(T, src))
         if np.array_equal(new_match, match):
             return T, iteration - 1, match
         match = new_match
-        T = _kabsch(src, dst[match])
+        T = _kabsch_centred(a, c_src, dst[match])
     return T, max_iterations, match
 
 
@@ -177,9 +191,15 @@ def scaled_uv(
 ) -> tuple[FloatArray, FloatArray]:
     """Rigid transform and separate pixel spacings for image points.
 
-    Model: ``p_dst = R @ (u·s_u, v·s_v, 0) + t``. Solved by nonlinear least squares
-    (:func:`scipy.optimize.least_squares`, Levenberg–Marquardt) over a rotation increment, the
-    translation and both spacings, starting from Kabsch at the nominal spacing.
+    Model: ``p_dst = R @ (u·s_u, v·s_v, 0) + t``. Solved by nonlinear least squares over a
+    rotation increment ``ω`` (``R = exp(ω) R_0``), the translation and both spacing factors,
+    starting from Kabsch at the nominal spacing (``R_0``), with the analytic Jacobian
+    (:func:`_jacobian`, its rotation columns times SO(3)'s left Jacobian of ``ω``) and the chain's
+    Levenberg–Marquardt (:func:`~brachycal.calibration.chain.solver.solve_least_squares`, SciPy's
+    objective and stopping rules without its per-call set-up) at tolerance 1e-15: the minimiser to
+    rounding (each parameter's Jacobian column orthogonal to the residual to a cosine of ~1e-13,
+    2e-11 at worst over 60 random sets; SciPy's finite-difference Jacobian, used before, left up to
+    1e-8, ~1e-10 m on the example session).
 
     Args:
         uv_px: ``(N, 2)`` pixel coordinates (u along columns, v along rows).
@@ -188,30 +208,51 @@ def scaled_uv(
 
     Returns:
         ``(T_dst_image (4, 4) rigid, spacing_m (2,))``.
+
+    Raises:
+        DegenerateDataError: the targets coincide, or a fitted spacing is not positive.
     """
+    # Here, not at the top: the chain package imports this module (through the sequential method).
+    from brachycal.calibration.chain.rotations import left_jacobian, rotation
+    from brachycal.calibration.chain.solver import solve_least_squares
+
     uv = np.asarray(uv_px, dtype=float)
     dst = np.asarray(p_dst, dtype=float)
     s0 = np.asarray(spacing_m, dtype=float)
     if _without_spread(dst):
         raise DegenerateDataError("the target points coincide: no pixel spacing can map the pixels onto them")
     src0 = np.column_stack([uv * s0, np.zeros(len(uv))])
-    T0 = kabsch(src0, dst)
-    R0 = T0[:3, :3]
+    R0 = kabsch(src0, dst)[:3, :3]
+    # Solved about the centroids, ``b = R S a + t'`` with ``a = p − c_src``, ``b = q − c_dst`` (the same
+    # minimiser; ``t = t' + c_dst − R S c_src``): the residuals then cancel numbers of the points'
+    # spread rather than of their distance from the origin, and the cost's rounding stays small. In
+    # pixels (over the larger nominal spacing): the solver's rounding-level stop is relative to
+    # ``cost + 1``, so the cost must not be tiny next to 1 (in metres it is ~1e-6).
+    c_src, c_dst = src0.mean(axis=0), dst.mean(axis=0)
+    a, b = src0 - c_src, dst - c_dst
+    pixel = float(s0.max())
+
+    def factors(x: FloatArray) -> FloatArray:
+        return np.array([x[6], x[7], 1.0])
 
     def residuals(x: FloatArray) -> FloatArray:
-        R = Rotation.from_rotvec(x[:3]).as_matrix() @ R0
-        p_image = np.column_stack([uv * (s0 * x[6:8]), np.zeros(len(uv))])
-        return (p_image @ R.T + x[3:6] - dst).ravel()
+        R = rotation(x[:3]) @ R0
+        return ((a * factors(x)) @ R.T + x[3:6] - b).ravel() / pixel
 
-    x0 = np.concatenate([np.zeros(3), T0[:3, 3], np.ones(2)])
-    fit = least_squares(residuals, x0, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    def jacobian(x: FloatArray) -> FloatArray:
+        J = _jacobian("uv", rotation(x[:3]) @ R0, factors(x), a)
+        J[:, :3] = J[:, :3] @ left_jacobian(x[:3])  # δθ (left increment of R) per dω
+        return J / pixel
+
+    x0 = np.concatenate([np.zeros(6), np.ones(2)])  # Kabsch: t' = 0
+    fit = solve_least_squares(residuals, jacobian, x0, tol=1e-15)
     if not np.all(fit.x[6:8] > 0.0):
         raise DegenerateDataError(
             f"the fitted pixel spacings come out {fit.x[6] * s0[0] * 1e3:.3g} x {fit.x[7] * s0[1] * 1e3:.3g} mm/px "
             "(not positive): the target points do not follow the pixels"
         )
-    R = Rotation.from_rotvec(fit.x[:3]).as_matrix() @ R0
-    return make_transform(R, fit.x[3:6]), s0 * fit.x[6:8]
+    R = rotation(fit.x[:3]) @ R0
+    return make_transform(R, fit.x[3:6] + c_dst - R @ (c_src * factors(fit.x))), s0 * fit.x[6:8]
 
 
 # --- ICP from many starts -------------------------------------------------------------------------
@@ -284,6 +325,14 @@ def _displacement(T_a: FloatArray, T_b: FloatArray, centre: FloatArray, cov: Flo
     return float(np.sqrt(max(offset @ offset + np.trace(dR @ cov @ dR.T), 0.0)))
 
 
+def _displacements(Ts: FloatArray, T: FloatArray, centre: FloatArray, cov: FloatArray) -> FloatArray:
+    """:func:`_displacement` of each of ``Ts (K, 4, 4)`` from ``T (4, 4)``: ``(K,)`` metres."""
+    dR, dt = Ts[:, :3, :3] - T[:3, :3], Ts[:, :3, 3] - T[:3, 3]
+    offset = dR @ centre + dt
+    spread = np.einsum("kij,jl,kil->k", dR, cov, dR)
+    return np.sqrt(np.maximum(np.sum(offset**2, axis=1) + spread, 0.0))
+
+
 def icp_global(
     p_src: ArrayLike,
     p_dst: ArrayLike,
@@ -318,11 +367,14 @@ def icp_global(
     tree = cKDTree(dst)
     moments = _moments(src)
     minima: list[tuple[FloatArray, float, np.ndarray]] = []
-    for start in [prior, *(icp_starts(src, dst) if starts is None else starts)]:
-        T, _, _ = icp(src, dst, start, max_iterations=max_iterations)
+    all_starts = [prior, *(icp_starts(src, dst) if starts is None else starts)]
+    found = np.empty((len(all_starts), 4, 4))  # the distinct minima's T, stacked to compare a new fit with all at once
+    for start in all_starts:
+        T, _, _ = _icp(src, dst, tree, np.asarray(start, dtype=float), max_iterations)
         distances, match = tree.query(transform_points(T, src))
         rms = float(np.sqrt(np.mean(distances**2)))
-        if not any(_displacement(T, other, *moments) < SAME_MINIMUM_M for other, _, _ in minima):
+        if not np.any(_displacements(found[: len(minima)], T, *moments) < SAME_MINIMUM_M):
+            found[len(minima)] = T
             minima.append((T, rms, match))
     minima.sort(key=lambda m: m[1])
     best_rms = minima[0][1]
@@ -389,17 +441,18 @@ class FitUncertainty:
 def _jacobian(model: str, R: FloatArray, scale: FloatArray, p_src: FloatArray) -> FloatArray:
     """``(3N, p)`` Jacobian of ``R S p_i + t`` with respect to (δθ, t, scale factors)."""
     mapped = (p_src * scale) @ R.T
-    n = len(p_src)
-    skew = np.zeros((n, 3, 3))
-    skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -mapped[:, 2], mapped[:, 1], -mapped[:, 0]
-    skew -= np.swapaxes(skew, 1, 2)
-    columns = [-skew, np.broadcast_to(np.eye(3), (n, 3, 3))]
+    J = np.zeros((len(p_src), 3, 6 + SCALE_MODELS[model]))
+    # δθ columns: d(δθ × m)/dδθ = −[m]×, written entry by entry (no (N, 3, 3) temporaries).
+    J[:, 0, 1], J[:, 0, 2] = mapped[:, 2], -mapped[:, 1]
+    J[:, 1, 0], J[:, 1, 2] = -mapped[:, 2], mapped[:, 0]
+    J[:, 2, 0], J[:, 2, 1] = mapped[:, 1], -mapped[:, 0]
+    J[:, 0, 3] = J[:, 1, 4] = J[:, 2, 5] = 1.0
     if model == "similarity":
-        columns.append((p_src @ R.T)[:, :, None])
+        J[:, :, 6] = p_src @ R.T
     elif model == "uv":
-        columns.append((p_src[:, :1] * R[:, 0])[:, :, None])
-        columns.append((p_src[:, 1:2] * R[:, 1])[:, :, None])
-    return np.concatenate(columns, axis=2).reshape(3 * n, -1)
+        J[:, :, 6] = p_src[:, :1] * R[:, 0]
+        J[:, :, 7] = p_src[:, 1:2] * R[:, 1]
+    return J.reshape(-1, J.shape[2])
 
 
 def fit_uncertainty(

@@ -120,10 +120,50 @@ class StoredCalibration:
     #: ``(width, height)`` of the calibrated images, pixels (``image.size_px``); None in files
     #: written before it was stored.
     image_size_px: tuple[int, int] | None = None
+    #: ``{joint: (urdf (4, 4), corrected (4, 4))}``: the joint origins of the URDF the result was
+    #: calibrated with and of the robot it corrected them to (empty: the result corrects nothing).
+    joint_origins: dict[str, tuple[FloatArray, FloatArray]] = field(default_factory=dict)
+    source: str = ""
 
     def software_robot(self, robot: Robot) -> Robot:
-        """The robot model to compute and command with: ``robot`` with the estimated joint offsets."""
-        return robot.with_joint_offsets(self.joint_offsets_rad) if self.joint_offsets_rad else robot
+        """The robot model to compute and command with: ``robot`` with the result's corrections
+        (identified geometry or joint offsets), applied exactly once.
+
+        A robot whose joint origins already are the corrected ones (the URDF ``brachycal export``
+        wrote) is returned as it is; one whose origins are the calibrated URDF's is corrected.
+
+        Raises:
+            InputError: the result corrects the robot and ``robot``'s joint origins are neither
+                (another robot, or another calibration's corrections: they would be mixed).
+        """
+        if not self.joint_origins:
+            return robot.with_joint_offsets(self.joint_offsets_rad) if self.joint_offsets_rad else robot
+        names = [name for name in self.joint_origins if name in robot.joint_names]
+        if len(names) != len(self.joint_origins):
+            missing = sorted(set(self.joint_origins) - set(names))[:3]
+            raise InputError(
+                f"the robot model has no joint(s) {', '.join(missing)} that this result corrects", file=self.source
+            )
+        here = {name: robot.joint_origin(name) for name in names}
+        if all(_same_origin(here[n], self.joint_origins[n][1]) for n in names):
+            return robot  # already corrected: never apply the corrections twice
+        if not all(_same_origin(here[n], self.joint_origins[n][0]) for n in names):
+            raise InputError(
+                "the robot model's joint origins are neither those of the URDF this result was calibrated with "
+                "nor its corrected ones: use that URDF (or the one 'brachycal export' wrote from this result)",
+                file=self.source,
+            )
+        return robot.with_joint_origins({n: self.joint_origins[n][1] for n in names})
+
+
+#: Two joint origins are the same when no entry differs by more than this (metres, and unitless
+#: rotation entries): far above the round trip through a URDF's text (~1e-15), far below any
+#: correction worth making (a robot correction of 1e-9 m or 1e-9 rad changes nothing measurable).
+ORIGIN_TOLERANCE = 1e-9
+
+
+def _same_origin(a: FloatArray, b: FloatArray) -> bool:
+    return bool(np.max(np.abs(a - b)) <= ORIGIN_TOLERANCE)
 
 
 def _matrix(value: object, path: Path, key: str) -> FloatArray:
@@ -165,7 +205,26 @@ def read_result(path: str | os.PathLike[str]) -> StoredCalibration:
         raw=raw,
         joint_offsets_rad={str(k): float(v) for k, v in raw.get("chain", {}).get("joint_offsets_rad", {}).items()},
         image_size_px=_image_size(raw, path),
+        joint_origins=_joint_origins(raw, path),
+        source=str(path),
     )
+
+
+def _joint_origins(raw: dict, path: Path) -> dict[str, tuple[FloatArray, FloatArray]]:
+    chain = raw.get("chain", {})
+    stored = chain.get("robot_joint_origins", {}) if isinstance(chain, dict) else {}
+    if not isinstance(stored, dict):
+        raise InputError("must map joint names to their origins", file=path, column="chain.robot_joint_origins")
+    out = {}
+    for name, pair in stored.items():
+        key = f"chain.robot_joint_origins.{name}"
+        if not isinstance(pair, dict) or set(pair) != {"urdf", "corrected"}:
+            raise InputError("must hold 'urdf' and 'corrected' 4x4 origins", file=path, column=key)
+        out[str(name)] = (
+            _matrix(pair["urdf"], path, f"{key}.urdf"),
+            _matrix(pair["corrected"], path, f"{key}.corrected"),
+        )
+    return out
 
 
 def _image_size(raw: dict, path: Path) -> tuple[int, int] | None:

@@ -168,7 +168,15 @@ def calibrate(
         with _data_of("samples.csv"):
             image[method] = image_to_probe.fit(method, session.uv_px, p_Ptip, session.spacing_m, T_Ptip_I_init)
             loocv[method] = image_to_probe.leave_one_out(
-                method, session.uv_px, T_R_ER, T_R_EL, p_ER_Ntip, probe.T_E_tool, session.spacing_m, T_Ptip_I_init
+                method,
+                session.uv_px,
+                T_R_ER,
+                T_R_EL,
+                p_ER_Ntip,
+                probe.T_E_tool,
+                session.spacing_m,
+                T_Ptip_I_init,
+                full=image[method],
             )
         p_cal = image_to_probe.predict_base(image[method], T_R_EL, probe.T_E_tool, session.uv_px)
         residuals[method] = ErrorStats.between(p_real, p_cal)

@@ -47,6 +47,7 @@ def calibrate_folder(
     joint_offsets: bool = False,
     progress: Callable[[int], None] | None = None,
     robot_accuracy: RobotAccuracy | None = DEFAULT_ROBOT_ACCURACY,
+    identify_robot: bool = False,
 ) -> SessionCalibration:
     """Read the session in ``folder`` and calibrate it.
 
@@ -57,6 +58,8 @@ def calibrate_folder(
         chain: also solve the whole chain (image model by cross-validation, uncertainty).
         bootstrap_replicates, joint_offsets, progress, robot_accuracy: for the chain
             (:func:`~brachycal.calibration.chain_report.calibrate_chain`).
+        identify_robot: with ``chain``, identify the robot's geometry too (``robot_accuracy`` is
+            its prior; :mod:`~brachycal.calibration.robot_identification`).
 
     Raises:
         InputError: the session is malformed (naming file, row and column).
@@ -80,5 +83,6 @@ def calibrate_folder(
             joint_offsets=joint_offsets,
             progress=progress,
             robot_accuracy=robot_accuracy,
+            identify=identify_robot,
         )
     return SessionCalibration(session, result, report)

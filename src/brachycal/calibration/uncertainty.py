@@ -31,20 +31,20 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from statistics import NormalDist
 
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy.optimize import approx_fprime, least_squares
-from scipy.stats import chi2, norm
 
 from brachycal.calibration.chain import (
-    SCANNER_SOUND_SPEED,
     ChainData,
     ChainFit,
     ParameterLayout,
     chain_jacobian,
     chain_residuals,
     finite_difference_steps,
+    image_model,
     joint_twists,
     leverages,
 )
@@ -56,7 +56,7 @@ from brachycal.se3 import FloatArray, transform_points
 
 
 def _layout(fit: ChainFit, robot: Robot) -> ParameterLayout:
-    return ParameterLayout(fit.model, tuple(robot.joint_names.index(n) for n in fit.joint_offsets_rad))
+    return fit.layout(robot.joint_names)
 
 
 def _landing(
@@ -156,13 +156,15 @@ def inside_ellipsoid(error_m: ArrayLike, covariance: FloatArray, level: float = 
     if C.ndim == 2:
         C = np.broadcast_to(C, (len(e), 3, 3))
     d2 = np.einsum("ni,nij,nj->n", e, np.linalg.inv(C), e)
+    from scipy.stats import chi2  # here, not at the top: scipy.stats costs 0.5 s to import, only this needs it
+
     return d2 <= chi2.ppf(level, 3)
 
 
 def interval(fit: ChainFit, name: str, level: float = 0.95) -> tuple[FloatArray, FloatArray]:
     """Normal-theory interval ``(low, high)`` of parameter block ``name`` (``"scale"``, ``"p_ER_Ntip"``…)."""
     k = fit.block(name)
-    half = norm.ppf(0.5 + level / 2) * fit.parameter_sd()[k]
+    half = NormalDist().inv_cdf(0.5 + level / 2) * fit.parameter_sd()[k]
     return fit.x[k] - half, fit.x[k] + half
 
 
@@ -229,8 +231,8 @@ def bootstrap(
         out["spacing_m"].append(spacing)
         out["p_ER_Ntip"].append(T_ER_Ntip[:3, 3])
         out["p_EL_Ptip"].append(T_EL_Ptip[:3, 3])
-        sound = SCANNER_SOUND_SPEED * spacing[1] / session.spacing_m[1] if fit.model != "rigid" else np.nan
-        out["sound_speed_m_s"].append(sound)
+        sound = image_model(fit.model).sound_speed_m_s(spacing, session.spacing_m)
+        out["sound_speed_m_s"].append(np.nan if sound is None else sound)
         if progress is not None:
             progress(1)
     return Bootstrap({k: np.array(v) for k, v in out.items()})

@@ -4,21 +4,16 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from brachycal.calibration import METHODS, calibrate_folder, write_result
-from brachycal.calibration.chain import (
-    DEFAULT_ROBOT_ACCURACY,
-    MAX_ROBOT_ROTATION_SD_RAD,
-    MAX_ROBOT_TRANSLATION_SD_M,
-    RobotAccuracy,
-)
 from brachycal.cli.common import add_urdf_option, load_robot, progress_bar
 from brachycal.errors import InputError
-from brachycal.files import OutputSet, sha256_bytes
-from brachycal.reporting import REPORT_FILES, chain_summary, table_i, table_ii, uncertainty_table, write_report
 from brachycal.validate import bounded_int, finite_float, name_list
+
+if TYPE_CHECKING:
+    from brachycal.calibration.robot_accuracy import RobotAccuracy
 
 #: Most bootstrap refits --bootstrap takes: a 95% percentile interval is settled by ~2000; 10000
 #: refits of the chain already take hours, so a larger count is a typo.
@@ -40,6 +35,13 @@ coverage on the twin: benchmarks/chain_checks.py, see the README) and the predic
 over the sample poses and the image; data that cannot determine the chain
 are refused. The result then carries the chain's transforms.
 
+With --method chain --identify-robot, the robot's own geometry (every joint origin's small
+translation and rotation, zero offsets included) is identified jointly with the chain from the
+same session, the stated accuracy (--robot-accuracy-mm/-deg: state the arm's real figures) as its
+prior; the result carries the corrections, which 'brachycal export' writes into the calibrated
+URDF and 'locate', 'plan' and 'export' apply exactly once. It prints which parameters the session
+cannot identify and why, and the image error at held-out configurations with and without it.
+
 The result (brachycal-result/1, JSON, metres) and the report are written together, all or
 nothing, when everything succeeded; neither replaces an existing file without --force.
 
@@ -49,6 +51,13 @@ example:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from brachycal.calibration.labels import METHODS
+    from brachycal.calibration.robot_accuracy import (
+        DEFAULT_ROBOT_ACCURACY,
+        MAX_ROBOT_ROTATION_SD_RAD,
+        MAX_ROBOT_TRANSLATION_SD_M,
+    )
+
     parser = sub.add_parser(
         "calibrate", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -90,6 +99,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="with --method chain: each joint origin's rotation SD per axis and zero-offset SD, "
         f"{degrees.rule} (default {np.degrees(DEFAULT_ROBOT_ACCURACY.rotation_sd_rad):g}; real arms often 0.01)",
     )
+    parser.add_argument(
+        "--identify-robot",
+        action="store_true",
+        help="with --method chain: also identify the robot's geometry from the session (the stated "
+        "accuracy is its prior); replaces --joint-offsets",
+    )
     replicates = bounded_int(low=0, high=MAX_BOOTSTRAP)
     parser.add_argument(
         "--bootstrap",
@@ -107,6 +122,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def _robot_accuracy(args: argparse.Namespace) -> RobotAccuracy:
     """The stated robot accuracy: the options given, the defaults for the others."""
+    from brachycal.calibration.robot_accuracy import DEFAULT_ROBOT_ACCURACY, RobotAccuracy
+
     if args.robot_accuracy_mm is None and args.robot_accuracy_deg is None:
         return DEFAULT_ROBOT_ACCURACY
     mm = args.robot_accuracy_mm if args.robot_accuracy_mm is not None else DEFAULT_ROBOT_ACCURACY.translation_sd_m * 1e3
@@ -124,15 +141,24 @@ def _robot_accuracy(args: argparse.Namespace) -> RobotAccuracy:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.method != "chain" and (args.bootstrap or args.joint_offsets):
-        option = "--bootstrap" if args.bootstrap else "--joint-offsets"
-        raise InputError(f"{option} needs --method chain (the sequential method has no bootstrap or joint offsets)")
+    from brachycal.calibration import calibrate_folder, write_result
+    from brachycal.files import OutputSet, sha256_bytes
+    from brachycal.reporting import chain_summary, table_i, table_ii, uncertainty_table
+
+    if args.method != "chain" and (args.bootstrap or args.joint_offsets or args.identify_robot):
+        option = "--bootstrap" if args.bootstrap else "--joint-offsets" if args.joint_offsets else "--identify-robot"
+        raise InputError(f"{option} needs --method chain (the sequential method has no bootstrap or robot terms)")
+    if args.identify_robot and args.joint_offsets:
+        raise InputError("--identify-robot replaces --joint-offsets (it identifies the zero offsets too): pass one")
     if args.method != "chain" and (args.robot_accuracy_mm is not None or args.robot_accuracy_deg is not None):
         option = "--robot-accuracy-mm" if args.robot_accuracy_mm is not None else "--robot-accuracy-deg"
         raise InputError(f"{option} needs --method chain (the sequential method states no robot term)")
     with OutputSet(force=args.force) as outputs:
         staged_result = outputs.claim(args.out, label="--out")
         if args.report:
+            # Here, not at the top: the report's figures load matplotlib (~0.5 s), for --report only.
+            from brachycal.reporting import REPORT_FILES, write_report
+
             for name in REPORT_FILES:
                 outputs.claim(Path(args.report) / name, make_parents=True, label=f"--report's {name}")
         robot = load_robot(args)
@@ -146,6 +172,7 @@ def run(args: argparse.Namespace) -> int:
                 joint_offsets=args.joint_offsets,
                 progress=bar.update,
                 robot_accuracy=_robot_accuracy(args),
+                identify_robot=args.identify_robot,
             )
         result, chain, session = calibrated.result, calibrated.chain, calibrated.session
         print(table_i(result))

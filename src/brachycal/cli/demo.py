@@ -11,10 +11,6 @@ import argparse
 import time
 from pathlib import Path
 
-from brachycal.files import OutputSet
-from brachycal.model import Robot
-from brachycal.reporting import DEMO_REPORT_FILES, demo_text, write_demo_report
-from brachycal.simulation import TWIN_FILES, TwinConfig, record, run_demo, write_recording
 from brachycal.validate import MAX_TARGETS, bounded_int, seed
 
 HELP = "calibrate a simulated session (digital twin) and compare with the truth"
@@ -65,6 +61,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from brachycal.files import OutputSet
+    from brachycal.model import Robot
+    from brachycal.reporting import DEMO_REPORT_FILES, demo_text, write_demo_report
+    from brachycal.simulation import TWIN_FILES, TwinConfig, record, run_demo, write_recording
+
     start = time.perf_counter()
     out = Path(args.out)
     with OutputSet(force=args.force) as outputs:

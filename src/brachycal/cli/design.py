@@ -6,10 +6,6 @@ import argparse
 from pathlib import Path
 
 from brachycal.cli.common import progress_bar
-from brachycal.files import OutputSet, write_csv
-from brachycal.model import Robot
-from brachycal.reporting import design_table
-from brachycal.simulation import DESIGNS, compare_designs
 from brachycal.validate import MAX_SEEDS, bounded_int, name_list
 
 HELP = "compare sample designs (4x4x4, 3x3x3, random, optimal) by predicted targeting error per robot minute"
@@ -26,6 +22,8 @@ example:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from brachycal.simulation.settings import DESIGNS
+
     parser = sub.add_parser(
         "design", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -46,6 +44,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from brachycal.files import OutputSet, write_csv
+    from brachycal.model import Robot
+    from brachycal.reporting import design_table
+    from brachycal.simulation import compare_designs
+
     out = Path(args.out)
     with OutputSet(force=args.force) as outputs:
         staged = outputs.claim(out / "design.csv", make_parents=True)

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from brachycal.calibration import ALL_LABELS, read_result
 from brachycal.cli.common import add_urdf_option, load_robot
 from brachycal.errors import InputError
-from brachycal.export import EXPORT_FILES, write_exports
-from brachycal.files import OutputSet
+
+if TYPE_CHECKING:
+    from brachycal.files import OutputSet
 
 HELP = "export a result: calibrated URDF, 3D Slicer/ITK transforms, PLUS CoordinateDefinitions, ROS static TFs"
 DESCRIPTION = """\
@@ -25,6 +26,8 @@ example:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from brachycal.calibration.labels import ALL_LABELS
+
     parser = sub.add_parser(
         "export", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -41,6 +44,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from brachycal.export import EXPORT_FILES
+    from brachycal.files import OutputSet
+
     with OutputSet(force=args.force) as outputs:
         for name in EXPORT_FILES:
             outputs.claim(Path(args.out) / name, make_parents=True)
@@ -52,6 +58,9 @@ def run(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace, outputs: OutputSet) -> None:
     """Write every export of the result into ``outputs``."""
+    from brachycal.calibration import read_result
+    from brachycal.export import write_exports
+
     stored = read_result(args.result)
     method = args.method or ("chain" if "chain" in stored.image else "kabsch")
     if method not in stored.image:

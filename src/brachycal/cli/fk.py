@@ -1,23 +1,40 @@
-"""``brachycal fk``: poses of tool frames from a joint log."""
+"""``brachycal fk``: poses of tool frames from a joint log, streamed block by block.
+
+The log is read, checked, computed and written in blocks (:data:`brachycal.data.csv_log.BLOCK_BYTES`
+of a CSV file, :data:`brachycal.data.bags.BLOCK_MESSAGES` messages of a bag), so memory does not
+grow with the log's length; with ``--times`` it grows with the number of requested times only.
+The pose table is staged and moved into place only when every block has been written.
+"""
 
 from __future__ import annotations
 
 import argparse
+from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from brachycal.cli.common import add_urdf_option, load_robot, progress_bar
-from brachycal.data import DEFAULT_TOPIC, read_joint_log, read_times, write_pose_table
+from brachycal.cli.common import add_robot_option, load_robot, progress_bar
 from brachycal.files import OutputSet
 from brachycal.validate import name_list
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from brachycal.model import Robot
+
+DEFAULT_TOPIC = "/joint_states"  # = brachycal.data.bags.DEFAULT_TOPIC, here so that --help imports no data module
 
 HELP = "poses of tool frames in base_link for every sample of a joint log"
 DESCRIPTION = """\
 Computes the pose of each requested frame in base_link for every sample of a joint log and
-writes the pose table: time,frame,x,y,z,qx,qy,qz,qw (metres; unit quaternion x,y,z,w, qw >= 0).
+writes the pose table: time,frame,x,y,z,qx,qy,qz,qw (metres; unit quaternion x,y,z,w, qw >= 0
+unless --quaternion-continuity).
 
 LOG is a CSV file (header 'time,<joint names>', radians, columns in any order), a ROS 1 .bag
-file, or a ROS 2 bag folder with sensor_msgs/JointState messages. With --times, the joint log is
-interpolated linearly to those times (e.g. the timestamps of ultrasound frames).
+file, or a ROS 2 bag folder (sqlite3 or MCAP) with sensor_msgs/JointState messages. With --times,
+the joint log is interpolated linearly to those times (e.g. the timestamps of ultrasound frames).
+The log is streamed: read, checked, computed and written in blocks, in memory that does not grow
+with its length.
 
 frames of the bundled SDA10F: needle_tip, top_model_tip (right flange), probe_tip, us_image
 (left flange), arm_right_link_tool0, arm_left_link_tool0, and every vendor link.
@@ -44,30 +61,72 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--times", metavar="CSV", help="evaluate at these times: a CSV file with a 'time' column (seconds)"
     )
     parser.add_argument("--topic", default=DEFAULT_TOPIC, help=f"JointState topic in a bag (default {DEFAULT_TOPIC})")
-    add_urdf_option(parser)
+    parser.add_argument(
+        "--quaternion-continuity",
+        action="store_true",
+        help="give each frame's quaternion the sign closest to the previous row's (no jump from q to -q where a "
+        "frame turns through qw = 0; for plots and interpolation) instead of qw >= 0 on every row; each "
+        "frame's first row keeps qw >= 0",
+    )
+    add_robot_option(parser)
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(run=run)
 
 
+def log_blocks(path: Path, robot: Robot, topic: str, quiet: bool) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """``(time (N,) s, q (N, nq) rad)`` blocks of a checked joint log (CSV or bag), with a progress bar
+    over the bytes (CSV) or messages (bag) read."""
+    from brachycal.data.bags import bag_log_blocks, is_bag
+    from brachycal.data.csv_log import csv_log_blocks
+
+    if is_bag(path):
+        with progress_bar(0, "reading bag", quiet) as bar:
+            bar.unit = "msg"
+
+            def total(n: int) -> None:
+                bar.total = n
+                bar.refresh()
+
+            for block, q in bag_log_blocks(path, robot, topic, progress=bar.update, total=total):
+                yield block.time, q
+        return
+    with progress_bar(path.stat().st_size, "reading log", quiet) as bar:
+        bar.unit = "B"
+        for block, q in csv_log_blocks(path, robot, progress=bar.update):
+            yield block.time, q
+
+
 def run(args: argparse.Namespace) -> int:
+    from brachycal.data import read_times
+    from brachycal.data.joint_log import interpolate_blocks
+    from brachycal.data.pose_table import PoseTableWriter
+    from brachycal.errors import InputError
+
     robot = load_robot(args)
     frames = args.frames  # names checked by argparse (none empty, no repeats)
     for frame in frames:
         robot.frame_id(frame)
     out = Path(args.out)
+    samples = 0
     with OutputSet(force=args.force) as outputs:
         staged = outputs.claim(out, label="--out")
-        log = read_joint_log(args.log, robot, args.topic)
-        if args.times:
-            times = read_times(args.times)
-            Q = log.interpolate(times)
-        else:
-            times, Q = log.time, log.q
-        with progress_bar(len(times), "forward kinematics", args.quiet) as bar:
-            poses = robot.fk_frames(frames, Q, progress=bar.update)
-        with progress_bar(len(times), "writing", args.quiet) as bar:
-            write_pose_table(staged, times, frames, poses, force=args.force, progress=bar.update)
+        if not Path(args.log).exists():  # here, not when the first block is asked for: before --times is read
+            raise InputError("no such file or folder", file=args.log)
+        blocks = log_blocks(Path(args.log), robot, args.topic, args.quiet)
+        times = read_times(args.times) if args.times else None
+        with open(staged, "w", newline="") as handle:
+            writer = PoseTableWriter(handle, frames, continuity=args.quaternion_continuity)
+            if times is None:
+                for time, q in blocks:
+                    writer.write(time, robot.fk_frames(frames, q))
+                    samples += len(time)
+            else:
+                Q = interpolate_blocks(blocks, times, source=args.log)
+                step = 16_384  # poses of this many times at once: a few MB
+                for start in range(0, len(times), step):
+                    writer.write(times[start : start + step], robot.fk_frames(frames, Q[start : start + step]))
+                samples = len(times)
     if not args.quiet:
-        print(f"wrote {len(times) * len(frames)} poses ({len(times)} samples x {len(frames)} frames) to {out}")
+        print(f"wrote {samples * len(frames)} poses ({samples} samples x {len(frames)} frames) to {out}")
     return 0

@@ -4,9 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from brachycal.calibration import ALL_LABELS, locate, read_result
 from brachycal.cli.common import add_urdf_option, load_robot
-from brachycal.data import read_configurations
 from brachycal.errors import InputError
 from brachycal.validate import MAX_IMAGE_PX, check_pixel, number_list
 
@@ -24,6 +22,8 @@ example:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from brachycal.calibration.labels import ALL_LABELS
+
     parser = sub.add_parser(
         "locate", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -48,6 +48,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from brachycal.calibration import locate, read_result
+    from brachycal.data import read_configurations
+
     stored = read_result(args.result)
     # The result knows its images' size (older result files do not: then argparse's bound stands).
     uv = check_pixel(args.uv, "--uv", size_px=stored.image_size_px)[None]

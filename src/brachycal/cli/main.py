@@ -1,4 +1,9 @@
-"""The ``brachycal`` command: one sub-command per job, one-line errors with exit code 2."""
+"""The ``brachycal`` command: one sub-command per job, one-line errors with exit code 2.
+
+Startup is kept short: every sub-command module is light at import (argparse only), and only the
+sub-command being run builds its full parser (which imports the constants its options need) and
+then imports what its run needs. ``brachycal --help`` imports no Pinocchio, SciPy, mink or matplotlib.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +13,7 @@ import signal
 import sys
 import threading
 import warnings
-from collections.abc import Iterator, Sequence
+from collections.abc import Collection, Iterator, Sequence
 from contextlib import contextmanager
 
 from brachycal import __version__
@@ -50,15 +55,47 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+COMMANDS = {
+    "demo": demo,
+    "model": model,
+    "fk": fk,
+    "plan": plan,
+    "session": session,
+    "calibrate": calibrate,
+    "locate": locate,
+    "export": export,
+    "pivot": pivot,
+    "nwire": nwire,
+    "study": study,
+    "design": design,
+}
+
+
+def build_parser(full: Collection[str] | None = None) -> argparse.ArgumentParser:
+    """The command's parser.
+
+    Args:
+        full: the sub-commands whose own parser (options, their rules and defaults) is built; the
+            others get a stand-in with their one-line help, enough for ``brachycal --help`` and for
+            naming the command. None: all of them (for looking at every option).
+    """
     parser = OneLineParser(
         prog="brachycal", description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--version", action="version", version=f"brachycal {__version__}")
     sub = parser.add_subparsers(title="commands", metavar="COMMAND", required=True, parser_class=OneLineParser)
-    for module in (demo, model, fk, plan, session, calibrate, locate, export, pivot, nwire, study, design):
-        module.add_parser(sub)
+    for name, module in COMMANDS.items():
+        if full is None or name in full:
+            module.add_parser(sub)
+        else:
+            sub.add_parser(name, help=module.HELP)
     return parser
+
+
+def _command(argv: Sequence[str]) -> str | None:
+    """The sub-command ``argv`` names: its first word that is not an option (the command's own
+    options, --help and --version, take no value), or None."""
+    return next((word for word in argv if not word.startswith("-")), None)
 
 
 class Terminated(BaseException):
@@ -83,6 +120,9 @@ def _command_environment() -> Iterator[None]:
         warnings.simplefilter("default")
         # Library chatter a user cannot act on (NumPy on a refused input, parser notices).
         warnings.filterwarnings("ignore", category=RuntimeWarning)
+        # A file left open by an interrupted import or by a library: a developer's concern, not
+        # the user's (Python hides these by default; "default" above would show them).
+        warnings.filterwarnings("ignore", category=ResourceWarning)
         try:
             yield
         finally:
@@ -92,7 +132,9 @@ def _command_environment() -> Iterator[None]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     try:
-        args = build_parser().parse_args(argv)
+        arguments = sys.argv[1:] if argv is None else list(argv)
+        command = _command(arguments)
+        args = build_parser(full=() if command is None else (command,)).parse_args(arguments)
     except SystemExit as exc:  # --help, --version, or a usage error (already printed, one line)
         return exc.code if isinstance(exc.code, int) else 2
     try:

@@ -4,22 +4,22 @@ from __future__ import annotations
 
 import argparse
 
-import numpy as np
-
-from brachycal.cli.common import add_urdf_option, load_robot
-from brachycal.model import TOOL_FRAME_PARENTS
-from brachycal.se3 import to_xyz_rpy
+from brachycal.cli.common import add_robot_option, load_robot, tool_frame_parents
 
 HELP = "joints, limits and tool frames of the robot model"
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser("model", help=HELP, description=HELP + ".")
-    add_urdf_option(parser)
+    add_robot_option(parser)
     parser.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from brachycal.se3 import to_xyz_rpy
+
     robot = load_robot(args)
     print(f"model: {robot.source}")
     print(f"{robot.nq} controlled axes, in configuration order (radians):")
@@ -29,7 +29,7 @@ def run(args: argparse.Namespace) -> int:
             f"  max {vel:.3f} rad/s"
         )
     print("tool frames (parent -> frame: xyz in mm, rpy in deg):")
-    for frame in TOOL_FRAME_PARENTS:
+    for frame in tool_frame_parents(args):
         if robot.model.existFrame(frame):
             parent, T = robot.tool_transform(frame)
             xyz, rpy = to_xyz_rpy(T)

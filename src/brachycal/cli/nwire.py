@@ -4,9 +4,6 @@ from __future__ import annotations
 
 import argparse
 
-from brachycal.calibration import nwire_from_files, write_nwire
-from brachycal.files import OutputSet
-
 HELP = "N-wire phantom calibration of a tracked probe (PLUS configuration + segmented frames)"
 DESCRIPTION = """\
 Calibrates Image -> Probe from a PLUS device-set configuration (phantom wire geometry and the
@@ -35,6 +32,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from brachycal.calibration import nwire_from_files, write_nwire
+    from brachycal.files import OutputSet
+
     with OutputSet(force=args.force) as outputs:
         staged = outputs.claim(args.out, label="--out")
         run = nwire_from_files(args.config, args.frames)

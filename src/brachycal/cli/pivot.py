@@ -4,10 +4,6 @@ from __future__ import annotations
 
 import argparse
 
-from brachycal.calibration import PIVOT_METHODS, pivot_from_file, write_pivot
-from brachycal.calibration.pivot_file import UNITS
-from brachycal.files import OutputSet
-
 HELP = "pivot calibration: tool tip and pivot point from poses rotating about a fixed tip"
 DESCRIPTION = """\
 Estimates the tip of a tool in its own (marker or flange) frame and the fixed pivot point in the
@@ -26,6 +22,9 @@ example:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from brachycal.calibration.labels import PIVOT_METHODS
+    from brachycal.calibration.labels import POSE_UNITS as UNITS
+
     parser = sub.add_parser(
         "pivot", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -38,6 +37,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from brachycal.calibration import pivot_from_file, write_pivot
+    from brachycal.files import OutputSet
+
     with OutputSet(force=args.force) as outputs:
         staged = outputs.claim(args.out, label="--out")
         calibration = pivot_from_file(args.poses, args.method, args.units)

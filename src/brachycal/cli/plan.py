@@ -3,37 +3,20 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import pickle
+import subprocess
+import sys
 from collections import Counter
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from brachycal.calibration import ALL_LABELS, read_result
-from brachycal.cli.common import add_urdf_option, load_robot, progress_bar
+from brachycal.cli.common import add_robot_option, load_robot, progress_bar
 from brachycal.errors import InputError
-from brachycal.export import calibrated_robot
-from brachycal.files import OutputSet
-from brachycal.imaging import DEFAULT_SPACING_M
-from brachycal.planning import (
-    IKSettings,
-    PlanSpec,
-    RectFOV,
-    SectorFOV,
-    Thresholds,
-    infeasible_path,
-    plan_poses,
-    write_infeasible,
-    write_plan,
-)
-from brachycal.planning.spec import EDGE_RANGE_M, MAX_CENTRE_M, MAX_SECTOR_DEPTH_M
-from brachycal.planning.verify import (
-    MAX_COLLISION_MARGIN_M,
-    MAX_JOINT_MARGIN_RAD,
-    MIN_COLLISION_MARGIN_M,
-    MIN_JOINT_MARGIN_RAD,
-)
-from brachycal.reporting import plan_text, plot_plan
+from brachycal.planning.spec import EDGE_RANGE_M, MAX_CENTRE_M, MAX_SECTOR_DEPTH_M, PlanSpec, RectFOV, SectorFOV
 from brachycal.validate import (
     MAX_GRID_POINTS,
     MAX_IMAGE_PX,
@@ -44,13 +27,18 @@ from brachycal.validate import (
     spacing_mm,
 )
 
+if TYPE_CHECKING:
+    from brachycal.files import OutputSet
+    from brachycal.planning import IKSettings, Plan, Thresholds
+
 HELP = "plan the calibration sample poses (a grid of needle-tip targets) with mink IK"
 DESCRIPTION = """\
 Plans one dual-arm pose per needle-tip target of a grid (default: the paper's 4 x 4 x 4 points
 in a 40 mm cube). The cube is aligned with the image: two axes in the image plane (lateral u,
-depth v), one along its normal. For each point the right arm puts the needle tip on it with the
-needle along the insertion direction, and the left arm puts the probe so that the tip shows at
-the planned pixel, inside the field of view. Both arms and the torso are solved together with
+depth v), one along its normal. For each point the needle arm (the SDA10F's right) puts the needle
+tip on it with the needle along the insertion direction, and the probe arm puts the probe so that
+the tip shows at the planned pixel, inside the field of view. Both arms (and the SDA10F's torso)
+are solved together with
 mink (joint and velocity limits, collision avoidance with a margin); every pose is then checked
 independently with Pinocchio and Coal (tip error < 0.01 mm, needle direction < 0.05 deg, tip
 within 0.01 mm of the image plane, inside the field of view, joint margin, clearance). Poses
@@ -61,9 +49,13 @@ Writes the plan CSV (controller joint order, radians and degrees, expected pixel
 a figure (grid and image coverage). If any point has no verified pose, the points and reasons
 are listed and nothing is written (exit code 2) unless --allow-partial, which writes the plan
 and <plan>_infeasible.csv. Tool frames: the URDF's nominal ones, or a calibration's (--result).
+The robot (--robot, default sda10f) gives the arms, the ready stance the robot starts from, the
+collision pairs, the controller's joint order and the default cube centre and directions (its
+workspace; docs/robots.md).
 
 example:
   brachycal plan --out plan.csv
+  brachycal plan --robot baxter --out baxter_plan.csv
   brachycal plan --result result.json --centre-mm 800,100,1050 --edge-mm 30 --out plan.csv
 """
 
@@ -99,9 +91,9 @@ def _grid_options(g: argparse._ArgumentGroup, d: PlanSpec) -> None:
     g.add_argument(
         "--centre-mm",
         type=centre,
-        default=_mm_pair(d.cube_centre_m),
         metavar="X,Y,Z",
-        help=f"cube centre in base_link, {centre.rule} (default {_mm_pair(d.cube_centre_m)})",
+        help=f"cube centre in the robot's base frame, {centre.rule} (default: the robot's workspace; "
+        f"sda10f {_mm_pair(d.cube_centre_m)})",
     )
     edge = finite_float(low=EDGE_RANGE_M[0] * 1e3, high=EDGE_RANGE_M[1] * 1e3, unit="mm")
     edge_mm = f"{d.edge_m * 1e3:g}"
@@ -114,9 +106,9 @@ def _grid_options(g: argparse._ArgumentGroup, d: PlanSpec) -> None:
     g.add_argument(
         "--insertion",
         type=direction,
-        default=",".join(f"{x:.6f}" for x in d.insertion_dir),
         metavar="DX,DY,DZ",
-        help="needle direction in base_link (default: forward, 35 deg towards the left)",
+        help="needle direction in the robot's base frame (default: the robot's workspace; sda10f: forward, "
+        "35 deg towards the left)",
     )
 
 
@@ -125,16 +117,16 @@ def _imaging_options(i: argparse._ArgumentGroup, d: PlanSpec) -> None:
     i.add_argument(
         "--image-depth",
         type=direction,
-        default=_pair(d.image_depth_dir),
         metavar="DX,DY,DZ",
-        help="image +v (depth) in base_link",
+        help="image +v (depth) in the robot's base frame (default: the robot's workspace; "
+        f"sda10f {_pair(d.image_depth_dir)})",
     )
     i.add_argument(
         "--image-lateral",
         type=direction,
-        default=_pair(d.image_lateral_dir),
         metavar="DX,DY,DZ",
-        help="image +u (lateral) in base_link, not parallel to --image-depth",
+        help="image +u (lateral) in the robot's base frame, not parallel to --image-depth (default: the robot's "
+        f"workspace; sda10f {_pair(d.image_lateral_dir)})",
     )
     pixel = number_list(count=2, low=-0.5, high=MAX_IMAGE_PX, unit="px")
     i.add_argument(
@@ -177,6 +169,14 @@ def _imaging_options(i: argparse._ArgumentGroup, d: PlanSpec) -> None:
 
 
 def _tool_options(t: argparse._ArgumentGroup) -> None:
+    from brachycal.calibration.labels import ALL_LABELS
+    from brachycal.planning.verify import (
+        MAX_COLLISION_MARGIN_M,
+        MAX_JOINT_MARGIN_RAD,
+        MIN_COLLISION_MARGIN_M,
+        MIN_JOINT_MARGIN_RAD,
+    )
+
     t.add_argument("--result", metavar="JSON", help="plan with a calibration result's tool frames")
     t.add_argument(
         "--method",
@@ -184,7 +184,7 @@ def _tool_options(t: argparse._ArgumentGroup) -> None:
         choices=tuple(ALL_LABELS),
         help="which image calibration of --result (default kabsch)",
     )
-    add_urdf_option(t)
+    add_robot_option(t)
     clearance = finite_float(low=MIN_COLLISION_MARGIN_M * 1e3, high=MAX_COLLISION_MARGIN_M * 1e3, unit="mm")
     t.add_argument(
         "--collision-margin-mm",
@@ -210,22 +210,32 @@ def _tool_options(t: argparse._ArgumentGroup) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    with OutputSet(force=args.force) as outputs:
-        _run(args, outputs)
+    from brachycal.files import OutputSet
+
+    with OutputSet(force=args.force) as outputs, _FigureProcess() as drawer:
+        _run(args, outputs, drawer)
     print("wrote " + ", ".join(map(str, outputs.written)))
     return 0
 
 
-def _run(args: argparse.Namespace, outputs: OutputSet) -> None:
-    """Plan and write the plan, its figure and (with infeasible points) their list into ``outputs``."""
+def _run(args: argparse.Namespace, outputs: OutputSet, drawer: _FigureProcess) -> None:
+    """Plan and write the plan, its figure (drawn by ``drawer``) and (with infeasible points) their
+    list into ``outputs``."""
+    from brachycal.planning import infeasible_path, plan_poses, write_infeasible, write_plan
+    from brachycal.reporting import plan_text
+
     spec, settings, thresholds = _settings(args)  # every option checked before any work
     out = Path(args.out)
     figure = Path(args.figure) if args.figure else out.with_suffix(".png")
     staged_plan = outputs.claim(out, label="--out")
     staged_infeasible = outputs.claim(infeasible_path(out), label="the list of infeasible points")
     staged_figure = outputs.claim(figure, label="--figure" if args.figure else "the figure (--out with .png)")
+    drawer.start()  # loads matplotlib in a second process while this one plans
     robot = load_robot(args)
     if args.result:
+        from brachycal.calibration import read_result
+        from brachycal.export import calibrated_robot
+
         stored = read_result(args.result)
         if args.method not in stored.image:
             raise InputError(f"the result has no method {args.method!r}", file=args.result)
@@ -246,12 +256,131 @@ def _run(args: argparse.Namespace, outputs: OutputSet) -> None:
             f"{len(plan.infeasible)} of {n} grid points have no verified pose ({summary}); "
             "move or shrink the cube, or pass --allow-partial"
         )
+    drawer.draw(plan, staged_figure)  # while the plan is written here
     write_plan(plan, robot, staged_plan, force=args.force)
     if plan.infeasible:
         write_infeasible(plan, staged_infeasible, force=args.force)
     else:
         outputs.release(infeasible_path(out))
-    plot_plan(plan, staged_figure)
+    drawer.wait(figure)
+
+
+class _FigureProcess:
+    """The plan's figure, drawn by a second process that loads matplotlib while this one plans.
+
+    Importing matplotlib with its 3D axes (~0.4 s) and drawing the figure (~0.5 s) would add to the
+    planning (~1 s with its imports); on two cores the second process takes them off the command's
+    path. The figure is drawn by :func:`brachycal.reporting.plot_plan`, as before, into the staging
+    path of the command's :class:`~brachycal.files.OutputSet` (committed with the plan or not at
+    all). The process (this Python, ``-c``; the plan goes to it pickled on its stdin, the outcome
+    comes back on its stdout) ignores Ctrl-C, which the command handles by ending it, and prints
+    nothing: its failure is raised here. Where it cannot start or dies, the figure is drawn here.
+    """
+
+    def __init__(self) -> None:
+        self._process: subprocess.Popen[bytes] | None = None
+        self._job: tuple[Plan, Path] | None = None
+
+    def __enter__(self) -> _FigureProcess:
+        return self
+
+    def start(self) -> None:
+        import signal
+        import threading
+
+        in_main_thread = threading.current_thread() is threading.main_thread()
+        # Ctrl-C reaches both processes; the child inherits "ignore" from here, so only this one reacts.
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if in_main_thread else None
+        try:
+            self._process = subprocess.Popen(
+                [sys.executable, "-c", "from brachycal.cli.plan import _draw_in_child; _draw_in_child()"],
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.DEVNULL,
+            )
+        except OSError:  # no process to be had (limits): draw here instead
+            self._process = None
+        finally:
+            if in_main_thread:
+                signal.signal(signal.SIGINT, previous)
+
+    def draw(self, plan: Plan, staged_figure: Path) -> None:
+        """Start drawing ``plan`` into ``staged_figure``; :meth:`wait` for it."""
+        self._job = (plan, staged_figure)
+        if self._process is not None and self._process.stdin is not None:
+            try:
+                with self._process.stdin as pipe:
+                    pickle.dump(self._job, pipe)
+            except OSError:  # it died (BrokenPipeError): wait() draws here
+                pass
+
+    def wait(self, figure: Path) -> None:
+        """Until the figure is drawn (``figure``: its destination, for an error).
+
+        Raises:
+            OSError: writing the figure failed (as drawing it here would).
+            OutputError: drawing it failed otherwise.
+        """
+        import warnings
+
+        from brachycal.errors import OutputError
+
+        assert self._job is not None, "draw() first"
+        reply = b""
+        if self._process is not None and self._process.stdout is not None:
+            with self._process.stdout as pipe:
+                reply = pipe.read()
+        if not reply:  # no process, or it could not start brachycal or died: draw here, as before
+            from brachycal.reporting import plot_plan  # (only then: matplotlib takes ~0.4 s to load)
+
+            plot_plan(*self._job)
+            return
+        outcome, warned = pickle.loads(reply)
+        for message in warned:  # its warnings, shown as this command shows its own
+            warnings.warn(message, UserWarning, stacklevel=2)
+        if isinstance(outcome, OSError):
+            raise outcome
+        if outcome is not None:
+            raise OutputError(f"could not draw the figure: {outcome}", file=figure)
+
+    def __exit__(self, *exc: object) -> None:
+        """End the drawing process: at once if the command failed, else once it has exited."""
+        process = self._process
+        if process is None:
+            return
+        if exc[0] is None:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                process.wait(timeout=10)  # it has answered (wait() returned): it is exiting
+        if process.poll() is None:
+            process.terminate()  # SIGTERM: it removes its half-written file and exits, quietly
+        process.wait()
+        for pipe in (process.stdin, process.stdout):
+            if pipe is not None:
+                pipe.close()
+
+
+def _draw_in_child() -> None:
+    """The drawing process: import matplotlib now, then draw the plan sent on stdin.
+
+    Writes ``(None or the error, [warning messages])`` pickled on stdout; prints nothing else.
+    SIGTERM (the command failed or was stopped) becomes SystemExit, so that a half-written figure
+    file is removed on the way out.
+    """
+    import signal
+    import warnings
+
+    signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(143))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("default")
+        try:
+            from brachycal.reporting import plot_plan
+
+            plot_plan(*pickle.load(sys.stdin.buffer))
+            outcome: object = None
+        except (Exception, SystemExit) as exc:
+            outcome = exc if isinstance(exc, OSError) else f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+    with contextlib.suppress(OSError):  # the command is gone: nothing to tell
+        pickle.dump((outcome, [" ".join(str(w.message).split()) for w in caught]), sys.stdout.buffer)
 
 
 def _settings(args: argparse.Namespace) -> tuple[PlanSpec, IKSettings, Thresholds]:
@@ -262,7 +391,21 @@ def _settings(args: argparse.Namespace) -> tuple[PlanSpec, IKSettings, Threshold
     Raises:
         InputError: naming the options that do not go together.
     """
-    if np.linalg.norm(np.cross(args.image_depth, args.image_lateral)) < 1e-6:
+    from brachycal.imaging import DEFAULT_SPACING_M
+    from brachycal.planning import IKSettings, Thresholds
+
+    # Unset geometry is the robot's workspace (the SDA10F's are PlanSpec's defaults).
+    if getattr(args, "robot", None) is None:
+        workspace = PlanSpec()
+    else:
+        from brachycal.model.description import load_description
+
+        workspace = PlanSpec.for_workspace(load_description(args.robot).workspace)
+    centre_m = workspace.cube_centre_m if args.centre_mm is None else args.centre_mm * 1e-3
+    insertion = workspace.insertion_dir if args.insertion is None else args.insertion
+    image_depth = workspace.image_depth_dir if args.image_depth is None else args.image_depth
+    image_lateral = workspace.image_lateral_dir if args.image_lateral is None else args.image_lateral
+    if np.linalg.norm(np.cross(image_depth, image_lateral)) < 1e-6:
         raise InputError("--image-depth and --image-lateral are parallel; the image plane needs two directions")
     if args.fov == "sector":
         fov: SectorFOV | RectFOV = SectorFOV(
@@ -278,12 +421,12 @@ def _settings(args: argparse.Namespace) -> tuple[PlanSpec, IKSettings, Threshold
         fov = RectFOV((u0, u1), (v0, v1))
     spacing_m = np.array(DEFAULT_SPACING_M) if args.spacing_mm is None else args.spacing_mm * 1e-3
     spec = PlanSpec(
-        cube_centre_m=args.centre_mm * 1e-3,
+        cube_centre_m=centre_m,
         edge_m=args.edge_mm * 1e-3,
         points_per_axis=args.points,
-        insertion_dir=args.insertion,
-        image_depth_dir=args.image_depth,
-        image_lateral_dir=args.image_lateral,
+        insertion_dir=insertion,
+        image_depth_dir=image_depth,
+        image_lateral_dir=image_lateral,
         centre_px=tuple(args.centre_px),
         spacing_m=spacing_m,
         fov=fov,

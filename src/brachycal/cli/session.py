@@ -6,25 +6,12 @@ import argparse
 from pathlib import Path
 
 from brachycal.cli.common import add_urdf_option, load_robot
-from brachycal.data.bags import DEFAULT_TOPIC
-from brachycal.data.recording import MAX_SPEED_RAD_S, SPEED_SPAN_S, STILL_WINDOW_S
-from brachycal.data.session import FILES as SESSION_FILES
-from brachycal.data.session_build import (
-    MAX_STILL_SPEED_RAD_S,
-    MAX_WINDOW_S,
-    REPORT_FILES,
-    StillSettings,
-    build_session_from_files,
-    session_settings,
-    write_build,
-)
 from brachycal.errors import InputError
-from brachycal.files import OutputSet
 from brachycal.validate import MAX_IMAGE_PX, finite_float, number_list, spacing_mm
 
 HELP = "session folders: build one from a lab's recording (joint log, marks, frames)"
 BUILD_HELP = "build a session folder from a joint log, the operator's marks and the annotated frames"
-BUILD_DESCRIPTION = f"""\
+BUILD_DESCRIPTION = """\
 Turns what a lab records during a calibration into a session folder (brachycal-session/1) that
 `brachycal calibrate` reads:
 
@@ -40,9 +27,9 @@ Turns what a lab records during a calibration into a session folder (brachycal-s
                the nearest planned pose, and the planned samples without a frame are reported
 
 The joints at each mark and frame are the mean of the log over a still window around its time
-(--still-window-s, default {STILL_WINDOW_S:g} s). The robot must be still over it: every joint
-slower than --max-speed-rad-s (default {MAX_SPEED_RAD_S:g} rad/s), judged by the slope of its
-readings over spans of --speed-span-s (default {SPEED_SPAN_S:g} s). A mark or annotated frame
+(--still-window-s, default {still_window_s:g} s). The robot must be still over it: every joint
+slower than --max-speed-rad-s (default {max_speed_rad_s:g} rad/s), judged by the slope of its
+readings over spans of --speed-span-s (default {speed_span_s:g} s). A mark or annotated frame
 taken while the robot moved, or whose window is not inside the log, is refused, naming it and
 its time. session.toml comes from --template, each value replaced by --spacing-mm, --size-px,
 --top-model-tip-mm; without a template all three are needed.
@@ -62,10 +49,17 @@ examples:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from brachycal.data.bags import DEFAULT_TOPIC
+    from brachycal.data.recording import MAX_SPEED_RAD_S, SPEED_SPAN_S, STILL_WINDOW_S
+    from brachycal.data.session_build import MAX_STILL_SPEED_RAD_S, MAX_WINDOW_S
+
     parser = sub.add_parser("session", help=HELP, description=HELP)
     actions = parser.add_subparsers(title="actions", metavar="ACTION", required=True)
+    description = BUILD_DESCRIPTION.format(
+        still_window_s=STILL_WINDOW_S, max_speed_rad_s=MAX_SPEED_RAD_S, speed_span_s=SPEED_SPAN_S
+    )
     build = actions.add_parser(
-        "build", help=BUILD_HELP, description=BUILD_DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
+        "build", help=BUILD_HELP, description=description, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     build.add_argument("log", metavar="LOG", help="joint log: CSV file, ROS 1 .bag or ROS 2 bag folder")
     marks = build.add_mutually_exclusive_group(required=True)
@@ -126,6 +120,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run_build(args: argparse.Namespace) -> int:
+    from brachycal.data.session import FILES as SESSION_FILES
+    from brachycal.data.session_build import (
+        REPORT_FILES,
+        StillSettings,
+        build_session_from_files,
+        session_settings,
+        write_build,
+    )
+    from brachycal.files import OutputSet
+
     out = Path(args.out)
     if args.speed_span_s > args.still_window_s:
         raise InputError(

@@ -5,14 +5,11 @@ from __future__ import annotations
 import argparse
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from brachycal.cli.common import progress_bar
-from brachycal.files import OutputSet, write_csv
 from brachycal.imaging import SCANNER_SOUND_SPEED_M_S
 from brachycal.planning.spec import EDGE_RANGE_M
-from brachycal.reporting import save_figure, study_figure, study_table
-from brachycal.simulation.study import MAX_STUDY_RUNS, STUDY_METHODS, RunParams, run_study, summarise, sweep
-from brachycal.simulation.twin import MAX_ANNOTATION_SD_PX, MAX_OUTLIER_RATE, TwinConfig
 from brachycal.validate import (
     MAX_GRID_POINTS,
     MAX_SEEDS,
@@ -23,12 +20,16 @@ from brachycal.validate import (
     number_list,
 )
 
+if TYPE_CHECKING:
+    from brachycal.simulation.study import RunParams
+
 HELP = "sweep noise, sample count and grid size on the twin: truth error vs leave-one-out"
 DESCRIPTION = """\
 Answers "how many samples do we need, and how good is our calibration really": for every
 combination of the swept settings and each seed, simulates a session on the digital twin,
 calibrates it, and records the leave-one-out figures (what a lab sees) next to the end-to-end
-targeting error against the truth (what the clinic needs).
+targeting error against the truth (what the clinic needs), both from the sample poses and at
+held-out configurations (torso turned 3 deg: postures the calibration never saw).
 
 Runs go to all local cores (--workers), or to an existing Dask distributed cluster
 (--scheduler tcp://host:8786; pip install 'brachycal[cluster]'). Rows are identical to a serial
@@ -41,6 +42,15 @@ example:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from brachycal.simulation.settings import (
+        MAX_ANNOTATION_SD_PX,
+        MAX_OUTLIER_RATE,
+        MAX_STUDY_RUNS,
+        ROBOT_ERROR_LEVELS,
+        STUDY_METHODS,
+        WATER_SOUND_SPEED_M_S,
+    )
+
     parser = sub.add_parser(
         "study", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -73,7 +83,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--sound",
         choices=("water", "tissue", "both"),
         default="water",
-        help=f"speed of sound: water ({TwinConfig().sound_speed_m_s:.0f} m/s, default), tissue (= scanner's "
+        help=f"speed of sound: water ({WATER_SOUND_SPEED_M_S:.0f} m/s, default), tissue (= scanner's "
         f"{SCANNER_SOUND_SPEED_M_S:.0f}), or both",
     )
     rates = number_list(low=0.0, high=MAX_OUTLIER_RATE)
@@ -87,7 +97,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--methods",
         type=name_list(STUDY_METHODS),
         default="kabsch,scaled_uv",
-        help="methods: the sequential ones and 'chain' (default kabsch,scaled_uv)",
+        help="methods: the sequential ones, 'chain', and 'chain+robot' (the chain with the robot identified, "
+        "the twin's robot-error level as its prior) (default kabsch,scaled_uv)",
+    )
+    parser.add_argument(
+        "--robot-error",
+        type=name_list(tuple(ROBOT_ERROR_LEVELS)),
+        default="well-built",
+        metavar="LEVEL,...",
+        help="how far the twin's robot is off its URDF: well-built (0.03 mm / 0.003 deg per joint, the default), "
+        "real-arm (0.1 mm / 0.01 deg), worn (0.3 mm / 0.03 deg); several to compare",
     )
     targets = bounded_int(low=1, high=MAX_TARGETS)
     parser.add_argument(
@@ -107,6 +126,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from brachycal.files import OutputSet
+
     runs = _sweep(args)  # every option and the size of the sweep checked before any work
     with OutputSet(force=args.force) as outputs:
         out = Path(args.out)
@@ -118,6 +139,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _sweep(args: argparse.Namespace) -> list[RunParams]:
     """The runs of the study (each option already range-checked by argparse)."""
+    from brachycal.simulation.study import sweep
+
     sound = {"water": [True], "tissue": [False], "both": [True, False]}[args.sound]
     return sweep(
         args.seeds,
@@ -128,11 +151,16 @@ def _sweep(args: argparse.Namespace) -> list[RunParams]:
         args.outlier_rate.tolist(),
         tuple(args.methods),
         args.targets,
+        tuple(args.robot_error),
     )
 
 
 def _run(args: argparse.Namespace, files: list[Path], runs: list[RunParams]) -> None:
     """Run the study ``runs``; write runs, summary and plot to the staging paths ``files``."""
+    from brachycal.files import write_csv
+    from brachycal.reporting import save_figure, study_figure, study_table
+    from brachycal.simulation.study import run_study, summarise
+
     print(
         f"study: {len(runs)} simulated sessions ({args.seeds} seeds each), "
         f"{'Dask at ' + args.scheduler if args.scheduler else str(args.workers) + ' local worker(s)'}"

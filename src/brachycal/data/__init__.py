@@ -16,55 +16,71 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from brachycal.data.bags import DEFAULT_TOPIC, is_bag, read_bag_log, write_bag_log
-from brachycal.data.csv_log import read_configurations, read_csv_log, read_times
-from brachycal.data.joint_log import JointLog, joint_columns, joint_log_from_columns
-from brachycal.data.plus_files import (
-    PlusConfig,
-    SegmentedFrame,
-    Wire,
-    read_coordinate_definitions,
-    read_plus_config,
-    read_segmented_frames,
-    read_sequence_header,
-)
-from brachycal.data.pose_list import read_pose_list
-from brachycal.data.pose_table import read_pose_table, write_pose_table
-from brachycal.data.recording import (
-    Frame,
-    Mark,
-    StillWindow,
-    read_bag_marks,
-    read_images,
-    read_marks,
-    read_slicer_markups,
-    still_configuration,
-)
-from brachycal.data.session import Session, Touches, read_session, read_session_toml, write_session
-from brachycal.data.session_build import (
-    BuildReport,
-    ImageSettings,
-    PlannedSamples,
-    SessionBuild,
-    StillSettings,
-    build_session,
-    build_session_from_files,
-    read_plan,
-    session_settings,
-    write_build,
-)
-from brachycal.errors import InputError
-from brachycal.model.robot import Robot
+from brachycal._lazy import attach
+
+if TYPE_CHECKING:  # imported on first use: `brachycal <command> --help` and `fk` need only a few of these
+    from brachycal.data.bags import DEFAULT_TOPIC, bag_log_blocks, is_bag, read_bag_log, write_bag_log
+    from brachycal.data.csv_log import csv_log_blocks, read_configurations, read_csv_log, read_times
+    from brachycal.data.joint_log import (
+        JointLog,
+        JointLogChecker,
+        interpolate_blocks,
+        joint_columns,
+        joint_log_from_columns,
+    )
+    from brachycal.data.plus_files import (
+        PlusConfig,
+        SegmentedFrame,
+        Wire,
+        read_coordinate_definitions,
+        read_plus_config,
+        read_segmented_frames,
+        read_sequence_header,
+    )
+    from brachycal.data.pose_list import read_pose_list
+    from brachycal.data.pose_table import PoseTableWriter, read_pose_table, write_pose_table
+    from brachycal.data.recording import (
+        Frame,
+        Mark,
+        StillWindow,
+        read_bag_marks,
+        read_images,
+        read_marks,
+        read_slicer_markups,
+        still_configuration,
+    )
+    from brachycal.data.session import Session, Touches, read_session, read_session_toml, write_session
+    from brachycal.data.session_build import (
+        BuildReport,
+        ImageSettings,
+        PlannedSamples,
+        SessionBuild,
+        StillSettings,
+        build_session,
+        build_session_from_files,
+        read_plan,
+        session_settings,
+        write_build,
+    )
+    from brachycal.model.robot import Robot
+
+__getattr__, __dir__ = attach(__name__, __file__)
 
 
-def read_joint_log(path: str | os.PathLike[str], robot: Robot, topic: str = DEFAULT_TOPIC) -> JointLog:
-    """Read a joint log from a CSV file, a ROS 1 ``.bag`` or a ROS 2 bag folder."""
+def read_joint_log(path: str | os.PathLike[str], robot: Robot, topic: str | None = None) -> JointLog:
+    """Read a joint log from a CSV file, a ROS 1 ``.bag`` or a ROS 2 bag folder (``topic``: the
+    bag's JointState topic, default :data:`~brachycal.data.bags.DEFAULT_TOPIC`)."""
+    from brachycal.data.bags import DEFAULT_TOPIC, is_bag, read_bag_log
+    from brachycal.data.csv_log import read_csv_log
+    from brachycal.errors import InputError
+
     path = Path(path)
     if not path.exists():
         raise InputError("no such file or folder", file=path)
     if is_bag(path):
-        return read_bag_log(path, robot, topic)
+        return read_bag_log(path, robot, DEFAULT_TOPIC if topic is None else topic)
     return read_csv_log(path, robot)
 
 
@@ -74,9 +90,11 @@ __all__ = [
     "Frame",
     "ImageSettings",
     "JointLog",
+    "JointLogChecker",
     "Mark",
     "PlannedSamples",
     "PlusConfig",
+    "PoseTableWriter",
     "SegmentedFrame",
     "Session",
     "SessionBuild",
@@ -84,8 +102,11 @@ __all__ = [
     "StillWindow",
     "Touches",
     "Wire",
+    "bag_log_blocks",
     "build_session",
     "build_session_from_files",
+    "csv_log_blocks",
+    "interpolate_blocks",
     "is_bag",
     "joint_columns",
     "joint_log_from_columns",

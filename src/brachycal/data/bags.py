@@ -6,27 +6,44 @@ drivers that split arms over several messages are refused rather than stitched t
 because stitching would invent configurations the robot never reported at one instant. A
 message that lists a joint twice is refused too (like a CSV header with a repeated column): which
 of its two positions is the joint's cannot be told.
+
+Long bags are streamed (:func:`bag_log_blocks`): messages are gathered into blocks of
+:data:`BLOCK_MESSAGES`, and a message laid out byte for byte like the first one (same frame id,
+same joint names in the same order, same number of positions: what a driver publishes at every
+tick) is not deserialised into Python objects: its stamp and positions are cut out of the raw
+bytes at the offsets the first message showed (ROS 1 serialisation or little-endian CDR), and a
+block's worth is converted by NumPy at once. Any other message takes the full path through
+rosbags with every check above.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator, Sequence
+import struct
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, cast
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from brachycal.data.joint_log import JointLog, joint_log_from_columns
+from brachycal.data.joint_log import JointLog, JointLogChecker
 from brachycal.errors import InputError
-from brachycal.model.robot import Robot
+from brachycal.se3 import FloatArray
+
+if TYPE_CHECKING:  # annotations only: reading a file needs no Pinocchio
+    from brachycal.model.robot import Robot
 
 if TYPE_CHECKING:  # the message's fields, for the type checker; rosbags is imported where it is used
     from rosbags.typesys.stores.ros2_humble import sensor_msgs__msg__JointState as JointStateMsg
 
+    from brachycal.data.csv_log import LogBlock
+
 JOINT_STATE = "sensor_msgs/msg/JointState"
 DEFAULT_TOPIC = "/joint_states"
+#: Messages read, checked, computed and written at a time: 16,384 JointStates of 15 axes are ~8 MB
+#: of raw messages, so memory stays a few tens of MB whatever the bag's length.
+BLOCK_MESSAGES = 16_384
 
 
 def is_bag(path: str | os.PathLike[str]) -> bool:
@@ -41,15 +58,13 @@ def bag_folder(path: str | os.PathLike[str]) -> Path:
     return path.parent if path.suffix in {".db3", ".mcap"} else path
 
 
-def bag_messages(path: str | os.PathLike[str], topic: str, msgtype: str) -> Iterator[tuple[str, int, int, object]]:
-    """The messages of one topic of a ROS 1 or ROS 2 bag, checked to be of type ``msgtype``.
+def _raw_messages(
+    path: str | os.PathLike[str], topic: str, msgtype: str
+) -> Iterator[tuple[str, int, int, bytes, Callable[[bytes], object], bool, int]]:
+    """The raw messages of one topic: ``(source, number, bag_time_ns, raw, deserialise, is_ros2, count)``.
 
-    Yields ``(source, number, bag_time_ns, message)``: the bag's path as errors name it, the
-    message's number on the topic (from 1), its receive time in nanoseconds, the deserialised
-    message. ``path`` is a ROS 1 ``.bag`` file or a ROS 2 bag folder (or its ``.db3``/``.mcap``).
-
-    Raises:
-        InputError: unreadable bag, no such topic, or the topic carries another message type.
+    ``deserialise(raw)`` gives the message; ``count`` is the number of messages on the topic.
+    See :func:`bag_messages` for the checks and errors.
     """
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
@@ -69,10 +84,234 @@ def bag_messages(path: str | os.PathLike[str], topic: str, msgtype: str) -> Iter
         for connection in connections:
             if connection.msgtype != msgtype:
                 raise InputError(f"topic {topic!r} carries {connection.msgtype}, expected {msgtype}", file=source)
-        for number, (connection, bag_time, raw) in enumerate(reader.messages(connections=connections), start=1):
-            yield source, number, bag_time, reader.deserialize(raw, connection.msgtype)
+        count = sum(c.msgcount for c in connections)
+
+        def deserialise(raw: bytes) -> object:
+            return reader.deserialize(raw, msgtype)
+
+        messages = _ros1_messages(reader, connections, source)
+        if messages is None:
+            messages = ((time, raw) for _, time, raw in reader.messages(connections=connections))
+        for number, (bag_time, raw) in enumerate(messages, start=1):
+            yield source, number, bag_time, raw, deserialise, bool(reader.is2), count
     finally:
         reader.close()
+
+
+def _ros1_messages(reader: Any, connections: list[Any], source: str) -> Iterator[tuple[int, bytes]] | None:
+    """``(bag_time_ns, raw)`` of a ROS 1 bag's messages on ``connections``, in the order of rosbags'
+    ``Reader.messages`` (its index, merged by time), without its per-message parsing of record
+    headers into dictionaries of strings (four fifths of the time of reading a JointState bag).
+
+    Uses the index rosbags built when it opened the bag (``indexes``, ``chunks``, ``bio`` of its
+    ROS 1 reader); returns None (read through rosbags) if this version of rosbags has them not.
+    """
+    import heapq
+
+    bags = getattr(reader, "readers", [])
+    if reader.is2 or len(bags) != 1 or not all(hasattr(bags[0], a) for a in ("indexes", "chunks", "bio")):
+        return None
+    bag = bags[0]
+    try:
+        indexes = [bag.indexes[c.id] for c in connections]
+    except (AttributeError, KeyError, TypeError):
+        return None
+
+    def op(header: bytes) -> int:
+        at = 0
+        while at + 4 <= len(header):
+            size = int.from_bytes(header[at : at + 4], "little")
+            field = header[at + 4 : at + 4 + size]
+            if field.startswith(b"op="):
+                return field[3]
+            at += 4 + size
+        return -1
+
+    def messages() -> Iterator[tuple[int, bytes]]:
+        chunk_pos, data = None, b""
+        for entry in heapq.merge(*indexes):
+            if entry.chunk_pos != chunk_pos:
+                chunk = bag.chunks[entry.chunk_pos]
+                bag.bio.seek(chunk.datapos)
+                data = chunk.decompressor(bag.bio.read(chunk.datasize))
+                chunk_pos = entry.chunk_pos
+            at = entry.offset
+            while True:  # connection records may precede the message (as rosbags skips them)
+                size = int.from_bytes(data[at : at + 4], "little")
+                kind = op(data[at + 4 : at + 4 + size])
+                at += 4 + size
+                length = int.from_bytes(data[at : at + 4], "little")
+                at += 4
+                if kind == 7:  # a connection record
+                    at += length
+                    continue
+                if kind != 2 or at + length > len(data):  # not message data: the index is wrong
+                    raise InputError("not a readable ROS bag (expected message data)", file=source)
+                yield entry.time, data[at : at + length]
+                break
+
+    return messages()
+
+
+def bag_messages(path: str | os.PathLike[str], topic: str, msgtype: str) -> Iterator[tuple[str, int, int, object]]:
+    """The messages of one topic of a ROS 1 or ROS 2 bag, checked to be of type ``msgtype``.
+
+    Yields ``(source, number, bag_time_ns, message)``: the bag's path as errors name it, the
+    message's number on the topic (from 1), its receive time in nanoseconds, the deserialised
+    message. ``path`` is a ROS 1 ``.bag`` file or a ROS 2 bag folder (or its ``.db3``/``.mcap``).
+
+    Raises:
+        InputError: unreadable bag, no such topic, or the topic carries another message type.
+    """
+    for source, number, bag_time, raw, deserialise, _, _ in _raw_messages(path, topic, msgtype):
+        yield source, number, bag_time, deserialise(raw)
+
+
+def _position_offset(raw: bytes, ros2: bool, msg: JointStateMsg) -> int | None:
+    """Where the positions of a JointState start in its raw bytes (ROS 1 or little-endian CDR), or
+    None if the layout is not the one expected (then every message takes the full path)."""
+
+    def u32(offset: int) -> int:
+        return int(struct.unpack_from("<I", raw, offset)[0])
+
+    def align(offset: int, size: int) -> int:  # CDR aligns relative to the end of the 4-byte encapsulation header
+        return offset if not ros2 else 4 + -(-(offset - 4) // size) * size
+
+    try:
+        if ros2 and raw[:2] != b"\x00\x01":  # only little-endian CDR
+            return None
+        offset = 12  # ROS 1: seq, sec, nsec; ROS 2: encapsulation, sec, nanosec
+        offset += 4 + u32(offset)  # frame_id
+        offset = align(offset, 4)
+        names = u32(offset)
+        offset += 4
+        for _ in range(names):
+            offset = align(offset, 4)
+            offset += 4 + u32(offset)
+        offset = align(offset, 4)
+        count = u32(offset)
+        offset = align(offset + 4, 8)
+        position = np.frombuffer(raw, dtype="<f8", count=count, offset=offset)
+    except (struct.error, ValueError):
+        return None
+    same = count == len(msg.position) and np.array_equal(position, np.asarray(msg.position, dtype=float))
+    return offset if same and names == len(msg.name) else None
+
+
+def bag_log_blocks(
+    path: str | os.PathLike[str],
+    robot: Robot,
+    topic: str = DEFAULT_TOPIC,
+    *,
+    block_messages: int | None = None,
+    progress: Callable[[int], None] | None = None,
+    total: Callable[[int], None] | None = None,
+) -> Iterator[tuple[LogBlock, FloatArray]]:
+    """The joint states of a bag checked block by block: ``(block, q (N, nq) radians, robot order)``.
+
+    The checks and refusals are those of :func:`read_bag_log` (``rows`` are message numbers);
+    ``progress(n)`` is called with the messages of each block, ``total(n)`` once with their number;
+    blocks hold ``block_messages`` messages (default :data:`BLOCK_MESSAGES`). The next block is
+    gathered in a background thread (:func:`~brachycal.data.csv_log.prefetched`) while the caller
+    works on this one; the checks run in the caller's thread.
+    """
+    from brachycal.data.csv_log import prefetched
+
+    source = str(bag_folder(path))
+    checker: JointLogChecker | None = None
+    for names, block in prefetched(_bag_blocks(path, topic, block_messages or BLOCK_MESSAGES, total)):
+        if checker is None:
+            checker = JointLogChecker(robot, names, source=source, row_label="message")
+        q = checker.check(block.time, block.values, block.rows)
+        if progress is not None:
+            progress(len(block.rows))
+        yield block, q
+    if checker is None:
+        raise InputError(f"topic {topic!r} has no messages", file=source)
+    checker.finish()
+
+
+def _bag_blocks(
+    path: str | os.PathLike[str], topic: str, block_messages: int, total: Callable[[int], None] | None
+) -> Iterator[tuple[list[str], LogBlock]]:
+    """The joint states of a bag in blocks, not yet checked: ``(joint names, block)``; values in the
+    order of the first message's names. Refuses messages whose names or positions do not fit."""
+    from brachycal.data.csv_log import LogBlock
+
+    names: list[str] | None = None
+    layout: tuple[int, int, bytes] | None = None  # raw length, position offset, bytes 12..offset of the first message
+    stamps: list[bytes] = []
+    positions: list[bytes] = []
+    bag_times: list[int] = []
+    numbers: list[int] = []
+    ros2 = True
+
+    def block() -> tuple[list[str], LogBlock]:
+        assert names is not None
+        sec = np.dtype("<i4") if ros2 else np.dtype("<u4")
+        stamp = np.frombuffer(b"".join(stamps), dtype=[("sec", sec), ("nanosec", "<u4")])
+        # the same operations as sec + 1e-9 * nanosec on Python numbers: the same times to the bit
+        time = stamp["sec"].astype(float) + 1e-9 * stamp["nanosec"].astype(float)
+        time = np.where(time > 0, time, np.asarray(bag_times, dtype=np.int64) * 1e-9)
+        values = np.frombuffer(b"".join(positions), dtype="<f8").reshape(len(stamps), len(names))
+        rows = np.asarray(numbers)
+        for part in (stamps, positions, bag_times, numbers):
+            part.clear()
+        return names, LogBlock(time, values, rows, int(rows[-1]))
+
+    for source, number, bag_time, raw, deserialise, ros2, count in _raw_messages(path, topic, JOINT_STATE):
+        if number == 1 and total is not None:
+            total(count)
+        if layout is not None and len(raw) == layout[0] and raw[12 : layout[1]] == layout[2]:
+            stamps.append(raw[4:12])
+            positions.append(raw[layout[1] : layout[1] + 8 * len(names or ())])
+        else:
+            # The topic was checked to carry JOINT_STATE; rosbags returns `object`.
+            msg = cast("JointStateMsg", deserialise(raw))
+            these = list(msg.name)
+            for k, name in enumerate(these):
+                if name in these[:k]:  # which of the two positions is the joint's? Refuse, as the CSV reader does.
+                    raise InputError(
+                        f"joint {name!r} listed twice (names {these.index(name) + 1} and {k + 1} of the message)",
+                        file=source,
+                        row=number,
+                        row_label="message",
+                    )
+            if names is None:
+                names = these
+            elif these != names:
+                order = {n: k for k, n in enumerate(these)}
+                missing = [n for n in names if n not in order]
+                if missing:
+                    raise InputError(
+                        f"lacks joint(s) {', '.join(missing)} that earlier messages carry",
+                        file=source,
+                        row=number,
+                        row_label="message",
+                    )
+            position = np.asarray(msg.position, dtype=float)
+            if len(position) != len(these):
+                raise InputError(
+                    f"has {len(these)} names but {len(position)} positions",
+                    file=source,
+                    row=number,
+                    row_label="message",
+                )
+            if layout is None and these == names:
+                offset = _position_offset(raw, ros2, msg)
+                if offset is not None:
+                    layout = (len(raw), offset, raw[12:offset])
+            if these != names:
+                position = position[[these.index(n) for n in names]]
+            sec_format = "<iI" if ros2 else "<II"
+            stamps.append(struct.pack(sec_format, msg.header.stamp.sec, msg.header.stamp.nanosec))
+            positions.append(position.astype("<f8").tobytes())
+        bag_times.append(bag_time)
+        numbers.append(number)
+        if len(numbers) >= block_messages:
+            yield block()
+    if numbers:
+        yield block()
 
 
 def read_bag_log(path: str | os.PathLike[str], robot: Robot, topic: str = DEFAULT_TOPIC) -> JointLog:
@@ -90,56 +329,13 @@ def read_bag_log(path: str | os.PathLike[str], robot: Robot, topic: str = DEFAUL
         InputError: unreadable bag, missing topic, or any refusal of
             :func:`~brachycal.data.joint_log.joint_log_from_columns`.
     """
-    source = str(bag_folder(path))
-    names: list[str] | None = None
-    times: list[float] = []
-    values: list[list[float]] = []
-    for source, number, bag_time, message in bag_messages(path, topic, JOINT_STATE):
-        # The topic was checked to carry JOINT_STATE; rosbags returns `object`.
-        msg = cast("JointStateMsg", message)
-        stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
-        these = list(msg.name)
-        for k, name in enumerate(these):
-            if name in these[:k]:  # which of the two positions is the joint's? Refuse, as the CSV reader does.
-                raise InputError(
-                    f"joint {name!r} listed twice (names {these.index(name) + 1} and {k + 1} of the message)",
-                    file=source,
-                    row=number,
-                    row_label="message",
-                )
-        if names is None:
-            names = these
-        elif these != names:
-            order = {n: k for k, n in enumerate(these)}
-            missing = [n for n in names if n not in order]
-            if missing:
-                raise InputError(
-                    f"lacks joint(s) {', '.join(missing)} that earlier messages carry",
-                    file=source,
-                    row=number,
-                    row_label="message",
-                )
-        position = np.asarray(msg.position, dtype=float)
-        if len(position) != len(these):
-            raise InputError(
-                f"has {len(these)} names but {len(position)} positions",
-                file=source,
-                row=number,
-                row_label="message",
-            )
-        if these != names:
-            position = position[[these.index(n) for n in names]]
-        times.append(stamp if stamp > 0 else bag_time * 1e-9)
-        values.append(position.tolist())
-    if names is None:
-        raise InputError(f"topic {topic!r} has no messages", file=source)
-    return joint_log_from_columns(
-        robot,
-        names,
-        np.array(times),
-        np.array(values),
-        source=source,
-        rows=np.arange(1, len(times) + 1),
+    blocks = list(bag_log_blocks(path, robot, topic))
+    return JointLog(
+        time=np.concatenate([b.time for b, _ in blocks]),
+        q=np.concatenate([q for _, q in blocks]),
+        joint_names=robot.joint_names,
+        source=str(bag_folder(path)),
+        rows=np.concatenate([b.rows for b, _ in blocks]),
         row_label="message",
     )
 
@@ -152,6 +348,7 @@ def write_bag_log(
     *,
     ros: int = 2,
     topic: str = DEFAULT_TOPIC,
+    storage: str = "sqlite3",
 ) -> Path:
     """Write joint states as a ROS 1 ``.bag`` file (``ros=1``) or a ROS 2 bag folder (``ros=2``).
 
@@ -160,6 +357,7 @@ def write_bag_log(
         time: ``(N,)`` seconds since the epoch, stamped into ``header.stamp`` and the bag.
         q: ``(N, J)`` radians in ``joint_names`` order.
         joint_names: ``(J,)`` names.
+        storage: a ROS 2 bag's storage, ``"sqlite3"`` (``.db3``) or ``"mcap"``.
     """
     from rosbags.rosbag1 import Writer as Writer1
     from rosbags.rosbag2 import Writer as Writer2
@@ -172,7 +370,13 @@ def write_bag_log(
     Time = typestore.types["builtin_interfaces/msg/Time"]
     q = np.asarray(q, dtype=float)
     time = np.asarray(time, dtype=float)
-    writer = Writer1(path) if ros == 1 else Writer2(path, version=9)
+    if ros == 1:
+        writer: Writer1 | Writer2 = Writer1(path)
+    else:
+        from rosbags.rosbag2 import StoragePlugin
+
+        plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+        writer = Writer2(path, version=9, storage_plugin=plugin)
     with writer:
         connection = writer.add_connection(topic, JOINT_STATE, typestore=typestore)
         for k, (t, row) in enumerate(zip(time, q, strict=True)):

@@ -11,16 +11,19 @@ kept as read, with one :class:`~brachycal.errors.BrachycalWarning` per file.
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from brachycal.errors import BrachycalWarning, InputError
 from brachycal.model.names import MIMIC_JOINTS
-from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray
+
+if TYPE_CHECKING:  # annotations only: reading a file needs no Pinocchio
+    from brachycal.model.robot import Robot
 
 #: Largest |angle| in radians a revolute joint can report; beyond it the log is taken for degrees.
 DEGREES_THRESHOLD = 2.0 * np.pi
@@ -130,25 +133,67 @@ def configurations_from_columns(
         BrachycalWarning: once per call (per file) when readings lie beyond a joint limit by less
             than :func:`limit_tolerance`; they are kept as read (what the encoder said).
     """
+    check_names(robot, names, source=source, row_label=row_label)
     values = np.asarray(values, dtype=float).reshape(-1, len(names))
     rows = np.arange(1, len(values) + 1) if rows is None else np.asarray(rows)
+    q, near = _check_configurations(robot, names, values, source=source, rows=rows, row_label=row_label)
+    if near is not None:
+        _warn_near_limit(robot, near, source=source, row_label=row_label)
+    return q
+
+
+def check_names(robot: Robot, names: Sequence[str], *, source: str, row_label: str = "row") -> None:
+    """Refuse a joint listed twice among ``names`` or a robot joint missing from them."""
+    for k, name in enumerate(names):
+        if name in names[:k]:  # which reading would be the joint's? A log must say it once.
+            raise InputError(
+                f"joint listed twice (columns {list(names).index(name) + 1} and {k + 1})",
+                file=source,
+                column=name,
+                row_label=row_label,
+            )
+    missing = [j for j in robot.joint_names if j not in names]
+    if missing:
+        raise InputError(f"missing joint(s) {', '.join(missing)}", file=source, row_label=row_label)
+
+
+@dataclass(frozen=True)
+class _NearLimit:
+    """Readings beyond a joint limit by less than the tolerance: the first one and how many."""
+
+    row: int  # its row (or message) number in the source
+    joint: int  # its column in the robot's joint order
+    value: float  # the reading (rad or m)
+    beyond: float  # by how much it lies beyond the limit (rad or m)
+    count: int  # how many such readings
+
+
+def _units(robot: Robot) -> tuple[FloatArray, np.ndarray, np.ndarray]:
+    """``(tolerance (nq,), unit (nq,) 'm'/'rad', digits (nq,))`` of each joint's limit messages."""
+    tolerance = limit_tolerance(robot)
+    unit = np.where(tolerance == LIMIT_TOLERANCE_M, "m", "rad")
+    digits = np.where(tolerance == LIMIT_TOLERANCE_M, 9, 6)  # a thousandth of the tolerance
+    return tolerance, unit, digits
+
+
+def _check_configurations(
+    robot: Robot, names: Sequence[str], values: FloatArray, *, source: str, rows: np.ndarray, row_label: str
+) -> tuple[FloatArray, _NearLimit | None]:
+    """The checks of :func:`configurations_from_columns` on ``values`` ``(N, C)`` (names already
+    checked): ``(q (N, nq) in the robot's order, the readings a hair beyond a limit or None)``."""
 
     def fail(message: str, index: int | None = None, column: str | None = None) -> InputError:
         row = None if index is None else int(rows[index])
         return InputError(message, file=source, row=row, column=column, row_label=row_label)
 
-    for k, name in enumerate(names):
-        if name in names[:k]:  # which reading would be the joint's? A log must say it once.
-            raise fail(f"joint listed twice (columns {list(names).index(name) + 1} and {k + 1})", column=name)
     position = {name: k for k, name in enumerate(names)}
-    missing = [j for j in robot.joint_names if j not in position]
-    if missing:
-        raise fail(f"missing joint(s) {', '.join(missing)}")
     q = values[:, [position[j] for j in robot.joint_names]]
-    for k, joint in enumerate(robot.joint_names):
-        bad = ~np.isfinite(q[:, k])
-        if bad.any():
-            raise fail("value is not a finite number", int(np.argmax(bad)), joint)
+    finite = np.isfinite(q)
+    if not finite.all():
+        for k, joint in enumerate(robot.joint_names):
+            bad = ~finite[:, k]
+            if bad.any():
+                raise fail("value is not a finite number", int(np.argmax(bad)), joint)
     too_big = np.abs(q) > DEGREES_THRESHOLD
     if too_big.any():
         i, k = (int(v) for v in np.unravel_index(int(np.argmax(too_big)), q.shape))
@@ -157,9 +202,7 @@ def configurations_from_columns(
             int(i),
             robot.joint_names[k],
         )
-    tolerance = limit_tolerance(robot)
-    unit = np.where(tolerance == LIMIT_TOLERANCE_M, "m", "rad")
-    digits = np.where(tolerance == LIMIT_TOLERANCE_M, 9, 6)  # a thousandth of the tolerance
+    tolerance, unit, digits = _units(robot)
     beyond = np.maximum(robot.lower - q, q - robot.upper)  # > 0 outside the limits
     outside = beyond > tolerance
     if outside.any():
@@ -178,17 +221,105 @@ def configurations_from_columns(
             if bad.any():
                 raise fail(f"{mimic} must equal {leader} (it only mirrors it)", int(np.argmax(bad)), mimic)
     near = beyond > 0  # warned about only once the file is accepted: a refusal stays one line
-    if near.any():
-        i, k = (int(v) for v in np.unravel_index(int(np.argmax(near)), q.shape))
-        where = f"{source}, {row_label} {int(rows[i])}, column {robot.joint_names[k]!r}"
-        warnings.warn(
-            f"{where}: value {q[i, k]:.{digits[k]}f} {unit[k]} is {beyond[i, k]:.2g} {unit[k]} beyond the "
-            f"joint limit, within the {tolerance[k]:g} {unit[k]} allowed for encoder noise; kept as read "
-            f"({int(near.sum())} reading(s) in this file beyond a limit by less than that)",
-            BrachycalWarning,
-            stacklevel=2,
+    if not near.any():
+        return q, None
+    i, k = (int(v) for v in np.unravel_index(int(np.argmax(near)), q.shape))
+    return q, _NearLimit(int(rows[i]), k, float(q[i, k]), float(beyond[i, k]), int(near.sum()))
+
+
+def _warn_near_limit(robot: Robot, near: _NearLimit, *, source: str, row_label: str) -> None:
+    tolerance, unit, digits = _units(robot)
+    k = near.joint
+    where = f"{source}, {row_label} {near.row}, column {robot.joint_names[k]!r}"
+    warnings.warn(
+        f"{where}: value {near.value:.{digits[k]}f} {unit[k]} is {near.beyond:.2g} {unit[k]} beyond the "
+        f"joint limit, within the {tolerance[k]:g} {unit[k]} allowed for encoder noise; kept as read "
+        f"({near.count} reading(s) in this file beyond a limit by less than that)",
+        BrachycalWarning,
+        stacklevel=3,
+    )
+
+
+class JointLogChecker:
+    """The checks of :func:`joint_log_from_columns`, applied block by block to a log read in pieces.
+
+    A long log is read, checked, computed and written in blocks so that memory does not grow with
+    its length. Each block is checked as a whole log would be (time finite and strictly increasing,
+    also across the boundary with the previous block; joints as :func:`configurations_from_columns`);
+    the warning about readings a hair beyond a limit is given once, by :meth:`finish`, for the file.
+
+    Args:
+        robot: the model the joints belong to.
+        names: ``(C,)`` names of the joint columns of every block's ``values``, in the source's order.
+        source: file name for messages.
+        row_label: what the blocks' ``rows`` count (``"row"`` or ``"message"``).
+
+    Raises:
+        InputError: a joint listed twice or missing among ``names``.
+    """
+
+    def __init__(self, robot: Robot, names: Sequence[str], *, source: str, row_label: str = "row") -> None:
+        self.robot = robot
+        self.names = list(names)
+        self.source = source
+        self.row_label = row_label
+        self.samples = 0
+        self._last: tuple[float, int] | None = None  # time (s) and row of the previous block's last sample
+        self._near: _NearLimit | None = None
+        self._near_count = 0
+        check_names(robot, self.names, source=source, row_label=row_label)
+
+    def check(self, time: ArrayLike, values: ArrayLike, rows: ArrayLike) -> FloatArray:
+        """Check one block: ``time`` ``(N,)`` s, ``values`` ``(N, C)`` rad, ``rows`` ``(N,)`` source rows.
+
+        Returns:
+            ``(N, nq)`` configurations in the robot's joint order.
+
+        Raises:
+            InputError: one line naming the file, the row and the column of the block's first problem.
+        """
+        time = np.asarray(time, dtype=float).reshape(-1)
+        values = np.asarray(values, dtype=float).reshape(len(time), len(self.names))
+        rows = np.asarray(rows)
+
+        def fail(message: str, index: int) -> InputError:
+            return InputError(message, file=self.source, row=int(rows[index]), column="time", row_label=self.row_label)
+
+        if len(time) == 0:
+            return np.empty((0, self.robot.nq))
+        bad_time = ~np.isfinite(time)
+        if bad_time.any():
+            raise fail("time is not a finite number", int(np.argmax(bad_time)))
+        if self._last is not None and not time[0] > self._last[0]:
+            raise fail(f"time {float(time[0])!r} does not increase (previous {self._last[0]!r})", 0)
+        step = np.diff(time)
+        if (step <= 0).any():
+            i = int(np.argmax(step <= 0)) + 1
+            raise fail(f"time {float(time[i])!r} does not increase (previous {float(time[i - 1])!r})", i)
+        q, near = _check_configurations(
+            self.robot, self.names, values, source=self.source, rows=rows, row_label=self.row_label
         )
-    return q
+        if near is not None:
+            self._near = self._near or near
+            self._near_count += near.count
+        self._last = (float(time[-1]), int(rows[-1]))
+        self.samples += len(time)
+        return q
+
+    def finish(self) -> None:
+        """After the last block: refuse an empty log; warn once about readings a hair beyond a limit.
+
+        Raises:
+            InputError: the log has no samples.
+
+        Warns:
+            BrachycalWarning: see :func:`configurations_from_columns`.
+        """
+        if self.samples == 0:
+            raise InputError("the log has no samples", file=self.source)
+        if self._near is not None:
+            near = _NearLimit(self._near.row, self._near.joint, self._near.value, self._near.beyond, self._near_count)
+            _warn_near_limit(self.robot, near, source=self.source, row_label=self.row_label)
 
 
 def joint_log_from_columns(
@@ -207,21 +338,52 @@ def joint_log_from_columns(
     """
     time = np.asarray(time, dtype=float).reshape(-1)
     rows = np.arange(1, len(time) + 1) if rows is None else np.asarray(rows)
-    missing = [j for j in robot.joint_names if j not in names]
-    if missing:
-        raise InputError(f"missing joint(s) {', '.join(missing)}", file=source)
+    checker = JointLogChecker(robot, names, source=source, row_label=row_label)
     if len(time) == 0:
         raise InputError("the log has no samples", file=source)
-
-    def fail(message: str, index: int) -> InputError:
-        return InputError(message, file=source, row=int(rows[index]), column="time", row_label=row_label)
-
-    bad_time = ~np.isfinite(time)
-    if bad_time.any():
-        raise fail("time is not a finite number", int(np.argmax(bad_time)))
-    step = np.diff(time)
-    if (step <= 0).any():
-        i = int(np.argmax(step <= 0)) + 1
-        raise fail(f"time {float(time[i])!r} does not increase (previous {float(time[i - 1])!r})", i)
-    q = configurations_from_columns(robot, names, values, source=source, rows=rows, row_label=row_label)
+    q = checker.check(time, values, rows)
+    checker.finish()
     return JointLog(time=time, q=q, joint_names=robot.joint_names, source=source, rows=rows, row_label=row_label)
+
+
+def interpolate_blocks(blocks: Iterable[tuple[FloatArray, FloatArray]], times: ArrayLike, *, source: str) -> FloatArray:
+    """Configurations at ``times`` ``(M,)`` s from a log read block by block: ``(M, nq)`` radians.
+
+    The streamed form of :meth:`JointLog.interpolate` (linear per joint, no extrapolation): each
+    ``(time (N,), q (N, nq))`` block, joined to the last sample of the block before it, gives the
+    requested times that fall within it. Memory grows with ``M``, not with the log.
+
+    Raises:
+        InputError: a requested time is not finite, or lies outside the log (the first such time
+            in the order given, as :meth:`JointLog.interpolate` says it).
+    """
+    times = np.asarray(times, dtype=float).reshape(-1)
+    if not np.all(np.isfinite(times)):
+        raise InputError("requested times must be finite", file=source)
+    order = np.argsort(times, kind="stable")
+    sorted_times = times[order]
+    Q: FloatArray | None = None
+    span: list[float] = []
+    previous: tuple[FloatArray, FloatArray] | None = None
+    for time, q in blocks:
+        if Q is None:
+            Q = np.full((len(times), q.shape[1]), np.nan)
+            span = [float(time[0]), float(time[-1])]
+        if previous is not None:
+            time = np.concatenate([previous[0], time])
+            q = np.concatenate([previous[1], q])
+        span[1] = float(time[-1])
+        lo = int(np.searchsorted(sorted_times, time[0], side="left"))
+        hi = int(np.searchsorted(sorted_times, time[-1], side="right"))
+        if hi > lo:
+            at = order[lo:hi]
+            Q[at] = np.column_stack([np.interp(times[at], time, q[:, k]) for k in range(q.shape[1])])
+        previous = (time[-1:], q[-1:])
+    assert Q is not None  # a log has samples: the readers refuse an empty one
+    outside = (times < span[0]) | (times > span[1])
+    if outside.any():
+        t = times[np.argmax(outside)]
+        raise InputError(
+            f"requested time {t:.6f} s is outside the log's span [{span[0]:.6f}, {span[1]:.6f}] s", file=source
+        )
+    return Q

@@ -17,15 +17,18 @@ import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from brachycal.data.csv_log import read_table, table_configurations, to_float, unique_names
 from brachycal.errors import InputError
 from brachycal.files import OutputSet, atomic_open, output_set, sha256_file
-from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray
 from brachycal.validate import check_spacing_mm
+
+if TYPE_CHECKING:  # annotations only: reading a file needs no Pinocchio
+    from brachycal.model.robot import Robot
 
 FORMAT = "brachycal-session/1"
 FILES = ("session.toml", "touches.csv", "axes.csv", "samples.csv")

@@ -26,6 +26,7 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -54,9 +55,11 @@ from brachycal.data.session import Session, Touches, read_session_toml, write_se
 from brachycal.errors import InputError
 from brachycal.files import OutputSet, output_set, sha256_file, write_csv, write_json
 from brachycal.model.names import MIMIC_JOINTS
-from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray
 from brachycal.validate import MAX_IMAGE_PX, check_pixel, check_range, check_spacing_mm, check_vector
+
+if TYPE_CHECKING:  # annotations only: reading a file needs no Pinocchio
+    from brachycal.model.robot import Robot
 
 __all__ = [
     "FORMAT",

@@ -6,17 +6,24 @@ has its own writer and, for round trips, a reader. Slicer/ITK and PLUS files are
 (``ImageToProbe`` maps pixels and carries the spacing: :func:`image_to_probe_mm`), ROS in metres.
 """
 
-from brachycal.export.formats import (
-    EXPORT_FILES,
-    calibrated_robot,
-    image_to_probe_mm,
-    plus_coordinate_definitions,
-    read_itk_transform,
-    read_ros_static_transforms,
-    ros_static_transforms,
-    write_exports,
-    write_itk_transform,
-)
+from typing import TYPE_CHECKING
+
+from brachycal._lazy import attach
+
+if TYPE_CHECKING:  # imported on first use (the formats need Pinocchio)
+    from brachycal.export.formats import (
+        EXPORT_FILES,
+        calibrated_robot,
+        image_to_probe_mm,
+        plus_coordinate_definitions,
+        read_itk_transform,
+        read_ros_static_transforms,
+        ros_static_transforms,
+        write_exports,
+        write_itk_transform,
+    )
+
+__getattr__, __dir__ = attach(__name__, __file__)
 
 __all__ = [
     "EXPORT_FILES",

@@ -7,25 +7,32 @@ planning and the simulated sessions start from; :func:`collision_link_pairs` and
 :class:`ClearanceChecker` keep the links apart.
 """
 
-from brachycal.model.collision import ClearanceChecker, collision_link_pairs
-from brachycal.model.ik import solve_ik
-from brachycal.model.names import (
-    BASE,
-    CONTROLLER_JOINT_NAMES,
-    JOINT_NAMES,
-    LEFT_ARM,
-    LEFT_FLANGE,
-    MIMIC_JOINTS,
-    NEEDLE_TIP,
-    PROBE_TIP,
-    READY,
-    RIGHT_ARM,
-    RIGHT_FLANGE,
-    TOOL_FRAME_PARENTS,
-    TOP_MODEL_TIP,
-    US_IMAGE,
-)
-from brachycal.model.robot import Robot, bundled_urdf_path
+from typing import TYPE_CHECKING
+
+from brachycal._lazy import attach
+
+if TYPE_CHECKING:  # imported on first use: the names need no Pinocchio, the Robot and its helpers do
+    from brachycal.model.collision import ClearanceChecker, collision_link_pairs
+    from brachycal.model.ik import solve_ik
+    from brachycal.model.names import (
+        BASE,
+        CONTROLLER_JOINT_NAMES,
+        JOINT_NAMES,
+        LEFT_ARM,
+        LEFT_FLANGE,
+        MIMIC_JOINTS,
+        NEEDLE_TIP,
+        PROBE_TIP,
+        READY,
+        RIGHT_ARM,
+        RIGHT_FLANGE,
+        TOOL_FRAME_PARENTS,
+        TOP_MODEL_TIP,
+        US_IMAGE,
+    )
+    from brachycal.model.robot import Robot, bundled_urdf_path
+
+__getattr__, __dir__ = attach(__name__, __file__)
 
 __all__ = [
     "BASE",

@@ -40,7 +40,8 @@ def solve_ik(
         T_base_target: ``(4, 4)`` target pose in ``base_link`` (only its translation when
             ``position_only``).
         q0: ``(nq,)`` start; joints not in ``joints`` keep their values.
-        joints: indices (into the configuration) that may move.
+        joints: indices (into the configuration) that may move: one-axis joints (revolute,
+            prismatic, continuous), whose coordinate changes as the joint's velocity says.
         position_only: solve for the position only (3 equations).
         margin: keep joints this far (rad) inside their limits.
         restarts: random restarts when the start does not converge.
@@ -57,6 +58,7 @@ def solve_ik(
     joints = list(joints)
     if not joints or any(not 0 <= j < robot.nq for j in joints):
         raise InputError(f"joint indices must be in [0, {robot.nq}), got {joints}")
+    columns = _velocity_columns(robot, joints)
     if position_only:
         target = check_finite(T_base_target, "IK target")
         if target.shape != (4, 4):
@@ -70,11 +72,13 @@ def solve_ik(
         raise InputError(f"IK start configuration must have {robot.nq} joints, got shape {start.shape}")
     rng = np.random.default_rng(seed)
     lo, hi = robot.lower[joints] + margin, robot.upper[joints] - margin
+    # A continuous joint has no limits: its restarts draw from one turn.
+    draw_lo, draw_hi = np.where(np.isfinite(lo), lo, -np.pi), np.where(np.isfinite(hi), hi, np.pi)
     for attempt in range(restarts + 1):
         q = start.copy()
         if attempt:
-            q[joints] = rng.uniform(lo, hi)
-        solved = _dls(robot, frame, target, q, joints, lo, hi, position_only, tol)
+            q[joints] = rng.uniform(draw_lo, draw_hi)
+        solved = _dls(robot, frame, target, q, joints, columns, lo, hi, position_only, tol)
         if solved is not None:
             return solved
     where = np.round(target[:3, 3], 4).tolist()
@@ -84,12 +88,30 @@ def solve_ik(
     )
 
 
+def _velocity_columns(robot: Robot, joints: list[int]) -> list[int]:
+    """Pinocchio's velocity index of each of ``joints`` (configuration indices), i.e. its Jacobian column.
+
+    Raises:
+        InputError: one of ``joints`` is a coordinate of a planar or floating joint (its coordinates
+            are not its velocities, so this solver cannot move it).
+    """
+    kinds = robot.joint_kinds
+    columns = []
+    for j in joints:
+        name = robot.joint_names[j]
+        if kinds.get(name) not in ("revolute", "prismatic", "continuous"):
+            raise InputError(f"IK moves revolute, prismatic and continuous joints only; {name!r} is not one")
+        columns.append(int(robot.model.joints[robot.model.getJointId(name)].idx_v))
+    return columns
+
+
 def _dls(
     robot: Robot,
     frame: str,
     target: FloatArray,
     q: FloatArray,
     joints: list[int],
+    columns: list[int],
     lo: FloatArray,
     hi: FloatArray,
     position_only: bool,
@@ -99,14 +121,16 @@ def _dls(
     fid = robot.frame_id(frame)
     goal = pin.SE3(target[:3, :3], target[:3, 3])
     for _ in range(200):
-        pin.forwardKinematics(model, data, q)
+        # ``q`` is brachycal's coordinates (one angle per continuous joint); Pinocchio takes its own.
+        q_pin = robot.to_pinocchio(q[None])[0]
+        pin.forwardKinematics(model, data, q_pin)
         current = pin.updateFramePlacement(model, data, fid)
         if position_only:
             error = goal.translation - current.translation
-            J = pin.computeFrameJacobian(model, data, q, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)[:3, joints]
+            J = pin.computeFrameJacobian(model, data, q_pin, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)[:3, columns]
         else:
             error = pin.log6(current.actInv(goal)).vector
-            J = pin.computeFrameJacobian(model, data, q, fid, pin.ReferenceFrame.LOCAL)[:, joints]
+            J = pin.computeFrameJacobian(model, data, q_pin, fid, pin.ReferenceFrame.LOCAL)[:, columns]
         if np.linalg.norm(error) < tol:
             return q
         damping = 1e-10 if np.linalg.norm(error) < 1e-4 else 1e-6

@@ -5,6 +5,11 @@ is built from it, a calibrated robot is a new :class:`Robot` whose tool joints c
 ``<origin>`` values (:meth:`Robot.with_tool_transform`), and :meth:`Robot.write_urdf` writes that
 text back out for ROS/MoveIt.
 
+A robot carries its rig (:attr:`Robot.rig`, a :class:`~brachycal.model.description.Rig`): which arm
+holds which tool, the ready stance, the collision pairs, the controller's joint order, the
+workspace. A description sets it (:func:`~brachycal.model.description.load_description`);
+:meth:`Robot.load` gives the SDA10F's; every ``with_*`` robot keeps it.
+
 Configurations are arrays in :attr:`Robot.joint_names` order (for the bundled SDA10F:
 :data:`brachycal.model.names.JOINT_NAMES`, torso then left arm then right arm), in radians
 (metres for prismatic joints): one number per degree of freedom, as joint logs carry them. A
@@ -21,9 +26,13 @@ configuration at a time (mimic, planar, floating joints). Both give the same pos
 
 from __future__ import annotations
 
+import copy
+import functools
+import io
 import os
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
@@ -36,6 +45,11 @@ from brachycal.model.batch_fk import BatchForwardKinematics
 from brachycal.model.joints import ONE_AXIS, Coordinates, UnsupportedJoint
 from brachycal.se3 import FloatArray, inverse, make_transform
 
+if TYPE_CHECKING:
+    import mujoco
+
+    from brachycal.model.description import Rig
+
 #: Configurations evaluated per block by the batch path: bounds the working memory (~2 MiB
 #: besides the output) and paces progress reports; 4096 measured fastest of 1024 to 20,000.
 CHUNK = 4096
@@ -46,6 +60,14 @@ def bundled_urdf_path() -> Path:
     return bundled("urdf", "sda10f.urdf")
 
 
+@functools.cache
+def sda10f_rig() -> Rig:
+    """The bundled SDA10F's rig (``robots/sda10f.toml``, equivalent to :mod:`brachycal.model.names`), read once."""
+    from brachycal.model.description import load_description
+
+    return load_description("sda10f").rig
+
+
 class Robot:
     """Kinematic model of a robot with its tool frames.
 
@@ -53,12 +75,25 @@ class Robot:
         urdf_xml: URDF text.
         base_dir: folder that relative mesh paths in the URDF are resolved against.
         source: name used in error messages (usually the file path).
+        rig: which arm holds which tool, the ready stance, the collision pairs, the workspace
+            (:class:`~brachycal.model.description.Rig`); ``None``: none (:attr:`rig` refuses).
 
     Raises:
         InputError: the text is not a URDF that Pinocchio can load.
     """
 
-    def __init__(self, urdf_xml: str, *, base_dir: str | os.PathLike[str], source: str = "<urdf>") -> None:
+    def __init__(
+        self,
+        urdf_xml: str,
+        *,
+        base_dir: str | os.PathLike[str],
+        source: str = "<urdf>",
+        rig: Rig | None = None,
+    ) -> None:
+        self._rig = rig
+        #: For :meth:`load`: the SDA10F's rig, fetched on first use of :attr:`rig` (reading the
+        #: description costs 0.03 s, which commands that never ask for it should not pay).
+        self._sda10f_rig_on_demand = False
         self._root = urdf_text.parse(urdf_xml, source)
         self.urdf_xml = urdf_xml
         self.base_dir = Path(base_dir)
@@ -89,13 +124,65 @@ class Robot:
     # --- construction -------------------------------------------------------------------
     @classmethod
     def load(cls, path: str | os.PathLike[str] | None = None) -> Robot:
-        """Load a URDF file; ``None`` loads the bundled SDA10F with its nominal tool frames."""
+        """Load a URDF file; ``None`` loads the bundled SDA10F with its nominal tool frames.
+
+        The robot carries the SDA10F's rig (:func:`sda10f_rig`): ``--urdf`` names an SDA10F URDF
+        (a calibrated one). A URDF of another robot loads, but its :attr:`rig` refuses: describe it
+        (:func:`brachycal.model.description.load_description`).
+        """
         file = Path(path) if path is not None else bundled_urdf_path()
         try:
             text = file.read_text()
         except OSError as exc:
             raise InputError(f"cannot read URDF ({exc.strerror})", file=file) from None
-        return cls(text, base_dir=file.parent, source=str(file))
+        robot = cls(text, base_dir=file.parent, source=str(file))
+        robot._sda10f_rig_on_demand = True
+        return robot
+
+    @property
+    def rig(self) -> Rig:
+        """Which arm holds which tool, the ready stance, collision pairs, controller order, workspace.
+
+        Raises:
+            InputError: the robot has none (built from URDF text without a description), or it was
+                loaded by :meth:`load` and is not the SDA10F (its joints are not the SDA10F's).
+        """
+        if self._rig is None and self._sda10f_rig_on_demand:
+            rig = sda10f_rig()
+            if rig.joint_names != self.joint_names or not all(
+                self.model.existFrame(f) for f in (rig.needle_flange, rig.probe_flange, *rig.tool_frame_parents)
+            ):
+                raise InputError(
+                    "this URDF is not the SDA10F's (its joints or tool frames differ): give a robot description "
+                    "(--robot FILE, docs/robots.md)",
+                    file=self.source,
+                )
+            self._rig = rig
+        if self._rig is None:
+            raise InputError(
+                "this robot model has no description of its arms and tools (--robot FILE, docs/robots.md)",
+                file=self.source,
+            )
+        return self._rig
+
+    def with_rig(self, rig: Rig) -> Robot:
+        """The same model carrying ``rig`` (its joint names must be the robot's).
+
+        Raises:
+            InputError: the rig's joints are not this robot's coordinates.
+        """
+        if rig.joint_names != self.joint_names:
+            raise InputError(f"the rig {rig.name!r} names other joints than this robot's", file=self.source)
+        out = copy.copy(self)  # the model is shared (never modified); its scratch data is not
+        out._data = self.model.createData()
+        out._rig, out._sda10f_rig_on_demand = rig, False
+        return out
+
+    def _like_this(self, urdf_xml: str) -> Robot:
+        """A robot of new URDF text with this one's folder, name and rig."""
+        out = Robot(urdf_xml, base_dir=self.base_dir, source=self.source, rig=self._rig)
+        out._sda10f_rig_on_demand = self._sda10f_rig_on_demand
+        return out
 
     # --- names and configurations -------------------------------------------------------
     @property
@@ -224,20 +311,20 @@ class Robot:
         return urdf_text.fixed_joint_transform(self._root, frame, self.source)
 
     def with_tool_transform(self, frame: str, T_parent_frame: ArrayLike) -> Robot:
-        """A new robot whose fixed joint ending at ``frame`` has origin ``T_parent_frame``."""
+        """A new robot (the same rig) whose fixed joint ending at ``frame`` has origin ``T_parent_frame``."""
         root = urdf_text.parse(self.urdf_xml, self.source)
         urdf_text.set_fixed_joint_transform(root, frame, np.asarray(T_parent_frame, dtype=float), self.source)
-        return Robot(urdf_text.to_text(root), base_dir=self.base_dir, source=self.source)
+        return self._like_this(urdf_text.to_text(root))
 
     def with_joint_origins(self, origins: Mapping[str, ArrayLike]) -> Robot:
-        """A new robot whose joints ``name`` have ``<origin>`` ``T_parent_joint`` ``(4, 4)``.
+        """A new robot (the same rig) whose joints ``name`` have ``<origin>`` ``T_parent_joint`` ``(4, 4)``.
 
         Used to build a "physical" robot whose geometry differs slightly from the nominal one.
         """
         root = urdf_text.parse(self.urdf_xml, self.source)
         for name, T in origins.items():
             urdf_text.set_joint_origin(root, name, np.asarray(T, dtype=float), self.source)
-        return Robot(urdf_text.to_text(root), base_dir=self.base_dir, source=self.source)
+        return self._like_this(urdf_text.to_text(root))
 
     def joint_axis(self, name: str) -> FloatArray:
         """``(3,)`` unit axis of a one-axis joint in its own frame (rotation axis, or slide direction).
@@ -254,7 +341,7 @@ class Robot:
         return joint.axis.copy()
 
     def with_joint_offsets(self, offsets_rad: Mapping[str, float]) -> Robot:
-        """A robot whose revolute joints read ``q`` where this one reads ``q + offset``.
+        """A robot (the same rig) whose revolute joints read ``q`` where this one reads ``q + offset``.
 
         ``FK_new(q) = FK_this(q + offsets)``: each offset turns the joint's origin about its axis.
         """
@@ -290,16 +377,63 @@ class Robot:
             self.model, self.urdf_xml, pin.GeometryType.COLLISION, package_dirs=[str(self.base_dir)]
         )
 
-    def mujoco_model(self):  # -> mujoco.MjModel (imported lazily: MuJoCo is only for planning)
-        """MuJoCo model of the same URDF; fixed links stay bodies, so tool frames are addressable."""
+    def mujoco_model(self) -> mujoco.MjModel:  # (MuJoCo imported lazily: it is only for planning)
+        """MuJoCo model of the same URDF's collision geometry; fixed links stay bodies, so tool frames
+        are addressable.
+
+        MuJoCo reads only its own mesh formats (STL, OBJ, MSH): other collision meshes (Baxter's
+        COLLADA ``.DAE``) are converted to STL in memory (trimesh), and every mesh is handed over
+        under a name of its own (``m<k>_<stem>.<ext>``: MuJoCo strips folders, so two files of the same
+        name in different folders would clash). Visual geometry is dropped: planning never sees it.
+        """
         import mujoco
 
-        return mujoco.MjModel.from_xml_string(self.urdf_xml, assets=self._mesh_assets())
+        root = urdf_text.parse(self.urdf_xml, self.source)
+        for link in root.iter("link"):
+            for visual in link.findall("visual"):
+                link.remove(visual)
+        assets: dict[str, bytes] = {}
+        asset_names: dict[Path, str] = {}
+        for mesh in root.iter("mesh"):
+            path = (self.base_dir / mesh.get("filename", "")).resolve()
+            if path not in asset_names:
+                name, data = _mujoco_mesh(path, len(asset_names), self.source)
+                asset_names[path] = name
+                assets[name] = data
+            mesh.set("filename", asset_names[path])
+        return mujoco.MjModel.from_xml_string(urdf_text.to_text(root), assets=assets)
 
-    def _mesh_assets(self) -> dict[str, bytes]:
-        assets = {}
-        for mesh in self._root.iter("mesh"):
-            filename = mesh.get("filename", "")
-            if "://" not in filename:
-                assets[Path(filename).name] = (self.base_dir / filename).read_bytes()
-        return assets
+
+#: Mesh formats MuJoCo decodes itself.
+_MUJOCO_MESH_SUFFIXES = (".stl", ".obj", ".msh")
+
+
+def _mujoco_mesh(path: Path, k: int, source: str) -> tuple[str, bytes]:
+    """``(asset name, bytes)`` of a collision mesh for MuJoCo: as it is, or converted to STL.
+
+    Raises:
+        InputError: the mesh cannot be read or converted.
+    """
+    suffix = path.suffix.lower()
+    try:
+        if suffix in _MUJOCO_MESH_SUFFIXES:
+            return f"m{k}_{path.stem}{suffix}", path.read_bytes()
+        return f"m{k}_{path.stem}.stl", _stl_bytes(path, path.stat().st_mtime_ns)
+    except OSError as exc:
+        raise InputError(f"cannot read collision mesh {path} ({exc.strerror})", file=source) from None
+    except Exception as exc:  # trimesh and pycollada refuse an undecodable file with assorted types
+        raise InputError(f"cannot convert collision mesh {path} to STL for MuJoCo ({exc})", file=source) from None
+
+
+@functools.lru_cache(maxsize=64)
+def _stl_bytes(path: Path, mtime_ns: int) -> bytes:
+    """Binary STL of a mesh file trimesh reads (COLLADA through pycollada), cached by file and
+    modification time: converting Baxter's torso takes 0.07 s and every planner asks again."""
+    import trimesh
+
+    mesh = trimesh.load(path, force="mesh")
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise ValueError("no triangles in it")
+    buffer = io.BytesIO()
+    mesh.export(buffer, file_type="stl")
+    return buffer.getvalue()

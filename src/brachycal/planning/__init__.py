@@ -5,15 +5,24 @@ image geometry in pixels; the insertion direction); :func:`plan_poses` solves on
 per target (:class:`DualArmIK` with :class:`IKSettings`), checks each again
 (:class:`PoseVerifier` with :class:`Thresholds`) and orders them by motion time, returning a
 :class:`Plan`; :func:`write_plan` writes it as CSV (controller joint order, radians and degrees).
-:data:`READY` is the stance planning starts from (:data:`brachycal.model.READY`).
+The robot's rig (``robot.rig``) gives the arms, the ready stance planning starts from, the collision
+pairs, the controller order and the workspace (:meth:`PlanSpec.for_robot`); :data:`READY` is the
+SDA10F's ready stance (:data:`brachycal.model.READY`).
 """
 
-from brachycal.model.names import READY
-from brachycal.planning.dual_arm_ik import DualArmIK, IKSettings
-from brachycal.planning.output import infeasible_path, write_infeasible, write_plan
-from brachycal.planning.plan import GridPoint, Infeasible, Plan, PlannedPose, grid_points, plan_poses
-from brachycal.planning.spec import PlanSpec, RectFOV, SectorFOV
-from brachycal.planning.verify import PoseCheck, PoseVerifier, Thresholds
+from typing import TYPE_CHECKING
+
+from brachycal._lazy import attach
+
+if TYPE_CHECKING:  # imported on first use: the plan's options need only the light spec module
+    from brachycal.model.names import READY
+    from brachycal.planning.dual_arm_ik import DualArmIK, IKSettings
+    from brachycal.planning.output import infeasible_path, write_infeasible, write_plan
+    from brachycal.planning.plan import GridPoint, Infeasible, Plan, PlannedPose, grid_points, plan_poses
+    from brachycal.planning.spec import PlanSpec, RectFOV, SectorFOV
+    from brachycal.planning.verify import PoseCheck, PoseVerifier, Thresholds
+
+__getattr__, __dir__ = attach(__name__, __file__)
 
 __all__ = [
     "READY",

@@ -1,9 +1,9 @@
-"""Dual-arm inverse kinematics with mink on the MuJoCo model of the project's URDF.
+"""Dual-arm inverse kinematics with mink on the MuJoCo model of the robot's URDF.
 
-One differential-IK problem moves all 15 axes at once: the torso is shared by both arms and
-solved jointly. Tasks: the needle tip on its target with the needle along the insertion
-direction (roll about the needle left free), the probe tip on its target pose, and a light
-posture task that keeps the arms near a comfortable stance. Limits: joint limits with a margin,
+One differential-IK problem moves every axis at once (the SDA10F's 15): joints both arms share (the
+SDA10F's torso) are solved jointly. Tasks: the needle tip on its target with the needle along the
+insertion direction (roll about the needle left free), the probe tip on its target pose, and a light
+posture task that keeps the arms near the rig's ready stance (``robot.rig.ready``). Limits: joint limits with a margin,
 joint velocity limits (so each iteration, and hence the path between successive poses, respects
 the vendor's speeds), and collision avoidance between the link pairs of
 :func:`brachycal.model.collision.collision_link_pairs` with a safety margin.
@@ -12,18 +12,22 @@ the vendor's speeds), and collision avoidance between the link pairs of
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import mink
 import numpy as np
-import qpsolvers
 from numpy.typing import ArrayLike
 
 from brachycal.errors import InputError, SolverError
-from brachycal.model.collision import collision_link_pairs
-from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, READY
-from brachycal.model.robot import Robot
+from brachycal.model.names import NEEDLE_TIP, PROBE_TIP
 from brachycal.se3 import FloatArray
 from brachycal.validate import check_finite, check_int, check_range, check_transform
+
+# mink (with MuJoCo and the QP solvers) and the robot model are imported by the solver itself: the
+# settings and a plan's records (pickled to the process that draws a plan) need neither.
+if TYPE_CHECKING:
+    import mink
+
+    from brachycal.model.robot import Robot
 
 #: The QP solver of each differential-IK step (qpsolvers' name).
 QP_SOLVER = "daqp"
@@ -85,24 +89,56 @@ class IKOutcome:
 
 
 def _se3(T: FloatArray) -> mink.SE3:
+    import mink
+
     return mink.SE3.from_matrix(np.asarray(T, dtype=float))
 
 
 class DualArmIK:
-    """Reusable solver for one robot model (tool frames included) and settings."""
+    """Reusable solver for one robot model (tool frames included) and settings.
+
+    MuJoCo may order the joints otherwise than Pinocchio (Baxter: right arm first); configurations
+    cross between the two by joint name.
+
+    Raises:
+        InputError: MuJoCo's configuration of the robot is not brachycal's (a floating or planar
+            joint, or a mimic joint MuJoCo moves on its own), so a configuration could not be
+            handed from one to the other unchanged; or the robot has no rig.
+    """
 
     def __init__(self, robot: Robot, settings: IKSettings = IKSettings()) -> None:
+        import mink
+        import mujoco
+
+        from brachycal.model.collision import collision_link_pairs
+
         self.robot = robot
         self.settings = settings
+        rig = robot.rig
         model = robot.mujoco_model()
+        mujoco_joints = tuple(model.joint(j).name for j in range(model.njnt))
+        one_axis_types = {int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE)}
+        one_axis = all(int(model.jnt_type[j]) in one_axis_types for j in range(model.njnt))
+        if model.nq != robot.nq or sorted(mujoco_joints) != sorted(robot.joint_names) or not one_axis:
+            raise InputError(
+                f"dual-arm IK needs MuJoCo's joints to be the robot's coordinates ({robot.nq}: "
+                f"{', '.join(robot.joint_names)}); MuJoCo reads {model.nq} coordinates of {', '.join(mujoco_joints)} "
+                "(planning supports revolute, prismatic and continuous joints)",
+                file=robot.source,
+            )
         self.model = model
+        #: MuJoCo's coordinate of each of the robot's: ``q_mujoco[self._mujoco_index] = q``.
+        self._mujoco_index = np.array([int(model.joint(name).qposadr[0]) for name in robot.joint_names])
         self.configuration = mink.Configuration(model)
         self.needle_task = mink.FrameTask(NEEDLE_TIP, "body", position_cost=1.0, orientation_cost=[1.0, 1.0, 0.0])
         self.probe_task = mink.FrameTask(PROBE_TIP, "body", position_cost=1.0, orientation_cost=1.0)
         self.posture_task = mink.PostureTask(model, cost=settings.posture_cost)
-        self.posture_task.set_target(READY)
-        geom_of_body = {model.body(model.geom_bodyid[g]).name: g for g in range(model.ngeom)}
-        pairs = [([geom_of_body[a]], [geom_of_body[b]]) for a, b in collision_link_pairs(robot)]
+        self.posture_task.set_target(self._to_mujoco(rig.ready))
+        # A link may carry several shapes (Baxter's head: two spheres): the pair keeps all of them apart.
+        geoms_of_body: dict[str, list[int]] = {}
+        for g in range(model.ngeom):
+            geoms_of_body.setdefault(model.body(model.geom_bodyid[g]).name, []).append(g)
+        pairs = [(geoms_of_body[a], geoms_of_body[b]) for a, b in collision_link_pairs(robot)]
         velocities = {name: float(v) for name, v in zip(robot.joint_names, robot.velocity_limit, strict=True)}
         self.limits = [
             mink.ConfigurationLimit(model, min_distance_from_limits=settings.joint_margin_rad),
@@ -121,7 +157,7 @@ class DualArmIK:
         Args:
             q_start: ``(nq,)`` start configuration, radians, model order.
             T_base_needle, T_base_probe: ``(4, 4)`` targets of the needle tip and the probe tip in
-                ``base_link`` (metres).
+                the robot's base (``robot.rig.base``, metres).
 
         Returns:
             The last configuration, whether it converged, and the remaining errors; running out of
@@ -139,7 +175,7 @@ class DualArmIK:
             raise InputError(f"IK start configuration must have {self.robot.nq} joints, got shape {q.shape}")
         T_base_needle = check_transform(T_base_needle, "needle target")
         T_base_probe = check_transform(T_base_probe, "probe target")
-        self.configuration.update(q.copy())
+        self.configuration.update(self._to_mujoco(q))
         self.needle_task.set_target(_se3(T_base_needle))
         self.probe_task.set_target(_se3(T_base_probe))
         # The posture task is soft: kept on, it would leave the tools a little off target (its
@@ -156,11 +192,24 @@ class DualArmIK:
             pos_err = float(max(np.linalg.norm(e_needle[:3]), np.linalg.norm(e_probe[:3])))
             ang_err = float(max(np.linalg.norm(e_needle[3:5]), np.linalg.norm(e_probe[3:])))
             if pos_err < s.position_tol_m and ang_err < s.angle_tol_rad:
-                return IKOutcome(self.configuration.q.copy(), True, iteration, pos_err, ang_err)
-        return IKOutcome(self.configuration.q.copy(), False, s.max_iterations, pos_err, ang_err)
+                return IKOutcome(self._from_mujoco(self.configuration.q), True, iteration, pos_err, ang_err)
+        return IKOutcome(self._from_mujoco(self.configuration.q), False, s.max_iterations, pos_err, ang_err)
+
+    def _to_mujoco(self, q: FloatArray) -> FloatArray:
+        """``(nq,)`` MuJoCo configuration of a robot configuration ``(nq,)`` (a new array)."""
+        out = np.empty(len(self._mujoco_index))
+        out[self._mujoco_index] = q
+        return out
+
+    def _from_mujoco(self, q_mujoco: FloatArray) -> FloatArray:
+        """``(nq,)`` robot configuration of a MuJoCo configuration (a new array)."""
+        return np.asarray(q_mujoco, dtype=float)[self._mujoco_index].copy()
 
     def _step(self, tasks: list, iteration: int, T_base_needle: FloatArray, T_base_probe: FloatArray) -> FloatArray:
         """One differential-IK velocity, ``(nv,)`` rad/s; a QP without solution becomes :class:`SolverError`."""
+        import mink
+        import qpsolvers
+
         try:
             velocity = mink.solve_ik(
                 self.configuration, tasks, self.settings.dt, QP_SOLVER, damping=1e-9, limits=self.limits
@@ -171,8 +220,8 @@ class DualArmIK:
             raise SolverError(
                 f"dual-arm IK: the QP solver {QP_SOLVER} found no joint velocity at iteration {iteration} "
                 f"moving {NEEDLE_TIP} to {_where(T_base_needle)} m and {PROBE_TIP} to {_where(T_base_probe)} m "
-                f"in base_link (joint limits with a {self.settings.joint_margin_rad:g} rad margin, velocity limits "
-                f"and a {self.settings.collision_margin_m * 1e3:g} mm collision margin cannot all hold"
+                f"in {self.robot.rig.base} (joint limits with a {self.settings.joint_margin_rad:g} rad margin, "
+                f"velocity limits and a {self.settings.collision_margin_m * 1e3:g} mm collision margin cannot all hold"
                 f"{self._outside_limits()}): {exc or type(exc).__name__}"
             ) from exc
         if velocity is None or not np.all(np.isfinite(velocity)):
@@ -184,7 +233,7 @@ class DualArmIK:
 
     def _outside_limits(self) -> str:
         """``"; outside its limits: <joints>"`` for the joints of the current configuration beyond their limits."""
-        q = self.configuration.q
+        q = self._from_mujoco(self.configuration.q)
         names = [
             n
             for n, v, lo, hi in zip(self.robot.joint_names, q, self.robot.lower, self.robot.upper, strict=True)

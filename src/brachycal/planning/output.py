@@ -1,11 +1,11 @@
 """Plan files: the pose table for the robot, and the list of infeasible points.
 
 ``plan.csv``: one row per pose in visiting order — ``order,point,i,j,k`` (grid indices along the
-image's lateral, depth and normal axes), ``x,y,z`` (needle-tip target in ``base_link``, metres),
+image's lateral, depth and normal axes), ``x,y,z`` (needle-tip target in the robot's base frame, metres),
 ``u_px,v_px`` (where the tip should appear in the image), ``move_s`` (motion time from the
 previous pose; the first from the ready stance), ``clearance_mm`` (smallest checked link
-distance), then the 15 joints in the controller's order in radians, then the same in degrees
-(``<joint>_deg``) for the teach pendant.
+distance), then the joints in the controller's order (``robot.rig.controller_joint_names``; the
+SDA10F's 15) in radians, then the same in degrees (``<joint>_deg``) for the teach pendant.
 
 ``<plan>_infeasible.csv``: ``point,i,j,k,x,y,z,u_px,v_px,reasons,detail`` for every grid point
 without a verified pose; reasons are ``fov``, ``reach``, ``collision``, ``limit``, ``direction``,
@@ -21,7 +21,6 @@ from pathlib import Path
 import numpy as np
 
 from brachycal.files import atomic_open
-from brachycal.model.names import CONTROLLER_JOINT_NAMES
 from brachycal.model.robot import Robot
 from brachycal.planning import order as ordering
 from brachycal.planning.plan import Plan
@@ -33,8 +32,9 @@ def infeasible_path(plan_path: str | os.PathLike[str]) -> Path:
 
 
 def write_plan(plan: Plan, robot: Robot, path: str | os.PathLike[str], *, force: bool = False) -> Path:
-    """Write the pose table (atomically)."""
-    columns = [robot.joint_names.index(name) for name in CONTROLLER_JOINT_NAMES]
+    """Write the pose table (atomically), the joints in the robot's controller order."""
+    controller = robot.rig.controller_joint_names
+    columns = [robot.joint_names.index(name) for name in controller]
     Q = np.array([plan.start_q, *(pose.q for pose in plan.poses)])
     times = ordering.move_times(Q, robot.velocity_limit, plan.speed_scale)
     header = [
@@ -50,8 +50,8 @@ def write_plan(plan: Plan, robot: Robot, path: str | os.PathLike[str], *, force:
         "v_px",
         "move_s",
         "clearance_mm",
-        *CONTROLLER_JOINT_NAMES,
-        *(f"{name}_deg" for name in CONTROLLER_JOINT_NAMES),
+        *controller,
+        *(f"{name}_deg" for name in controller),
     ]
     with atomic_open(path, force=force) as f:
         f.write(",".join(header) + "\n")

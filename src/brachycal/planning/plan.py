@@ -4,20 +4,22 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from brachycal.errors import SolverError
-from brachycal.model.collision import ClearanceChecker, collision_link_pairs
-from brachycal.model.names import READY, US_IMAGE
-from brachycal.model.robot import Robot
+from brachycal.model.names import PROBE_TIP, US_IMAGE
 from brachycal.planning import order as ordering
 from brachycal.planning.dual_arm_ik import DualArmIK, IKSettings
 from brachycal.planning.spec import PlanSpec
 from brachycal.planning.verify import PoseCheck, PoseVerifier, Thresholds
 from brachycal.se3 import FloatArray
 from brachycal.validate import check_range
+
+if TYPE_CHECKING:  # the records of a plan load without the robot model (Pinocchio)
+    from brachycal.model.robot import Robot
 
 
 @dataclass(frozen=True)
@@ -53,11 +55,12 @@ class Plan:
     """Feasible poses in visiting order, the infeasible points with reasons, and timings.
 
     Attributes:
-        poses: in the optimised order (nearest neighbour + 2-opt from :data:`start_q`).
+        poses: in the optimised order (nearest neighbour + 2-opt from :attr:`start_q`).
         infeasible: grid points without a verified pose.
         motion_time_s: ``{"raster", "serpentine", "optimised"}`` → seconds from ``start_q``.
         speed_scale: fraction of the vendor's velocity limits used for the motion times.
         solve_time_s: wall time of IK and checks.
+        start_q: ``(nq,)`` where the robot starts, radians: the rig's ready stance.
     """
 
     spec: PlanSpec
@@ -66,7 +69,7 @@ class Plan:
     motion_time_s: dict[str, float]
     speed_scale: float
     solve_time_s: float
-    start_q: FloatArray = field(default_factory=lambda: READY.copy())
+    start_q: FloatArray
 
     @property
     def min_clearance_m(self) -> float:
@@ -104,21 +107,27 @@ def plan_poses(
     """Plan one pose per grid point.
 
     Args:
-        robot: the model with the tool frames to plan with (nominal, or a calibration's).
+        robot: the model with the tool frames to plan with (nominal, or a calibration's); its rig
+            (``robot.rig``) gives the ready stance (start and posture target) and the collision pairs.
         spec: the grid and imaging geometry.
         settings: IK settings (margins a little larger than the check's thresholds).
         thresholds: the independent check's acceptance thresholds.
         speed_scale: fraction of the vendor's velocity limits for the motion-time estimate.
         progress: called with 1 after each grid point.
     """
+    from brachycal.model.collision import ClearanceChecker, collision_link_pairs
+
     check_range(speed_scale, "speed scale", low=0.0, high=1.0, low_open=True)
     start = time.perf_counter()
     ik = DualArmIK(robot, settings)
     verifier = PoseVerifier(robot, spec, ClearanceChecker(robot, collision_link_pairs(robot)), thresholds)
-    T_Ptip_I = robot.tool_transform(US_IMAGE)[1]
+    # The image on the probe tip, by forward kinematics (both hang on the left flange, so any
+    # configuration gives it): reading the URDF's rpy would load SciPy's rotations for one matrix.
+    ready = robot.rig.ready
+    T_Ptip_I = robot.transform(PROBE_TIP, US_IMAGE, ready)
     points = grid_points(spec)
     solve_order = ordering.serpentine(np.array([p.index for p in points]))
-    q = READY.copy()
+    q = ready.copy()
     feasible: list[PlannedPose] = []
     infeasible: list[Infeasible] = []
     for n in solve_order:
@@ -150,8 +159,9 @@ def plan_poses(
                     infeasible.append(Infeasible(point, reasons, _detail(check, outcome.position_error_m)))
         if progress is not None:
             progress(1)
-    motion, visit = _order(feasible, robot, speed_scale, solve_order, points)
-    return Plan(spec, [feasible[k] for k in visit], infeasible, motion, speed_scale, time.perf_counter() - start)
+    motion, visit = _order(feasible, robot, ready, speed_scale)
+    elapsed = time.perf_counter() - start
+    return Plan(spec, [feasible[k] for k in visit], infeasible, motion, speed_scale, elapsed, ready)
 
 
 def _detail(check: PoseCheck, ik_error_m: float) -> str:
@@ -162,11 +172,11 @@ def _detail(check: PoseCheck, ik_error_m: float) -> str:
 
 
 def _order(
-    feasible: list[PlannedPose], robot: Robot, speed_scale: float, solve_order: np.ndarray, points: list[GridPoint]
+    feasible: list[PlannedPose], robot: Robot, start_q: FloatArray, speed_scale: float
 ) -> tuple[dict[str, float], np.ndarray]:
     if not feasible:
         return {"raster": 0.0, "serpentine": 0.0, "optimised": 0.0}, np.zeros(0, dtype=int)
-    Q = np.array([READY, *(p.q for p in feasible)])
+    Q = np.array([start_q, *(p.q for p in feasible)])
     times = ordering.move_times(Q, robot.velocity_limit, speed_scale)
     index = np.array([p.point.index for p in feasible])
     orders = {

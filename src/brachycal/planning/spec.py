@@ -11,7 +11,8 @@ fill a square of the image (Fig. 10 d of the paper), which keeps the registratio
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -28,6 +29,10 @@ from brachycal.validate import (
     check_spacing_m,
     check_vector,
 )
+
+if TYPE_CHECKING:  # types only: a spec loads without the robot model
+    from brachycal.model.description import Workspace
+    from brachycal.model.robot import Robot
 
 #: Cube edge, metres: at least 1 mm (a smaller cube puts grid points a few pixels apart, below what
 #: 1 px annotation noise resolves), at most 0.5 m (far more than an image or a prostate covers).
@@ -111,7 +116,10 @@ def _unit(v: ArrayLike, name: str) -> FloatArray:
 
 @dataclass(frozen=True)
 class PlanSpec:
-    """Inputs of the planner (SI units, directions in ``base_link``).
+    """Inputs of the planner (SI units, directions in the robot's base frame, ``base_link`` on the SDA10F).
+
+    The defaults of the cube centre and the three directions are the SDA10F's workspace
+    (``robots/sda10f.toml``; a test keeps the two equal); :meth:`for_robot` takes another robot's.
 
     Attributes:
         cube_centre_m: ``(3,)`` centre of the sample cube (the prostate), metres.
@@ -175,6 +183,27 @@ class PlanSpec:
                 )
             if not np.all(np.abs(offsets) <= EDGE_RANGE_M[1]):  # also refuses NaN
                 raise InputError(f"sample offsets must be finite and within {EDGE_RANGE_M[1]:g} m of the cube centre")
+
+    @classmethod
+    def for_robot(cls, robot: Robot, **changes: Any) -> PlanSpec:
+        """The spec of ``robot``'s workspace (``robot.rig.workspace``: cube centre, insertion and image
+        directions), with ``changes`` (any other field, or one of those) on top.
+
+        Raises:
+            InputError: the robot has no rig, or a change is out of range.
+        """
+        return cls.for_workspace(robot.rig.workspace, **changes)
+
+    @classmethod
+    def for_workspace(cls, workspace: Workspace, **changes: Any) -> PlanSpec:
+        """The spec of a rig's :class:`~brachycal.model.description.Workspace`, with ``changes`` on top."""
+        spec = cls(
+            cube_centre_m=np.array(workspace.cube_centre_m),
+            insertion_dir=np.array(workspace.insertion_dir),
+            image_depth_dir=np.array(workspace.image_depth_dir),
+            image_lateral_dir=np.array(workspace.image_lateral_dir),
+        )
+        return replace(spec, **changes) if changes else spec
 
     def image_axes(self) -> FloatArray:
         """``R_base_image (3, 3)`` of the reference probe pose: columns x (u), y (v), z = x × y."""

@@ -8,16 +8,19 @@ margin, and every checked link pair apart by at least the collision margin.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from brachycal.model.collision import ClearanceChecker
 from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
-from brachycal.model.robot import Robot
 from brachycal.planning.spec import PlanSpec
 from brachycal.se3 import FloatArray, inverse, transform_points
 from brachycal.validate import check_range
+
+if TYPE_CHECKING:  # types only: the thresholds and a pose's figures load without Pinocchio
+    from brachycal.model.collision import ClearanceChecker
+    from brachycal.model.robot import Robot
 
 #: Smallest joint margin a plan may keep, radians (0.1 deg = 1.75e-3 rad). A planned pose must stay
 #: inside the limits even as read back by the encoders: the joint-log and session readers accept a

@@ -7,48 +7,40 @@ figure, which write through :mod:`brachycal.files`). The 3D scene (:func:`robot_
 :func:`scene_figure`, :func:`render_png`, :func:`save_glb`) loads trimesh on first use.
 """
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-from brachycal.reporting.demo_report import DEMO_REPORT_FILES, demo_text, write_demo_report
-from brachycal.reporting.figures import (
-    error_histogram,
-    error_histogram_figure,
-    method_comparison,
-    method_comparison_figure,
-    points_3d,
-    points_3d_figure,
-    residuals_per_sample,
-    residuals_per_sample_figure,
-    save_figure,
-    study_figure,
-)
-from brachycal.reporting.html_report import REPORT_FILES, write_report
-from brachycal.reporting.plan_plot import plan_figure, plot_plan
-from brachycal.reporting.tables import (
-    chain_summary,
-    design_table,
-    plan_text,
-    study_table,
-    table_i,
-    table_ii,
-    table_iii,
-    targeting_table,
-    uncertainty_table,
-)
+from brachycal._lazy import attach
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # imported on first use (matplotlib ~0.5 s, trimesh ~0.6 s to load)
+    from brachycal.reporting.demo_report import DEMO_REPORT_FILES, demo_text, write_demo_report
+    from brachycal.reporting.figures import (
+        error_histogram,
+        error_histogram_figure,
+        method_comparison,
+        method_comparison_figure,
+        points_3d,
+        points_3d_figure,
+        residuals_per_sample,
+        residuals_per_sample_figure,
+        save_figure,
+        study_figure,
+    )
+    from brachycal.reporting.html_report import REPORT_FILES, write_report
+    from brachycal.reporting.plan_plot import plan_figure, plot_plan
     from brachycal.reporting.scene import TOOL_FRAMES, render_png, robot_scene, save_glb, scene_figure
+    from brachycal.reporting.tables import (
+        chain_summary,
+        design_table,
+        plan_text,
+        study_table,
+        table_i,
+        table_ii,
+        table_iii,
+        targeting_table,
+        uncertainty_table,
+    )
 
-#: Names of :mod:`brachycal.reporting.scene`, imported when first used (trimesh takes ~0.6 s to load).
-_SCENE = ("TOOL_FRAMES", "render_png", "robot_scene", "save_glb", "scene_figure")
-
-
-def __getattr__(name: str) -> Any:
-    if name in _SCENE:
-        from brachycal.reporting import scene
-
-        return getattr(scene, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__, __dir__ = attach(__name__, __file__)
 
 
 __all__ = [

@@ -17,7 +17,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from numpy.typing import ArrayLike
 
-from brachycal.calibration.image_to_probe import ALL_LABELS, METHOD_LABELS
+from brachycal.calibration.labels import ALL_LABELS, METHOD_LABELS
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.files import atomic_path
 
@@ -129,13 +129,14 @@ def study_figure(summary: Sequence[Mapping[str, Any]]) -> Figure:
     axes = fig.subplots(1, 2, sharey=True)
 
     def setting(s: Mapping[str, Any]) -> tuple:
-        return s["method"], s["annotation_px"], s["edge_mm"], s["sound_speed"], s["outlier_rate"]
+        return s["method"], s["annotation_px"], s["edge_mm"], s["sound_speed"], s["outlier_rate"], s["robot_error"]
 
     for key in sorted({setting(s) for s in summary}):
-        method, ann, edge, sound, _ = key
+        method, ann, edge, sound, _, level = key
         rows = sorted((s for s in summary if setting(s) == key), key=lambda s: s["samples"])
         n = np.array([s["samples"] for s in rows])
         label = f"{ALL_LABELS[method]}, {ann:g} px, {edge:g} mm" + ("" if sound else ", tissue")
+        label += "" if level == "well-built" else f", {level} robot"
         for ax, figure in zip(axes, ("loo_mae_mm", "target_mae_mm"), strict=True):
             ax.errorbar(
                 n,

@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from matplotlib.figure import Figure
 
-from brachycal.planning.plan import Plan
 from brachycal.reporting.figures import save_figure
+
+if TYPE_CHECKING:  # a type only: drawing a plan needs no planner (mink)
+    from brachycal.planning.plan import Plan
 
 
 def plan_figure(plan: Plan) -> Figure:

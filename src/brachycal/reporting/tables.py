@@ -7,15 +7,17 @@ Every function returns text (millimetres and degrees, as the column heads say); 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from brachycal.calibration.image_to_probe import ALL_LABELS, METHOD_LABELS
+from brachycal.calibration.labels import ALL_LABELS, METHOD_LABELS
 from brachycal.calibration.metrics import ErrorStats
-from brachycal.calibration.sequential import CalibrationResult
 from brachycal.imaging.pixels import SCANNER_SOUND_SPEED_M_S
-from brachycal.planning.plan import Plan
-from brachycal.simulation.design import MECHANICAL_MINUTES, SECONDS_PER_SAMPLE
+
+if TYPE_CHECKING:  # types only: `brachycal plan` prints plan_text without loading the calibration
+    from brachycal.calibration.sequential import CalibrationResult
+    from brachycal.planning.plan import Plan
 
 
 def _row(label: str, stats: ErrorStats, width: int) -> str:
@@ -100,7 +102,29 @@ def chain_summary(report, sample_ids: list[str]) -> str:
         f"max {report.predicted_cube_mm.max():.3f} mm; over the image at the central pose: "
         f"{report.predicted_fov_mm.min():.3f}..{report.predicted_fov_mm.max():.3f} mm"
     )
+    lines += _identification_lines(report)
     return "\n".join(lines)
+
+
+def _identification_lines(report) -> list[str]:
+    """The identified robot: how much of it the session determined, what not and why, and the
+    image error at held-out configurations with and without it."""
+    identified = report.identification
+    if identified is None:
+        return []
+    lines = ["ROBOT IDENTIFIED (joint origins corrected; the stated accuracy is the prior):"]
+    lines += [f"  {line}" for line in identified.identifiability.summary(identified.joint_names)]
+    largest = np.abs(identified.corrections)
+    lines.append(
+        f"  largest correction: {largest[:, :3].max() * 1e3:.3f} mm, {np.degrees(largest[:, 3:].max()):.4f} deg"
+    )
+    if report.identification_cv is not None:
+        chain_alone, with_robot = report.identification_cv
+        lines.append(
+            "  image error at held-out configurations (8-fold, RMSE): "
+            f"{chain_alone.rmse_mm:.3f} mm without identification, {with_robot.rmse_mm:.3f} mm with it"
+        )
+    return lines
 
 
 def targeting_table(stats: dict[str, ErrorStats], n_targets: int) -> str:
@@ -163,6 +187,9 @@ def design_table(rows: Sequence[Mapping[str, object]]) -> str:
     """Sample designs compared (rows of :func:`~brachycal.simulation.design.compare_designs`): per
     design the mean over seeds of robot minutes, predicted and actual RMS landing error (mm), and
     information per minute."""
+    # Imported here: the simulation loads SciPy's statistics and mink, which plan_text's callers do not need.
+    from brachycal.simulation.design import MECHANICAL_MINUTES, SECONDS_PER_SAMPLE
+
     lines = [
         f"time model: {MECHANICAL_MINUTES:g} min mechanical + {SECONDS_PER_SAMPLE:g} s per sample + motion",
         f"{'design':<12} {'samples':>7} {'minutes':>8} {'predicted RMS (mm)':>19} {'actual RMS (mm)':>16} "
@@ -183,18 +210,20 @@ def design_table(rows: Sequence[Mapping[str, object]]) -> str:
 
 def study_table(summary: Sequence[Mapping[str, object]]) -> str:
     """A study's summary (:func:`~brachycal.simulation.study.summarise`): per setting and method the
-    leave-one-out and targeting MAE (mean ± SD over seeds) and the mean largest targeting error, mm."""
+    leave-one-out and targeting MAE (mean ± SD over seeds), the targeting MAE at held-out
+    configurations (torso turned 3°) and the mean largest targeting error, mm."""
     lines = [
-        f"{'samples':>7} {'edge':>5} {'ann.px':>6} {'sound':>6} {'outl.':>5} {'method':<22} "
-        f"{'LOO MAE (mm)':>14} {'target MAE (mm)':>16} {'target max':>11}"
+        f"{'robot':<10} {'samples':>7} {'edge':>5} {'ann.px':>6} {'sound':>6} {'outl.':>5} {'method':<22} "
+        f"{'LOO MAE (mm)':>14} {'target MAE (mm)':>16} {'held-out MAE':>15} {'target max':>11}"
     ]
     for s in summary:
         label = ALL_LABELS[str(s["method"])]
         lines.append(
-            f"{s['samples']:>7} {s['edge_mm']:>5g} {s['annotation_px']:>6g} "
+            f"{s['robot_error']!s:<10} {s['samples']:>7} {s['edge_mm']:>5g} {s['annotation_px']:>6g} "
             f"{'water' if s['sound_speed'] else 'tissue':>6} {s['outlier_rate']:>5g} {label:<22} "
             f"{s['loo_mae_mm_mean']:>7.3f} ± {s['loo_mae_mm_sd']:.3f} {s['target_mae_mm_mean']:>8.3f} ± "
-            f"{s['target_mae_mm_sd']:.3f} {s['target_max_mm_mean']:>11.3f}"
+            f"{s['target_mae_mm_sd']:.3f} {s['target_held_out_mae_mm_mean']:>7.3f} ± "
+            f"{s['target_held_out_mae_mm_sd']:.3f} {s['target_max_mm_mean']:>11.3f}"
         )
     return "\n".join(lines)
 

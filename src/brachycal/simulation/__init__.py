@@ -16,15 +16,22 @@
   ``brachycal design`` (:data:`DESIGNS`).
 """
 
-from brachycal.simulation.demo import DemoRun, run_demo
-from brachycal.simulation.design import DESIGNS, compare_designs, evaluate_design
-from brachycal.simulation.exact import SessionTruth, default_truth, exact_session
-from brachycal.simulation.nwire_twin import NWireSimConfig, TrackerRoute, tracker_route
-from brachycal.simulation.recording import RECORDING_FILES, Recording, RecordingConfig, record, write_recording
-from brachycal.simulation.study import STUDY_METHODS, RunParams, run_study, summarise, sweep
-from brachycal.simulation.targeting import TargetingResult, targeting_error
-from brachycal.simulation.twin import Twin, TwinConfig, simulate
-from brachycal.simulation.twin_files import TWIN_FILES, read_twin, write_twin
+from typing import TYPE_CHECKING
+
+from brachycal._lazy import attach
+
+if TYPE_CHECKING:  # imported on first use (each simulation loads the robot, SciPy and mink)
+    from brachycal.simulation.demo import DemoRun, run_demo
+    from brachycal.simulation.design import DESIGNS, compare_designs, evaluate_design
+    from brachycal.simulation.exact import SessionTruth, default_truth, exact_session
+    from brachycal.simulation.nwire_twin import NWireSimConfig, TrackerRoute, tracker_route
+    from brachycal.simulation.recording import RECORDING_FILES, Recording, RecordingConfig, record, write_recording
+    from brachycal.simulation.study import STUDY_METHODS, RunParams, run_study, summarise, sweep
+    from brachycal.simulation.targeting import TargetingResult, targeting_error
+    from brachycal.simulation.twin import Twin, TwinConfig, simulate
+    from brachycal.simulation.twin_files import TWIN_FILES, read_twin, write_twin
+
+__getattr__, __dir__ = attach(__name__, __file__)
 
 __all__ = [
     "DESIGNS",

@@ -27,6 +27,7 @@ from brachycal.calibration.uncertainty import landing_covariance, landing_jacobi
 from brachycal.errors import InputError
 from brachycal.model.robot import Robot
 from brachycal.planning import PlanSpec, plan_poses
+from brachycal.simulation.settings import DESIGNS
 from brachycal.simulation.targeting import targeting_error
 from brachycal.simulation.twin import TwinConfig, simulate
 from brachycal.validate import MAX_SEEDS, check_int
@@ -34,7 +35,6 @@ from brachycal.validate import MAX_SEEDS, check_int
 MECHANICAL_MINUTES = 5.0
 SECONDS_PER_SAMPLE = 10.0
 SPEED_SCALE = 0.25
-DESIGNS = ("grid 4x4x4", "grid 3x3x3", "random 64", "random 27", "optimal 27")
 
 
 def grid_offsets(points: int, edge_m: float) -> np.ndarray:

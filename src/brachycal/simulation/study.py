@@ -19,14 +19,21 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 
 from brachycal.calibration import calibrate
-from brachycal.calibration.chain import cross_validate, fit_chain, select_model
+from brachycal.calibration.chain import RobotAccuracy, cross_validate, fit_chain, select_model
 from brachycal.calibration.image_to_probe import METHODS
-from brachycal.errors import InputError
+from brachycal.calibration.sequential import CalibrationResult
+from brachycal.errors import DegenerateDataError, InputError
 from brachycal.model.robot import Robot
 from brachycal.planning import PlanSpec
 from brachycal.planning.spec import EDGE_RANGE_M
+from brachycal.simulation.settings import (
+    HELD_OUT_TORSO_TURN_RAD,
+    MAX_STUDY_RUNS,
+    ROBOT_ERROR_LEVELS,
+    STUDY_METHODS,
+)
 from brachycal.simulation.targeting import targeting_error
-from brachycal.simulation.twin import MAX_ANNOTATION_SD_PX, MAX_OUTLIER_RATE, TwinConfig, simulate
+from brachycal.simulation.twin import MAX_ANNOTATION_SD_PX, MAX_OUTLIER_RATE, Twin, TwinConfig, simulate
 from brachycal.validate import (
     MAX_GRID_POINTS,
     MAX_SEEDS,
@@ -37,13 +44,6 @@ from brachycal.validate import (
     check_range,
     check_seed,
 )
-
-#: Most simulated sessions one sweep may ask for: each takes seconds to minutes, so 10000 is days
-#: of computing on a workstation; more is a typo (and its list of runs alone could fill memory).
-MAX_STUDY_RUNS = 10_000
-
-#: Methods a study can run: the sequential registrations and the whole-chain fit.
-STUDY_METHODS = (*METHODS, "chain")
 
 
 @dataclass(frozen=True)
@@ -66,6 +66,7 @@ class RunParams:
     outlier_rate: float
     methods: tuple[str, ...]
     targets: int
+    robot_error: str = "well-built"
 
     def __post_init__(self) -> None:
         check_seed(self.seed, "seed")
@@ -79,6 +80,10 @@ class RunParams:
         if not self.methods or unknown or isinstance(self.methods, str):
             raise InputError(f"methods must be a tuple of {', '.join(STUDY_METHODS)}, got {self.methods!r}")
         check_int(self.targets, "targets", low=1, high=MAX_TARGETS)
+        if self.robot_error not in ROBOT_ERROR_LEVELS:
+            raise InputError(
+                f"unknown robot-error level {self.robot_error!r}; choose from {', '.join(ROBOT_ERROR_LEVELS)}"
+            )
 
 
 def sweep(
@@ -90,6 +95,7 @@ def sweep(
     outlier_rates: Sequence[float] = (0.0,),
     methods: tuple[str, ...] = ("kabsch", "scaled_uv"),
     targets: int = 30,
+    robot_errors: Sequence[str] = ("well-built",),
 ) -> list[RunParams]:
     """Every combination, seeds innermost (the order rows are reported in).
 
@@ -107,23 +113,32 @@ def sweep(
         ("annotation noises", annotation_px),
         ("sound speeds", sound_speed),
         ("outlier rates", outlier_rates),
+        ("robot-error levels", robot_errors),
     ):
         if len(values) == 0:
             raise InputError(f"the list of {name} is empty")
-    total = seeds * len(points) * len(edges_mm) * len(annotation_px) * len(sound_speed) * len(outlier_rates)
+    total = (
+        seeds
+        * len(points)
+        * len(edges_mm)
+        * len(annotation_px)
+        * len(sound_speed)
+        * len(outlier_rates)
+        * len(robot_errors)
+    )
     if total > MAX_STUDY_RUNS:
         raise InputError(
             f"the sweep has {total} simulated sessions (seeds x every combination); at most {MAX_STUDY_RUNS} "
             "(each takes seconds to minutes): sweep fewer values or seeds"
         )
-    combos = itertools.product(points, edges_mm, annotation_px, sound_speed, outlier_rates, range(seeds))
-    return [RunParams(seed, p, e, a, s, o, methods, targets) for p, e, a, s, o, seed in combos]
+    combos = itertools.product(robot_errors, points, edges_mm, annotation_px, sound_speed, outlier_rates, range(seeds))
+    return [RunParams(seed, p, e, a, s, o, methods, targets, level) for level, p, e, a, s, o, seed in combos]
 
 
 def run_one(params: RunParams) -> list[dict[str, object]]:
     """Simulate, calibrate and judge one session; one row per method."""
     robot = Robot.load()
-    base = TwinConfig()
+    base = TwinConfig().with_robot_error(params.robot_error)
     config = replace(
         base,
         seed=params.seed,
@@ -134,42 +149,91 @@ def run_one(params: RunParams) -> list[dict[str, object]]:
         spec=replace(PlanSpec(), points_per_axis=params.points_per_axis, edge_m=params.edge_mm * 1e-3),
     )
     twin = simulate(robot, config)
-    sequential = tuple(m for m in params.methods if m != "chain")
+    sequential = tuple(m for m in params.methods if m in METHODS)
     result = calibrate(twin.session, robot, sequential or ("scaled_uv",))
     rows = []
     for method in params.methods:
-        chosen = ""
-        if method == "chain":
-            choice = select_model(twin.session, robot, result)
-            fit = fit_chain(twin.session, robot, result, choice.model)
-            chosen = choice.model
-            hit = targeting_error(twin, fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image, params.targets).stats
-            loo = cross_validate(twin.session, robot, result, choice.model, folds=len(twin.session.uv_px))
-            tip = fit.T_ER_Ntip
-        else:
-            hit = targeting_error(twin, result.T_ER_Ntip, result.T_EL_Ptip, result.image[method], params.targets).stats
-            loo = result.loocv[method]
-            tip = result.T_ER_Ntip
+        try:
+            figures = _judge(twin, robot, result, method, params.targets)
+        except DegenerateDataError as exc:  # the method refuses this session: a finding, not a crash
+            figures = {"refused": exc.problem}
         rows.append(
             {
                 **{k: v for k, v in asdict(params).items() if k != "methods"},
                 "samples": len(twin.session.sample_ids),
                 "method": method,
-                "chain_model": chosen,
-                "loo_mae_mm": loo.mae_mm,
-                "loo_rmse_mm": loo.rmse_mm,
-                "loo_sd_mm": loo.sd_mm,
-                "loo_max_mm": loo.max_mm,
-                "target_mae_mm": hit.mae_mm,
-                "target_rmse_mm": hit.rmse_mm,
-                "target_sd_mm": hit.sd_mm,
-                "target_max_mm": hit.max_mm,
-                "needle_tip_error_mm": float(np.linalg.norm(tip[:3, 3] - twin.truth.T_ER_Ntip[:3, 3]) * 1e3),
+                **{key: figures.get(key, np.nan) for key in FIGURES},
+                "chain_model": figures.get("chain_model", ""),
+                "refused": figures.get("refused", ""),
                 "table1_needle_mae_mm": result.needle.validation.mae_mm,
                 "table1_probe_mae_mm": result.probe.validation.mae_mm,
             }
         )
     return rows
+
+
+#: The figures of one method on one session (NaN where the method refused the session).
+FIGURES = (
+    "cv_folds",
+    "loo_mae_mm",
+    "loo_rmse_mm",
+    "loo_sd_mm",
+    "loo_max_mm",
+    "target_mae_mm",
+    "target_rmse_mm",
+    "target_sd_mm",
+    "target_max_mm",
+    "target_held_out_mae_mm",
+    "target_held_out_max_mm",
+    "needle_tip_error_mm",
+)
+
+
+def _judge(twin: Twin, robot: Robot, result: CalibrationResult, method: str, targets: int) -> dict[str, object]:
+    """One method's calibration of the twin's session and its figures (:data:`FIGURES`)."""
+    session, software = twin.session, robot
+    n, chosen = len(session.uv_px), ""
+    if method == "chain":
+        chosen = select_model(session, robot, result).model
+        fit = fit_chain(session, robot, result, chosen, robot_accuracy=None)
+        loo = cross_validate(session, robot, result, chosen, folds=n)
+    if method == "chain+robot":  # K-fold over configurations: every fold identifies the robot again
+        from brachycal.calibration.robot_identification import (
+            IDENTIFICATION_FOLDS,
+            choose_and_identify,
+            cross_validate_identification,
+        )
+
+        config = twin.config
+        accuracy = RobotAccuracy(config.link_offset_sd_m, config.link_tilt_sd_rad, config.encoder_sd_rad)
+        choice, identified = choose_and_identify(session, robot, result, accuracy)
+        chosen = choice.model
+        fit, software, n = identified.fit, identified.robot(robot), IDENTIFICATION_FOLDS
+        loo = cross_validate_identification(session, robot, result, chosen, accuracy)[1]
+    if method in ("chain", "chain+robot"):
+        T_ER_Ntip, T_EL_Ptip, image = fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image
+    else:
+        T_ER_Ntip, T_EL_Ptip, image = result.T_ER_Ntip, result.T_EL_Ptip, result.image[method]
+        loo = result.loocv[method]
+    hit = targeting_error(twin, T_ER_Ntip, T_EL_Ptip, image, targets, software=software).stats
+    held_out = targeting_error(
+        twin, T_ER_Ntip, T_EL_Ptip, image, targets, software=software, torso_turn_rad=HELD_OUT_TORSO_TURN_RAD
+    ).stats
+    return {
+        "chain_model": chosen,
+        "cv_folds": n,
+        "loo_mae_mm": loo.mae_mm,
+        "loo_rmse_mm": loo.rmse_mm,
+        "loo_sd_mm": loo.sd_mm,
+        "loo_max_mm": loo.max_mm,
+        "target_mae_mm": hit.mae_mm,
+        "target_rmse_mm": hit.rmse_mm,
+        "target_sd_mm": hit.sd_mm,
+        "target_max_mm": hit.max_mm,
+        "target_held_out_mae_mm": held_out.mae_mm,
+        "target_held_out_max_mm": held_out.max_mm,
+        "needle_tip_error_mm": float(np.linalg.norm(T_ER_Ntip[:3, 3] - twin.truth.T_ER_Ntip[:3, 3]) * 1e3),
+    }
 
 
 def run_study(
@@ -245,8 +309,18 @@ def _check_reachable(scheduler: str) -> None:
 
 
 def summarise(rows: Sequence[dict[str, object]]) -> list[dict[str, object]]:
-    """Mean and SD over seeds for each parameter combination and method."""
-    keys = ("points_per_axis", "samples", "edge_mm", "annotation_px", "sound_speed", "outlier_rate", "method")
+    """Mean and SD over seeds for each parameter combination and method (sessions a method refused,
+    as :class:`~brachycal.errors.DegenerateDataError`, are counted in ``refused`` and left out)."""
+    keys = (
+        "robot_error",
+        "points_per_axis",
+        "samples",
+        "edge_mm",
+        "annotation_px",
+        "sound_speed",
+        "outlier_rate",
+        "method",
+    )
     groups: dict[tuple, list[dict[str, object]]] = {}
     for row in rows:
         groups.setdefault(tuple(row[k] for k in keys), []).append(row)
@@ -254,6 +328,7 @@ def summarise(rows: Sequence[dict[str, object]]) -> list[dict[str, object]]:
     for key, members in groups.items():
         entry: dict[str, object] = dict(zip(keys, key, strict=True))
         entry["seeds"] = len(members)
+        entry["refused"] = sum(1 for m in members if m.get("refused"))
         for figure in (
             "loo_mae_mm",
             "loo_rmse_mm",
@@ -261,11 +336,12 @@ def summarise(rows: Sequence[dict[str, object]]) -> list[dict[str, object]]:
             "target_mae_mm",
             "target_rmse_mm",
             "target_max_mm",
+            "target_held_out_mae_mm",
             "table1_needle_mae_mm",
             "table1_probe_mae_mm",
         ):
-            values = np.array([m[figure] for m in members], dtype=float)
-            entry[f"{figure}_mean"] = float(values.mean())
-            entry[f"{figure}_sd"] = float(values.std())
+            values = np.array([m[figure] for m in members if not m.get("refused")], dtype=float)
+            entry[f"{figure}_mean"] = float(values.mean()) if values.size else float("nan")
+            entry[f"{figure}_sd"] = float(values.std()) if values.size else float("nan")
         out.append(entry)
     return out

@@ -5,7 +5,9 @@ and its own random stream (so switching one source off does not change the other
 
 - ``kinematic_error``: the physical robot's joint origins differ from the URDF's — each joint is
   shifted (0.03 mm SD per axis), tilted (0.003° SD) and has a zero offset (0.003° SD). The error
-  is fixed for a robot (structured), not white; the tools end up 0.1–0.3 mm off.
+  is fixed for a robot (structured), not white; the tools end up 0.1–0.3 mm off. Named levels
+  (:data:`ROBOT_ERROR_LEVELS`, :meth:`TwinConfig.with_robot_error`): ``well-built`` (this
+  default), ``real-arm`` (0.1 mm / 0.01°) and ``worn`` (0.3 mm / 0.03°).
 - ``encoder_noise``: joint readings = true joints + 2e-5 rad SD (≈ 0.02 mm at 1 m).
 - ``jog_error``: a touched tool tip stops 0.05 mm SD per axis away from the reference tip.
 - ``annotation_noise``: the annotated pixel is off by 1.0 px SD per axis.
@@ -52,20 +54,17 @@ from brachycal.simulation.exact import (
     default_truth,
     touch,
 )
+from brachycal.simulation.settings import (
+    MAX_ANNOTATION_SD_PX,
+    MAX_OUTLIER_RATE,
+    ROBOT_ERROR_LEVELS,
+    SOUND_SPEED_RANGE_M_S,
+    WATER_SOUND_SPEED_M_S,
+)
 from brachycal.validate import MAX_IMAGE_PX, check_int, check_range, check_seed, check_vector
 
 #: The twin's random streams, one per error source (and the targets of the targeting error).
 STREAMS = ("robot", "tools", "jog", "encoder", "beam", "annotation", "outliers", "targets")
-
-#: Largest annotation noise SD, pixels: at 50 px (~1 cm at 0.19 mm/px) an image no longer locates
-#: the needle tip at all; a larger value is a typo.
-MAX_ANNOTATION_SD_PX = 50.0
-#: Largest fraction of gross annotation outliers: beyond half, no robust estimator can tell the
-#: outliers from the good samples (their breakdown point is at most 50 %).
-MAX_OUTLIER_RATE = 0.5
-#: Speeds of sound the twin may use, m/s: the media an ultrasound image shows (fat ~1450, water
-#: 1482, soft tissue 1540, muscle ~1580) lie well inside; bone and air are not imaged.
-SOUND_SPEED_RANGE_M_S = (1000.0, 2000.0)
 
 #: Range of each numeric noise setting of :class:`TwinConfig` (all SDs >= 0). The upper ends are
 #: typo guards some 100 times the defaults: beyond them the touches and IK of the twin are no
@@ -119,7 +118,7 @@ class TwinConfig:
     annotation_noise: bool = True
     annotation_sd_px: float = 1.0
     sound_speed: bool = True
-    sound_speed_m_s: float = 1482.0
+    sound_speed_m_s: float = WATER_SOUND_SPEED_M_S
     out_of_plane: bool = True
     beam_thickness_m: float = 0.6e-3
     outliers: bool = False
@@ -156,6 +155,18 @@ class TwinConfig:
             out_of_plane=False,
             outliers=False,
         )
+
+    def with_robot_error(self, level: str) -> TwinConfig:
+        """The same set-up with the physical robot off its URDF by a named level
+        (:data:`ROBOT_ERROR_LEVELS`).
+
+        Raises:
+            InputError: an unknown level.
+        """
+        if level not in ROBOT_ERROR_LEVELS:
+            raise InputError(f"unknown robot-error level {level!r}; choose from {', '.join(ROBOT_ERROR_LEVELS)}")
+        shift, tilt, zero = ROBOT_ERROR_LEVELS[level]
+        return replace(self, link_offset_sd_m=shift, link_tilt_sd_rad=tilt, joint_offset_sd_rad=zero)
 
     @property
     def axial_scale(self) -> float:

@@ -1,0 +1,119 @@
+"""Robot identification on the twin: targeting with and without it, over seeds and robot-error levels.
+
+Run: ``.venv/bin/python benchmarks/robot_identification.py [SEEDS] [LEVEL,...]`` (default 6 seeds,
+0–5, both levels; about 1.5 min per seed and level on 2 cores). A method that refuses a session
+(:class:`~brachycal.errors.DegenerateDataError`) is counted, with its reason, not averaged. For
+each robot-error level of the twin
+(:data:`brachycal.simulation.twin.ROBOT_ERROR_LEVELS`: ``real-arm`` 0.1 mm / 0.01° per joint,
+``worn`` three times that) and each method — the paper's rigid method (``kabsch``), the whole
+chain (``chain``), the whole chain with the robot identified (``chain+robot``, the level as its
+prior) — prints the mean and SD over seeds of:
+
+- the end-to-end targeting error (MAE over 30 targets in the prostate cube, from the sample poses);
+- the same at held-out configurations (torso turned 3°: postures the calibration never saw);
+- the cross-validated image error (LOO for the first two; 8-fold over configurations for
+  ``chain+robot``, every fold identifying the robot again).
+
+Issue 19's goal: end-to-end targeting ≤ 0.15 mm mean over seeds with identification. Each level's
+``chain+robot`` figures go to ``benchmarks/results.json`` (:func:`timing.record`).
+
+``--coverage N [LEVEL]``: how often the identified fit's stated 95 % regions contain the truth over
+N twin sessions (seeds 100…), the prior stated at the twin's own level: the needle and probe tips
+(3D ellipsoids) and the landing error at 20 targets per session (one ellipsoid per target, from
+:func:`~brachycal.calibration.uncertainty.landing_covariance` with the identified robot). A
+calibrated 95 % region covers 95 %; with 20 sessions, 16–20 of 20 is within binomial chance.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import numpy as np
+from timing import record
+
+from brachycal.simulation.study import run_study, sweep
+
+LEVELS = ("real-arm", "worn")
+METHODS = ("kabsch", "chain", "chain+robot")
+GOAL_MM = 0.15
+
+
+def main(seeds: int = 6, levels: tuple[str, ...] = LEVELS) -> None:
+    start = time.perf_counter()
+    runs = sweep(seeds, [4], [40.0], [1.0], methods=METHODS, targets=30, robot_errors=levels)
+    rows = run_study(runs, workers=2)
+    print(f"{len(runs)} twin sessions (seeds 0-{seeds - 1}) in {time.perf_counter() - start:.0f} s\n")
+    print(f"{'level':<10} {'method':<12} {'targeting MAE':>16} {'held-out MAE':>16} {'CV RMSE (image)':>18} refused")
+    for level in levels:
+        for method in METHODS:
+            every = [r for r in rows if r["robot_error"] == level and r["method"] == method]
+            chosen = [r for r in every if not r["refused"]]
+            refusals = sorted({str(r["refused"]) for r in every if r["refused"]})
+            figures = {
+                key: np.array([r[key] for r in chosen], dtype=float)
+                for key in ("target_mae_mm", "target_held_out_mae_mm", "loo_rmse_mm")
+            }
+            cells = [f"{v.mean():.3f} ± {v.std():.3f} mm" for v in figures.values()]
+            print(f"{level:<10} {method:<12} {cells[0]:>16} {cells[1]:>16} {cells[2]:>18} {len(every) - len(chosen)}")
+            for reason in refusals:
+                print(f"    refused: {reason}")
+            if method == "chain+robot":
+                for key, label in (("target_mae_mm", "targeting"), ("target_held_out_mae_mm", "held-out targeting")):
+                    baseline = np.nanmean(
+                        [r[key] for r in rows if r["robot_error"] == level and r["method"] == "chain"] + [np.nan]
+                    )
+                    value = float(figures[key].mean())
+                    record(
+                        f"robot identification, {level} twin: {label} MAE (mean of {seeds} seeds)",
+                        value,
+                        "mm",
+                        goal=f"<= {GOAL_MM} mm",
+                        met=value <= GOAL_MM,
+                        peer="whole chain without identification",
+                        peer_value=float(baseline),
+                    )
+
+
+def coverage(sessions: int, level: str = "real-arm") -> None:
+    from brachycal.calibration import calibrate
+    from brachycal.calibration.chain import RobotAccuracy
+    from brachycal.calibration.robot_identification import identify_robot
+    from brachycal.calibration.uncertainty import inside_ellipsoid, landing_covariance
+    from brachycal.model import Robot
+    from brachycal.simulation.targeting import targeting_error
+    from brachycal.simulation.twin import TwinConfig, simulate
+
+    robot = Robot.load()
+    tips = {"needle": 0, "probe": 0}
+    landed = targets = 0
+    for seed in range(100, 100 + sessions):
+        config = TwinConfig(seed=seed).with_robot_error(level)
+        twin = simulate(robot, config)
+        accuracy = RobotAccuracy(config.link_offset_sd_m, config.link_tilt_sd_rad, config.encoder_sd_rad)
+        identified = identify_robot(
+            twin.session, robot, calibrate(twin.session, robot, ("scaled_uv",)), "sound_speed", accuracy
+        )
+        fit, corrected = identified.fit, identified.robot(robot)
+        for tool, name, true in (
+            ("needle", "p_ER_Ntip", twin.truth.T_ER_Ntip[:3, 3]),
+            ("probe", "p_EL_Ptip", twin.truth.T_EL_Ptip[:3, 3]),
+        ):
+            k = fit.block(name)
+            tips[tool] += int(inside_ellipsoid(fit.x[k] - true, fit.covariance[k, k])[0])
+        hit = targeting_error(twin, fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image, 20, software=corrected)
+        C = landing_covariance(fit, corrected, twin.session.spacing_m, hit.q_read, hit.uv_px)
+        landed += int(inside_ellipsoid(hit.landed_m - hit.targets_m, C).sum())
+        targets += len(C)
+        print(f"seed {seed}: needle {tips['needle']}, probe {tips['probe']}, landing {landed}/{targets}", flush=True)
+    print(
+        f"\n{level} twin, prior = its level, {sessions} sessions: 95 % regions cover the needle tip "
+        f"{tips['needle']}/{sessions}, the probe tip {tips['probe']}/{sessions}, the landing error {landed}/{targets}"
+    )
+
+
+if __name__ == "__main__":
+    if len(sys.argv) > 1 and sys.argv[1] == "--coverage":
+        coverage(int(sys.argv[2]), sys.argv[3] if len(sys.argv) > 3 else "real-arm")
+        raise SystemExit(0)
+    main(int(sys.argv[1]) if len(sys.argv) > 1 else 6, tuple(sys.argv[2].split(",")) if len(sys.argv) > 2 else LEVELS)

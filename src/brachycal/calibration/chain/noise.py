@@ -1,0 +1,143 @@
+"""Noise levels of the chain's residual groups (touches, axes moves, images): estimated from the
+residuals with the degrees-of-freedom correction, and each group's share left to the session's
+noise once a stated robot accuracy is taken out (module docstring of :mod:`brachycal.calibration.chain`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from brachycal.calibration.chain.conditioning import RCOND_LIMIT
+from brachycal.se3 import FloatArray
+
+#: Starting noise levels (metres per coordinate) of the residual groups; also the level assumed
+#: for a group with too few residual degrees of freedom to estimate its own.
+INITIAL_SIGMA = {"touch": 1e-4, "axes": 1e-4, "image": 3e-4}
+GROUPS = ("touch", "axes", "image")
+#: Fewest residual degrees of freedom ν from which a group's noise level is estimated: the
+#: relative SD of the estimate is about 1/√(2ν), 25 % at ν = 8.
+MIN_NOISE_DOF = 8.0
+#: One micrometre: below anything this set-up resolves (encoder noise alone is ~20 µm at 1 m). A
+#: group's noise level is not taken below it (it weights the group), and a group whose residual
+#: scale is at it is reported as below resolution, not as a measured noise level.
+RESOLUTION_M = 1e-6
+
+
+@dataclass(frozen=True)
+class NoiseLevel:
+    """A residual group's noise level and where it comes from.
+
+    Attributes:
+        sd_m: noise SD per coordinate, metres (the weight the group gets).
+        dof: residual degrees of freedom of the group (its rows minus its leverages).
+        source: ``"residuals"`` (estimated from them), ``"assumed"`` (too few degrees of freedom;
+            see ``note``) or ``"below resolution"`` (the residuals are under :data:`RESOLUTION_M`).
+        note: one line a person can read.
+    """
+
+    sd_m: float
+    dof: float
+    source: str
+    note: str
+
+
+#: Reciprocal condition number (of the equilibrated ``J``) above which :func:`leverages` uses the
+#: Cholesky factor of ``JᵀJ``: its relative error, ~ε/rcond², is then below 1e-9 (the chain's
+#: sessions measure 7e-3 and up), and every singular value is far above the SVD's cut
+#: (:data:`RCOND_LIMIT`), which therefore would keep them all: the same hat matrix, 3× cheaper.
+CHOLESKY_RCOND = 1e-3
+
+
+def leverages(J: FloatArray) -> FloatArray:
+    """Diagonal of the hat matrix ``J (JᵀJ)⁺ Jᵀ`` (rows' leverages): from the Cholesky factor ``L`` of
+    ``JᵀJ`` (``h_i = |L⁻¹ j_i|²``) when ``J`` is well conditioned (:data:`CHOLESKY_RCOND`), else from an
+    SVD of ``J`` that leaves out the directions below :data:`RCOND_LIMIT`."""
+    norms = np.linalg.norm(J, axis=0)
+    live = norms > 0  # the hat matrix does not depend on the columns' scales: equilibrate them
+    A = J[:, live] / norms[live]
+    H = A.T @ A
+    eigenvalues = np.linalg.eigvalsh(H)
+    if eigenvalues.size and eigenvalues[0] > CHOLESKY_RCOND**2 * eigenvalues[-1]:
+        L = np.linalg.cholesky(H)
+        return np.sum(np.linalg.solve(L, A.T) ** 2, axis=0)
+    U, s, _ = np.linalg.svd(A, full_matrices=False)
+    rank = s > s[0] * RCOND_LIMIT if s.size and s[0] > 0 else np.zeros(s.size, dtype=bool)
+    return np.sum(U[:, rank] ** 2, axis=1)
+
+
+def noise_levels(
+    normalised: FloatArray,
+    J: FloatArray,
+    rows: dict[str, slice],
+    sigma: dict[str, float],
+    robust: bool,
+    *,
+    h: FloatArray | None = None,
+) -> dict[str, NoiseLevel]:
+    """Each group's noise level from its residuals, with the degrees-of-freedom correction.
+
+    ``normalised`` and ``J`` are the residuals and Jacobian of the weighted problem (rows divided
+    by ``sigma``). Final stage: ``σ_g² = Σ_g r_raw² / (n_g − Σ_g h_ii)``; robust stage: the same
+    correction applied to 1.4826 × the median absolute residual. Groups with fewer than
+    :data:`MIN_NOISE_DOF` residual degrees of freedom take an assumed level (see the module).
+    ``h`` are the rows' leverages when the problem is regularised (a prior's rows make them
+    ``J (JᵀJ + P)⁻¹ Jᵀ``, smaller than the least-squares ones :func:`leverages` gives from ``J``).
+    """
+    h = leverages(J) if h is None else np.asarray(h, dtype=float)
+    out: dict[str, NoiseLevel] = {}
+    for g in GROUPS:
+        raw = normalised[rows[g]] * sigma[g]
+        dof = float(raw.size - h[rows[g]].sum())
+        if dof < MIN_NOISE_DOF:
+            continue
+        if robust:
+            scale = 1.4826 * float(np.median(np.abs(raw))) * np.sqrt(raw.size / dof)
+        else:
+            scale = float(np.sqrt(np.sum(raw**2) / dof))
+        if scale < RESOLUTION_M:
+            note = f"below {RESOLUTION_M * 1e3:.3f} mm (resolution)"
+            out[g] = NoiseLevel(RESOLUTION_M, dof, "below resolution", note)
+        else:
+            out[g] = NoiseLevel(scale, dof, "residuals", f"{scale * 1e3:.3f} mm ({dof:.0f} residual dof)")
+    for g in GROUPS:
+        if g in out:
+            continue
+        dof = float(normalised[rows[g]].size - h[rows[g]].sum())
+        if g == "axes" and "touch" in out:
+            level, why = out["touch"].sd_m, "the touches' level"
+        else:
+            level, why = INITIAL_SIGMA[g], "the prior level"
+        out[g] = NoiseLevel(level, dof, "assumed", f"{level * 1e3:.3f} mm assumed ({why}: {dof:.0f} residual dof)")
+    return out
+
+
+def noise_share(
+    normalised: FloatArray,
+    J: FloatArray,
+    J_c: FloatArray,
+    robot_covariance: FloatArray,
+    rows: dict[str, slice],
+    noise: dict[str, NoiseLevel],
+) -> dict[str, float]:
+    """Each group's residual variance that the session's noise explains, as a fraction of its level.
+
+    The residuals of the weighted problem are ``(I − H)(n + J_c c)``: the robot's error adds
+    ``Σ_i [(I − H) J_c Σ_c J_cᵀ (I − H)]_ii`` (expected) to a group's residual sum of squares, on top
+    of the noise's ``σ² (n_g − Σ h_ii)``. The noise levels estimated from the residuals (the fit's
+    weights) contain both; the share ``(RSS_g − robot_g) / RSS_g`` (floored at 0: a stated accuracy
+    that explains all the scatter leaves no noise) is what the noise part of the covariance keeps,
+    so the robot's error is not counted twice. Groups with an assumed level keep it whole.
+    """
+    norms = np.linalg.norm(J, axis=0)
+    live = norms > 0
+    U, s, _ = np.linalg.svd(J[:, live] / norms[live], full_matrices=False)
+    U = U[:, s > s[0] * RCOND_LIMIT]
+    M = J_c - U @ (U.T @ J_c)  # (I − H) J_c
+    robot_rows = np.einsum("ij,jk,ik->i", M, robot_covariance, M)
+    out = {}
+    for g, part in rows.items():
+        rss = float(np.sum(normalised[part] ** 2))
+        keep = noise[g].source == "residuals" and rss > 0
+        out[g] = max(0.0, 1.0 - float(robot_rows[part].sum()) / rss) if keep else 1.0
+    return out
