@@ -30,6 +30,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/plan_speed.py
 	$(BIN)/python benchmarks/chain_checks.py
 	$(BIN)/python benchmarks/table3.py
+	$(BIN)/python benchmarks/robot_identification.py
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)

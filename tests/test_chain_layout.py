@@ -85,12 +85,14 @@ def _compared_strings(tree: ast.AST) -> list[tuple[int, str]]:
 
 
 def test_no_code_that_uses_the_chain_compares_image_model_names():
-    # The sequential registrations have methods of the same names (image_to_probe, registration):
-    # only modules that use the chain are held to the table.
+    # The sequential registrations have methods of the same names (image_to_probe, registration;
+    # registration borrows the chain's solver, not its models): only the other modules that use
+    # the chain are held to the table.
+    sequential_family = {"image_models.py", "registration.py", "image_to_probe.py"}
     offenders = []
     for path in sorted(SOURCE.rglob("*.py")):
         text = path.read_text()
-        if "calibration.chain" not in text or path.name == "image_models.py":
+        if "calibration.chain" not in text or path.name in sequential_family:
             continue
         offenders += [
             f"{path.relative_to(SOURCE)}:{line} {value!r}"

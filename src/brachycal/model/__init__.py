@@ -4,7 +4,9 @@ A configuration is ``(nq,)`` (or ``(N, nq)``) in :data:`JOINT_NAMES` order, radi
 ``(4, 4)`` ``T_base_frame`` arrays in metres (``p_base = T @ p_frame``). :func:`solve_ik` places one
 frame with one arm's axes (:data:`LEFT_ARM`, :data:`RIGHT_ARM`); :data:`READY` is the stance
 planning and the simulated sessions start from; :func:`collision_link_pairs` and
-:class:`ClearanceChecker` keep the links apart.
+:class:`ClearanceChecker` keep the links apart. Robots other than the SDA10F: a robot description
+(:func:`load_description`, :data:`BUNDLED_ROBOTS`, ``docs/robots.md``) builds the :class:`Robot` and
+its :class:`Rig` (which arm holds what, ready stance, collision pairs, workspace).
 """
 
 from typing import TYPE_CHECKING
@@ -13,6 +15,7 @@ from brachycal._lazy import attach
 
 if TYPE_CHECKING:  # imported on first use: the names need no Pinocchio, the Robot and its helpers do
     from brachycal.model.collision import ClearanceChecker, collision_link_pairs
+    from brachycal.model.description import BUNDLED_ROBOTS, Rig, RobotDescription, load_description
     from brachycal.model.ik import solve_ik
     from brachycal.model.names import (
         BASE,
@@ -36,6 +39,7 @@ __getattr__, __dir__ = attach(__name__, __file__)
 
 __all__ = [
     "BASE",
+    "BUNDLED_ROBOTS",
     "CONTROLLER_JOINT_NAMES",
     "JOINT_NAMES",
     "LEFT_ARM",
@@ -50,8 +54,11 @@ __all__ = [
     "TOP_MODEL_TIP",
     "US_IMAGE",
     "ClearanceChecker",
+    "Rig",
     "Robot",
+    "RobotDescription",
     "bundled_urdf_path",
     "collision_link_pairs",
+    "load_description",
     "solve_ik",
 ]

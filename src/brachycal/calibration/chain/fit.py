@@ -27,9 +27,11 @@ from brachycal.calibration.chain.noise import GROUPS, INITIAL_SIGMA, NoiseLevel,
 from brachycal.calibration.chain.problem import ChainProblem, Reweighted
 from brachycal.calibration.chain.result import ChainFit
 from brachycal.calibration.chain.robot_terms import DEFAULT_ROBOT_ACCURACY, RobotAccuracy, robot_jacobian_at
+from brachycal.calibration.chain.solver import MAX_ITERATIONS
 from brachycal.calibration.image_to_probe import ImageCalibration
 from brachycal.calibration.sequential import CalibrationResult
 from brachycal.data.session import Session
+from brachycal.errors import SolverError
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray
 
@@ -54,6 +56,8 @@ class FinalStage:
         noise: the groups' noise levels estimated at the last settling solve.
         keep: ``(N,)`` the image samples in the fit; ``outliers`` ``(N,)`` those flagged.
         residuals, jacobian: normalised residuals ``(M,)`` and their Jacobian ``(M, P)`` at ``x``.
+        converged: whether the last solve met its tolerance (checked after the conditioning, which
+            explains non-convergence on data that do not determine the unknowns).
     """
 
     x: FloatArray
@@ -63,6 +67,7 @@ class FinalStage:
     outliers: np.ndarray
     residuals: FloatArray
     jacobian: FloatArray
+    converged: bool = True
 
 
 @dataclass(frozen=True)
@@ -158,7 +163,7 @@ def final_stage(
         outliers = again
     # The estimate: to the last digit (the others only weight and flag).
     fit = problem.solve(x, sigma, keep, "linear", tol=1e-15, at=at)
-    return FinalStage(fit.x, sigma, noise, keep, outliers, fit.fun, fit.jac)
+    return FinalStage(fit.x, sigma, noise, keep, outliers, fit.fun, fit.jac, converged=fit.status != 0)
 
 
 def covariance_terms(problem: ChainProblem, final: FinalStage, robot_accuracy: RobotAccuracy | None) -> CovarianceTerms:
@@ -167,9 +172,12 @@ def covariance_terms(problem: ChainProblem, final: FinalStage, robot_accuracy: R
 
     Raises:
         DegenerateDataError: the data do not determine the unknowns (:func:`check_conditioning`).
+        SolverError: they do, but the final solve did not converge.
     """
     J, r = final.jacobian, final.residuals
     conditioning, noise_covariance = check_conditioning(J, problem.layout, problem.session, final.keep)
+    if not final.converged:  # determined, yet not at its minimum: no number to report
+        raise SolverError(f"whole chain: the least-squares solve did not converge in {MAX_ITERATIONS} steps")
     if robot_accuracy is None:
         return CovarianceTerms(conditioning, noise_covariance, noise_covariance)
     J_c = robot_jacobian_at(

@@ -70,7 +70,8 @@ class Solution:
             ``JᵀJ`` is the Gauss–Newton Hessian of the cost); the plain Jacobian for ``"linear"``.
         cost: the objective at ``x``.
         nfev, njev: residual and Jacobian evaluations.
-        status: 1 gtol, 2 ftol, 3 xtol (as SciPy), 4 no lower cost at rounding level.
+        status: 0 not converged in :data:`MAX_ITERATIONS` steps, 1 gtol, 2 ftol, 3 xtol (as SciPy),
+            4 no lower cost at rounding level.
     """
 
     x: FloatArray
@@ -108,7 +109,10 @@ def solve_least_squares(
     ``start`` their values at ``x0`` if already known (not evaluated again).
 
     Raises:
-        SolverError: the residuals are not finite, or no convergence in :data:`MAX_ITERATIONS` steps.
+        SolverError: the residuals are not finite at ``x0``. Without convergence in
+            :data:`MAX_ITERATIONS` steps it returns with ``status`` 0 (as SciPy at ``max_nfev``): on
+            data that do not determine the unknowns the conditioning check then gives the reason;
+            on data that do, :func:`~brachycal.calibration.chain.fit.covariance_terms` refuses it.
     """
     if loss not in ("linear", "soft_l1"):
         raise ValueError(f"unknown loss {loss!r}")
@@ -126,7 +130,7 @@ def solve_least_squares(
     scale[scale == 0] = 1.0
     damping = 0.0
     status = 0
-    for _ in range(MAX_ITERATIONS):  # as SciPy's max_nfev: the conditioning check judges what is returned
+    for _ in range(MAX_ITERATIONS):
         A = J_s / scale
         g = A.T @ f_s
         if np.max(np.abs(g), initial=0.0) < tol:
