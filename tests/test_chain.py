@@ -342,8 +342,10 @@ def test_samples_without_spread_are_refused(robot, stretched):
     uv = twin.session.uv_px
     patch = _subset(twin.session, np.argsort(np.linalg.norm(uv - uv[0], axis=1))[:4])  # 4 images within ~2 px
     limit = f"limit {np.degrees(ROTATION_SD_LIMIT):.1f}"
-    with pytest.raises(DegenerateDataError, match=f"image rotation is determined only to .*{limit}"):
+    with pytest.raises(DegenerateDataError, match=f"image rotation is determined only to .*{limit}") as refused:
         fit_chain(patch, robot, sequential, "rigid")
+    # Both causes are named: too little spread, and a robot off its URDF (issue 19's remedy).
+    assert "--identify-robot" in str(refused.value) and "spread over the image" in str(refused.value)
     one_pose = _subset(twin.session, np.zeros(64, dtype=int))  # and pixels scattered by 1 px
     jitter = replace(one_pose, uv_px=uv[0] + np.random.default_rng(0).normal(size=(64, 2)))
     with pytest.raises(DegenerateDataError, match=r"samples\.csv"):

@@ -30,7 +30,7 @@ def plan_figure(plan: Plan) -> Figure:
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("y (mm)")
     ax.set_zlabel("z (mm)")
-    ax.set_title(f"{len(plan.poses)} needle-tip targets in base_link")
+    ax.set_title(f"{len(plan.poses)} needle-tip targets in the robot's base frame")
     ax.legend(loc="upper left", fontsize=8)
 
     ax2 = fig.add_subplot(1, 2, 2)

@@ -89,7 +89,8 @@ def check_conditioning(
             layout,
             [blocks[worst].start],
             f"is determined only to {np.degrees(rotation_sd[worst]):.1f}° SD "
-            f"(limit {np.degrees(ROTATION_SD_LIMIT):.1f}°, where linearised intervals stop holding)",
+            f"(limit {np.degrees(ROTATION_SD_LIMIT):.1f}°, where linearised intervals stop holding; a robot far "
+            "off its URDF scatters the data this way too: calibrate --identify-robot estimates it)",
             session,
             used,
         )
