@@ -20,13 +20,11 @@ run with ``OMP_NUM_THREADS=1`` to compare (the problems are small: one thread is
 
 from __future__ import annotations
 
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
-from timing import best_of, record
+from timing import best_of, best_wall, brachycal_command, record
 
 from brachycal.calibration import calibrate
 from brachycal.calibration.chain import cross_validate, fit_chain, select_model
@@ -41,20 +39,9 @@ GOAL_S = 2.0
 def end_to_end(method: str, repeats: int = 3) -> float:
     """Best wall time of ``brachycal calibrate`` on the example session with ``--method``, in a new
     process, seconds."""
-    script = Path(sys.executable).with_name("brachycal")
-    command = [str(script)] if script.exists() else [sys.executable, "-m", "brachycal.cli.main"]
-    times = []
     with tempfile.TemporaryDirectory() as tmp:
         argv = ["calibrate", str(SESSION), "--out", str(Path(tmp) / "r.json"), "--method", method, "--force", "--quiet"]
-        for _ in range(repeats):
-            start = time.perf_counter()
-            subprocess.run(
-                [*command, *argv],
-                check=True,
-                stdout=subprocess.DEVNULL,
-            )
-            times.append(time.perf_counter() - start)
-    return min(times)
+        return best_wall([*brachycal_command(), *argv], repeats)
 
 
 #: What ``calibrate --method chain`` imports before it computes (the command line, the robot model, the
@@ -67,12 +54,7 @@ STARTUP_IMPORTS = (
 
 def startup(repeats: int = 3) -> float:
     """Best wall time of a new Python process that only imports :data:`STARTUP_IMPORTS`, seconds."""
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        subprocess.run([sys.executable, "-c", STARTUP_IMPORTS], check=True)
-        times.append(time.perf_counter() - start)
-    return min(times)
+    return best_wall([sys.executable, "-c", STARTUP_IMPORTS], repeats)
 
 
 def stages(repeats: int = 3) -> None:

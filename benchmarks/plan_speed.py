@@ -12,14 +12,12 @@ Run: ``.venv/bin/python benchmarks/plan_speed.py``. Two figures:
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-from timing import best_of, record
+from timing import best_of, best_wall, brachycal_command, record
 
 from brachycal.model import Robot
 from brachycal.planning import PlanSpec, plan_poses
@@ -33,19 +31,9 @@ GOAL_S = 1.5
 
 def end_to_end(repeats: int = 3) -> float:
     """Best wall time of ``brachycal plan`` with the default grid, in a new process, seconds."""
-    script = Path(sys.executable).with_name("brachycal")
-    command = [str(script)] if script.exists() else [sys.executable, "-m", "brachycal.cli.main"]
-    times = []
     with tempfile.TemporaryDirectory() as tmp:
-        for _ in range(repeats):
-            start = time.perf_counter()
-            subprocess.run(
-                [*command, "plan", "--out", str(Path(tmp) / "plan.csv"), "--force", "--quiet"],
-                check=True,
-                stdout=subprocess.DEVNULL,
-            )
-            times.append(time.perf_counter() - start)
-    return min(times)
+        argv = ["plan", "--out", str(Path(tmp) / "plan.csv"), "--force", "--quiet"]
+        return best_wall([*brachycal_command(), *argv], repeats)
 
 
 def main() -> None:

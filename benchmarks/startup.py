@@ -11,10 +11,8 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import time
-from pathlib import Path
 
-from timing import record
+from timing import best_wall, brachycal_command, record
 
 from brachycal.cli.main import COMMANDS
 
@@ -23,22 +21,6 @@ GOAL_S = 0.35
 #: The libraries a ``--help`` should not need (each takes 0.1-0.5 s to import).
 HEAVY = ("pinocchio", "scipy", "mink", "matplotlib")
 REPEATS = 5
-
-
-def _command() -> list[str]:
-    """The installed ``brachycal`` script next to this Python, else ``python -m brachycal.cli.main``."""
-    script = Path(sys.executable).with_name("brachycal")
-    return [str(script)] if script.exists() else [sys.executable, "-m", "brachycal.cli.main"]
-
-
-def best_wall(argv: list[str]) -> float:
-    """Shortest wall time of :data:`REPEATS` runs of ``argv`` in a new process, seconds."""
-    times = []
-    for _ in range(REPEATS):
-        start = time.perf_counter()
-        subprocess.run(argv, check=True, stdout=subprocess.DEVNULL)
-        times.append(time.perf_counter() - start)
-    return min(times)
 
 
 def heavy_imports(words: list[str]) -> list[str]:
@@ -55,22 +37,11 @@ def heavy_imports(words: list[str]) -> list[str]:
 
 
 def main() -> None:
-    peer = best_wall([sys.executable, "-c", "pass"])
-    command = _command()
-    value = best_wall([*command, "--help"])
-    loaded = heavy_imports(["--help"])
-    record(
-        "startup: brachycal --help",
-        value,
-        "s",
-        goal=f"<= {GOAL_S} s, no {'/'.join(HEAVY)}" + (f" (loads {', '.join(loaded)})" if loaded else ""),
-        met=value <= GOAL_S and not loaded,
-        peer="python -c pass",
-        peer_value=peer,
-    )
-    for name in COMMANDS:
-        words = [name, "build", "--help"] if name == "session" else [name, "--help"]
-        value = best_wall([*command, *words])
+    peer = best_wall([sys.executable, "-c", "pass"], REPEATS)
+    command = brachycal_command()
+    every = [["--help"]] + [[name, "build", "--help"] if name == "session" else [name, "--help"] for name in COMMANDS]
+    for words in every:
+        value = best_wall([*command, *words], REPEATS)
         loaded = heavy_imports(words)
         record(
             f"startup: brachycal {' '.join(words)}",

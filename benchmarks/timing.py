@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 import os
 import platform
+import subprocess
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -20,6 +22,17 @@ def best_of(repeats: int, fn: Callable[[], object]) -> float:
         fn()
         times.append(time.perf_counter() - start)
     return min(times)
+
+
+def brachycal_command() -> list[str]:
+    """The installed ``brachycal`` script next to this Python, else ``python -m brachycal.cli.main``."""
+    script = Path(sys.executable).with_name("brachycal")
+    return [str(script)] if script.exists() else [sys.executable, "-m", "brachycal.cli.main"]
+
+
+def best_wall(argv: list[str], repeats: int = 3) -> float:
+    """Shortest wall time of ``repeats`` runs of ``argv`` in a new process each, seconds (start-up included)."""
+    return best_of(repeats, lambda: subprocess.run(argv, check=True, stdout=subprocess.DEVNULL))
 
 
 def machine() -> dict[str, object]:
