@@ -118,7 +118,6 @@ class RobotIdentification:
             (module docstring), its robot term the remaining robot error ``c − ĉ``.
         identifiability: the base-set analysis.
         posterior: ``(P + 6 nq, P + 6 nq)`` joint covariance of ``(θ, c)``.
-        image_sigma_before_m: the image residuals' level before identification (metres per coordinate).
     """
 
     corrections: FloatArray
@@ -127,7 +126,6 @@ class RobotIdentification:
     fit: ChainFit
     identifiability: Identifiability
     posterior: FloatArray
-    image_sigma_before_m: float
 
     def robot(self, nominal: Robot) -> Robot:
         """The corrected robot (``nominal`` must be the robot the session was calibrated with)."""
@@ -204,7 +202,6 @@ def identify_robot(
         fit,
         identifiability(A[: -len(scale)], len(fit.x), scale, posterior, robot.joint_names),
         posterior,
-        first.sigma["image"],
     )
 
 
@@ -261,10 +258,11 @@ class _Identification:
         """Gauss–Newton on ``(x, c)`` with the prior rows; returns x, c and the augmented Jacobian
         ``A`` (data rows, then the prior's; the robot columns in prior units, ``J_c · scale``)."""
         session, layout, base, keep, scale = self.session, self.layout, self.base, self.keep, self.scale
-        data = self.data(c)
+        corrected = self.corrected(c)
+        data = ChainData.of(session, corrected)
         r = chain_residuals(x, layout, data, base, sigma, keep)
         J_x = chain_jacobian(x, layout, data, base, sigma, keep)
-        J_c = robot_jacobian_at(session, corrected_robot(self.nominal, c.reshape(-1, 6)), layout, x, base, sigma, keep)
+        J_c = robot_jacobian_at(session, corrected, layout, x, base, sigma, keep)
         prior_rows = np.hstack([np.zeros((len(scale), len(x))), np.eye(len(scale))])
         A = np.vstack([np.hstack([J_x, J_c * scale]), prior_rows])
         for k in range(iterations):
