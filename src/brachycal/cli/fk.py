@@ -20,6 +20,7 @@ from brachycal.validate import name_list
 if TYPE_CHECKING:
     import numpy as np
 
+    from brachycal.data.pose_table import BackgroundPoseWriter
     from brachycal.model import Robot
 
 DEFAULT_TOPIC = "/joint_states"  # = brachycal.data.bags.DEFAULT_TOPIC, here so that --help imports no data module
@@ -80,6 +81,11 @@ def log_blocks(path: Path, robot: Robot, topic: str, quiet: bool) -> Iterator[tu
     from brachycal.data.bags import bag_log_blocks, is_bag
     from brachycal.data.csv_log import csv_log_blocks
 
+    if quiet:  # no bar: tqdm not even imported
+        bag = is_bag(path)
+        for block, q in bag_log_blocks(path, robot, topic) if bag else csv_log_blocks(path, robot):
+            yield block.time, q
+        return
     if is_bag(path):
         with progress_bar(0, "reading bag", quiet) as bar:
             bar.unit = "msg"
@@ -99,8 +105,7 @@ def log_blocks(path: Path, robot: Robot, topic: str, quiet: bool) -> Iterator[tu
 
 def run(args: argparse.Namespace) -> int:
     from brachycal.data import read_times
-    from brachycal.data.joint_log import interpolate_blocks
-    from brachycal.data.pose_table import PoseTableWriter
+    from brachycal.data.pose_table import BackgroundPoseWriter, PoseTableWriter
     from brachycal.errors import InputError
 
     robot = load_robot(args)
@@ -108,25 +113,39 @@ def run(args: argparse.Namespace) -> int:
     for frame in frames:
         robot.frame_id(frame)
     out = Path(args.out)
-    samples = 0
     with OutputSet(force=args.force) as outputs:
         staged = outputs.claim(out, label="--out")
         if not Path(args.log).exists():  # here, not when the first block is asked for: before --times is read
             raise InputError("no such file or folder", file=args.log)
         blocks = log_blocks(Path(args.log), robot, args.topic, args.quiet)
         times = read_times(args.times) if args.times else None
-        with open(staged, "w", newline="") as handle:
-            writer = PoseTableWriter(handle, frames, continuity=args.quaternion_continuity)
-            if times is None:
-                for time, q in blocks:
-                    writer.write(time, robot.fk_frames(frames, q))
-                    samples += len(time)
-            else:
-                Q = interpolate_blocks(blocks, times, source=args.log)
-                step = 16_384  # poses of this many times at once: a few MB
-                for start in range(0, len(times), step):
-                    writer.write(times[start : start + step], robot.fk_frames(frames, Q[start : start + step]))
-                samples = len(times)
+        with open(staged, "wb") as handle:
+            # Formatted and written in a thread while the next block is computed (BackgroundPoseWriter).
+            writer = BackgroundPoseWriter(PoseTableWriter(handle, frames, continuity=args.quaternion_continuity))
+            with writer:
+                _compute(robot, frames, blocks, times, writer, args.log)
+            samples = len(times) if times is not None else writer.writer.rows // len(frames)
     if not args.quiet:
         print(f"wrote {samples * len(frames)} poses ({samples} samples x {len(frames)} frames) to {out}")
     return 0
+
+
+def _compute(
+    robot: Robot,
+    frames: list[str],
+    blocks: Iterator[tuple[np.ndarray, np.ndarray]],
+    times: np.ndarray | None,
+    writer: BackgroundPoseWriter,
+    source: str,
+) -> None:
+    """Poses of ``frames`` for every sample of ``blocks`` (or at ``times`` ``(M,)`` s, interpolated), to ``writer``."""
+    from brachycal.data.joint_log import interpolate_blocks
+
+    if times is None:
+        for time, q in blocks:
+            writer.write(time, robot.fk_frames(frames, q))
+        return
+    Q = interpolate_blocks(blocks, times, source=source)
+    step = 16_384  # poses of this many times at once: a few MB
+    for start in range(0, len(times), step):
+        writer.write(times[start : start + step], robot.fk_frames(frames, Q[start : start + step]))

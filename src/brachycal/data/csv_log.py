@@ -385,18 +385,23 @@ def csv_log_blocks(
     :class:`~brachycal.data.joint_log.JointLogChecker`), including time increasing across blocks;
     the last block is followed by the check that the log is not empty and the one warning about
     readings a hair beyond a joint limit. ``progress(n)`` is called with the bytes read by each block.
-    The next block is read (parsed) in a background thread (:func:`prefetched`) while the caller
-    works on this one; the checks run in the caller's thread, so refusals and warnings are raised
-    there.
+    The next block is read (parsed) and checked in a background thread (:func:`prefetched`) while
+    the caller works on this one; a refusal is raised in the caller's thread when it reaches the
+    block (the blocks before it are the caller's as without the thread), and the warning, given by
+    :meth:`~brachycal.data.joint_log.JointLogChecker.finish` after the last block, is given there too.
 
     Raises:
         InputError: one line naming the file, row and column of the first problem.
     """
     with open_csv_log(path, robot) as log:
         checker = JointLogChecker(robot, log.joints, source=str(log.path))
+
+        def checked() -> Iterator[tuple[LogBlock, FloatArray]]:
+            for block in log.blocks(block_bytes):
+                yield block, checker.check(block.time, block.values, block.rows)
+
         done = 0
-        for block in prefetched(log.blocks(block_bytes)):
-            q = checker.check(block.time, block.values, block.rows)
+        for block, q in prefetched(checked()):
             if progress is not None:
                 progress(block.done - done)
             done = block.done

@@ -17,10 +17,13 @@ tests against Python's formatting), an order of magnitude faster than formatting
 
 from __future__ import annotations
 
+import io
 import os
+import queue
+import threading
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import IO
+from typing import IO, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -46,9 +49,10 @@ def _digits(n: np.ndarray, count: int) -> np.ndarray:
     groups = -(-count // 4)
     out = np.empty((len(n), groups), dtype=np.uint32)
     rest = n
-    for g in range(groups - 1, -1, -1):
+    for g in range(groups - 1, 0, -1):
         rest, four = np.divmod(rest, 10_000)
         out[:, g] = _DIGITS4[four]
+    out[:, 0] = _DIGITS4[rest]  # n < 10**count <= 10**(4 groups): what is left is below 10,000
     return out.view(np.uint8)[:, 4 * groups - count :]
 
 
@@ -149,36 +153,54 @@ def _position_quaternion(T_base_frames: FloatArray) -> tuple[FloatArray, FloatAr
 
 
 class PoseTableWriter:
-    """Writes a pose table block by block to an open text file (header first).
+    """Writes a pose table block by block to an open file (header first).
 
     Args:
-        handle: text file opened for writing (``newline=""``).
+        handle: file opened for writing: binary (the rows go as they are formatted, ASCII bytes:
+            ``brachycal fk``), or text with ``newline=""`` (decoded first).
         frames: ``(F,)`` frame names, the order of the rows of each time.
         continuity: quaternion sign continuity (see the module docstring); default qw ≥ 0.
     """
 
-    def __init__(self, handle: IO[str], frames: Sequence[str], *, continuity: bool = False) -> None:
+    def __init__(self, handle: IO[str] | IO[bytes], frames: Sequence[str], *, continuity: bool = False) -> None:
         self.handle = handle
         self.frames = list(frames)
         self.continuity = continuity
         self.rows = 0
+        self._binary = not isinstance(handle, io.TextIOBase)
         self._previous: list[FloatArray | None] = [None] * len(self.frames)
         self._names = [np.frombuffer(f",{f},".encode(), dtype=np.uint8) for f in self.frames]
-        handle.write(",".join(HEADER) + "\n")
+        self._put((",".join(HEADER) + "\n").encode("ascii"))
+
+    def _put(self, text: bytes) -> None:
+        if self._binary:
+            cast("IO[bytes]", self.handle).write(text)
+        else:
+            cast("IO[str]", self.handle).write(text.decode("ascii"))
 
     def write(self, time: ArrayLike, T_base_frames: ArrayLike) -> None:
         """Append the rows of ``time`` ``(N,)`` seconds and ``T_base_frames`` ``(F, N, 4, 4)`` (metres)."""
+        self.write_numbers(*self.numbers(time, T_base_frames))
+
+    def numbers(self, time: ArrayLike, T_base_frames: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """``(time (N,), numbers (F, N, 7))``: the rows' numbers, position (metres) then quaternion (x, y,
+        z, w) with this table's sign convention; the blocks must be taken in order (continuity)."""
         time = np.asarray(time, dtype=float).reshape(-1)
         poses = np.asarray(T_base_frames, dtype=float)
         if len(time) == 0:
-            return
+            return time, np.zeros((len(self.frames), 0, 7))
         position, quat = _position_quaternion(poses)  # (F, N, 3), (F, N, 4)
         if self.continuity:
             for k in range(len(self.frames)):
                 quat[k] = continuous_signs(quat[k], self._previous[k])
                 self._previous[k] = quat[k, -1].copy()
+        return time, np.concatenate([position, quat], axis=2)
+
+    def write_numbers(self, time: FloatArray, numbers: FloatArray) -> None:
+        """Append the rows of :meth:`numbers`' output."""
         n, frames = len(time), len(self.frames)
-        numbers = np.concatenate([position, quat], axis=2)  # (F, N, 7)
+        if n == 0:
+            return
         texts = [format_fixed(time, DECIMALS[0])[None].repeat(frames, axis=0)]  # (F, N, width) each
         texts += [format_fixed(numbers[:, :, c].reshape(-1), DECIMALS[c + 1]).reshape(frames, n, -1) for c in range(7)]
         # A row: time ",frame," x "," y "," z "," qx "," qy "," qz "," qw "\n", right-aligned in one width
@@ -199,8 +221,76 @@ class PoseTableWriter:
                 at += text.shape[2]
             block[:, k, at] = ord("\n")
         flat = block.reshape(-1)
-        self.handle.write(flat[flat != _PAD].tobytes().decode("ascii"))
+        self._put(flat[flat != _PAD].tobytes())
         self.rows += len(time) * len(self.frames)
+
+
+class BackgroundPoseWriter:
+    """A :class:`PoseTableWriter` whose blocks are formatted and written in a worker thread, in order.
+
+    ``brachycal fk`` computes block k + 1 while block k is turned into text: the formatting is
+    NumPy work on large arrays and the file writes are I/O, both mostly without the GIL, so on a
+    second core they take the writing off the command's path (the log's parsing is a third thread,
+    :func:`~brachycal.data.csv_log.prefetched`). :meth:`write` takes the quaternions in the caller's
+    thread (:meth:`PoseTableWriter.numbers`, ~20 % of a block's writing) so that the two threads'
+    shares of a block are about even; the worker formats and writes (:meth:`PoseTableWriter.write_numbers`).
+    The text is the same as :meth:`PoseTableWriter.write`'s: one worker, blocks in the order given.
+
+    Use as a context manager: leaving it normally waits for every block to be written; leaving it
+    by an exception (a refusal, SIGTERM) drops the blocks not yet written and waits only for the one
+    being written. An exception of the worker (e.g. ``OSError``: disk full) is raised in the
+    caller's thread by the next :meth:`write` or on leaving.
+
+    Args:
+        writer: the writer the blocks go to.
+        depth: blocks waiting at most (each ``F × N`` poses: a few MB); :meth:`write` waits beyond it.
+    """
+
+    _DONE = None
+
+    def __init__(self, writer: PoseTableWriter, depth: int = 2) -> None:
+        self.writer = writer
+        self._queue: queue.Queue[tuple[FloatArray, FloatArray] | None] = queue.Queue(maxsize=depth)
+        self._stop = threading.Event()
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._work, name="brachycal-pose-writer", daemon=True)
+
+    def _work(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is self._DONE:
+                return
+            if self._stop.is_set() or self._error is not None:
+                continue  # drain: the caller is leaving, or a block failed (its error is raised there)
+            try:
+                self.writer.write_numbers(*item)
+            except BaseException as exc:  # handed to the caller's thread
+                self._error = exc
+
+    def _raise_error(self) -> None:
+        if self._error is not None:
+            error, self._error = self._error, None
+            self._stop.set()
+            raise error
+
+    def write(self, time: ArrayLike, T_base_frames: ArrayLike) -> None:
+        """Queue the rows of ``time`` ``(N,)`` seconds and ``T_base_frames`` ``(F, N, 4, 4)`` (metres);
+        ``time`` must not be changed afterwards (it is written later)."""
+        self._raise_error()
+        # The quaternions here, the text there: the two threads' shares of a block's work are about even.
+        self._queue.put(self.writer.numbers(time, T_base_frames))
+
+    def __enter__(self) -> BackgroundPoseWriter:
+        self._thread.start()
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, *exc: object) -> None:
+        if kind is not None:
+            self._stop.set()
+        self._queue.put(self._DONE)  # the worker drains the queue, so this cannot wait for long
+        self._thread.join()
+        if kind is None:
+            self._raise_error()
 
 
 def write_pose_table(
