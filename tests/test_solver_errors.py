@@ -93,11 +93,11 @@ def _true_image(twin):
 
 
 #: Each retry loop: where its solve_ik is looked up, how to run it, how many attempts it makes
-#: when every one fails (approaches turned 0, ±20, ±40, ±60°; five nearest sample poses; 12
-#: hand–eye turns of three sizes each), and the words of its final failure.
+#: when every one fails (approaches turned 0, ±20, ..., ±160, 180°: exact.TURNS_DEG; five nearest
+#: sample poses; 12 hand–eye turns of three sizes each), and the words of its final failure.
 LOOPS = [
-    ("touch", exact, _touch, 7, "cannot touch the reference tip"),
-    ("axes", exact, _axes, 7, "cannot make the three-point moves"),
+    ("touch", exact, _touch, len(exact.TURNS_DEG), "cannot touch the reference tip"),
+    ("axes", exact, _axes, len(exact.TURNS_DEG), "cannot make the three-point moves"),
     ("targeting", targeting, _targeting, 5, "no configuration"),
     ("hand-eye", nwire_twin, _hand_eye, 36, "only 0 of 12 probe turns are reachable"),
 ]

@@ -77,7 +77,8 @@ def check_transform(
     Args:
         T: ``(*, 4, 4)`` homogeneous transform(s), any units for the translation.
         name: what the value is (``"ProbeToTracker"``, ``"--pose"``), for the error.
-        file, row: where it was read from, for the error.
+        file: the file it was read from, for the error.
+        row: the row it was read from, for the error.
         tolerance: largest accepted ``|RᵀR − I|`` entry and ``|det R − 1|``.
 
     Returns:
@@ -361,7 +362,11 @@ def parse_number_list(
         name: the option, for the error.
         count: exact number of items required (None: 1 to ``max_items``).
         kind: ``float`` or ``int`` (whole numbers).
-        low, high, low_open, high_open, unit: range of each item, as :func:`check_range`.
+        low: range of each item, as :func:`check_range`.
+        high: as ``low``.
+        low_open: as ``low``.
+        high_open: as ``low``.
+        unit: as ``low``.
     """
     items = [item.strip() for item in str(text).split(",")]
     if count is not None and len(items) != count:

@@ -4,11 +4,21 @@ Transforms are 4×4 row-major lists in metres. Besides the keys of the conventio
 (``transforms``, ``mechanical``, ``loocv``, ``inputs``), the file carries the pixel spacing each
 registration method goes with (``spacing_mm``), the reference tips, fit residuals, the samples'
 names, the tool-axes angles, and the software versions that produced it.
+
+``robot`` (a key added with robot descriptions; the format stays ``brachycal-result/1``, as the
+conventions allow added keys) records which robot the result was calibrated with: the
+description's ``name`` (``--robot``), its file and SHA-256, the SHA-256 of the URDF text the model
+was built from and the configuration's joint names. :meth:`StoredCalibration.software_robot`
+refuses a robot of another name or other joints (its flanges are other links: the transforms would
+be applied to the wrong arm), and warns when the description file changed since. Files written
+before it (no ``robot`` key; ``robot_model`` only) are read as they are: the SDA10F was then the
+only robot, and nothing is checked.
 """
 
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -17,8 +27,8 @@ import numpy as np
 from brachycal.calibration.image_to_probe import METHODS, ImageCalibration
 from brachycal.calibration.sequential import CalibrationResult
 from brachycal.data.json_files import read_format_json
-from brachycal.errors import InputError
-from brachycal.files import write_json
+from brachycal.errors import BrachycalWarning, InputError
+from brachycal.files import sha256_bytes, sha256_file, write_json
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray
 from brachycal.validate import MAX_IMAGE_PX, check_int, check_spacing_mm, check_transform
@@ -26,8 +36,66 @@ from brachycal.validate import MAX_IMAGE_PX, check_int, check_spacing_mm, check_
 FORMAT = "brachycal-result/1"
 
 
-def to_json(result: CalibrationResult, *, robot_source: str = "", robot_sha256: str = "", chain=None) -> dict:
+@dataclass(frozen=True)
+class RobotRecord:
+    """Which robot a result was calibrated with (the result file's ``robot`` block).
+
+    Attributes:
+        name: the description's name (``--robot NAME``).
+        description: the description file it was read from.
+        description_sha256: SHA-256 of that file's bytes ("" if it could not be read).
+        urdf_sha256: SHA-256 of the URDF text the model was built from (tool frames included).
+        joint_names: the configuration's columns, in order.
+    """
+
+    name: str
+    description: str
+    description_sha256: str
+    urdf_sha256: str
+    joint_names: tuple[str, ...]
+
+    @classmethod
+    def of(cls, robot: Robot) -> RobotRecord:
+        """The record of ``robot`` (its rig: :attr:`Robot.rig`)."""
+        rig = robot.rig
+        try:
+            description_sha256 = sha256_file(rig.source)
+        except OSError:  # a rig whose file is gone: the name and the URDF still say which robot
+            description_sha256 = ""
+        return cls(rig.name, str(rig.source), description_sha256, sha256_bytes(robot.urdf_xml), robot.joint_names)
+
+    def as_json(self) -> dict[str, object]:
+        return {
+            "name": self.name,
+            "description": self.description,
+            "description_sha256": self.description_sha256,
+            "urdf_sha256": self.urdf_sha256,
+            "joint_names": list(self.joint_names),
+        }
+
+    @property
+    def option(self) -> str:
+        """The ``--robot`` argument that loads it again: the bundled name (a description read from
+        brachycal's ``robots/<name>.toml``, wherever brachycal was installed), else the description file."""
+        from brachycal.model.description import BUNDLED_ROBOTS
+
+        bundled = self.name in BUNDLED_ROBOTS and Path(self.description).parts[-2:] == ("robots", f"{self.name}.toml")
+        return self.name if bundled else self.description
+
+
+def to_json(
+    result: CalibrationResult,
+    *,
+    robot_source: str = "",
+    robot_sha256: str = "",
+    chain=None,
+    robot: Robot | None = None,
+) -> dict:
     """The result as a JSON-ready dict.
+
+    With ``robot`` (the model it was calibrated with), ``robot_model`` is its URDF's source and
+    SHA-256 (``robot_source`` and ``robot_sha256`` are then ignored) and ``robot`` its
+    :class:`RobotRecord`.
 
     With ``chain`` (a :class:`~brachycal.calibration.chain_report.ChainReport`), the transforms
     are the whole-chain method's (``Ptip_T_I`` and ``spacing_mm`` under ``"chain"``), its section
@@ -49,6 +117,10 @@ def to_json(result: CalibrationResult, *, robot_source: str = "", robot_sha256: 
         out["axes_angle_sd_deg"] = calibration.rotation.axes_angle_sd_deg
         return out
 
+    record = None
+    if robot is not None:
+        record = RobotRecord.of(robot)
+        robot_source, robot_sha256 = robot.source, record.urdf_sha256
     payload = {
         "format": FORMAT,
         "transforms": {
@@ -67,6 +139,7 @@ def to_json(result: CalibrationResult, *, robot_source: str = "", robot_sha256: 
         **({"image": {"size_px": list(result.image_size_px)}} if result.image_size_px else {}),
         "inputs": result.inputs,
         "robot_model": {"urdf": robot_source, "sha256": robot_sha256},
+        **({"robot": record.as_json()} if record is not None else {}),
         "software": {"brachycal": __version__, "pinocchio": pinocchio.__version__, "numpy": np.__version__},
     }
     if chain is None:
@@ -97,14 +170,18 @@ def write_result(
     robot_source: str = "",
     robot_sha256: str = "",
     chain=None,
+    robot: Robot | None = None,
 ) -> Path:
     """Write the result atomically; never replaces an existing file unless ``force``.
+
+    ``robot``: the model it was calibrated with, recorded (:func:`to_json`); give it, so that
+    ``locate`` and ``export`` can refuse another robot.
 
     Raises:
         OutputError: the file exists (without ``force``), cannot be written, or a value is NaN or
             infinite (the error names its key; JSON has no NaN).
     """
-    payload = to_json(result, robot_source=robot_source, robot_sha256=robot_sha256, chain=chain)
+    payload = to_json(result, robot_source=robot_source, robot_sha256=robot_sha256, chain=chain, robot=robot)
     return write_json(path, payload, force=force)
 
 
@@ -124,6 +201,58 @@ class StoredCalibration:
     #: calibrated with and of the robot it corrected them to (empty: the result corrects nothing).
     joint_origins: dict[str, tuple[FloatArray, FloatArray]] = field(default_factory=dict)
     source: str = ""
+    #: The robot it was calibrated with (the ``robot`` block); None in files written before it.
+    robot: RobotRecord | None = None
+
+    def check_robot(self, robot: Robot) -> None:
+        """Refuse a robot other than the one the result was calibrated with (nothing to check for
+        files without a ``robot`` block).
+
+        Raises:
+            InputError: another description name, or other joints (one line naming the result
+                file and the ``--robot`` that fits).
+
+        Warns:
+            BrachycalWarning: the same robot, but its description file changed since calibration.
+        """
+        record = self.robot
+        if record is None:
+            return
+        rig = robot.rig
+        if rig.name != record.name:
+            raise InputError(
+                f"calibrated on robot {record.name!r}, not {rig.name!r}: pass --robot {record.option}",
+                file=self.source,
+                column="robot.name",
+            )
+        if tuple(robot.joint_names) != record.joint_names:
+            missing = [n for n in record.joint_names if n not in robot.joint_names]
+            extra = [n for n in robot.joint_names if n not in record.joint_names]
+            what = (
+                f"it has no {', '.join(missing[:3])}"
+                if missing
+                else f"it also has {', '.join(extra[:3])}"
+                if extra
+                else "its joints in another order"
+            )
+            raise InputError(
+                f"robot {rig.name!r} has other joints than the one this result was calibrated with "
+                f"({what}): pass --robot {record.option}",
+                file=self.source,
+                column="robot.joint_names",
+            )
+        if record.description_sha256:
+            try:
+                now = sha256_file(rig.source)
+            except OSError:
+                return
+            if now != record.description_sha256:
+                warnings.warn(
+                    f"{self.source}: robot description {rig.source} has changed since this result was "
+                    "calibrated with it (its SHA-256 differs): if its kinematics changed, calibrate again",
+                    BrachycalWarning,
+                    stacklevel=2,
+                )
 
     def software_robot(self, robot: Robot) -> Robot:
         """The robot model to compute and command with: ``robot`` with the result's corrections
@@ -133,9 +262,11 @@ class StoredCalibration:
         wrote) is returned as it is; one whose origins are the calibrated URDF's is corrected.
 
         Raises:
-            InputError: the result corrects the robot and ``robot``'s joint origins are neither
-                (another robot, or another calibration's corrections: they would be mixed).
+            InputError: ``robot`` is not the robot the result was calibrated with
+                (:meth:`check_robot`), or the result corrects the robot and ``robot``'s joint
+                origins are neither (another calibration's corrections: they would be mixed).
         """
+        self.check_robot(robot)
         if not self.joint_origins:
             return robot.with_joint_offsets(self.joint_offsets_rad) if self.joint_offsets_rad else robot
         names = [name for name in self.joint_origins if name in robot.joint_names]
@@ -207,7 +338,28 @@ def read_result(path: str | os.PathLike[str]) -> StoredCalibration:
         image_size_px=_image_size(raw, path),
         joint_origins=_joint_origins(raw, path),
         source=str(path),
+        robot=_robot_record(raw, path),
     )
+
+
+def _robot_record(raw: dict, path: Path) -> RobotRecord | None:
+    """The ``robot`` block, or None if the file has none (written before robot descriptions)."""
+    if "robot" not in raw:
+        return None
+    block = raw["robot"]
+    if not isinstance(block, dict):
+        raise InputError("must be an object (name, description, ...)", file=path, column="robot")
+    texts = {}
+    for key in ("name", "description", "description_sha256", "urdf_sha256"):
+        value = block.get(key)
+        if not isinstance(value, str) or (key == "name" and not value):
+            what = "a non-empty string" if key == "name" else "a string"
+            raise InputError(f"must be {what}", file=path, column=f"robot.{key}")
+        texts[key] = value
+    joints = block.get("joint_names")
+    if not isinstance(joints, list) or not joints or not all(isinstance(j, str) and j for j in joints):
+        raise InputError("must be a list of joint names", file=path, column="robot.joint_names")
+    return RobotRecord(joint_names=tuple(joints), **texts)
 
 
 def _joint_origins(raw: dict, path: Path) -> dict[str, tuple[FloatArray, FloatArray]]:

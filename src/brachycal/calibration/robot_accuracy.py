@@ -32,8 +32,8 @@ class RobotAccuracy:
     ``translation_sd_m`` SD per axis (metres) and a rotation of ``rotation_sd_rad`` SD per axis
     (radians, about the origin's own axes), and its zero by ``rotation_sd_rad`` SD about its axis
     (the model the twin draws its physical robot from). ``encoder_sd_rad`` is the SD of each joint
-    reading (radians): it enters the landing error when aiming (the probe arm's and torso's
-    readings place the target).
+    reading (radians): it enters the landing error when aiming (the probe arm's and the shared
+    joints' readings, e.g. the SDA10F's torso, place the target).
 
     Defaults (:data:`DEFAULT_ROBOT_ACCURACY`): the twin's well-built arm, 0.03 mm / 0.003° per
     joint and 2e-5 rad per reading. The vendor states ±0.1 mm repeatability (not accuracy), and

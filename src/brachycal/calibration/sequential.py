@@ -35,12 +35,16 @@ from brachycal.calibration.tool_tips import (
 )
 from brachycal.data.session import Session
 from brachycal.errors import DegenerateDataError
-from brachycal.model.names import LEFT_FLANGE, RIGHT_FLANGE, US_IMAGE
+from brachycal.model.names import US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, make_transform, transform_points
 
-#: Which flange carries which tool.
-TOOL_FLANGE = {"needle": RIGHT_FLANGE, "top_model": RIGHT_FLANGE, "probe": LEFT_FLANGE}
+
+def tool_flange(robot: Robot, tool: str) -> str:
+    """The flange link carrying ``tool`` (``needle``, ``top_model``: the needle arm's; ``probe``: the
+    probe arm's), from the robot's rig (:attr:`Robot.rig`; the SDA10F's right and left ``tool0``)."""
+    rig = robot.rig
+    return rig.probe_flange if tool == "probe" else rig.needle_flange
 
 
 @dataclass(frozen=True)
@@ -109,14 +113,14 @@ def _data_of(file: str) -> Iterator[None]:
 
 
 def _tool(session: Session, robot: Robot, tool: str, rtip1: TipEstimate) -> ToolCalibration:
-    flange = TOOL_FLANGE[tool]
+    flange = tool_flange(robot, tool)
     tip = tool_tip_estimate(robot.fk(flange, session.touches[tool, "rtip1"].q), rtip1)
     check_tip(tip, f"{tool} tip")
     p_E_tool = tip.p
     validation = validate_tip(
         robot.fk(flange, session.touches[tool, "rtip2"].q),
         p_E_tool,
-        robot.fk(RIGHT_FLANGE, session.touches["top_model", "rtip2"].q),
+        robot.fk(robot.rig.needle_flange, session.touches["top_model", "rtip2"].q),
         session.p_ER_Mtip,
     )
     axes = session.axes[tool]
@@ -136,17 +140,19 @@ def calibrate(
 
     Args:
         session: the recorded data.
-        robot: kinematic model giving the flange poses (the URDF's flanges).
+        robot: kinematic model giving the flange poses: its rig's needle flange (the paper's ER, the
+            SDA10F's right ``tool0``) and probe flange (EL); any dual-arm robot with a description.
         methods: registration methods to fit and cross-validate (default: all).
         T_Ptip_I_init: ``(4, 4)`` ICP's prior; default: the model's ``us_image`` frame.
 
     Raises:
         DegenerateDataError: a step's conditioning check failed; the message names the session file.
     """
+    needle_flange, probe_flange = robot.rig.needle_flange, robot.rig.probe_flange
     with _data_of("touches.csv"):
         check_distinct_touches(session.touches)
         reference_tips = {
-            ref: reference_tip_estimate(robot.fk(RIGHT_FLANGE, session.touches["top_model", ref].q), session.p_ER_Mtip)
+            ref: reference_tip_estimate(robot.fk(needle_flange, session.touches["top_model", ref].q), session.p_ER_Mtip)
             for ref in ("rtip1", "rtip2")
         }
         check_separation(reference_tips["rtip1"], reference_tips["rtip2"])
@@ -158,8 +164,8 @@ def calibrate(
     if T_Ptip_I_init is None:
         T_Ptip_I_init = robot.tool_transform(US_IMAGE)[1]
 
-    T_R_ER = robot.fk(RIGHT_FLANGE, session.samples_q)
-    T_R_EL = robot.fk(LEFT_FLANGE, session.samples_q)
+    T_R_ER = robot.fk(needle_flange, session.samples_q)
+    T_R_EL = robot.fk(probe_flange, session.samples_q)
     p_ER_Ntip = needle.T_E_tool[:3, 3]
     p_Ptip = image_to_probe.probe_points(T_R_ER, T_R_EL, p_ER_Ntip, probe.T_E_tool)
     p_real = transform_points(T_R_ER, p_ER_Ntip)
@@ -202,8 +208,8 @@ def loo_points(session: Session, robot: Robot, result: CalibrationResult, method
     return image_to_probe.leave_one_out_points(
         method,
         session.uv_px,
-        robot.fk(RIGHT_FLANGE, session.samples_q),
-        robot.fk(LEFT_FLANGE, session.samples_q),
+        robot.fk(robot.rig.needle_flange, session.samples_q),
+        robot.fk(robot.rig.probe_flange, session.samples_q),
         result.T_ER_Ntip[:3, 3],
         result.T_EL_Ptip,
         session.spacing_m,
@@ -214,9 +220,10 @@ def loo_points(session: Session, robot: Robot, result: CalibrationResult, method
 def locate(
     robot: Robot, q: FloatArray, uv_px: FloatArray, T_EL_Ptip: FloatArray, calibration: ImageCalibration
 ) -> FloatArray:
-    """Targeting: image pixels ``(N, 2)`` → ``p_R (N, 3)`` in ``base_link`` at configuration(s) ``q``.
+    """Targeting: image pixels ``(N, 2)`` → ``p_R (N, 3)`` in the robot's base frame at configuration(s) ``q``
+    (``T_R_EL`` is the rig's probe flange).
 
     ``p_R = T_R_EL(q) @ T_EL_Ptip @ T_Ptip_I @ p_I`` with ``p_I = (u·s_u, v·s_v, 0)``.
     """
     q = np.asarray(q, dtype=float)
-    return image_to_probe.predict_base(calibration, robot.fk(LEFT_FLANGE, q), T_EL_Ptip, uv_px)
+    return image_to_probe.predict_base(calibration, robot.fk(robot.rig.probe_flange, q), T_EL_Ptip, uv_px)

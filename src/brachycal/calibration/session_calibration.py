@@ -56,8 +56,10 @@ def calibrate_folder(
         robot: the kinematic model (flange poses; its ``us_image`` is ICP's prior).
         methods: image-to-probe methods to fit and cross-validate (:data:`METHODS`).
         chain: also solve the whole chain (image model by cross-validation, uncertainty).
-        bootstrap_replicates, joint_offsets, progress, robot_accuracy: for the chain
-            (:func:`~brachycal.calibration.chain_report.calibrate_chain`).
+        bootstrap_replicates: for the chain (:func:`~brachycal.calibration.chain_report.calibrate_chain`).
+        joint_offsets: for the chain, as ``bootstrap_replicates``.
+        progress: for the chain, as ``bootstrap_replicates``.
+        robot_accuracy: for the chain, as ``bootstrap_replicates``.
         identify_robot: with ``chain``, identify the robot's geometry too (``robot_accuracy`` is
             its prior; :mod:`~brachycal.calibration.robot_identification`).
 

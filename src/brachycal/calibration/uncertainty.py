@@ -12,8 +12,9 @@ enter. The joints' origin errors ``c`` move the estimate by ``S c`` and, at the 
 the physical needle tip and the physical target by ``L_c c`` (``L_c`` the image residual
 ``T_R_ER p_N − T_R_EL T_EL_I p_I`` differentiated with respect to ``c`` at the aiming joints and
 pixel: the software computes and commands with the URDF); the two are correlated, so
-``e ≈ G δθ_noise + (G S + L_c) c``. And the joint readings when aiming (torso and probe arm; the
-needle arm's joints are the commanded ones) place the target with encoder noise ``n``:
+``e ≈ G δθ_noise + (G S + L_c) c``. And the joint readings when aiming (the shared joints, e.g. the
+SDA10F's torso, and the probe arm; the needle arm's joints are the commanded ones) place the target
+with encoder noise ``n``:
 ``e_n = −L_q n`` (``L_q`` the same residual differentiated with respect to those joints). The
 landing covariance is ``G Σ_noise Gᵀ + (G S + L_c) Σ_c (G S + L_c)ᵀ + σ_enc² L_q L_qᵀ``.
 ``benchmarks/chain_checks.py`` measures its coverage on the twin.
@@ -50,7 +51,6 @@ from brachycal.calibration.chain import (
 )
 from brachycal.data.session import Session
 from brachycal.errors import InputError
-from brachycal.model.names import LEFT_FLANGE, RIGHT_ARM, RIGHT_FLANGE
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, transform_points
 
@@ -65,8 +65,8 @@ def _landing(
     layout = _layout(fit, robot)
     T_ER_Ntip, T_EL_Ptip, T_Ptip_I, _, spacing = layout.unpack(x, fit.base, nominal_spacing)
     q = q + layout.offsets(x, robot.nq)
-    T_R_EL = robot.fk(LEFT_FLANGE, q)
-    R_R_ER = robot.fk(RIGHT_FLANGE, q)[:, :3, :3]
+    T_R_EL = robot.fk(robot.rig.probe_flange, q)
+    R_R_ER = robot.fk(robot.rig.needle_flange, q)[:, :3, :3]
     p_I = np.column_stack([uv * spacing, np.zeros(len(uv))])
     return transform_points(T_R_EL @ T_EL_Ptip @ T_Ptip_I, p_I) - np.einsum("nij,j->ni", R_R_ER, T_ER_Ntip[:3, 3])
 
@@ -84,7 +84,7 @@ def landing_covariance(
 
     The session's noise, and with the fit's stated robot accuracy the robot model's error and (if
     ``encoder_noise``) the joint readings' noise when aiming (see the module docstring). The
-    needle arm's orientation is taken from ``q`` (its right-arm joints).
+    needle arm's orientation is taken from ``q`` (its needle-arm joints, ``robot.rig``).
     """
     G = landing_jacobian(fit, robot, nominal_spacing, q, uv_px)
     if fit.robot_accuracy is None:
@@ -106,23 +106,27 @@ def landing_robot_jacobians(
     """``L_c (M, 3, 6 nq)`` and ``L_q (M, 3, nq)``: the image residual ``T_R_ER p_N − T_R_EL T_EL_I p_I``
     (metres) at joints ``q (M, nq)`` and pixels ``uv_px (M, 2)`` differentiated with respect to every
     joint's origin motion ``(v, ω)`` (:func:`~brachycal.calibration.chain.joint_twists`) and to the
-    joint readings (zero for the needle arm's joints, which are commanded, not read)."""
+    joint readings (zero for the needle arm's joints, which are commanded, not read; ``robot.rig``)."""
     layout = _layout(fit, robot)
     q = np.atleast_2d(np.asarray(q, dtype=float)) + layout.offsets(fit.x, robot.nq)
     uv = np.atleast_2d(np.asarray(uv_px, dtype=float))
     T_ER_Ntip, T_EL_Ptip, T_Ptip_I, _, spacing = layout.unpack(fit.x, fit.base, np.asarray(nominal_spacing, float))
-    p_needle = transform_points(robot.fk(RIGHT_FLANGE, q), T_ER_Ntip[:3, 3])
+    rig = robot.rig
+    p_needle = transform_points(robot.fk(rig.needle_flange, q), T_ER_Ntip[:3, 3])
     p_I = np.column_stack([uv * spacing, np.zeros(len(uv))])
-    p_image = transform_points(robot.fk(LEFT_FLANGE, q) @ T_EL_Ptip @ T_Ptip_I, p_I)
+    p_image = transform_points(robot.fk(rig.probe_flange, q) @ T_EL_Ptip @ T_Ptip_I, p_I)
 
     def moves(W: FloatArray, p: FloatArray) -> FloatArray:  # (M, nq, 6, 6) twists -> (M, 3, 6 nq) point motions
         v, w = W[:, :, :3, :], W[:, :, 3:, :]
         motion = v - np.cross(p[:, None, :, None], w, axis=2)  # ω × p = −p × ω, per twist column
         return motion.transpose(0, 2, 1, 3).reshape(len(p), 3, -1)
 
-    L_c = moves(joint_twists(robot, q, RIGHT_FLANGE), p_needle) - moves(joint_twists(robot, q, LEFT_FLANGE), p_image)
+    L_c = moves(joint_twists(robot, q, rig.needle_flange), p_needle) - moves(
+        joint_twists(robot, q, rig.probe_flange), p_image
+    )
     axes = np.concatenate([[0, 0, 0], np.zeros(3)])
-    read = [k for k in range(robot.nq) if k not in RIGHT_ARM]
+    commanded = set(rig.needle_arm_indices)
+    read = [k for k in range(robot.nq) if k not in commanded]
     L_q = np.zeros((len(q), 3, robot.nq))
     for k in read:  # a reading's error turns the joint about its axis: the motion (0, axis)
         axes[3:] = robot.joint_axis(robot.joint_names[k])

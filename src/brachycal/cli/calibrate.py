@@ -4,16 +4,10 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import TYPE_CHECKING
 
-import numpy as np
-
-from brachycal.cli.common import add_urdf_option, load_robot, progress_bar
+from brachycal.cli.common import add_robot_accuracy_options, add_robot_option, load_robot, progress_bar, robot_accuracy
 from brachycal.errors import InputError
-from brachycal.validate import bounded_int, finite_float, name_list
-
-if TYPE_CHECKING:
-    from brachycal.calibration.robot_accuracy import RobotAccuracy
+from brachycal.validate import bounded_int, name_list
 
 #: Most bootstrap refits --bootstrap takes: a 95% percentile interval is settled by ~2000; 10000
 #: refits of the chain already take hours, so a larger count is a typo.
@@ -42,6 +36,10 @@ prior; the result carries the corrections, which 'brachycal export' writes into 
 URDF and 'locate', 'plan' and 'export' apply exactly once. It prints which parameters the session
 cannot identify and why, and the image error at held-out configurations with and without it.
 
+The robot is the SDA10F unless --robot names another description (baxter, ur5_pair, or a TOML
+file: docs/robots.md); the session's joint columns must be that robot's. The result records it
+(its "robot" block), and 'locate' and 'export' refuse another robot.
+
 The result (brachycal-result/1, JSON, metres) and the report are written together, all or
 nothing, when everything succeeded; neither replaces an existing file without --force.
 
@@ -52,11 +50,6 @@ example:
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from brachycal.calibration.labels import METHODS
-    from brachycal.calibration.robot_accuracy import (
-        DEFAULT_ROBOT_ACCURACY,
-        MAX_ROBOT_ROTATION_SD_RAD,
-        MAX_ROBOT_TRANSLATION_SD_M,
-    )
 
     parser = sub.add_parser(
         "calibrate", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -82,22 +75,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="with --method chain: also estimate the joint zero offsets this session identifies",
     )
-    millimetres = finite_float(low=0.0, high=MAX_ROBOT_TRANSLATION_SD_M * 1e3, unit="mm")
-    parser.add_argument(
-        "--robot-accuracy-mm",
-        type=millimetres,
-        metavar="SD",
-        help="with --method chain: the robot's stated accuracy, each joint origin's translation SD per axis, "
-        f"{millimetres.rule} (default {DEFAULT_ROBOT_ACCURACY.translation_sd_m * 1e3:g}, a well-built arm; "
-        "real arms are often 0.1); included in the intervals and the predicted landing error",
-    )
-    degrees = finite_float(low=0.0, high=float(np.degrees(MAX_ROBOT_ROTATION_SD_RAD)), unit="deg")
-    parser.add_argument(
-        "--robot-accuracy-deg",
-        type=degrees,
-        metavar="SD",
-        help="with --method chain: each joint origin's rotation SD per axis and zero-offset SD, "
-        f"{degrees.rule} (default {np.degrees(DEFAULT_ROBOT_ACCURACY.rotation_sd_rad):g}; real arms often 0.01)",
+    add_robot_accuracy_options(
+        parser,
+        "with --method chain",
+        zero=True,
+        note="; included in the intervals and the predicted landing error",
     )
     parser.add_argument(
         "--identify-robot",
@@ -113,36 +95,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="N",
         help=f"with --method chain: N bootstrap refits for percentile intervals, {replicates.rule} (default 0)",
     )
-    add_urdf_option(parser)
+    add_robot_option(parser)
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("--report", metavar="DIR", help="also write a self-contained HTML report (DIR/report.html)")
     parser.set_defaults(run=run)
 
 
-def _robot_accuracy(args: argparse.Namespace) -> RobotAccuracy:
-    """The stated robot accuracy: the options given, the defaults for the others."""
-    from brachycal.calibration.robot_accuracy import DEFAULT_ROBOT_ACCURACY, RobotAccuracy
-
-    if args.robot_accuracy_mm is None and args.robot_accuracy_deg is None:
-        return DEFAULT_ROBOT_ACCURACY
-    mm = args.robot_accuracy_mm if args.robot_accuracy_mm is not None else DEFAULT_ROBOT_ACCURACY.translation_sd_m * 1e3
-    deg = (
-        args.robot_accuracy_deg
-        if args.robot_accuracy_deg is not None
-        else float(np.degrees(DEFAULT_ROBOT_ACCURACY.rotation_sd_rad))
-    )
-    return RobotAccuracy(
-        mm * 1e-3,
-        float(np.radians(deg)),
-        DEFAULT_ROBOT_ACCURACY.encoder_sd_rad,
-        f"--robot-accuracy-mm {mm:g} --robot-accuracy-deg {deg:g} (encoder SD: the default)",
-    )
-
-
 def run(args: argparse.Namespace) -> int:
     from brachycal.calibration import calibrate_folder, write_result
-    from brachycal.files import OutputSet, sha256_bytes
+    from brachycal.files import OutputSet
     from brachycal.reporting import chain_summary, table_i, table_ii, uncertainty_table
 
     if args.method != "chain" and (args.bootstrap or args.joint_offsets or args.identify_robot):
@@ -171,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
                 bootstrap_replicates=args.bootstrap,
                 joint_offsets=args.joint_offsets,
                 progress=bar.update,
-                robot_accuracy=_robot_accuracy(args),
+                robot_accuracy=robot_accuracy(args),
                 identify_robot=args.identify_robot,
             )
         result, chain, session = calibrated.result, calibrated.chain, calibrated.session
@@ -187,9 +149,8 @@ def run(args: argparse.Namespace) -> int:
             result,
             staged_result,
             force=args.force,
-            robot_source=robot.source,
-            robot_sha256=sha256_bytes(robot.urdf_xml),
             chain=chain,
+            robot=robot,
         )
         if args.report:
             write_report(

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from tqdm import tqdm
 
+    from brachycal.calibration.robot_accuracy import RobotAccuracy
     from brachycal.model import Robot
 
 
@@ -83,4 +84,62 @@ def progress_bar(total: int, desc: str, quiet: bool) -> tqdm:
         leave=False,
         file=sys.stderr,
         disable=True if quiet else None,
+    )
+
+
+def add_robot_accuracy_options(
+    parser: argparse.ArgumentParser | argparse._ArgumentGroup, when: str, *, zero: bool, note: str = ""
+) -> None:
+    """``--robot-accuracy-mm`` and ``--robot-accuracy-deg``: the robot's stated kinematic accuracy.
+
+    Args:
+        parser: where to add them.
+        when: the option they go with, for the help (``"with --method chain"``).
+        zero: whether 0 (a perfect robot) is allowed; a prior of identification must be positive.
+        note: what the accuracy is used for, appended to the millimetres' help.
+    """
+    import numpy as np
+
+    from brachycal.calibration.robot_accuracy import (
+        DEFAULT_ROBOT_ACCURACY,
+        MAX_ROBOT_ROTATION_SD_RAD,
+        MAX_ROBOT_TRANSLATION_SD_M,
+    )
+    from brachycal.validate import finite_float
+
+    millimetres = finite_float(low=0.0, high=MAX_ROBOT_TRANSLATION_SD_M * 1e3, low_open=not zero, unit="mm")
+    parser.add_argument(
+        "--robot-accuracy-mm",
+        type=millimetres,
+        metavar="SD",
+        help=f"{when}: the robot's stated accuracy, each joint origin's translation SD per axis, "
+        f"{millimetres.rule} (default {DEFAULT_ROBOT_ACCURACY.translation_sd_m * 1e3:g}, a well-built arm; "
+        f"real arms are often 0.1){note}",
+    )
+    degrees = finite_float(low=0.0, high=float(np.degrees(MAX_ROBOT_ROTATION_SD_RAD)), low_open=not zero, unit="deg")
+    parser.add_argument(
+        "--robot-accuracy-deg",
+        type=degrees,
+        metavar="SD",
+        help=f"{when}: each joint origin's rotation SD per axis and zero-offset SD, "
+        f"{degrees.rule} (default {np.degrees(DEFAULT_ROBOT_ACCURACY.rotation_sd_rad):g}; real arms often 0.01)",
+    )
+
+
+def robot_accuracy(args: argparse.Namespace) -> RobotAccuracy:
+    """The stated robot accuracy: the options given, the defaults for the others."""
+    import numpy as np
+
+    from brachycal.calibration.robot_accuracy import DEFAULT_ROBOT_ACCURACY, RobotAccuracy
+
+    if args.robot_accuracy_mm is None and args.robot_accuracy_deg is None:
+        return DEFAULT_ROBOT_ACCURACY
+    default = DEFAULT_ROBOT_ACCURACY
+    mm = args.robot_accuracy_mm if args.robot_accuracy_mm is not None else default.translation_sd_m * 1e3
+    deg = args.robot_accuracy_deg if args.robot_accuracy_deg is not None else float(np.degrees(default.rotation_sd_rad))
+    return RobotAccuracy(
+        mm * 1e-3,
+        float(np.radians(deg)),
+        default.encoder_sd_rad,
+        f"--robot-accuracy-mm {mm:g} --robot-accuracy-deg {deg:g} (encoder SD: the default)",
     )

@@ -11,6 +11,7 @@ import argparse
 import time
 from pathlib import Path
 
+from brachycal.cli.common import add_robot_option
 from brachycal.validate import MAX_TARGETS, bounded_int, seed
 
 HELP = "calibrate a simulated session (digital twin) and compare with the truth"
@@ -29,6 +30,10 @@ over seeds 0-9 the tracker route lands 0.49 +/- 0.13 mm (MAE, mean +/- SD over s
 Kabsch fusion 0.40 +/- 0.02 mm, the scaled u/v fusion 0.07 +/- 0.01 mm
 (python benchmarks/table3.py).
 
+Any robot with a description (--robot baxter, --robot ur5_pair, --robot FILE; docs/robots.md):
+the twin plans in that robot's workspace and calibrates as on the SDA10F. The accuracy each
+bundled robot reaches is in the README (Robots).
+
 The files are written together when the demo succeeded; an earlier demo's files in DIR are
 replaced only with --force.
 
@@ -36,6 +41,7 @@ examples:
   brachycal demo                      simulate with seed 0 (= examples/twin_session)
   brachycal demo --seed 7             another simulated session
   brachycal demo --example            calibrate the committed examples/twin_session
+  brachycal demo --robot baxter       the same main job on a Baxter
 """
 
 
@@ -45,7 +51,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--out", default="demo_output", metavar="DIR", help="output folder (default demo_output)")
     parser.add_argument("--seed", type=seed, default=0, help=f"seed of the simulated session, {seed.rule} (default 0)")
-    parser.add_argument("--example", action="store_true", help="use the committed examples/twin_session")
+    parser.add_argument("--example", action="store_true", help="use the committed examples/twin_session (the SDA10F's)")
+    add_robot_option(parser)
     targets = bounded_int(low=1, high=MAX_TARGETS)
     parser.add_argument(
         "--targets", type=targets, default=50, help=f"targets for the targeting error, {targets.rule} (default 50)"
@@ -61,12 +68,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from brachycal.cli.common import load_robot
     from brachycal.files import OutputSet
-    from brachycal.model import Robot
     from brachycal.reporting import DEMO_REPORT_FILES, demo_text, write_demo_report
     from brachycal.simulation import TWIN_FILES, TwinConfig, record, run_demo, write_recording
 
     start = time.perf_counter()
+    from brachycal.simulation.demo import check_example_robot
+
+    robot = load_robot(args)  # a bad description is refused before anything is claimed
+    if args.example:
+        check_example_robot(robot)
     out = Path(args.out)
     with OutputSet(force=args.force) as outputs:
         for name in TWIN_FILES:
@@ -74,12 +86,10 @@ def run(args: argparse.Namespace) -> int:
         outputs.claim(out / "result.json", make_parents=True)
         for name in DEMO_REPORT_FILES:
             outputs.claim(out / "report" / name, make_parents=True)
-        demo = run_demo(
-            Robot.load(), out, seed=args.seed, example=args.example, n_targets=args.targets, outputs=outputs
-        )
+        demo = run_demo(robot, out, seed=args.seed, example=args.example, n_targets=args.targets, outputs=outputs)
         write_demo_report(demo, out / "report", outputs=outputs)
         if args.recording:
-            rec = record(Robot.load(), TwinConfig(seed=args.seed))
+            rec = record(robot, TwinConfig(seed=args.seed))
             write_recording(rec, out / "recording", bag="sqlite3", force=args.force, outputs=outputs)
         print(demo_text(demo))
     report = out / "report"
@@ -93,6 +103,7 @@ def run(args: argparse.Namespace) -> int:
             f"wrote {rec_dir} (the twin's recording); build a session from it with:\n  brachycal session build "
             f"{rec_dir}/joint_log.csv --marks {rec_dir}/marks.csv --images {rec_dir}/images.csv "
             f"--plan {rec_dir}/plan.csv --template {rec_dir}/session.toml --out {out}/built_session"
+            + (f" --robot {args.robot}" if args.robot is not None else "")
         )
     print(f"done in {time.perf_counter() - start:.1f} s")
     return 0

@@ -4,17 +4,18 @@ from __future__ import annotations
 
 import argparse
 
-from brachycal.cli.common import add_urdf_option, load_robot
+from brachycal.cli.common import add_robot_option, load_robot
 from brachycal.errors import InputError
 from brachycal.validate import MAX_IMAGE_PX, check_pixel, number_list
 
 HELP = "map an image pixel to base_link through the calibrated chain (targeting)"
 DESCRIPTION = """\
-Computes p_R = T_R_EL(q) @ T_EL_Ptip @ T_Ptip_I @ (u*s_u, v*s_v, 0): the point of base_link
-that pixel (u, v) shows, with the robot at configuration q. RESULT is a calibration result file
-(brachycal calibrate); JOINTS is a CSV file whose header names the 15 joints (radians), one
-configuration per row (a joint log works; its time column is ignored). Prints one line per row:
-row,x,y,z in metres.
+Computes p_R = T_R_EL(q) @ T_EL_Ptip @ T_Ptip_I @ (u*s_u, v*s_v, 0): the point of the robot's
+base frame that pixel (u, v) shows, with the robot at configuration q (EL: the probe arm's flange).
+RESULT is a calibration result file (brachycal calibrate); JOINTS is a CSV file whose header names
+the robot's joints (radians; the SDA10F's 15), one configuration per row (a joint log works; its
+time column is ignored). Prints one line per row: row,x,y,z in metres. --robot must be the robot
+the result was calibrated with (the result records it).
 
 example:
   brachycal locate result.json joints.csv --uv 540,300
@@ -43,7 +44,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         choices=tuple(ALL_LABELS),
         help="which image calibration of the result (default kabsch)",
     )
-    add_urdf_option(parser)
+    add_robot_option(parser)
     parser.set_defaults(run=run)
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from brachycal.cli.common import add_urdf_option, load_robot
+from brachycal.cli.common import add_robot_option, load_robot
 from brachycal.errors import InputError
 from brachycal.validate import MAX_IMAGE_PX, finite_float, number_list, spacing_mm
 
@@ -15,7 +15,8 @@ BUILD_DESCRIPTION = """\
 Turns what a lab records during a calibration into a session folder (brachycal-session/1) that
 `brachycal calibrate` reads:
 
-  LOG          the joint states: CSV (time,<15 joints>) or a ROS 1/2 bag (sensor_msgs/JointState)
+  LOG          the joint states: CSV (time,<joints>) or a ROS 1/2 bag (sensor_msgs/JointState);
+               the joints are the --robot's (default the SDA10F's 15)
   --marks      marks.csv: time,kind,tool,name, one row per moment the operator marked:
                touch,<top_model|needle|probe>,<rtip1|rtip2> or axes,<needle|probe>,<p1|p2|p3>;
                trial numbers follow the order in time (or --marks-topic: the same as
@@ -88,7 +89,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     build.add_argument("--size-px", type=size, metavar="W,H", help=f"image width and height, {size.rule} px")
     tip = number_list(count=3, low=-2000.0, high=2000.0, unit="mm")
     build.add_argument(
-        "--top-model-tip-mm", type=tip, metavar="X,Y,Z", help=f"top-model tip on the right flange, {tip.rule}"
+        "--top-model-tip-mm",
+        type=tip,
+        metavar="X,Y,Z",
+        help=f"top-model tip on the needle arm's flange (the SDA10F's right), {tip.rule}",
     )
     window = finite_float(low=0.0, high=MAX_WINDOW_S, low_open=True, unit="s")
     build.add_argument(
@@ -113,7 +117,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="V",
         help=f"largest joint speed of a still robot, {speed.rule} (default {MAX_SPEED_RAD_S:g})",
     )
-    add_urdf_option(build)
+    add_robot_option(build)
     build.add_argument("--out", required=True, metavar="SESSION", help="session folder to write (created if needed)")
     build.add_argument("--force", action="store_true", help="replace the files of an existing session in SESSION")
     build.set_defaults(run=run_build)
@@ -160,5 +164,6 @@ def run_build(args: argparse.Namespace) -> int:
         write_build(build, out, force=args.force, outputs=outputs)
     print(build.report.summary())
     print(f"\nwrote {out}: {', '.join((*SESSION_FILES, *REPORT_FILES))}")
-    print(f"next: brachycal calibrate {out} --out result.json")
+    robot_option = f" --robot {args.robot}" if args.robot else f" --urdf {args.urdf}" if args.urdf else ""
+    print(f"next: brachycal calibrate {out}{robot_option} --out result.json")
     return 0

@@ -7,7 +7,7 @@ import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from brachycal.cli.common import progress_bar
+from brachycal.cli.common import add_robot_option, progress_bar
 from brachycal.imaging import SCANNER_SOUND_SPEED_M_S
 from brachycal.planning.spec import EDGE_RANGE_M
 from brachycal.validate import (
@@ -30,6 +30,10 @@ combination of the swept settings and each seed, simulates a session on the digi
 calibrates it, and records the leave-one-out figures (what a lab sees) next to the end-to-end
 targeting error against the truth (what the clinic needs), both from the sample poses and at
 held-out configurations (torso turned 3 deg: postures the calibration never saw).
+
+Any robot with a description (--robot NAME|FILE, docs/robots.md): the twin plans in its
+workspace. A robot without a joint shared by both arms (no torso: baxter, ur5_pair) has no
+held-out turn: its held-out columns read nan in the CSV files, "no torso" in the table.
 
 Runs go to all local cores (--workers), or to an existing Dask distributed cluster
 (--scheduler tcp://host:8786; pip install 'brachycal[cluster]'). Rows are identical to a serial
@@ -119,6 +123,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=min(os.cpu_count() or 1, MAX_WORKERS),
         help=f"local processes, {workers.rule} (default: all cores)",
     )
+    add_robot_option(parser)
     parser.add_argument("--scheduler", metavar="ADDRESS", help="Dask distributed scheduler to run on")
     parser.add_argument("--force", action="store_true", help="replace existing outputs")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -139,8 +144,15 @@ def run(args: argparse.Namespace) -> int:
 
 def _sweep(args: argparse.Namespace) -> list[RunParams]:
     """The runs of the study (each option already range-checked by argparse)."""
+    from brachycal.cli.common import load_robot
     from brachycal.simulation.study import sweep
 
+    if args.urdf is not None:  # each run loads its robot again, in its own process: by description
+        from brachycal.errors import InputError
+
+        raise InputError("study simulates a described robot: use --robot NAME|FILE, not --urdf")
+    robot = load_robot(args)  # a bad description is refused here, before any run
+    name = robot.rig.name if args.robot in (None, robot.rig.name) else str(Path(args.robot).resolve())
     sound = {"water": [True], "tissue": [False], "both": [True, False]}[args.sound]
     return sweep(
         args.seeds,
@@ -152,6 +164,7 @@ def _sweep(args: argparse.Namespace) -> list[RunParams]:
         tuple(args.methods),
         args.targets,
         tuple(args.robot_error),
+        name,
     )
 
 

@@ -11,7 +11,7 @@ kept as read, with one :class:`~brachycal.errors.BrachycalWarning` per file.
 from __future__ import annotations
 
 import warnings
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -96,11 +96,22 @@ class JointLog:
         return np.column_stack([np.interp(times, self.time, self.q[:, k]) for k in range(self.q.shape[1])])
 
 
+def mimic_joints(robot: Robot) -> Mapping[str, str]:
+    """The joints ``robot``'s controller publishes that only copy a coordinate: its rig's
+    (``[controller] mimic``), or the SDA10F's (:data:`~brachycal.model.names.MIMIC_JOINTS`) for a
+    model without a description."""
+    try:
+        return robot.rig.mimic_joints
+    except InputError:
+        return MIMIC_JOINTS
+
+
 def joint_columns(robot: Robot, header: Sequence[str]) -> list[str]:
     """The columns of ``header`` that hold joint values, in header order: the robot's joints and the
-    mimic joints (:data:`~brachycal.model.names.MIMIC_JOINTS`, which :func:`configurations_from_columns`
-    checks against the axes they mirror). Other columns (time, labels, pixels) are not joints."""
-    return [name for name in header if name in robot.joint_names or name in MIMIC_JOINTS]
+    mimic joints (:func:`mimic_joints`, which :func:`configurations_from_columns` checks against the
+    axes they mirror). Other columns (time, labels, pixels) are not joints."""
+    mimic = mimic_joints(robot)
+    return [name for name in header if name in robot.joint_names or name in mimic]
 
 
 def configurations_from_columns(
@@ -214,7 +225,7 @@ def _check_configurations(
             int(i),
             robot.joint_names[k],
         )
-    for mimic, leader in MIMIC_JOINTS.items():
+    for mimic, leader in mimic_joints(robot).items():
         if mimic in position and leader in position and mimic not in robot.joint_names:
             diff = np.abs(values[:, position[mimic]] - values[:, position[leader]])
             bad = ~(diff <= MIMIC_TOLERANCE)

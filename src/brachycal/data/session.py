@@ -1,13 +1,16 @@
 """Calibration sessions, format ``brachycal-session/1`` (a folder; ``docs/conventions.md``).
 
 - ``session.toml``: format, image spacing and size, the top-model tip on the right flange.
-- ``touches.csv``: ``tool,reference,trial,<15 joints>``; tools ``top_model``, ``needle``,
+- ``touches.csv``: ``tool,reference,trial,<joints>``; tools ``top_model``, ``needle``,
   ``probe``; references ``rtip1`` (calibration) and ``rtip2`` (validation).
-- ``axes.csv``: ``tool,point,<15 joints>``; tools ``needle``, ``probe``; points ``p1``–``p3``.
-- ``samples.csv``: ``sample,<15 joints>,u_px,v_px``.
+- ``axes.csv``: ``tool,point,<joints>``; tools ``needle``, ``probe``; points ``p1``–``p3``.
+- ``samples.csv``: ``sample,<joints>,u_px,v_px``.
 
-:func:`read_session` validates everything before anything is computed and refuses with one line
-naming the file, row and column. Values are converted to SI on reading (mm → m).
+``<joints>`` are the robot's configuration columns (the SDA10F's 15 joints; another robot's from
+its description, ``--robot``), radians, in any order. :func:`read_session` validates everything
+before anything is computed and refuses with one line naming the file, row and column; a file
+whose joint columns are another robot's is refused naming the missing and the unknown columns.
+Values are converted to SI on reading (mm → m).
 """
 
 from __future__ import annotations
@@ -134,8 +137,51 @@ def _labels(
     return out
 
 
+#: Columns of each session CSV file besides the joints.
+OWN_COLUMNS = {
+    "touches.csv": ("tool", "reference", "trial"),
+    "axes.csv": ("tool", "point"),
+    "samples.csv": ("sample", "u_px", "v_px"),
+}
+
+
+def _listed(names: list[str], most: int = 4) -> str:
+    shown = ", ".join(names[:most])
+    return shown if len(names) <= most else f"{shown} and {len(names) - most} more"
+
+
+def check_robot_columns(path: Path, header: list[str], robot: Robot) -> None:
+    """Refuse a session file recorded on another robot: a joint of ``robot`` missing from ``header``.
+
+    The refusal names the robot (its description's name when it has one), the missing joint columns
+    and the columns that are neither the file's own (:data:`OWN_COLUMNS`) nor the robot's joints
+    nor the mimic joints its controller publishes: another robot's joints, most likely.
+
+    Raises:
+        InputError: one line naming the file.
+    """
+    missing = [name for name in robot.joint_names if name not in header]
+    if not missing:
+        return  # extra columns are ignored, as in a joint log
+    try:
+        rig = robot.rig
+        who, mimic = f"robot {rig.name!r}", set(rig.mimic_joints)
+    except InputError:  # a model without a description: name its URDF
+        who, mimic = f"the robot of {robot.source}", set()
+    own = OWN_COLUMNS.get(path.name, ())
+    extra = [h for h in header if h not in own and h not in robot.joint_names and h not in mimic]
+    unknown = f"; unknown column(s) {_listed(extra)}" if extra else ""
+    hint = ": recorded on another robot? pass its --robot" if extra else ""
+    raise InputError(
+        f"the joint columns are not those of {who}: missing {_listed(missing)} "
+        f"({len(missing)} of {robot.nq}){unknown}{hint}",
+        file=path,
+    )
+
+
 def _read_touches(path: Path, robot: Robot) -> dict[tuple[str, str], Touches]:
     header, rows, records = read_table(path, ["tool", "reference", "trial"])
+    check_robot_columns(path, header, robot)
     tools = _labels(path, header, rows, records, "tool", TOUCH_TOOLS)
     references = _labels(path, header, rows, records, "reference", REFERENCES)
     trials = to_float(path, header, rows, records, ["trial"])[:, 0]
@@ -177,6 +223,7 @@ def _list(values: np.ndarray) -> str:
 
 def _read_axes(path: Path, robot: Robot) -> dict[str, dict[str, FloatArray]]:
     header, rows, records = read_table(path, ["tool", "point"])
+    check_robot_columns(path, header, robot)
     tools = _labels(path, header, rows, records, "tool", AXES_TOOLS)
     points = _labels(path, header, rows, records, "point", AXES_POINTS)
     q = table_configurations(path, robot, header, rows, records)
@@ -194,6 +241,7 @@ def _read_axes(path: Path, robot: Robot) -> dict[str, dict[str, FloatArray]]:
 
 def _read_samples(path: Path, robot: Robot, size_px: np.ndarray) -> tuple[list[str], FloatArray, FloatArray]:
     header, rows, records = read_table(path, ["sample", "u_px", "v_px"])
+    check_robot_columns(path, header, robot)
     ids = unique_names(path, header, rows, records, "sample")
     uv = to_float(path, header, rows, records, ["u_px", "v_px"])
     for axis, name in enumerate(("u_px", "v_px")):

@@ -33,7 +33,13 @@ from numpy.typing import ArrayLike
 
 from brachycal.data.bags import DEFAULT_TOPIC, is_bag
 from brachycal.data.csv_log import read_table, to_float
-from brachycal.data.joint_log import LIMIT_TOLERANCE_RAD, JointLog, configurations_from_columns, limit_tolerance
+from brachycal.data.joint_log import (
+    LIMIT_TOLERANCE_RAD,
+    JointLog,
+    configurations_from_columns,
+    joint_columns,
+    limit_tolerance,
+)
 from brachycal.data.recording import (
     AXES_POINTS,
     AXES_TOOLS,
@@ -54,7 +60,6 @@ from brachycal.data.recording import (
 from brachycal.data.session import Session, Touches, read_session_toml, write_session
 from brachycal.errors import InputError
 from brachycal.files import OutputSet, output_set, sha256_file, write_csv, write_json
-from brachycal.model.names import MIMIC_JOINTS
 from brachycal.se3 import FloatArray
 from brachycal.validate import MAX_IMAGE_PX, check_pixel, check_range, check_spacing_mm, check_vector
 
@@ -230,7 +235,7 @@ def read_plan(path: str | os.PathLike[str], robot: Robot) -> PlannedSamples:
     if not names:
         raise InputError("the plan has no poses", file=path)
     uv = to_float(path, header, rows, records, ["u_px", "v_px"])
-    joints = [h for h in header if h in robot.joint_names or h in MIMIC_JOINTS]
+    joints = joint_columns(robot, header)
     q = configurations_from_columns(
         robot, joints, to_float(path, header, rows, records, joints), source=str(path), rows=rows
     )

@@ -1,9 +1,10 @@
 """Exports of a calibration into the tools labs use: URDF, 3D Slicer/ITK, PLUS, ROS.
 
-:func:`write_exports` writes all of them (:data:`EXPORT_FILES`) for a calibration (``T_ER_Ntip``,
-``T_EL_Ptip`` in metres, an :class:`~brachycal.calibration.ImageCalibration`); each format also
-has its own writer and, for round trips, a reader. Slicer/ITK and PLUS files are in millimetres
-(``ImageToProbe`` maps pixels and carries the spacing: :func:`image_to_probe_mm`), ROS in metres.
+:func:`write_exports` writes all of them (:func:`export_files`: names from the robot's rig) for a
+calibration (``T_ER_Ntip``, ``T_EL_Ptip`` in metres, an
+:class:`~brachycal.calibration.ImageCalibration`); each format also has its own writer and, for
+round trips, a reader. Slicer/ITK and PLUS files are in millimetres (``ImageToProbe`` maps pixels
+and carries the spacing: :func:`image_to_probe_mm`), ROS in metres.
 """
 
 from typing import TYPE_CHECKING
@@ -14,6 +15,8 @@ if TYPE_CHECKING:  # imported on first use (the formats need Pinocchio)
     from brachycal.export.formats import (
         EXPORT_FILES,
         calibrated_robot,
+        export_files,
+        flange_labels,
         image_to_probe_mm,
         plus_coordinate_definitions,
         read_itk_transform,
@@ -28,6 +31,8 @@ __getattr__, __dir__ = attach(__name__, __file__)
 __all__ = [
     "EXPORT_FILES",
     "calibrated_robot",
+    "export_files",
+    "flange_labels",
     "image_to_probe_mm",
     "plus_coordinate_definitions",
     "read_itk_transform",

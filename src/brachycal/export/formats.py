@@ -1,8 +1,11 @@
 """Writers (and readers, for round trips) of the formats a calibration is used in.
 
-- **URDF**: the bundled SDA10F with the calibrated ``needle_tip``, ``probe_tip`` and
-  ``us_image`` joints (for ROS/MoveIt). The URDF frame ``us_image`` is rigid; the pixel spacing
-  stays in the result file (and in the PLUS/Slicer image transforms below).
+- **URDF** (``<robot>_calibrated.urdf``, ``<robot>`` the description's name: ``sda10f``,
+  ``ur5_pair``, ...): the robot's URDF with the calibrated ``needle_tip``, ``probe_tip`` and
+  ``us_image`` joints (for ROS/MoveIt), and, for a result that corrects the robot, the corrected
+  joint origins (the robot given is the software robot, corrected exactly once). The URDF frame
+  ``us_image`` is rigid; the pixel spacing stays in the result file (and in the PLUS/Slicer image
+  transforms below).
 - **3D Slicer / ITK** ``.tfm``: ``#Insight Transform File V1.0`` with an ``AffineTransform_double_3_3``.
   ITK files store the *resampling* transform (Slicer's "from parent") in LPS; Slicer converts to
   RAS and shows the inverse as "to parent". So for a to-parent matrix ``M`` (RAS, mm) the file
@@ -18,9 +21,10 @@ from __future__ import annotations
 
 import io
 import os
+import re
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import cast
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -28,11 +32,48 @@ from numpy.typing import ArrayLike
 from brachycal.calibration.image_to_probe import ImageCalibration
 from brachycal.errors import InputError
 from brachycal.files import OutputSet, atomic_open, output_set
-from brachycal.model.names import LEFT_FLANGE, NEEDLE_TIP, PROBE_TIP, RIGHT_FLANGE, US_IMAGE
+from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, make_transform, to_position_quaternion
 
+if TYPE_CHECKING:
+    from brachycal.model.description import Rig
+
 LPS = np.diag([-1.0, -1.0, 1.0, 1.0])
+
+
+def flange_labels(rig: Rig) -> tuple[str, str]:
+    """``(needle flange, probe flange)`` names in PLUS and Slicer files: ``RightFlange``/``LeftFlange``
+    when each flange link names its side (a ``right``/``left`` word in the link name, the two sides
+    different: the SDA10F's ``arm_right_link_tool0``, Baxter's ``right_hand_link``, the UR5 cell's
+    ``right_tool0``), else ``NeedleFlange``/``ProbeFlange``."""
+
+    def side(link: str) -> str | None:
+        words = set(re.split(r"[^a-z]+", link.lower()))
+        sides = [s for s in ("left", "right") if s in words]
+        return sides[0].capitalize() if len(sides) == 1 else None
+
+    needle, probe = side(rig.needle_flange), side(rig.probe_flange)
+    if needle is None or probe is None or needle == probe:
+        return "NeedleFlange", "ProbeFlange"
+    return f"{needle}Flange", f"{probe}Flange"
+
+
+def export_files(rig: Rig) -> tuple[str, ...]:
+    """The files :func:`write_exports` writes into its folder for a robot with this rig, in order:
+    the calibrated URDF (``<name>_calibrated.urdf``), the three ``.tfm`` files, the PLUS and ROS files."""
+    needle, probe = flange_labels(rig)
+    return (
+        f"{rig.name}_calibrated.urdf",
+        "ImageToProbe.tfm",
+        f"ProbeTo{probe}.tfm",
+        f"NeedleTipTo{needle}.tfm",
+        "PlusCoordinateDefinitions.xml",
+        "static_transforms.yaml",
+    )
+
+
+#: :func:`export_files` of the bundled SDA10F (the default robot).
 EXPORT_FILES = (
     "sda10f_calibrated.urdf",
     "ImageToProbe.tfm",
@@ -41,7 +82,6 @@ EXPORT_FILES = (
     "PlusCoordinateDefinitions.xml",
     "static_transforms.yaml",
 )
-"""The files :func:`write_exports` writes into its folder, in this order."""
 
 
 def calibrated_robot(robot: Robot, T_ER_Ntip: ArrayLike, T_EL_Ptip: ArrayLike, image: ImageCalibration) -> Robot:
@@ -98,13 +138,22 @@ def _matrix_text(M: FloatArray) -> str:
     return "\n        ".join(" ".join(f"{v:.9g}" for v in row) for row in M)
 
 
-def plus_coordinate_definitions(T_ER_Ntip: ArrayLike, T_EL_Ptip: ArrayLike, image: ImageCalibration) -> str:
-    """A PLUS ``<CoordinateDefinitions>`` element (text) with the calibrated transforms."""
+def plus_coordinate_definitions(
+    T_ER_Ntip: ArrayLike,
+    T_EL_Ptip: ArrayLike,
+    image: ImageCalibration,
+    labels: tuple[str, str] = ("RightFlange", "LeftFlange"),
+) -> str:
+    """A PLUS ``<CoordinateDefinitions>`` element (text) with the calibrated transforms.
+
+    ``labels``: the needle and probe flanges' PLUS names (:func:`flange_labels`; default the SDA10F's).
+    """
     date = datetime.now(UTC).strftime("%Y.%m.%d %H:%M:%S")
+    needle, probe = labels
     items = [
         ("Image", "Probe", image_to_probe_mm(image)),
-        ("Probe", "LeftFlange", _mm(T_EL_Ptip)),
-        ("NeedleTip", "RightFlange", _mm(T_ER_Ntip)),
+        ("Probe", probe, _mm(T_EL_Ptip)),
+        ("NeedleTip", needle, _mm(T_ER_Ntip)),
     ]
     body = "\n".join(
         f'  <Transform From="{a}" To="{b}"\n    Matrix="\n        {_matrix_text(M)}"\n    Date="{date}" />'
@@ -114,8 +163,18 @@ def plus_coordinate_definitions(T_ER_Ntip: ArrayLike, T_EL_Ptip: ArrayLike, imag
     return f"{header}{body}\n</CoordinateDefinitions>\n"
 
 
-def ros_static_transforms(T_ER_Ntip: ArrayLike, T_EL_Ptip: ArrayLike, image: ImageCalibration) -> str:
-    """ROS static transforms as YAML (metres, quaternion x, y, z, w) with publisher commands."""
+def ros_static_transforms(
+    T_ER_Ntip: ArrayLike,
+    T_EL_Ptip: ArrayLike,
+    image: ImageCalibration,
+    flanges: tuple[str, str] = ("arm_right_link_tool0", "arm_left_link_tool0"),
+) -> str:
+    """ROS static transforms as YAML (metres, quaternion x, y, z, w) with publisher commands.
+
+    ``flanges``: the needle and probe flange links, the tools' parents (``rig.needle_flange``,
+    ``rig.probe_flange``; default the SDA10F's).
+    """
+    needle_flange, probe_flange = flanges
     lines = [
         "# brachycal calibration: static transforms (metres; quaternion x, y, z, w).",
         "# The image's pixel spacing (not a transform) is given as us_image_spacing_m.",
@@ -123,8 +182,8 @@ def ros_static_transforms(T_ER_Ntip: ArrayLike, T_EL_Ptip: ArrayLike, image: Ima
         "transforms:",
     ]
     for parent, child, T in (
-        (RIGHT_FLANGE, NEEDLE_TIP, T_ER_Ntip),
-        (LEFT_FLANGE, PROBE_TIP, T_EL_Ptip),
+        (needle_flange, NEEDLE_TIP, T_ER_Ntip),
+        (probe_flange, PROBE_TIP, T_EL_Ptip),
         (PROBE_TIP, US_IMAGE, image.T_Ptip_I),
     ):
         p, q = to_position_quaternion(np.asarray(T, dtype=float))
@@ -163,26 +222,33 @@ def write_exports(
     force: bool = False,
     outputs: OutputSet | None = None,
 ) -> list[Path]:
-    """Write every export (:data:`EXPORT_FILES`) into ``folder`` (created if needed), all or nothing.
+    """Write every export (:func:`export_files` of ``robot.rig``) into ``folder`` (created if
+    needed), all or nothing.
 
-    With ``outputs`` (a command's :class:`~brachycal.files.OutputSet`) the files join that set and
-    are committed with it; without, they are committed together on return. Returns the files'
-    final paths.
+    ``robot`` is the model to write: for a result that corrects the robot, the corrected one
+    (:meth:`~brachycal.calibration.StoredCalibration.software_robot`); only its tool joints are
+    replaced here. With ``outputs`` (a command's :class:`~brachycal.files.OutputSet`) the files join
+    that set and are committed with it; without, they are committed together on return. Returns the
+    files' final paths.
     """
     folder = Path(folder)
+    rig = robot.rig
+    names = export_files(rig)
+    urdf, image_tfm, probe_tfm, needle_tfm, plus, ros = names
+    labels = flange_labels(rig)
     with output_set(outputs, force=force) as out:
-        staged = {name: out.path(folder / name, make_parents=True) for name in EXPORT_FILES}
-        calibrated_robot(robot, T_ER_Ntip, T_EL_Ptip, image).write_urdf(staged["sda10f_calibrated.urdf"], force=force)
+        staged = {name: out.path(folder / name, make_parents=True) for name in names}
+        calibrated_robot(robot, T_ER_Ntip, T_EL_Ptip, image).write_urdf(staged[urdf], force=force)
         for name, M in (
-            ("ImageToProbe.tfm", image_to_probe_mm(image)),
-            ("ProbeToLeftFlange.tfm", _mm(T_EL_Ptip)),
-            ("NeedleTipToRightFlange.tfm", _mm(T_ER_Ntip)),
+            (image_tfm, image_to_probe_mm(image)),
+            (probe_tfm, _mm(T_EL_Ptip)),
+            (needle_tfm, _mm(T_ER_Ntip)),
         ):
             write_itk_transform(M, staged[name], force=force)
         for name, text in (
-            ("PlusCoordinateDefinitions.xml", plus_coordinate_definitions(T_ER_Ntip, T_EL_Ptip, image)),
-            ("static_transforms.yaml", ros_static_transforms(T_ER_Ntip, T_EL_Ptip, image)),
+            (plus, plus_coordinate_definitions(T_ER_Ntip, T_EL_Ptip, image, labels)),
+            (ros, ros_static_transforms(T_ER_Ntip, T_EL_Ptip, image, (rig.needle_flange, rig.probe_flange))),
         ):
             with atomic_open(staged[name], force=force) as f:
                 f.write(text)
-    return [folder / name for name in EXPORT_FILES]
+    return [folder / name for name in names]

@@ -156,8 +156,9 @@ class DualArmIK:
 
         Args:
             q_start: ``(nq,)`` start configuration, radians, model order.
-            T_base_needle, T_base_probe: ``(4, 4)`` targets of the needle tip and the probe tip in
-                the robot's base (``robot.rig.base``, metres).
+            T_base_needle: ``(4, 4)`` target of the needle tip in the robot's base (``robot.rig.base``,
+                metres).
+            T_base_probe: ``(4, 4)`` target of the probe tip, likewise.
 
         Returns:
             The last configuration, whether it converged, and the remaining errors; running out of

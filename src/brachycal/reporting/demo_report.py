@@ -38,6 +38,7 @@ def demo_text(run: DemoRun) -> str:
     twin, result, c = run.twin, run.result, run.twin.config
     lines = [
         f"brachycal demo: the paper's calibration on {run.origin}",
+        f"robot: {twin.nominal.rig.name} ({twin.nominal.rig.summary})",
         "",
         f"twin: {len(twin.session.sample_ids)} planned sample poses in a {c.spec.edge_m * 1e3:.0f} mm cube, "
         f"{c.trials} touches per tool and reference tip",
@@ -80,7 +81,7 @@ def demo_text(run: DemoRun) -> str:
     for method in TRUTH_METHODS:
         spacing = result.image[method].spacing_m
         lines.append(
-            f"  {method:9s} image centre on the left flange {_mm(run.image_centre_error_m(method))}, "
+            f"  {method:9s} image centre on the probe flange {_mm(run.image_centre_error_m(method))}, "
             f"spacing {spacing[0] * 1e3:.4f} x {spacing[1] * 1e3:.4f} mm/px "
             f"(true {truth.spacing_m[0] * 1e3:.4f} x {truth.spacing_m[1] * 1e3:.4f})"
         )

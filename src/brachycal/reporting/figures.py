@@ -58,12 +58,12 @@ def error_histogram(stats: ErrorStats, path: str | os.PathLike[str], title: str)
 
 def points_3d_figure(p_real_m: ArrayLike, p_cal_m: ArrayLike, title: str) -> Figure:
     """Fig. 10 (e): real needle tips ``(N, 3)`` and their calibrated estimates ``(N, 3)``, metres in
-    ``base_link``, drawn in millimetres."""
+    the robot's base frame (``base_link`` on the SDA10F), drawn in millimetres."""
     real, cal = np.asarray(p_real_m) * 1e3, np.asarray(p_cal_m) * 1e3
     fig = Figure(figsize=(6, 5), layout="tight")
     ax = fig.add_subplot(projection="3d")
-    ax.scatter(*real.T, s=16, color="tab:blue", label="real (robot, right arm)")
-    ax.scatter(*cal.T, s=16, marker="^", color="tab:orange", label="calibrated (image, left arm)")
+    ax.scatter(*real.T, s=16, color="tab:blue", label="real (robot, needle arm)")
+    ax.scatter(*cal.T, s=16, marker="^", color="tab:orange", label="calibrated (image, probe arm)")
     for a, b in zip(real, cal, strict=True):
         ax.plot(*np.stack([a, b]).T, color="0.5", lw=0.6)
     ax.set_xlabel("x (mm)")

@@ -52,10 +52,8 @@ def robot_scene(
     for frame in frames:
         axis = trimesh.creation.axis(origin_size=0.004, axis_radius=0.002, axis_length=0.05)
         scene.add_geometry(axis, node_name=f"{frame}_axes", geom_name=f"{frame}_axes", transform=robot.fk(frame, q))
-    for tool, flange, colour in (
-        (NEEDLE_TIP, "arm_right_link_tool0", [200, 200, 200, 255]),
-        (PROBE_TIP, "arm_left_link_tool0", [60, 60, 60, 255]),
-    ):
+    for tool, colour in ((NEEDLE_TIP, [200, 200, 200, 255]), (PROBE_TIP, [60, 60, 60, 255])):
+        flange = robot.rig.tool_frame_parents[tool]  # the arm's flange (the rig's: any robot)
         # The end-effectors have no geometry in the URDF: draw each as a rod from flange to tip.
         a, b = robot.fk(flange, q)[:3, 3], robot.fk(tool, q)[:3, 3]
         radius = 0.004 if tool == NEEDLE_TIP else 0.009
@@ -105,7 +103,8 @@ def scene_figure(
 
     Args:
         scene: from :func:`robot_scene`.
-        elevation, azimuth: view angles, degrees (matplotlib's ``view_init``).
+        elevation: view angle, degrees (matplotlib's ``view_init``).
+        azimuth: view angle, degrees.
         zoom_to: ``(2, 3)`` low and high corners of the box to show, metres; default the whole scene.
     """
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection

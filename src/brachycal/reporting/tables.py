@@ -208,12 +208,20 @@ def design_table(rows: Sequence[Mapping[str, object]]) -> str:
     return "\n".join(lines)
 
 
+def _held_out(s: Mapping[str, object]) -> str:
+    mean, sd = float(s["target_held_out_mae_mm_mean"]), float(s["target_held_out_mae_mm_sd"])  # type: ignore[arg-type]
+    return "no torso" if np.isnan(mean) else f"{mean:.3f} ± {sd:.3f}"
+
+
 def study_table(summary: Sequence[Mapping[str, object]]) -> str:
     """A study's summary (:func:`~brachycal.simulation.study.summarise`): per setting and method the
     leave-one-out and targeting MAE (mean ± SD over seeds), the targeting MAE at held-out
-    configurations (torso turned 3°) and the mean largest targeting error, mm."""
-    lines = [
-        f"{'robot':<10} {'samples':>7} {'edge':>5} {'ann.px':>6} {'sound':>6} {'outl.':>5} {'method':<22} "
+    configurations (torso turned 3°; "no torso" on a robot without a joint shared by both arms) and
+    the mean largest targeting error, mm. The first line names the robot(s) the twin simulated."""
+    robots = sorted({str(s["robot"]) for s in summary if "robot" in s})
+    lines = [f"robot: {', '.join(robots)}"] if robots else []
+    lines += [
+        f"{'robot err.':<10} {'samples':>7} {'edge':>5} {'ann.px':>6} {'sound':>6} {'outl.':>5} {'method':<22} "
         f"{'LOO MAE (mm)':>14} {'target MAE (mm)':>16} {'held-out MAE':>15} {'target max':>11}"
     ]
     for s in summary:
@@ -222,8 +230,7 @@ def study_table(summary: Sequence[Mapping[str, object]]) -> str:
             f"{s['robot_error']!s:<10} {s['samples']:>7} {s['edge_mm']:>5g} {s['annotation_px']:>6g} "
             f"{'water' if s['sound_speed'] else 'tissue':>6} {s['outlier_rate']:>5g} {label:<22} "
             f"{s['loo_mae_mm_mean']:>7.3f} ± {s['loo_mae_mm_sd']:.3f} {s['target_mae_mm_mean']:>8.3f} ± "
-            f"{s['target_mae_mm_sd']:.3f} {s['target_held_out_mae_mm_mean']:>7.3f} ± "
-            f"{s['target_held_out_mae_mm_sd']:.3f} {s['target_max_mm_mean']:>11.3f}"
+            f"{s['target_mae_mm_sd']:.3f} {_held_out(s):>15} {s['target_max_mm_mean']:>11.3f}"
         )
     return "\n".join(lines)
 

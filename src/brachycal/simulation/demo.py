@@ -7,6 +7,9 @@ calibration is judged by the end-to-end targeting error of every method on the s
 robot, next to the tracker route (N-wire phantom + hand–eye with an optical tracker, Table III).
 The returned :class:`DemoRun` holds everything the tables and figures show
 (:mod:`brachycal.reporting.demo_report` renders them).
+
+Any robot with a description (``robot.rig``): the twin plans in its workspace, touches and moves
+with its arms; the committed example is the SDA10F's only.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from brachycal.calibration.result_file import write_result
 from brachycal.calibration.sequential import CalibrationResult, calibrate, loo_points
 from brachycal.data.session import FILES as SESSION_FILES
 from brachycal.data.session import Session, read_session
+from brachycal.errors import InputError
 from brachycal.files import OutputSet, bundled, output_set
 from brachycal.imaging.pixels import image_points
 from brachycal.model.robot import Robot
@@ -83,6 +87,20 @@ class DemoRun:
         return (calibrated - true)[0]
 
 
+def check_example_robot(robot: Robot) -> None:
+    """Refuse the committed example (``examples/twin_session``, simulated on the SDA10F) for another robot.
+
+    Raises:
+        InputError: ``robot`` is not the SDA10F.
+    """
+    name = robot.rig.name
+    if name != "sda10f":
+        raise InputError(
+            f"the committed example examples/twin_session is the SDA10F's, not {name!r}'s: "
+            "simulate one instead (drop --example)"
+        )
+
+
 @contextmanager
 def _as_written(outputs: OutputSet, session_dir: Path) -> Iterator[Path]:
     """A temporary folder showing the staged session files under their own names (symlinks)."""
@@ -113,21 +131,28 @@ def run_demo(
         robot: the nominal model (the software's).
         folder: where the session and the result go.
         seed: the simulated session's seed (ignored with ``example``).
-        example: calibrate the committed ``examples/twin_session`` (seed 0) instead.
+        example: calibrate the committed ``examples/twin_session`` (seed 0, the SDA10F's) instead.
         n_targets: targets of the targeting error.
         force: replace existing files.
 
     Raises:
         SolverError: a pose of the set-up is unreachable for the simulated robot.
         OutputError: a file cannot be written.
+        InputError: ``example`` with a robot other than the SDA10F.
     """
     folder = Path(folder)
+    rig = robot.rig
     if example:
+        check_example_robot(robot)
         twin = read_twin(bundled("examples", "twin_session"), robot)
         origin = "the committed example examples/twin_session"
     else:
         twin = simulate(robot, TwinConfig(seed=seed))
-        origin = f"a simulated session (seed {seed})"
+        origin = (
+            f"a simulated session (seed {seed})"
+            if rig.name == "sda10f"
+            else f"a simulated {rig.name} session (seed {seed})"
+        )
     session_dir = folder / "session"
     with output_set(outputs, force=force) as out:
         write_twin(twin, session_dir, force=force, outputs=out)
@@ -135,7 +160,7 @@ def run_demo(
         with _as_written(out, session_dir) as written:
             session = read_session(written, robot)
         result = calibrate(session, robot)
-        write_result(result, out.path(folder / "result.json", make_parents=True), force=force)
+        write_result(result, out.path(folder / "result.json", make_parents=True), force=force, robot=robot)
     targeting = {
         m: targeting_error(twin, result.T_ER_Ntip, result.T_EL_Ptip, result.image[m], n_targets) for m in METHODS
     }

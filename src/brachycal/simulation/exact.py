@@ -5,10 +5,17 @@ truth's transforms, every touch is exact and every annotation is the true pixel.
 of such a session must return the truth to numerical precision. The digital twin (noise, robot
 errors, planned poses) builds on this.
 
-Geometry, in ``base_link``: the reference tips lie in front of the robot at about waist height;
-tools approach them pointing forward and down, each trial from another direction. Image samples
-sweep a 4×4 grid of pixels over the image for each of several probe poses that step the image
-plane through the needle's workspace, so the needle tips fill a volume.
+Geometry, on any rig (:attr:`Robot.rig <brachycal.model.robot.Robot.rig>`): every place is an
+offset from the rig's sample cube (``workspace.cube_centre_m``) in its *workspace frame*
+(:func:`workspace_frame`: x forward, the probe's depth direction made horizontal; z up, the
+base's z; y to the probe arm's side), so a robot description places the whole session by its
+cube. The reference tips lie 0.2 m below the cube, in front of the needle arm; tools approach
+them pointing forward and down, each trial from another direction; the axes moves start 0.1 m
+below and behind the cube, each on its arm's side. Image samples sweep a 4×4 grid of pixels over
+the image for each of several probe poses that step the image plane through the needle's
+workspace, so the needle tips fill a volume. Places are rounded to 1 µm, so a cube given in round
+numbers gives round-number places: the SDA10F's (cube at (0.80, 0.10, 1.05) m) are exactly the
+fixed ``base_link`` positions of earlier versions, which keeps its twin's files identical.
 """
 
 from __future__ import annotations
@@ -20,21 +27,115 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from brachycal.data.session import Session, Touches
-from brachycal.errors import SolverError
+from brachycal.errors import InputError, SolverError
 from brachycal.imaging.pixels import DEFAULT_IMAGE_SIZE_PX, DEFAULT_SPACING_M, image_points
 from brachycal.model.ik import solve_ik
-from brachycal.model.names import LEFT_ARM, NEEDLE_TIP, PROBE_TIP, READY, RIGHT_ARM, TOP_MODEL_TIP, US_IMAGE
+from brachycal.model.names import LEFT_ARM, NEEDLE_TIP, PROBE_TIP, RIGHT_ARM, TOP_MODEL_TIP, US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, make_transform, transform_points
 
-#: The arms' axes in a configuration (:data:`brachycal.model.names.LEFT_ARM`, ``RIGHT_ARM``).
+#: The SDA10F's arms' axes in a configuration (:data:`brachycal.model.names.LEFT_ARM`, ``RIGHT_ARM``);
+#: other robots: ``robot.rig.probe_arm_indices``, ``needle_arm_indices``.
 LEFT, RIGHT = LEFT_ARM, RIGHT_ARM
 
-#: The probe pose of the samples: shaft (z) along +x of base_link, image lateral (x) along +z.
-R_BASE_PROBE = np.column_stack([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]])
-P_BASE_PROBE = np.array([0.80, 0.10, 1.00])
-#: Needle direction for the samples: the probe axis turned 35° about base z (wrists stay apart).
-R_BASE_NEEDLE = Rotation.from_euler("z", 35.0, degrees=True).as_matrix() @ R_BASE_PROBE
+#: Places of the session as offsets from the sample cube's centre in the workspace frame
+#: (:func:`workspace_frame`: forward, towards the probe arm's side, up), metres. On the SDA10F
+#: (cube at (0.80, 0.10, 1.05) m, workspace frame = base_link) they are the positions the twin has
+#: always used: reference tips (0.75, -0.05, 0.85) and (0.72, 0.08, 0.85) m, axes-move starts
+#: (0.70, -0.10, 0.95) m (needle) and (0.70, 0.15, 0.95) m (probe), sample probe at (0.80, 0.10, 1.00) m.
+REFERENCE_TIP_OFFSETS_M: dict[str, tuple[float, float, float]] = {
+    "rtip1": (-0.05, -0.15, -0.20),
+    "rtip2": (-0.08, -0.02, -0.20),
+}
+AXES_START_OFFSETS_M: dict[str, tuple[float, float, float]] = {
+    "needle": (-0.10, -0.20, -0.10),
+    "probe": (-0.10, 0.05, -0.10),
+}
+SAMPLE_PROBE_OFFSET_M = (0.0, 0.0, -0.05)
+#: Places are rounded to this grid, metres (see the module docstring).
+PLACE_GRID_DECIMALS = 6
+
+
+def workspace_frame(robot: Robot) -> FloatArray:
+    """``R_base_ws (3, 3)``: the rig's workspace frame, columns forward, side, up (in the base frame).
+
+    Up is the base's z (the tips lie below the cube, tools approach downwards); forward is the
+    probe's depth direction (``workspace.image_depth_dir``) made horizontal, or the needle's
+    insertion direction if the probe points straight down; the side axis points from the needle
+    arm towards the probe arm (their flanges at the ready stance), so the places of
+    :data:`REFERENCE_TIP_OFFSETS_M` and :data:`AXES_START_OFFSETS_M` fall on the side of the arm that uses them
+    whichever arm holds the needle. Identity on the three bundled robots.
+
+    Raises:
+        InputError: both directions are vertical (no forward direction).
+    """
+    rig = robot.rig
+    up = np.array([0.0, 0.0, 1.0])
+    for direction in (rig.workspace.image_depth_dir, rig.workspace.insertion_dir):
+        forward = np.asarray(direction, dtype=float) - direction[2] * up
+        if np.linalg.norm(forward) > 1e-6:
+            forward = forward / np.linalg.norm(forward)
+            break
+    else:
+        raise InputError(
+            f"robot {rig.name!r}: the workspace's image depth and insertion directions are both vertical; "
+            "the twin needs a forward direction",
+            file=rig.source,
+        )
+    side = np.cross(up, forward)
+    ready = rig.ready
+    towards_probe = robot.fk(rig.probe_flange, ready)[:3, 3] - robot.fk(rig.needle_flange, ready)[:3, 3]
+    if towards_probe @ side < 0:  # the needle arm stands on the +side: mirror
+        side = -side
+    return np.column_stack([forward, side, up])
+
+
+def place(robot: Robot, offset_m: tuple[float, float, float]) -> FloatArray:
+    """``(3,)`` the point ``offset_m`` (workspace frame, metres) from the rig's cube centre, in the base
+    frame, rounded to 1 µm (:data:`PLACE_GRID_DECIMALS`)."""
+    centre = np.asarray(robot.rig.workspace.cube_centre_m, dtype=float)
+    return np.round(centre + workspace_frame(robot) @ np.asarray(offset_m, dtype=float), PLACE_GRID_DECIMALS)
+
+
+def reference_tips(robot: Robot) -> dict[str, FloatArray]:
+    """The two reference tips, ``(3,)`` each in the base frame (:data:`REFERENCE_TIP_OFFSETS_M`)."""
+    return {name: place(robot, offset) for name, offset in REFERENCE_TIP_OFFSETS_M.items()}
+
+
+def axes_start(robot: Robot) -> dict[str, FloatArray]:
+    """Where the three-point moves start, per tool (``needle``, ``probe``): ``(3,)`` in the base frame."""
+    return {tool: place(robot, offset) for tool, offset in AXES_START_OFFSETS_M.items()}
+
+
+def touch_tools(robot: Robot) -> tuple[tuple[str, str, list[int]], ...]:
+    """The tools that touch the reference tips: session name, their frame, the arm's joint indices.
+    The needle and the probe (the last two) also make the three-point axes moves."""
+    rig = robot.rig
+    return (
+        ("top_model", TOP_MODEL_TIP, rig.needle_arm_indices),
+        ("needle", NEEDLE_TIP, rig.needle_arm_indices),
+        ("probe", PROBE_TIP, rig.probe_arm_indices),
+    )
+
+
+def sample_poses(robot: Robot) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The exact session's probe pose and needle orientation: ``R_base_probe (3, 3)``,
+    ``p_base_probe (3,)`` and ``R_base_needle (3, 3)``.
+
+    The probe's shaft (z) along the workspace's image depth direction, its image lateral (x) along
+    the image lateral direction, 5 cm below the cube centre; the needle along the insertion
+    direction with its x along the image lateral direction (wrists stay apart). On the SDA10F:
+    probe along +x, image lateral +z, needle turned 35° about z.
+    """
+    ws = robot.rig.workspace
+    depth = np.asarray(ws.image_depth_dir, dtype=float)
+    lateral = np.asarray(ws.image_lateral_dir, dtype=float)
+    R_probe = np.column_stack([lateral, np.cross(depth, lateral), depth])
+    insertion = np.asarray(ws.insertion_dir, dtype=float)
+    x = lateral - (lateral @ insertion) * insertion
+    x = x / np.linalg.norm(x)
+    R_needle = np.column_stack([x, np.cross(insertion, x), insertion])
+    return R_probe, place(robot, SAMPLE_PROBE_OFFSET_M), R_needle
 
 
 @dataclass(frozen=True)
@@ -73,33 +174,44 @@ def _nudge(T: FloatArray, rotvec: list[float], shift_m: list[float]) -> FloatArr
 
 
 def default_truth(robot: Robot, spacing_scale: tuple[float, float] = (1.0, 1.0)) -> SessionTruth:
-    """The URDF's nominal frames moved by a few millimetres and a degree or two (fixed values).
+    """The description's nominal tool frames moved by a few millimetres and a degree or two (fixed
+    values); the top model as mounted nominally; the reference tips of :func:`reference_tips`.
 
     Args:
-        robot: the nominal model.
+        robot: the nominal model (with its rig).
         spacing_scale: true spacing = the nominal :data:`~brachycal.imaging.DEFAULT_SPACING_M`
             (0.19 mm/pixel) × this, per axis (e.g. 1.04 axially for water at room temperature).
     """
     nominal = np.array(DEFAULT_SPACING_M)
+    tips = reference_tips(robot)
     return SessionTruth(
         T_ER_Ntip=_nudge(robot.tool_transform(NEEDLE_TIP)[1], [0.02, -0.015, 0.03], [1.5e-3, -2.0e-3, 3.0e-3]),
         T_EL_Ptip=_nudge(robot.tool_transform(PROBE_TIP)[1], [-0.01, 0.02, -0.025], [-2.0e-3, 1.0e-3, -1.5e-3]),
         T_Ptip_I=_nudge(robot.tool_transform(US_IMAGE)[1], [0.015, 0.01, -0.02], [2.5e-3, -1.5e-3, 1.0e-3]),
         spacing_m=nominal * np.asarray(spacing_scale),
         nominal_spacing_m=nominal,
-        p_ER_Mtip=np.array([0.0, 0.0, 0.150]),
-        p_R_Rtip1=np.array([0.75, -0.05, 0.85]),
-        p_R_Rtip2=np.array([0.72, 0.08, 0.85]),
+        p_ER_Mtip=robot.tool_transform(TOP_MODEL_TIP)[1][:3, 3].copy(),
+        p_R_Rtip1=tips["rtip1"],
+        p_R_Rtip2=tips["rtip2"],
         size_px=np.array(DEFAULT_IMAGE_SIZE_PX),
     )
 
 
-def _approach(k: int, n: int, turn_deg: float = 0.0) -> FloatArray:
-    """Orientation of a tool approaching a tip, trial ``k`` of ``n``: z forward-down, varied."""
+#: Turns of the approach an operator tries, in this order, when a direction is out of reach, degrees:
+#: 20° steps both ways, up to half a turn. The SDA10F and Baxter reach every touch of the default
+#: twin straight on (0°; the SDA10F's sessions are those of the earlier ±60° list); the UR5 cell's
+#: probe needs 80° at one touch of seed 0 (its reference tips sit 0.1 m above the table).
+TURNS_DEG = (0.0, *(sign * step for step in range(20, 181, 20) for sign in (1.0, -1.0)))[:-1]
+
+
+def _approach(k: int, n: int, turn_deg: float = 0.0, R_base_ws: FloatArray | None = None) -> FloatArray:
+    """Orientation of a tool approaching a tip, trial ``k`` of ``n``: z forward-down, varied
+    (forward and down of the workspace frame ``R_base_ws``; default the base's axes)."""
     base = Rotation.from_euler("y", 135.0, degrees=True)  # z axis points forward and down
     spin = Rotation.from_euler("z", 360.0 * k / n + turn_deg, degrees=True)
     tilt = Rotation.from_euler("x", 12.0, degrees=True)
-    return (base * spin * tilt).as_matrix()
+    R = (base * spin * tilt).as_matrix()
+    return R if R_base_ws is None else R_base_ws @ R
 
 
 def touch(
@@ -108,29 +220,22 @@ def touch(
     """Joints that put ``frame`` on ``p_R`` for trial ``k`` of ``n``.
 
     Like an operator, it turns the approach about the vertical when one direction is out of the
-    arm's reach (up to ±60° in 20° steps).
+    arm's reach (:data:`TURNS_DEG`: up to ±180° in 20° steps).
 
     Raises:
         SolverError: no approach direction reaches the tip.
     """
-    for turn in (0.0, 20.0, -20.0, 40.0, -40.0, 60.0, -60.0):
+    R_base_ws = workspace_frame(robot)
+    for turn in TURNS_DEG:
         try:
-            T = make_transform(_approach(k, n, turn), p_R)
+            T = make_transform(_approach(k, n, turn, R_base_ws), p_R)
             return solve_ik(robot, frame, T, q0, arm, margin=0.05, restarts=10, seed=seed)
         except SolverError:  # unreachable this way: turn the approach (input errors propagate)
             continue
     raise SolverError(
-        f"{frame} cannot touch the reference tip at {np.round(p_R, 4).tolist()} m in base_link "
-        f"(trial {k + 1} of {n}, approach turned up to ±60°)"
+        f"{frame} cannot touch the reference tip at {np.round(p_R, 4).tolist()} m in the base frame "
+        f"(trial {k + 1} of {n}, approach turned up to ±180°)"
     )
-
-
-#: The tools that touch the reference tips: session name, their frame, the arm's joints. The
-#: needle and the probe also make the three-point axes moves.
-TOUCH_TOOLS = (("top_model", TOP_MODEL_TIP, RIGHT), ("needle", NEEDLE_TIP, RIGHT), ("probe", PROBE_TIP, LEFT))
-
-#: Where the three-point moves start, per tool: in front of the robot, each on its arm's side.
-AXES_START = {"needle": np.array([0.70, -0.10, 0.95]), "probe": np.array([0.70, 0.15, 0.95])}
 
 
 def axes_moves(
@@ -144,8 +249,9 @@ def axes_moves(
     Raises:
         SolverError: no orientation makes all three points reachable.
     """
-    for turn in (0.0, 20.0, -20.0, 40.0, -40.0, 60.0, -60.0):
-        R = _approach(0, 1, turn)
+    R_base_ws = workspace_frame(robot)
+    for turn in TURNS_DEG:
+        R = _approach(0, 1, turn, R_base_ws)
         try:
             q1 = solve_ik(robot, frame, make_transform(R, p1), q0, arm, margin=0.05, restarts=10, seed=seed)
             return {
@@ -161,7 +267,7 @@ def axes_moves(
             continue
     raise SolverError(
         f"{frame} cannot make the three-point moves ({move_m * 1e3:g} mm) from {np.round(p1, 4).tolist()} m "
-        "in base_link (orientation turned up to ±60°)"
+        "in the base frame (orientation turned up to ±180°)"
     )
 
 
@@ -177,7 +283,7 @@ def exact_session(
     """A noise-free session: ``probe_poses × grid²`` image samples, ``trials`` touches per tip.
 
     Args:
-        robot: the nominal model (its flanges are the physical robot's).
+        robot: the nominal model with its rig (its flanges are the physical robot's).
         truth: the transforms to hide in the data.
         trials: repeats per tool and reference tip.
         probe_poses: probe poses, each stepping the image plane ~5 mm along its normal.
@@ -188,18 +294,20 @@ def exact_session(
         SolverError: a pose of the set-up is unreachable.
     """
     physical = truth.robot(robot)
-    q_home = READY.copy()
+    q_home = robot.rig.ready
+    needle_arm, probe_arm = robot.rig.needle_arm_indices, robot.rig.probe_arm_indices
     ik = functools.partial(solve_ik, margin=0.05, restarts=50, seed=seed)
+    tools = touch_tools(robot)
 
     touches = {}
     for reference, p_R in (("rtip1", truth.p_R_Rtip1), ("rtip2", truth.p_R_Rtip2)):
-        for tool, frame, arm in TOUCH_TOOLS:
+        for tool, frame, arm in tools:
             q = np.array([touch(physical, frame, arm, p_R, k, trials, q_home, seed) for k in range(trials)])
             touches[tool, reference] = Touches(np.arange(1, trials + 1), q)
 
-    axes = {
-        tool: axes_moves(physical, frame, arm, AXES_START[tool], q_home, seed) for tool, frame, arm in TOUCH_TOOLS[1:]
-    }
+    starts = axes_start(robot)
+    axes = {tool: axes_moves(physical, frame, arm, starts[tool], q_home, seed) for tool, frame, arm in tools[1:]}
+    R_base_probe, p_base_probe, R_base_needle = sample_poses(robot)
 
     width, height = truth.size_px
     us = np.linspace(0.3 * width, 0.75 * width, grid)
@@ -211,13 +319,13 @@ def exact_session(
     for j in range(probe_poses):
         offset = (j - (probe_poses - 1) / 2) * 5e-3
         R_probe = Rotation.from_euler("x", 2.0 * (j - (probe_poses - 1) / 2), degrees=True).as_matrix()
-        T_R_Ptip = make_transform(R_BASE_PROBE @ R_probe, P_BASE_PROBE + offset * R_BASE_PROBE[:, 1])
-        q = ik(physical, PROBE_TIP, T_R_Ptip, q, LEFT)
+        T_R_Ptip = make_transform(R_base_probe @ R_probe, p_base_probe + offset * R_base_probe[:, 1])
+        q = ik(physical, PROBE_TIP, T_R_Ptip, q, probe_arm)
         T_R_I = physical.fk(US_IMAGE, q)
         for u in us:
             for v in vs:
                 p_R = transform_points(T_R_I, image_points((u, v), truth.spacing_m)[0])
-                q = ik(physical, NEEDLE_TIP, make_transform(R_BASE_NEEDLE, p_R), q, RIGHT)
+                q = ik(physical, NEEDLE_TIP, make_transform(R_base_needle, p_R), q, needle_arm)
                 ids.append(f"s{len(ids) + 1:03d}")
                 configs.append(q.copy())
                 uv.append((u, v))

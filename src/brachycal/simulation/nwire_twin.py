@@ -75,9 +75,10 @@ from brachycal.data.plus_files import PlusConfig, SegmentedFrame, Wire
 from brachycal.errors import InputError, SolverError
 from brachycal.imaging.pixels import DEFAULT_SPACING_M, image_points, pixels
 from brachycal.model.ik import solve_ik
-from brachycal.model.names import LEFT_ARM, LEFT_FLANGE
+from brachycal.model.robot import Robot
 from brachycal.planning.spec import SectorFOV
 from brachycal.se3 import FloatArray, inverse, make_transform, transform_points
+from brachycal.simulation.exact import workspace_frame
 from brachycal.simulation.twin import Twin
 
 MM = 1e-3
@@ -360,15 +361,31 @@ def tracker_route(
 #: Where the probe's marker body sits on the probe tip frame (60 mm back along the shaft, 40 mm
 #: to the side, turned 30° about the shaft).
 T_PTIP_MARKER = make_transform(Rotation.from_euler("z", 30, degrees=True).as_matrix(), [0.04, 0.0, -0.06])
-#: The tracker in base_link's terms (``T_tracker_base``): 1.5 m in front of the robot, facing it.
+#: The tracker in the SDA10F's base_link terms (``T_tracker_base``): 1.5 m in front of the robot, facing it.
 T_TRACKER_BASE = make_transform(Rotation.from_euler("xyz", [10, 170, -30], degrees=True).as_matrix(), [1.5, 0.2, 0.4])
+#: The SDA10F's sample cube centre (``robots/sda10f.toml``), metres: the tracker of another robot
+#: stands where it stands relative to this cube (:func:`tracker_pose`).
+SDA10F_CUBE_CENTRE_M = (0.80, 0.10, 1.05)
+
+
+def tracker_pose(robot: Robot) -> FloatArray:
+    """``T_tracker_base (4, 4)`` for ``robot``: placed relative to its sample cube (workspace frame,
+    :func:`~brachycal.simulation.exact.workspace_frame`) as :data:`T_TRACKER_BASE` is to the SDA10F's,
+    so it faces the probe from the same distance; exactly :data:`T_TRACKER_BASE` on the SDA10F."""
+    R_base_ws = workspace_frame(robot)
+    centre = np.asarray(robot.rig.workspace.cube_centre_m, dtype=float)
+    # T_sda_base_ws @ inv(T_base_ws), written out so that it is the identity to the bit on the SDA10F.
+    T_sda_base = make_transform(R_base_ws.T, np.asarray(SDA10F_CUBE_CENTRE_M) - R_base_ws.T @ centre)
+    return T_TRACKER_BASE @ T_sda_base
 
 
 def _hand_eye_session(twin: Twin, sim: NWireSimConfig, tracker: Tracker, encoder: np.random.Generator) -> FloatArray:
     """Robot poses rotating the probe about three axes, read by the robot and seen by the tracker."""
     physical, nominal = twin.physical, twin.nominal
+    flange, arm = nominal.rig.probe_flange, nominal.rig.probe_arm_indices
+    T_tracker_base = tracker_pose(nominal)
     q_start = twin.true_samples_q[len(twin.true_samples_q) // 2]
-    T_R_EL = physical.fk(LEFT_FLANGE, q_start)
+    T_R_EL = physical.fk(flange, q_start)
     T_EL_marker = twin.truth.T_EL_Ptip @ T_PTIP_MARKER
     T_flange, T_marker = [], []
     for k in range(sim.hand_eye_poses):
@@ -379,7 +396,7 @@ def _hand_eye_session(twin: Twin, sim: NWireSimConfig, tracker: Tracker, encoder
                 Rotation.from_rotvec(np.radians(angle_deg) * axis).as_matrix(), np.zeros(3)
             )
             try:
-                q_true = solve_ik(physical, LEFT_FLANGE, T_target, q_start, LEFT_ARM, margin=0.0, restarts=0)
+                q_true = solve_ik(physical, flange, T_target, q_start, arm, margin=0.0, restarts=0)
                 break
             except SolverError:  # this turn is out of reach: try a smaller one (input errors propagate)
                 continue
@@ -387,8 +404,8 @@ def _hand_eye_session(twin: Twin, sim: NWireSimConfig, tracker: Tracker, encoder
             continue
         reading = encoder.normal(scale=twin.config.encoder_sd_rad, size=q_true.shape)
         q_read = q_true + (reading if twin.config.encoder_noise else 0.0)
-        T_flange.append(nominal.fk(LEFT_FLANGE, q_read))
-        seen = T_TRACKER_BASE @ physical.fk(LEFT_FLANGE, q_true) @ T_EL_marker
+        T_flange.append(nominal.fk(flange, q_read))
+        seen = T_tracker_base @ physical.fk(flange, q_true) @ T_EL_marker
         T_marker.append(tracker.read(seen, sim.tracker_frames))
     if len(T_flange) < 3:
         raise SolverError(

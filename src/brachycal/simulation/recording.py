@@ -41,7 +41,6 @@ from brachycal.data.recording import AXES_POINTS, MARK_TYPE, REFERENCES, STILL_W
 from brachycal.data.session import Session, write_session
 from brachycal.errors import InputError
 from brachycal.files import OutputSet, atomic_open, output_set
-from brachycal.model.names import READY
 from brachycal.model.robot import Robot
 from brachycal.planning import Plan, plan_poses
 from brachycal.planning.output import write_plan
@@ -159,7 +158,7 @@ def record(nominal: Robot, config: TwinConfig | None = None, recording: Recordin
     config = TwinConfig() if config is None else config
     recording = RecordingConfig() if recording is None else recording
     twin = simulate(nominal, replace(config, encoder_noise=False))
-    plan = plan_poses(nominal, config.spec)
+    plan = plan_poses(nominal, twin.config.spec)  # the spec the twin used (the robot's workspace by default)
     session = twin.session
     timing = np.random.default_rng([config.seed, _TIMING])
     # The stops, in the order a lab works: touches (calibration tip, then validation tip), axes, samples.
@@ -181,7 +180,7 @@ def record(nominal: Robot, config: TwinConfig | None = None, recording: Recordin
     # Segments: (start, duration, q_from, q_to); a hold has q_from == q_to.
     segments: list[tuple[float, float, FloatArray, FloatArray]] = []
     t = 0.0
-    q_prev = np.array(READY, dtype=float)
+    q_prev = nominal.rig.ready
     segments.append((t, recording.hold_s, q_prev, q_prev))
     t += recording.hold_s
     marks: list[Mark] = []

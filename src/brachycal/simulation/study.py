@@ -5,6 +5,11 @@ methods, judged by leave-one-out (what a lab sees) and by the end-to-end targeti
 the truth (what the clinic needs). Runs are independent pure functions of their parameters, so
 they can go to local processes or to a Dask cluster, and the rows come back in the same order
 with the same numbers as a serial run.
+
+Any robot (``RunParams.robot``: a bundled description's name or a description file every worker
+can read): the twin plans in that robot's workspace. The held-out targeting figures turn the
+torso (:mod:`brachycal.simulation.targeting`); on a robot without a joint shared by both arms
+they are NaN (no such turn exists).
 """
 
 from __future__ import annotations
@@ -24,7 +29,6 @@ from brachycal.calibration.image_to_probe import METHODS
 from brachycal.calibration.sequential import CalibrationResult
 from brachycal.errors import DegenerateDataError, InputError
 from brachycal.model.robot import Robot
-from brachycal.planning import PlanSpec
 from brachycal.planning.spec import EDGE_RANGE_M
 from brachycal.simulation.settings import (
     HELD_OUT_TORSO_TURN_RAD,
@@ -32,8 +36,8 @@ from brachycal.simulation.settings import (
     ROBOT_ERROR_LEVELS,
     STUDY_METHODS,
 )
-from brachycal.simulation.targeting import targeting_error
-from brachycal.simulation.twin import MAX_ANNOTATION_SD_PX, MAX_OUTLIER_RATE, Twin, TwinConfig, simulate
+from brachycal.simulation.targeting import targeting_error, torso_index
+from brachycal.simulation.twin import MAX_ANNOTATION_SD_PX, MAX_OUTLIER_RATE, Twin, TwinConfig, simulate, spec_for
 from brachycal.validate import (
     MAX_GRID_POINTS,
     MAX_SEEDS,
@@ -52,7 +56,8 @@ class RunParams:
 
     Checked on construction, so a bad sweep is refused before any run starts: seed in [0, 2**32),
     points per axis in [2, 20], edge in [1, 500] mm, annotation noise in [0, 50] px, outlier rate
-    in [0, 0.5], methods among :data:`STUDY_METHODS` (at least one), targets in [1, 100000].
+    in [0, 0.5], methods among :data:`STUDY_METHODS` (at least one), targets in [1, 100000];
+    ``robot`` a robot description (a bundled name or a ``.toml`` path: loaded by each run).
 
     Raises:
         InputError: naming the parameter, its range and the value given.
@@ -67,6 +72,7 @@ class RunParams:
     methods: tuple[str, ...]
     targets: int
     robot_error: str = "well-built"
+    robot: str = "sda10f"
 
     def __post_init__(self) -> None:
         check_seed(self.seed, "seed")
@@ -84,6 +90,8 @@ class RunParams:
             raise InputError(
                 f"unknown robot-error level {self.robot_error!r}; choose from {', '.join(ROBOT_ERROR_LEVELS)}"
             )
+        if not isinstance(self.robot, str) or not self.robot:
+            raise InputError(f"robot must be a robot description's name or file, got {self.robot!r}")
 
 
 def sweep(
@@ -96,6 +104,7 @@ def sweep(
     methods: tuple[str, ...] = ("kabsch", "scaled_uv"),
     targets: int = 30,
     robot_errors: Sequence[str] = ("well-built",),
+    robot: str = "sda10f",
 ) -> list[RunParams]:
     """Every combination, seeds innermost (the order rows are reported in).
 
@@ -132,12 +141,21 @@ def sweep(
             "(each takes seconds to minutes): sweep fewer values or seeds"
         )
     combos = itertools.product(robot_errors, points, edges_mm, annotation_px, sound_speed, outlier_rates, range(seeds))
-    return [RunParams(seed, p, e, a, s, o, methods, targets, level) for level, p, e, a, s, o, seed in combos]
+    return [RunParams(seed, p, e, a, s, o, methods, targets, level, robot) for level, p, e, a, s, o, seed in combos]
+
+
+def load_study_robot(name: str) -> Robot:
+    """The nominal robot of a run: the bundled SDA10F as :meth:`Robot.load` gives it, any other a description."""
+    if name == "sda10f":
+        return Robot.load()
+    from brachycal.model.description import load_description
+
+    return load_description(name).robot
 
 
 def run_one(params: RunParams) -> list[dict[str, object]]:
     """Simulate, calibrate and judge one session; one row per method."""
-    robot = Robot.load()
+    robot = load_study_robot(params.robot)
     base = TwinConfig().with_robot_error(params.robot_error)
     config = replace(
         base,
@@ -146,7 +164,7 @@ def run_one(params: RunParams) -> list[dict[str, object]]:
         sound_speed=params.sound_speed,
         outliers=params.outlier_rate > 0,
         outlier_rate=params.outlier_rate,
-        spec=replace(PlanSpec(), points_per_axis=params.points_per_axis, edge_m=params.edge_mm * 1e-3),
+        spec=replace(spec_for(robot, base), points_per_axis=params.points_per_axis, edge_m=params.edge_mm * 1e-3),
     )
     twin = simulate(robot, config)
     sequential = tuple(m for m in params.methods if m in METHODS)
@@ -216,9 +234,13 @@ def _judge(twin: Twin, robot: Robot, result: CalibrationResult, method: str, tar
         T_ER_Ntip, T_EL_Ptip, image = result.T_ER_Ntip, result.T_EL_Ptip, result.image[method]
         loo = result.loocv[method]
     hit = targeting_error(twin, T_ER_Ntip, T_EL_Ptip, image, targets, software=software).stats
-    held_out = targeting_error(
-        twin, T_ER_Ntip, T_EL_Ptip, image, targets, software=software, torso_turn_rad=HELD_OUT_TORSO_TURN_RAD
-    ).stats
+    if torso_index(robot) is None:  # no torso to turn: no held-out configurations (NaN, module docstring)
+        held_out_mae_mm = held_out_max_mm = float("nan")
+    else:
+        held_out = targeting_error(
+            twin, T_ER_Ntip, T_EL_Ptip, image, targets, software=software, torso_turn_rad=HELD_OUT_TORSO_TURN_RAD
+        ).stats
+        held_out_mae_mm, held_out_max_mm = held_out.mae_mm, held_out.max_mm
     return {
         "chain_model": chosen,
         "cv_folds": n,
@@ -230,8 +252,8 @@ def _judge(twin: Twin, robot: Robot, result: CalibrationResult, method: str, tar
         "target_rmse_mm": hit.rmse_mm,
         "target_sd_mm": hit.sd_mm,
         "target_max_mm": hit.max_mm,
-        "target_held_out_mae_mm": held_out.mae_mm,
-        "target_held_out_max_mm": held_out.max_mm,
+        "target_held_out_mae_mm": held_out_mae_mm,
+        "target_held_out_max_mm": held_out_max_mm,
         "needle_tip_error_mm": float(np.linalg.norm(T_ER_Ntip[:3, 3] - twin.truth.T_ER_Ntip[:3, 3]) * 1e3),
     }
 
@@ -312,6 +334,7 @@ def summarise(rows: Sequence[dict[str, object]]) -> list[dict[str, object]]:
     """Mean and SD over seeds for each parameter combination and method (sessions a method refused,
     as :class:`~brachycal.errors.DegenerateDataError`, are counted in ``refused`` and left out)."""
     keys = (
+        "robot",
         "robot_error",
         "points_per_axis",
         "samples",

@@ -13,6 +13,13 @@ Held-out configurations (``torso_turn_rad``): each aim starts from the nearest s
 the torso turned, so both arms reach the same targets in postures the calibration never saw
 (3° moves the elbows by a few centimetres). A calibration that absorbed the robot's own error
 into its tools at the sample poses loses accuracy there; one that identified the robot should not.
+The torso is the rig's shared joint (``robot.rig.shared_joints``, the first if several: the
+SDA10F's ``torso_joint_b1``). A robot without one (Baxter's torso is fixed, a cell of two arms
+on a table has none) has no turn that moves both arms together: a non-zero turn is refused there
+(:class:`~brachycal.errors.InputError`), and ``brachycal study`` reports its held-out figures as
+NaN ("no torso" in its table).
+
+Any robot: the probe arm images, the needle arm moves (``robot.rig``'s arms and flanges).
 """
 
 from __future__ import annotations
@@ -25,16 +32,16 @@ from scipy.spatial.transform import Rotation
 
 from brachycal.calibration.image_to_probe import ImageCalibration, predict_base
 from brachycal.calibration.metrics import ErrorStats
-from brachycal.errors import SolverError
+from brachycal.errors import InputError, SolverError
 from brachycal.imaging.pixels import image_points, pixels
 from brachycal.model.ik import solve_ik
-from brachycal.model.names import JOINT_NAMES, LEFT_ARM, LEFT_FLANGE, NEEDLE_TIP, RIGHT_ARM, US_IMAGE
+from brachycal.model.names import JOINT_NAMES, NEEDLE_TIP, US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, make_transform
 from brachycal.simulation.twin import STREAMS, Twin, streams
 from brachycal.validate import MAX_TARGETS, check_int, check_range
 
-#: The torso's index in a configuration (it carries both arms).
+#: The SDA10F's torso index in a configuration (it carries both arms); any robot: :func:`torso_index`.
 TORSO = JOINT_NAMES.index("torso_joint_b1")
 #: Largest torso turn of the held-out configurations: beyond ~0.1 rad the arms leave the reach of
 #: some targets from the sample poses' neighbourhood.
@@ -54,6 +61,12 @@ class TargetingResult:
     stats: ErrorStats
     uv_px: FloatArray
     q_read: FloatArray
+
+
+def torso_index(robot: Robot) -> int | None:
+    """Index of the joint the held-out turn moves: the rig's first shared joint, ``None`` without one."""
+    shared = robot.rig.shared_indices
+    return shared[0] if shared else None
 
 
 def random_targets(twin: Twin, n: int) -> FloatArray:
@@ -78,13 +91,20 @@ def targeting_error(
     ``software`` is the robot model the software computes and commands with (default: the
     nominal URDF; a calibration that corrects the robot passes its corrected model).
     ``torso_turn_rad`` turns the torso of every start pose (held-out configurations, module
-    docstring; within ±0.2 rad).
+    docstring; within ±0.2 rad; only on a robot with a shared joint).
 
     Raises:
         SolverError: a target is out of reach from all five nearest sample poses.
+        InputError: a non-zero torso turn on a robot without a shared joint.
     """
     check_int(n_targets, "number of targets", low=1, high=MAX_TARGETS)
     check_range(torso_turn_rad, "torso turn", low=-MAX_TORSO_TURN_RAD, high=MAX_TORSO_TURN_RAD, unit="rad")
+    torso = torso_index(twin.nominal)
+    if torso is None and torso_turn_rad != 0.0:
+        raise InputError(
+            f"robot {twin.nominal.rig.name!r} has no joint shared by both arms (no torso): held-out "
+            "configurations by a torso turn need one"
+        )
     aim = _Aim(twin, software or twin.nominal, T_ER_Ntip, T_EL_Ptip, image)
     targets = random_targets(twin, n_targets)
     landed = np.empty_like(targets)
@@ -96,7 +116,8 @@ def targeting_error(
         starts = np.argsort(np.linalg.norm(sample_tips - target, axis=1))[:5]
         for attempt, nearest in enumerate(starts):
             q_start = twin.true_samples_q[nearest].copy()
-            q_start[TORSO] += torso_turn_rad
+            if torso is not None:
+                q_start[torso] += torso_turn_rad
             try:
                 landed[k], uv[k], q_read[k] = aim.land(target, q_start)
                 break
@@ -114,6 +135,9 @@ class _Aim:
     ) -> None:
         self.twin, self.software, self.T_EL_Ptip, self.image = twin, software, T_EL_Ptip, image
         self.nominal_cal = software.with_tool_transform(NEEDLE_TIP, T_ER_Ntip)
+        rig = twin.nominal.rig
+        self.needle_arm, self.probe_arm = rig.needle_arm_indices, rig.probe_arm_indices
+        self.probe_flange = rig.probe_flange
         spec = twin.config.spec
         self.R_image = spec.image_axes()
         self.direction = spec.needle_pose(spec.cube_centre_m)[:3, 2]
@@ -130,19 +154,20 @@ class _Aim:
         offset = self.R_image.T @ (target - spec.cube_centre_m)
         uv = np.asarray(spec.centre_px) + pixels(offset, truth.spacing_m)[0]
         origin = target - self.R_image @ image_points(uv, truth.spacing_m)[0]
-        q_true = self.ik(twin.physical, US_IMAGE, make_transform(self.R_image, origin), q_start, LEFT_ARM)
+        q_true = self.ik(twin.physical, US_IMAGE, make_transform(self.R_image, origin), q_start, self.probe_arm)
         q_read = q_true.copy()
         if twin.config.encoder_noise:
             q_read += self.read_rng.normal(scale=twin.config.encoder_sd_rad, size=q_true.shape)
         # The software's estimate of the target, and the needle commanded onto it: the roll as in
         # the start pose, the axis turned onto the insertion direction.
-        p_software = predict_base(self.image, self.software.fk(LEFT_FLANGE, q_read), self.T_EL_Ptip, uv[None])[0]
+        p_software = predict_base(self.image, self.software.fk(self.probe_flange, q_read), self.T_EL_Ptip, uv[None])[0]
         R_needle = self.nominal_cal.fk(NEEDLE_TIP, q_start)[:3, :3]
         turn, _ = Rotation.align_vectors([self.direction], [R_needle[:, 2]])
         T_command = make_transform(turn.as_matrix() @ R_needle, p_software)
-        q_command = self.ik(self.nominal_cal, NEEDLE_TIP, T_command, q_read, RIGHT_ARM)
+        arm = self.needle_arm
+        q_command = self.ik(self.nominal_cal, NEEDLE_TIP, T_command, q_read, arm)
         q_executed = q_true.copy()
-        q_executed[RIGHT_ARM] = q_command[RIGHT_ARM]
+        q_executed[arm] = q_command[arm]
         q_seen = q_read.copy()
-        q_seen[RIGHT_ARM] = q_command[RIGHT_ARM]
+        q_seen[arm] = q_command[arm]
         return twin.physical.fk(NEEDLE_TIP, q_executed)[:3, 3], uv, q_seen

@@ -25,10 +25,18 @@ With these defaults the twin reproduces the paper's figures: Table I MAE ≈ 0.1
 
 The session follows the paper's protocol: three touches per tool and reference tip (top-model,
 needle and probe on ``rtip1`` and ``rtip2``), three-point axes moves, and one image per planned
-pose (:func:`brachycal.planning.plan_poses`): the right arm goes to its planned joints, then the
+pose (:func:`brachycal.planning.plan_poses`): the needle arm goes to its planned joints, then the
 probe is adjusted until the needle tip shows near its planned pixel (as an operator does), the
 joints are read and the tip annotated. The tools and image sit 2 mm / 1° SD away from the URDF's
 nominal frames (their truth). The same seed gives the same files.
+
+Any robot: everything robot-specific comes from its rig (``robot.rig``, a robot description):
+which arm holds the needle and which the probe, the ready stance every touch starts from, the
+nominal tool mounts the truth is drawn around, and the workspace that places the cube, the
+reference tips and the axes moves (:mod:`brachycal.simulation.exact`). A :class:`TwinConfig`
+whose ``spec`` is left at its default plans in the simulated robot's own workspace
+(:meth:`PlanSpec.for_robot <brachycal.planning.PlanSpec.for_robot>`); on the SDA10F that is the
+planner's default spec itself, so its twin is unchanged.
 """
 
 from __future__ import annotations
@@ -42,17 +50,17 @@ from brachycal.data.session import Session, Touches
 from brachycal.errors import InputError
 from brachycal.imaging.pixels import SCANNER_SOUND_SPEED_M_S, image_points
 from brachycal.model.ik import solve_ik
-from brachycal.model.names import LEFT_ARM, NEEDLE_TIP, PROBE_TIP, READY, US_IMAGE
+from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.planning import PlanSpec, plan_poses
 from brachycal.se3 import FloatArray, make_transform, transform_points
 from brachycal.simulation.exact import (
-    AXES_START,
-    TOUCH_TOOLS,
     SessionTruth,
     axes_moves,
+    axes_start,
     default_truth,
     touch,
+    touch_tools,
 )
 from brachycal.simulation.settings import (
     MAX_ANNOTATION_SD_PX,
@@ -93,6 +101,31 @@ _SWITCHES = (
 )
 
 
+#: The default plan spec of :class:`TwinConfig`: "the simulated robot's own workspace". One shared
+#: (frozen) instance, so :func:`simulate` can tell a spec left at its default (``is``) from one given.
+_ROBOT_WORKSPACE = PlanSpec()
+
+
+def _robot_workspace() -> PlanSpec:
+    return _ROBOT_WORKSPACE
+
+
+def spec_for(nominal: Robot, config: TwinConfig) -> PlanSpec:
+    """The plan spec a twin of ``nominal`` uses: ``config.spec`` if one was given; left at its default,
+    the robot's own workspace (:meth:`PlanSpec.for_robot`), or :class:`PlanSpec`'s defaults
+    themselves when the workspace is theirs (the SDA10F's: its directions agree to 1e-12 but the
+    TOML's cos 35° is one bit off NumPy's, and the committed example was planned with NumPy's).
+    """
+    if config.spec is not _ROBOT_WORKSPACE:
+        return config.spec
+    own = PlanSpec.for_robot(nominal)
+    same = all(
+        np.allclose(getattr(own, name), getattr(_ROBOT_WORKSPACE, name), rtol=0.0, atol=1e-12)
+        for name in ("cube_centre_m", "insertion_dir", "image_depth_dir", "image_lateral_dir")
+    )
+    return _ROBOT_WORKSPACE if same else own
+
+
 @dataclass(frozen=True)
 class TwinConfig:
     """Noise sources of the twin (see the module docstring for what each one models).
@@ -100,7 +133,8 @@ class TwinConfig:
     Every setting is checked on construction: the switches must be ``True``/``False``, the seed
     in [0, 2**32), each SD finite and within its range (``_RANGES``: from 0 up to about 100
     times its default), the sound speed in [1000, 2000] m/s, the outlier rate in [0, 0.5], the
-    outlier sizes 0 <= low <= high px, 1 to 100 trials.
+    outlier sizes 0 <= low <= high px, 1 to 100 trials. ``spec`` left at its default means the
+    simulated robot's own workspace (:func:`spec_for`); the :class:`Twin` holds the resolved one.
 
     Raises:
         InputError: naming the setting, its range and the value given.
@@ -127,7 +161,7 @@ class TwinConfig:
     tool_offset_sd_m: float = 2e-3
     tool_tilt_sd_rad: float = np.radians(1.0)
     trials: int = 3
-    spec: PlanSpec = field(default_factory=PlanSpec)
+    spec: PlanSpec = field(default_factory=_robot_workspace)
 
     def __post_init__(self) -> None:
         check_seed(self.seed, "twin seed")
@@ -238,11 +272,16 @@ def _truth(nominal: Robot, config: TwinConfig, rng: np.random.Generator) -> Sess
 
 
 def simulate(nominal: Robot, config: TwinConfig = TwinConfig()) -> Twin:
-    """Simulate one calibration session.
+    """Simulate one calibration session of ``nominal`` (any robot with a rig: ``nominal.rig``).
+
+    The returned twin's ``config`` holds the plan spec used (:func:`spec_for`).
 
     Raises:
         SolverError: a pose of the set-up is unreachable for the physical robot.
+        InputError: the robot has no rig (a bare URDF that is not the SDA10F's).
     """
+    rig = nominal.rig
+    config = replace(config, spec=spec_for(nominal, config))
     rng = streams(config.seed)
     truth = _truth(nominal, config, rng["tools"])
     physical = truth.robot(physical_kinematics(nominal, config, rng["robot"]))
@@ -253,22 +292,23 @@ def simulate(nominal: Robot, config: TwinConfig = TwinConfig()) -> Twin:
     def jog() -> FloatArray:
         return rng["jog"].normal(scale=config.jog_sd_m, size=3) if config.jog_error else np.zeros(3)
 
-    q_home = READY.copy()
+    q_home = rig.ready
+    tools = touch_tools(nominal)
     touches = {}
     for reference, p_R in (("rtip1", truth.p_R_Rtip1), ("rtip2", truth.p_R_Rtip2)):
-        for tool, frame, arm in TOUCH_TOOLS:
+        for tool, frame, arm in tools:
             q_trials = [
                 touch(physical, frame, arm, p_R + jog(), k, config.trials, q_home, config.seed)
                 for k in range(config.trials)
             ]
             touches[tool, reference] = Touches(np.arange(1, config.trials + 1), read(np.array(q_trials)))
 
+    starts = axes_start(nominal)
     axes = {
         tool: {
-            point: read(q)
-            for point, q in axes_moves(physical, frame, arm, AXES_START[tool], q_home, config.seed).items()
+            point: read(q) for point, q in axes_moves(physical, frame, arm, starts[tool], q_home, config.seed).items()
         }
-        for tool, frame, arm in TOUCH_TOOLS[1:]
+        for tool, frame, arm in tools[1:]
     }
 
     plan = plan_poses(nominal, config.spec)
@@ -283,7 +323,9 @@ def simulate(nominal: Robot, config: TwinConfig = TwinConfig()) -> Twin:
         u, v = pose.point.uv_px
         origin = tip - R_image @ image_points((u, v), truth.spacing_m, e)[0]
         # The adjustment is small; the physical arm may use its whole range (the plan kept margins).
-        q = solve_ik(physical, US_IMAGE, make_transform(R_image, origin), q, LEFT_ARM, margin=0.0, restarts=0)
+        q = solve_ik(
+            physical, US_IMAGE, make_transform(R_image, origin), q, rig.probe_arm_indices, margin=0.0, restarts=0
+        )
         true_q_rows.append(q)
         uv_rows.append((u, v))
     true_q, uv = np.array(true_q_rows), np.array(uv_rows, dtype=float)

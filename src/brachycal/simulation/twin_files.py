@@ -82,7 +82,14 @@ def _truth_json(twin: Twin) -> dict:
 
 
 def read_twin(folder: str | os.PathLike[str], nominal: Robot) -> Twin:
-    """Read a twin written by :func:`write_twin` (the session is validated as usual)."""
+    """Read a twin written by :func:`write_twin` (the session is validated as usual).
+
+    ``nominal`` is the robot the twin was simulated with (any description): the physical robot's
+    URDF is read with its rig.
+
+    Raises:
+        InputError: not a twin folder, or a file of it that does not fit ``nominal`` (other joints).
+    """
     folder = Path(folder)
     path = folder / "truth.json"
     if not path.is_file():
@@ -115,7 +122,7 @@ def read_twin(folder: str | os.PathLike[str], nominal: Robot) -> Twin:
         p_R_Rtip2=np.array(raw["reference_tips_m"]["rtip2"]),
         size_px=session.size_px.copy(),  # the simulated images' size, as the session states it
     )
-    physical = Robot.load(folder / "physical_robot.urdf")
+    physical = Robot.load(folder / "physical_robot.urdf").with_rig(nominal.rig)
     return Twin(
         session,
         truth,

@@ -9,8 +9,9 @@ divided by its group's noise level (metres per coordinate):
   reference tip they touched (3 per touch);
 - axes: the tip's move p1→p2 (p1→p3) must run along the tool's y (z) axis: its components along
   the tool's other two axes (2 per move; the move's length is not recorded, so not used);
-- image samples: the needle tip through the right arm against the annotated pixel through the left
-  arm, ``T_R_ER p_ER_Ntip − T_R_EL T_EL_Ptip T_Ptip_I (u s_u, v s_v, 0)`` (3 per image).
+- image samples: the needle tip through the needle arm (the SDA10F's right; ``robot.rig``) against
+  the annotated pixel through the probe arm,
+  ``T_R_ER p_ER_Ntip − T_R_EL T_EL_Ptip T_Ptip_I (u s_u, v s_v, 0)`` (3 per image).
 
 Image models (one table, :data:`IMAGE_MODELS`): ``rigid`` (the scanner's spacing), ``similarity``
 (one scale), ``scaled_uv`` (a scale per axis) and ``sound_speed`` (the physical model: lateral
@@ -49,8 +50,9 @@ needle rotation is fixed by its axes moves alone.
 Robot corrections (optional, ``joint_offsets=True``): zero offsets of the joints that this
 session can tell apart from the other unknowns. :func:`identifiable_joint_offsets` measures, per
 joint, how much of the residuals' response to its offset lies outside the span of the chain
-parameters. Two are never identifiable here: the torso (it turns both arms together, so the
-data only see it through the reference tips, which are unknown too) and each arm's last joint
+parameters. Two are never identifiable here: the shared joints (``robot.rig.shared_joints``, the
+SDA10F's torso: they turn both arms together, so the data only see them through the reference
+tips, which are unknown too; a robot of two separate arms has none) and each arm's last joint
 (its offset is a turn about the flange axis, which the tool transforms absorb). The others are
 estimated with a weak prior (0.01° SD) that keeps poorly excited ones near zero.
 

@@ -8,7 +8,6 @@ from functools import cached_property
 import numpy as np
 
 from brachycal.data.session import Session
-from brachycal.model.names import LEFT_FLANGE, RIGHT_FLANGE
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray
 
@@ -23,7 +22,8 @@ N_AXES_ROWS = 2 * sum(len(across) for _, _, across in AXES_MOVES)
 class ChainData:
     """Flange poses of every datum, computed once (the model's forward kinematics).
 
-    Poses are ``T_R_E`` ``(4, 4)`` stacks in ``base_link``, metres: the touches per tool as
+    Poses are ``T_R_E`` ``(4, 4)`` stacks in the robot's base frame, metres (``E`` the rig's needle
+    flange ER or probe flange EL): the touches per tool as
     ``(reference index, (T, 4, 4))`` pairs, the axes moves at p1, p2, p3 ``(3, 4, 4)``, both flanges
     at every image sample ``(N, 4, 4)``, with the annotated pixels ``uv_px (N, 2)`` and the scanner's
     nominal spacing ``spacing_m (2,)`` (metres per pixel).
@@ -44,13 +44,14 @@ class ChainData:
     def of(cls, session: Session, robot: Robot, offsets: FloatArray | None = None) -> ChainData:
         """The session's poses through ``robot``, with joint zero ``offsets (nq,)`` (radians) added."""
         shift = np.zeros(robot.nq) if offsets is None else offsets
+        needle_flange, probe_flange = robot.rig.needle_flange, robot.rig.probe_flange  # the paper's ER and EL
 
         def fk(flange: str, q: FloatArray) -> FloatArray:
             return robot.fk(flange, np.atleast_2d(q) + shift)
 
         touches = {
             tool: [
-                (k, fk(RIGHT_FLANGE if tool != "probe" else LEFT_FLANGE, session.touches[tool, ref].q))
+                (k, fk(needle_flange if tool != "probe" else probe_flange, session.touches[tool, ref].q))
                 for k, ref in enumerate(("rtip1", "rtip2"))
             ]
             for tool in ("top_model", "needle", "probe")
@@ -60,10 +61,10 @@ class ChainData:
             top=touches["top_model"],
             needle=touches["needle"],
             probe=touches["probe"],
-            needle_axes=fk(RIGHT_FLANGE, np.array([session.axes["needle"][p] for p in ("p1", "p2", "p3")])),
-            probe_axes=fk(LEFT_FLANGE, np.array([session.axes["probe"][p] for p in ("p1", "p2", "p3")])),
-            T_R_ER=fk(RIGHT_FLANGE, session.samples_q),
-            T_R_EL=fk(LEFT_FLANGE, session.samples_q),
+            needle_axes=fk(needle_flange, np.array([session.axes["needle"][p] for p in ("p1", "p2", "p3")])),
+            probe_axes=fk(probe_flange, np.array([session.axes["probe"][p] for p in ("p1", "p2", "p3")])),
+            T_R_ER=fk(needle_flange, session.samples_q),
+            T_R_EL=fk(probe_flange, session.samples_q),
             uv_px=session.uv_px,
             spacing_m=session.spacing_m,
         )

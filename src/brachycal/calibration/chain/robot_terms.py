@@ -23,7 +23,6 @@ from brachycal.calibration.robot_accuracy import (  # noqa: F401  (re-exported: 
     RobotAccuracy,
 )
 from brachycal.data.session import Session
-from brachycal.model.names import LEFT_FLANGE, RIGHT_FLANGE
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray
 
@@ -127,20 +126,21 @@ def robot_jacobian_at(
         return joint_twists(robot, np.atleast_2d(q) + offsets, flange)
 
     refs = ("rtip1", "rtip2")
+    needle_flange, probe_flange = robot.rig.needle_flange, robot.rig.probe_flange
     parts = []
     # Touches, in ChainData's order (top-model, needle, probe; rtip1 then rtip2): the touching tip.
     for tool, flange, touches, p_tool in (
-        ("top_model", RIGHT_FLANGE, data.top, data.p_ER_Mtip),
-        ("needle", RIGHT_FLANGE, data.needle, T_ER_Ntip[:3, 3]),
-        ("probe", LEFT_FLANGE, data.probe, T_EL_Ptip[:3, 3]),
+        ("top_model", needle_flange, data.top, data.p_ER_Mtip),
+        ("needle", needle_flange, data.needle, T_ER_Ntip[:3, 3]),
+        ("probe", probe_flange, data.probe, T_EL_Ptip[:3, 3]),
     ):
         for ref, (_, T) in zip(refs, touches, strict=True):
             W = twists(session.touches[tool, ref].q, flange)
             parts.append(_rows(_point_motion(T[:, :3, :3] @ p_tool + T[:, :3, 3]), W) / sigma["touch"])
     # Axes moves: r = a · (tip_i − tip_0), a = R_0 R_tool e_c turns with pose 0's ω_0, the tips move.
     for tool, flange, T_axes, T_tool in (
-        ("needle", RIGHT_FLANGE, data.needle_axes, T_ER_Ntip),
-        ("probe", LEFT_FLANGE, data.probe_axes, T_EL_Ptip),
+        ("needle", needle_flange, data.needle_axes, T_ER_Ntip),
+        ("probe", probe_flange, data.probe_axes, T_EL_Ptip),
     ):
         W = twists(np.array([session.axes[tool][p] for p in ("p1", "p2", "p3")]), flange)
         tips = T_axes[:, :3, :3] @ T_tool[:3, 3] + T_axes[:, :3, 3]
@@ -153,14 +153,14 @@ def robot_jacobian_at(
                 turn = np.cross(a, delta) @ W[0, :, 3:, :]  # (ω_0 × a)·Δ = ω_0·(a × Δ), per joint
                 row = turn + np.einsum("a,ajc->jc", a, moves[point] - moves[0])
                 parts.append(row.reshape(1, -1) / sigma["axes"])
-    # Images: the needle tip through the right flange minus the image point through the left one.
+    # Images: the needle tip through the needle flange minus the image point through the probe flange.
     q = session.samples_q[keep]
     p_needle = data.T_R_ER[keep, :3, :3] @ T_ER_Ntip[:3, 3] + data.T_R_ER[keep, :3, 3]
     T_EL_I = T_EL_Ptip @ T_Ptip_I
     p_EL = (data.uv_px[keep] * spacing) @ T_EL_I[:3, :2].T + T_EL_I[:3, 3]
     p_image = (data.T_R_EL[keep, :3, :3] @ p_EL[:, :, None])[:, :, 0] + data.T_R_EL[keep, :3, 3]
-    image = _rows(_point_motion(p_needle), twists(q, RIGHT_FLANGE)) - _rows(
-        _point_motion(p_image), twists(q, LEFT_FLANGE)
+    image = _rows(_point_motion(p_needle), twists(q, needle_flange)) - _rows(
+        _point_motion(p_image), twists(q, probe_flange)
     )
     parts.append(image / sigma["image"])
     return np.vstack(parts)
