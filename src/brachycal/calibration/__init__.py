@@ -2,12 +2,13 @@
 
 The paper's sequential method, step by step (``T_a_b`` maps frame b into frame a; metres):
 
-- :func:`calibrate` — a whole session: reference tips, ``T_ER_Ntip`` (needle tip on the right
-  flange), ``T_EL_Ptip`` (probe tip on the left flange) with Table I, and ``T_Ptip_I`` (image on
+- :func:`calibrate` — a whole session: reference tips, ``T_ER_Ntip`` (needle tip on the needle
+  arm's flange ER: the SDA10F's right ``tool0``, ``robot.rig.needle_flange`` on any robot),
+  ``T_EL_Ptip`` (probe tip on the probe arm's flange EL) with Table I, and ``T_Ptip_I`` (image on
   the probe) by every method of :data:`METHODS` with its leave-one-out figures (Table II), as a
   :class:`CalibrationResult`; :func:`calibrate_folder` reads a session folder first (and can add
   the whole chain); :func:`loo_points` gives one method's leave-one-out points (Fig. 10);
-  :func:`locate` maps image pixels to ``base_link`` through a calibration (targeting).
+  :func:`locate` maps image pixels to the robot's base frame through a calibration (targeting).
 - :class:`ImageCalibration` — a rigid ``T_Ptip_I (4, 4)`` with the pixel spacing ``(2,)`` it goes
   with, metres per pixel; :class:`ErrorStats` — MAE, RMSE, SD and max of 3D errors (``*_mm``).
 
@@ -17,8 +18,11 @@ Beyond the paper: the whole chain as one least-squares problem (:func:`calibrate
 of a pose-list file :func:`pivot_from_file`); N-wire phantom calibration from PLUS files
 (:func:`nwire_from_files`); hand–eye calibration (:func:`hand_eye`); the robot's own geometry
 identified with the chain (:func:`identify_robot`, :class:`RobotIdentification`,
-:func:`corrected_robot`, :func:`cross_validate_identification`). Result files:
-``brachycal-result/1`` (:func:`write_result`, :func:`read_result`), ``brachycal-pivot/1``
+:func:`corrected_robot`, :func:`cross_validate_identification`) and which extra observations would
+identify it best (:func:`base_criterion`, :func:`observation_rows`: the A-optimal criterion on the
+landing error, :class:`Criterion`; an :class:`Observation` is a touch or an image sample). Result files:
+``brachycal-result/1`` (:func:`write_result`, :func:`read_result`; :class:`RobotRecord` says which
+robot a result was calibrated with), ``brachycal-pivot/1``
 (:func:`write_pivot`, :func:`read_pivot`), ``brachycal-nwire/1`` (:func:`write_nwire`,
 :func:`read_nwire`).
 """
@@ -45,13 +49,14 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
         read_pivot,
         write_pivot,
     )
-    from brachycal.calibration.result_file import StoredCalibration, read_result, write_result
+    from brachycal.calibration.result_file import RobotRecord, StoredCalibration, read_result, write_result
     from brachycal.calibration.robot_identification import (
         RobotIdentification,
         corrected_robot,
         cross_validate_identification,
         identify_robot,
     )
+    from brachycal.calibration.robot_observability import Criterion, Observation, base_criterion, observation_rows
     from brachycal.calibration.sequential import CalibrationResult, ToolCalibration, calibrate, locate, loo_points
     from brachycal.calibration.session_calibration import SessionCalibration, calibrate_folder
     from brachycal.calibration.uncertainty import (
@@ -73,19 +78,23 @@ __all__ = [
     "CalibrationResult",
     "ChainFit",
     "ChainReport",
+    "Criterion",
     "ErrorStats",
     "ImageCalibration",
     "NWireCalibration",
     "NWireRun",
+    "Observation",
     "PivotCalibration",
     "PivotResult",
     "PredictedUncertainty",
     "RobotIdentification",
+    "RobotRecord",
     "SessionCalibration",
     "StoredCalibration",
     "StoredNWire",
     "StoredPivot",
     "ToolCalibration",
+    "base_criterion",
     "calibrate",
     "calibrate_chain",
     "calibrate_folder",
@@ -101,6 +110,7 @@ __all__ = [
     "locate",
     "loo_points",
     "nwire_from_files",
+    "observation_rows",
     "pivot_algebraic",
     "pivot_from_file",
     "pivot_robust",

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import os
 import pickle
 import subprocess
 import sys
@@ -83,6 +84,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     o.add_argument("--allow-partial", action="store_true", help="write the plan even if some points are infeasible")
     o.add_argument("--force", action="store_true", help="replace existing outputs")
     o.add_argument("--quiet", action="store_true", help="no progress bar")
+    from brachycal.cli.plan_excitation import EPILOG, add_excitation_options
+
+    add_excitation_options(parser.add_argument_group("excitation poses (robot identification)"))
+    parser.epilog = EPILOG
     parser.set_defaults(run=run)
 
 
@@ -210,8 +215,16 @@ def _tool_options(t: argparse._ArgumentGroup) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from brachycal.cli.plan_excitation import check_excitation_options, run_excitation
     from brachycal.files import OutputSet
 
+    check_excitation_options(args)
+    if args.excitation is not None:
+        return run_excitation(args)
+    # The planner uses MuJoCo's collision distances, never its rendering: unset, importing mink
+    # (through mujoco) loads GLFW and probes for a display, ~0.1 s of start-up. A user's own
+    # MUJOCO_GL stands; this changes the environment of this command's process (and its figure child) only.
+    os.environ.setdefault("MUJOCO_GL", "disable")
     with OutputSet(force=args.force) as outputs, _FigureProcess() as drawer:
         _run(args, outputs, drawer)
     print("wrote " + ", ".join(map(str, outputs.written)))

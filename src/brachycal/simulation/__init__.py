@@ -13,7 +13,9 @@
   (:data:`RECORDING_FILES`, optionally a ROS 2 bag) for ``brachycal session build``.
 - :func:`run_demo` — ``brachycal demo`` (:class:`DemoRun`); :func:`sweep`, :func:`run_study`,
   :func:`summarise` — ``brachycal study``; :func:`compare_designs`, :func:`evaluate_design` —
-  ``brachycal design`` (:data:`DESIGNS`).
+  ``brachycal design`` (:data:`DESIGNS`); :func:`compare_excitation`, :func:`evaluate_excitation` —
+  ``brachycal design --robot-error`` (excitation poses recorded on a twin with robot error by
+  :func:`extended_twin_session`).
 """
 
 from typing import TYPE_CHECKING
@@ -22,8 +24,9 @@ from brachycal._lazy import attach
 
 if TYPE_CHECKING:  # imported on first use (each simulation loads the robot, SciPy and mink)
     from brachycal.simulation.demo import DemoRun, run_demo
-    from brachycal.simulation.design import DESIGNS, compare_designs, evaluate_design
+    from brachycal.simulation.design import DESIGNS, compare_designs, compare_excitation, evaluate_design
     from brachycal.simulation.exact import SessionTruth, default_truth, exact_session
+    from brachycal.simulation.excitation_twin import evaluate_excitation, extended_twin_session
     from brachycal.simulation.nwire_twin import NWireSimConfig, TrackerRoute, tracker_route
     from brachycal.simulation.recording import RECORDING_FILES, Recording, RecordingConfig, record, write_recording
     from brachycal.simulation.study import STUDY_METHODS, RunParams, run_study, summarise, sweep
@@ -49,9 +52,12 @@ __all__ = [
     "Twin",
     "TwinConfig",
     "compare_designs",
+    "compare_excitation",
     "default_truth",
     "evaluate_design",
+    "evaluate_excitation",
     "exact_session",
+    "extended_twin_session",
     "read_twin",
     "record",
     "run_demo",

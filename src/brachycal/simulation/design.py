@@ -26,10 +26,11 @@ from brachycal.calibration.chain import fit_chain, information_blocks
 from brachycal.calibration.uncertainty import landing_covariance, landing_jacobian, predicted_rms_mm
 from brachycal.errors import InputError
 from brachycal.model.robot import Robot
-from brachycal.planning import PlanSpec, plan_poses
+from brachycal.planning import plan_poses
+from brachycal.planning.excitation_budget import DEFAULT_BUDGET_MINUTES, MAX_BUDGET_MINUTES
 from brachycal.simulation.settings import DESIGNS
 from brachycal.simulation.targeting import targeting_error
-from brachycal.simulation.twin import TwinConfig, simulate
+from brachycal.simulation.twin import TwinConfig, simulate, spec_for
 from brachycal.validate import MAX_SEEDS, check_int
 
 MECHANICAL_MINUTES = 5.0
@@ -47,7 +48,7 @@ def grid_offsets(points: int, edge_m: float) -> np.ndarray:
 def optimal_offsets(robot: Robot, k: int = 27, seed: int = 0, edge_m: float = 0.040) -> np.ndarray:
     """Greedy A-optimal ``k`` points from the 5 × 5 × 5 candidate grid (see the module docstring)."""
     candidates = grid_offsets(5, edge_m)
-    twin = simulate(robot, TwinConfig(seed=seed, spec=replace(PlanSpec(), offsets_m=candidates)))
+    twin = simulate(robot, TwinConfig(seed=seed, spec=replace(spec_for(robot, TwinConfig()), offsets_m=candidates)))
     session = twin.session
     result = calibrate(session, robot, ("scaled_uv",))
     fit = fit_chain(session, robot, result, "sound_speed")
@@ -89,7 +90,7 @@ def design_offsets(name: str, robot: Robot, seed: int, edge_m: float = 0.040) ->
 def evaluate_design(robot: Robot, name: str, seed: int, targets: int = 30) -> dict[str, object]:
     """Plan, simulate and calibrate one design; predicted and actual landing error, robot minutes."""
     offsets = design_offsets(name, robot, seed)
-    spec = replace(PlanSpec(), offsets_m=offsets)
+    spec = replace(spec_for(robot, TwinConfig()), offsets_m=offsets)  # the robot's own workspace
     plan = plan_poses(robot, spec, speed_scale=SPEED_SCALE)
     twin = simulate(robot, TwinConfig(seed=seed, spec=spec))
     result = calibrate(twin.session, robot, ("scaled_uv",))
@@ -141,4 +142,39 @@ def compare_designs(
             rows.append(evaluate_design(robot, design, seed))
             if progress is not None:
                 progress(1)
+    return rows
+
+
+def compare_excitation(
+    robot: Robot,
+    level: str,
+    seeds: int = 3,
+    budget_minutes: float = DEFAULT_BUDGET_MINUTES,
+    *,
+    progress: Callable[[int], None] | None = None,
+) -> list[dict[str, object]]:
+    """The 4 × 4 × 4 design plus excitation poses on twins whose robot is off its URDF by ``level``
+    (:data:`~brachycal.simulation.settings.ROBOT_ERROR_LEVELS`), seeds ``0 .. seeds-1``: one row per
+    seed (:func:`~brachycal.simulation.excitation_twin.evaluate_excitation`): the predicted RMS landing
+    error and the targeting and held-out targeting MAE with the robot identified on the session alone,
+    on the session plus the excitation poses, on the session plus as many plain repeats of their
+    source poses and of session samples drawn at random; the extra robot minutes (on top of this
+    design's :data:`MECHANICAL_MINUTES` and samples).
+
+    Raises:
+        InputError: an unknown level, a seed count or budget out of range.
+    """
+    from brachycal.simulation.excitation_twin import evaluate_excitation
+    from brachycal.simulation.settings import ROBOT_ERROR_LEVELS
+    from brachycal.validate import check_range
+
+    check_int(seeds, "seeds", low=1, high=MAX_SEEDS)
+    check_range(budget_minutes, "excitation budget", low=0.0, high=MAX_BUDGET_MINUTES, low_open=True, unit="min")
+    if level not in ROBOT_ERROR_LEVELS:
+        raise InputError(f"unknown robot-error level {level!r}; choose from {', '.join(ROBOT_ERROR_LEVELS)}")
+    rows = []
+    for seed in range(seeds):
+        rows.append({"design": "grid 4x4x4 + excitation", **evaluate_excitation(robot, seed, level, budget_minutes)})
+        if progress is not None:
+            progress(1)
     return rows
