@@ -7,20 +7,23 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test lint docs bench clean
 
 demo: $(STAMP)
 	$(BIN)/brachycal demo --force  # demo_output is make's own: a second run replaces it
 
 test: $(STAMP)
-	$(BIN)/ruff check src tests benchmarks examples urdf
+	$(BIN)/ruff check src tests benchmarks examples urdf docs
 	$(BIN)/mypy
 	$(BIN)/python -m pytest
 
 lint: $(STAMP)
-	$(BIN)/ruff check src tests benchmarks examples urdf
-	$(BIN)/ruff format --check src tests benchmarks examples urdf
+	$(BIN)/ruff check src tests benchmarks examples urdf docs
+	$(BIN)/ruff format --check src tests benchmarks examples urdf docs
 	$(BIN)/mypy
+
+docs: $(STAMP)
+	$(BIN)/mkdocs build --strict --site-dir site
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/fk_throughput.py
@@ -39,4 +42,4 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 clean:
-	rm -rf $(VENV) demo_output .pytest_cache .hypothesis .ruff_cache .mypy_cache
+	rm -rf $(VENV) demo_output site .pytest_cache .hypothesis .ruff_cache .mypy_cache

@@ -17,7 +17,7 @@ from collections.abc import Collection, Iterator, Sequence
 from contextlib import contextmanager
 
 from brachycal import __version__
-from brachycal.cli import calibrate, demo, design, export, fk, locate, model, nwire, pivot, plan, session, study
+from brachycal.cli import calibrate, demo, design, export, fk, locate, model, nwire, pivot, plan, session, study, view
 from brachycal.errors import BrachycalError
 
 DESCRIPTION = """\
@@ -39,6 +39,8 @@ start here:
   brachycal locate RESULT JOINTS --uv U,V
                                       where an image pixel is in base_link
   brachycal export RESULT --out DIR   calibrated URDF, Slicer/ITK, PLUS and ROS files
+  brachycal view RESULT --session SESSION
+                                      the calibrated session in 3D, in the browser
   brachycal pivot POSES.csv --out pivot.json
                                       pivot calibration of a tracked tool
   brachycal nwire CONFIG FRAMES --out nwire.json
@@ -68,6 +70,7 @@ COMMANDS = {
     "nwire": nwire,
     "study": study,
     "design": design,
+    "view": view,
 }
 
 

@@ -4,7 +4,9 @@ Tables return text (millimetres and degrees, as their heads say). Every figure h
 returns a matplotlib ``Figure`` (``*_figure``; neither touches pyplot, the backend or
 ``rcParams``) and a function that saves it (:func:`save_figure` and the functions named after the
 figure, which write through :mod:`brachycal.files`). The 3D scene (:func:`robot_scene`,
-:func:`scene_figure`, :func:`render_png`, :func:`save_glb`) loads trimesh on first use.
+:func:`scene_figure`, :func:`render_png`, :func:`save_glb`) loads trimesh on first use. The
+interactive view in the browser (:class:`Viewer` of a :class:`ViewContent`: :func:`poses_content`,
+:func:`calibration_content`) is served by viser.
 """
 
 from typing import TYPE_CHECKING
@@ -39,6 +41,7 @@ if TYPE_CHECKING:  # imported on first use (matplotlib ~0.5 s, trimesh ~0.6 s to
         targeting_table,
         uncertainty_table,
     )
+    from brachycal.reporting.viewer import ViewContent, Viewer, calibration_content, poses_content
 
 __getattr__, __dir__ = attach(__name__, __file__)
 
@@ -47,6 +50,9 @@ __all__ = [
     "DEMO_REPORT_FILES",
     "REPORT_FILES",
     "TOOL_FRAMES",
+    "ViewContent",
+    "Viewer",
+    "calibration_content",
     "chain_summary",
     "demo_text",
     "design_table",
@@ -59,6 +65,7 @@ __all__ = [
     "plot_plan",
     "points_3d",
     "points_3d_figure",
+    "poses_content",
     "render_png",
     "residuals_per_sample",
     "residuals_per_sample_figure",

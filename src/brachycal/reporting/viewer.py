@@ -1,0 +1,291 @@
+"""An interactive 3D view in the browser: the robot at a pose or along a set of poses, its tool
+frames and image plane, sample points with their residual vectors, the sample cube, targets and
+where the needle landed.
+
+Served by `viser <https://viser.studio>`_: a maintained WebGL viewer whose client ships inside
+the pip package (no Node, no second server), which loads the robot's meshes through yourdfpy (the
+loader :mod:`brachycal.reporting.scene` already uses, so the view shows the same geometry the
+kinematics compute with), steps through poses with a slider, and shows inside Jupyter (an IFrame
+of the same page, :meth:`Viewer.show`). Pinocchio's Meshcat visualizer was the alternative; its
+client, meshcat-python, has had no release since 2021.
+
+:class:`ViewContent` is what is shown (plain arrays, built and tested without a browser);
+:class:`Viewer` serves it. Everything is in the robot's base frame, metres.
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from functools import partial
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from brachycal.errors import InputError
+from brachycal.imaging.pixels import image_points
+from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
+from brachycal.model.robot import Robot
+from brachycal.se3 import FloatArray, transform_points
+
+if TYPE_CHECKING:
+    import viser
+
+    from brachycal.calibration.result_file import StoredCalibration
+    from brachycal.data.session import Session
+    from brachycal.simulation.twin import Twin
+
+#: Colours (RGB, 0–255) of what the view draws, so that a screenshot can be checked by colour.
+ROBOT_RGB = (150, 160, 190)
+IMAGE_RGB = (255, 160, 0)
+#: None is close (within 80 per channel) to another one or to the frames' axes (red, green, blue).
+COLOURS: dict[str, tuple[int, int, int]] = {
+    "real": (200, 0, 90),  # crimson: needle tips through the needle arm
+    "calibrated": (0, 150, 200),  # teal: the same tips through the probe arm and the image
+    "residual": (20, 20, 20),
+    "target": (120, 200, 40),  # lime
+    "landed": (230, 0, 230),  # magenta
+    "cube": (120, 120, 120),
+}
+#: Tool frames drawn as axes at each pose.
+VIEW_FRAMES = (NEEDLE_TIP, PROBE_TIP, US_IMAGE)
+
+
+@dataclass(frozen=True)
+class ViewContent:
+    """What the view shows, in the robot's base frame (metres).
+
+    Attributes:
+        robot: the model drawn (with the calibrated tool frames, if any).
+        poses_q: ``(M, nq)`` configurations the slider steps through (M ≥ 1), radians.
+        pose_labels: ``(M,)`` a name per pose (sample or plan point names).
+        image_size_px: ``(width, height)`` of the image drawn on ``us_image``; None: no image plane.
+        spacing_m: ``(2,)`` pixel spacing of that image, metres per pixel.
+        points: name → ``(K, 3)`` points, drawn in :data:`COLOURS` [name].
+        vectors: name → ``((K, 3), (K, 3))`` segments from the first to the second point.
+        cube: ``(T_base_cube (4, 4), edge_m)``: the sample cube, axes along ``T``'s; None: none.
+    """
+
+    robot: Robot
+    poses_q: FloatArray
+    pose_labels: list[str]
+    image_size_px: tuple[int, int] | None = None
+    spacing_m: FloatArray = field(default_factory=lambda: np.array([1.9e-4, 1.9e-4]))
+    points: dict[str, FloatArray] = field(default_factory=dict)
+    vectors: dict[str, tuple[FloatArray, FloatArray]] = field(default_factory=dict)
+    cube: tuple[FloatArray, float] | None = None
+
+    def __post_init__(self) -> None:
+        q = np.atleast_2d(np.asarray(self.poses_q, dtype=float))
+        if q.shape[1] != self.robot.nq or len(q) == 0:
+            raise InputError(f"poses must be (M, {self.robot.nq}) configurations, got shape {q.shape}")
+        if len(self.pose_labels) != len(q):
+            raise InputError(f"{len(self.pose_labels)} pose labels for {len(q)} poses")
+        object.__setattr__(self, "poses_q", q)
+
+    def image_corners_m(self, k: int) -> FloatArray | None:
+        """``(4, 3)`` corners of the image plane at pose ``k``; None without an image size."""
+        if self.image_size_px is None:
+            return None
+        w, h = self.image_size_px
+        corners_px = np.array([[0, 0], [w, 0], [w, h], [0, h]], dtype=float)
+        return transform_points(self.robot.fk(US_IMAGE, self.poses_q[k]), image_points(corners_px, self.spacing_m))
+
+
+def cube_edges(T_base_cube: ArrayLike, edge_m: float) -> tuple[FloatArray, FloatArray]:
+    """The 12 edges of a cube centred on ``T_base_cube``'s origin: ``(12, 3)`` starts and ends."""
+    corners = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], dtype=float) * edge_m / 2
+    pairs = [(a, b) for a in range(8) for b in range(a + 1, 8) if np.sum(corners[a] != corners[b]) == 1]
+    p = transform_points(np.asarray(T_base_cube, dtype=float), corners)
+    return p[[a for a, _ in pairs]], p[[b for _, b in pairs]]
+
+
+class Viewer:
+    """The content served in the browser; the page is at :attr:`url` until :meth:`close`.
+
+    Args:
+        content: what to show.
+        host: interface to listen on (``127.0.0.1``: this machine only; ``0.0.0.0``: the network).
+        port: TCP port; 0 picks a free one.
+    """
+
+    def __init__(self, content: ViewContent, host: str = "127.0.0.1", port: int = 0) -> None:
+        import viser
+        import yourdfpy
+        from viser.extras import ViserUrdf
+
+        if port == 0:
+            port = _free_port(host)
+        self.content = content
+        self.server: viser.ViserServer = viser.ViserServer(host=host, port=port, label="brachycal", verbose=False)
+        self.host, self.port = host, self.server.get_port()  # viser moves to the next port if one is taken
+        scene = self.server.scene
+        scene.set_up_direction("+z")
+        robot = content.robot
+        urdf = yourdfpy.URDF.load(
+            io.StringIO(robot.urdf_xml),
+            filename_handler=partial(yourdfpy.filename_handler_relative, dir=str(robot.base_dir)),
+        )
+        self._urdf = ViserUrdf(self.server, urdf, root_node_name="/robot", mesh_color_override=ROBOT_RGB)
+        self._joint_order = self._urdf.get_actuated_joint_names()
+        self._frames = {f: scene.add_frame(f"/frames/{f}", axes_length=0.05, axes_radius=0.002) for f in VIEW_FRAMES}
+        self._image: Any = None
+        for name, p in content.points.items():
+            scene.add_point_cloud(
+                f"/points/{name}",
+                points=np.asarray(p, dtype=float),
+                colors=COLOURS.get(name, (0, 0, 0)),
+                point_size=0.004,
+                point_shape="circle",
+            )
+        for name, (a, b) in content.vectors.items():
+            segments = np.stack([np.asarray(a, dtype=float), np.asarray(b, dtype=float)], axis=1)
+            scene.add_line_segments(
+                f"/vectors/{name}",
+                points=segments,
+                colors=COLOURS.get(name, (0, 0, 0)),
+                thickness=2.0,
+                thickness_units="screen",
+            )
+        if content.cube is not None:
+            a, b = cube_edges(*content.cube)
+            scene.add_line_segments(
+                "/cube",
+                points=np.stack([a, b], axis=1),
+                colors=COLOURS["cube"],
+                thickness=1.5,
+                thickness_units="screen",
+            )
+        self._slider = self.server.gui.add_slider(
+            "pose",
+            min=0,
+            max=max(len(content.poses_q) - 1, 1),
+            step=1,
+            initial_value=0,
+            disabled=len(content.poses_q) == 1,
+        )
+        self._label = self.server.gui.add_text("name", initial_value=content.pose_labels[0], disabled=True)
+        self._slider.on_update(lambda _: self.show_pose(int(self._slider.value)))
+        self.show_pose(0)
+        focus = np.concatenate([np.atleast_2d(p) for p in content.points.values()]) if content.points else None
+        look_at = focus.mean(axis=0) if focus is not None else robot.fk(US_IMAGE, content.poses_q[0])[:3, 3]
+        self.server.initial_camera.look_at = tuple(look_at)
+        self.server.initial_camera.position = tuple(look_at + np.array([0.35, -0.35, 0.2]))
+
+    @property
+    def url(self) -> str:
+        """The page's address."""
+        host = "127.0.0.1" if self.host in ("0.0.0.0", "") else self.host
+        return f"http://{host}:{self.port}"
+
+    def show_pose(self, k: int) -> None:
+        """Put the robot, its tool frames and the image plane at pose ``k``."""
+        content = self.content
+        q = content.poses_q[k]
+        named = content.robot.named(q)
+        self._urdf.update_cfg(np.array([named[n] for n in self._joint_order], dtype=float))
+        for frame, handle in self._frames.items():
+            T = content.robot.fk(frame, q)
+            handle.position = T[:3, 3]
+            handle.wxyz = _wxyz(T[:3, :3])
+        corners = content.image_corners_m(k)
+        if corners is not None:
+            if self._image is not None:
+                self._image.remove()
+            self._image = self.server.scene.add_mesh_simple(
+                "/image_plane",
+                vertices=corners,
+                faces=np.array([[0, 1, 2], [0, 2, 3]]),
+                color=IMAGE_RGB,
+                opacity=0.5,
+                side="double",
+            )
+        self._label.value = content.pose_labels[k]  # type: ignore[misc]  # viser has the setter; mypy sees the base's getter only
+
+    def show(self, height: int = 600) -> Any:
+        """The view in a Jupyter notebook (an IFrame of :attr:`url`)."""
+        from IPython.display import IFrame
+
+        return IFrame(self.url, width="100%", height=height)
+
+    def close(self) -> None:
+        """Stop serving."""
+        self.server.stop()
+
+
+def _wxyz(R: FloatArray) -> tuple[float, float, float, float]:
+    from scipy.spatial.transform import Rotation
+
+    x, y, z, w = Rotation.from_matrix(R).as_quat()
+    return (float(w), float(x), float(y), float(z))
+
+
+def _free_port(host: str) -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind((host, 0))
+        return int(s.getsockname()[1])
+
+
+def poses_content(
+    robot: Robot,
+    poses_q: ArrayLike,
+    labels: Sequence[str] | None = None,
+    *,
+    image_size_px: tuple[int, int] | None = None,
+    spacing_m: ArrayLike = (1.9e-4, 1.9e-4),
+) -> ViewContent:
+    """The robot stepping through ``poses_q`` ``(M, nq)`` (a plan, a log), nothing else."""
+    q = np.atleast_2d(np.asarray(poses_q, dtype=float))
+    names = list(labels) if labels is not None else [str(k) for k in range(len(q))]
+    return ViewContent(robot, q, names, image_size_px, np.asarray(spacing_m, dtype=float))
+
+
+def calibration_content(
+    robot: Robot,
+    stored: StoredCalibration,
+    session: Session,
+    method: str,
+    *,
+    twin: Twin | None = None,
+    n_targets: int = 50,
+) -> ViewContent:
+    """A calibrated session: the robot through its samples, and per sample the needle tip through
+    the needle arm (``real``: ``T_R_ER(q) @ p_ER_Ntip``) and through the probe arm and the image
+    (``calibrated``: ``T_R_EL(q) @ T_EL_Ptip @ T_Ptip_I @ p_I``, Fig. 10's pair) joined by their
+    ``residual``; the sample cube, aligned with the image as the planner aligns it. With the twin
+    the session was simulated by, also ``target`` and ``landed`` points (the end-to-end targeting
+    error, :func:`~brachycal.simulation.targeting_error`, with the model the software commands).
+
+    Raises:
+        InputError: ``method`` is not in the result.
+    """
+    from brachycal.calibration.sequential import locate
+    from brachycal.export.formats import calibrated_robot
+
+    if method not in stored.image:
+        raise InputError(f"the result has no method {method!r} (it has {', '.join(stored.image)})", file=stored.source)
+    software = stored.software_robot(robot)
+    image = stored.image[method]
+    shown = calibrated_robot(software, stored.T_ER_Ntip, stored.T_EL_Ptip, image)
+    q = session.samples_q
+    real = transform_points(software.fk(robot.rig.needle_flange, q), stored.T_ER_Ntip[:3, 3])
+    calibrated = locate(software, q, session.uv_px, stored.T_EL_Ptip, image)
+    points = {"real": real, "calibrated": calibrated}
+    vectors = {"residual": (real, calibrated)}
+    # The planner aligns the cube with the image at the first pose: its axes are the image's.
+    T_cube = shown.fk(US_IMAGE, q[0]).copy()
+    T_cube[:3, 3] = real.mean(axis=0)
+    extent = np.ptp((real - T_cube[:3, 3]) @ T_cube[:3, :3], axis=0)
+    cube = (T_cube, float(max(extent.max(), 1e-3)))
+    if twin is not None:
+        from brachycal.simulation.targeting import targeting_error
+
+        hit = targeting_error(twin, stored.T_ER_Ntip, stored.T_EL_Ptip, image, n_targets, software=software)
+        points["target"], points["landed"] = hit.targets_m, hit.landed_m
+        vectors["landed"] = (hit.targets_m, hit.landed_m)
+    size = (int(session.size_px[0]), int(session.size_px[1]))
+    return ViewContent(shown, q, list(session.sample_ids), size, image.spacing_m, points, vectors, cube)
