@@ -128,7 +128,7 @@ def test_export_writes_the_robots_files_and_frames(calibrated, name, tmp_path):
     outcome = run_cli(["export", str(c.chain), "--robot", name, "--out", str(out)])
     assert outcome.code == 0, outcome.err
     files = export_files(rig)
-    assert sorted(p.name for p in out.iterdir()) == sorted(files)
+    assert sorted(p.name for p in out.iterdir()) == sorted([*files, "meshes"])  # the URDF's meshes beside it
     assert files[0] == f"{name}_calibrated.urdf"
     assert files[2:4] == ("ProbeToLeftFlange.tfm", "NeedleTipToRightFlange.tfm")  # each bundled flange names its side
     # The calibrated URDF is the robot's, with the true tools: its needle tip is where the physical one is.

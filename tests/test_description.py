@@ -315,6 +315,7 @@ REFUSALS = [
     ),
     ("tool-missing", _edited("ur5_pair", "[tools.top_model_tip]", "[tools.top_model_typo]"), ["top_model_typo"]),
     ("not-toml", _edited("ur5_pair", "[needle_arm]", "[needle_arm"), ["TOML"]),
+    ("name-is-a-path", _edited("ur5_pair", 'name = "ur5_pair"', 'name = "../ur5"'), ["name", "../ur5"]),
     ("wrong-format", _edited("ur5_pair", 'format = "brachycal-robot/1"', 'format = "brachycal-robot/9"'), ["format"]),
     (
         "mount-prefix-twice",

@@ -30,7 +30,9 @@ def test_every_export_loads_back(robot, calibrated, tmp_path):
     _, result = calibrated
     image = result.image["scaled_uv"]
     files = write_exports(robot, result.T_ER_Ntip, result.T_EL_Ptip, image, tmp_path)
-    assert {f.name for f in files} == {
+    # The URDF's meshes are copied beside it (tests/test_exports_handoff.py: the folder is self-contained).
+    assert all(f.parent == tmp_path / "meshes" for f in files if f.suffix == ".stl")
+    assert {f.name for f in files if f.parent == tmp_path} == {
         "sda10f_calibrated.urdf",
         "ImageToProbe.tfm",
         "ProbeToLeftFlange.tfm",

@@ -18,11 +18,12 @@ CASES = [
     Case("absurd-budget", [*EXCITE, "--excitation-minutes", "1e6"], ("--excitation-minutes",)),
     Case("nan-budget", [*EXCITE, "--excitation-minutes", "nan"], ("--excitation-minutes",)),
     Case("other-robot", [*EXCITE, "--robot", "baxter"], ("touches.csv",)),
+    Case("robot-without-self-motion", [*EXCITE, "--robot", "ur5_pair"], ("ur5_pair", "one way")),
     Case("with-result", [*EXCITE, "--result", "{tmp}/r.json"], ("--result",)),
     Case("design-with-designs", [*DESIGN, "--designs", "grid 3x3x3"], ("--designs",)),
     Case("design-zero-budget", [*DESIGN, "--excitation-minutes", "0"], ("--excitation-minutes",)),
     Case("design-unknown-level", [*DESIGN[:3], "--robot-error", "rusty"], ("--robot-error",)),
-    Case("design-robot-without-torso", [*DESIGN, "--robot", "baxter"], ("--robot-error", "baxter", "shared")),
+    Case("design-robot-without-torso", [*DESIGN, "--robot", "baxter"], ("baxter", "shared", "held-out")),
     Case(
         "accuracy-without-excitation", ["plan", "--out", "{tmp}/p.csv", "--robot-accuracy-mm", "0.1"], ("--excitation",)
     ),

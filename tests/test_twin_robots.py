@@ -23,7 +23,7 @@ from brachycal.planning import PlanSpec
 from brachycal.simulation import exact
 from brachycal.simulation.study import RunParams, run_one
 from brachycal.simulation.targeting import targeting_error
-from brachycal.simulation.twin import TwinConfig, simulate
+from brachycal.simulation.twin import TwinConfig, simulate, spec_for
 from brachycal.simulation.twin_files import read_twin
 
 #: A noise-free calibration returns the truth up to the twin's own IK tolerance (tools placed to
@@ -145,6 +145,49 @@ def test_a_fourth_robot_is_one_description_file_and_the_twin_follows_its_workspa
     for tool in ("needle", "probe"):
         assert np.allclose(exact.axes_start(far)[tool] - exact.axes_start(near)[tool], shift, atol=1e-9)
     assert exact.workspace_frame(far) == pytest.approx(np.eye(3))  # forward +x, probe arm at +y, up +z
+
+
+def test_a_default_twin_config_means_the_robots_own_workspace_even_after_pickling(described):
+    # A config sent to a worker process (pickled) must not fall back to the SDA10F's cube.
+    import copy
+    import pickle
+
+    for config in (TwinConfig(), pickle.loads(pickle.dumps(TwinConfig())), copy.deepcopy(TwinConfig())):
+        assert spec_for(described["baxter"], config).cube_centre_m == pytest.approx([0.95, 0.0, 0.15])
+        sda10f = spec_for(described["sda10f"], config)  # PlanSpec's own defaults: the committed example's
+        assert type(sda10f) is PlanSpec and np.array_equal(sda10f.insertion_dir, PlanSpec().insertion_dir)
+
+
+def test_a_robot_holding_the_needle_in_its_left_arm_gets_a_mirrored_session(described, tmp_path):
+    # Baxter with its arms' roles swapped (and the insertion mirrored with them): the places of the
+    # session mirror about the cube's vertical plane, the orientations stay rotations, and the
+    # noise-free session calibrates to its truth as the bundled ones do.
+    text = bundled_description_path("baxter").read_text()
+    swapped = (
+        text.replace('name = "baxter"', 'name = "baxter_swapped"')
+        .replace("[needle_arm]", "[arm_a]")
+        .replace("[probe_arm]", "[needle_arm]")
+        .replace("[arm_a]", "[probe_arm]")
+        .replace(
+            "insertion_dir = [0.8191520442889918, 0.573576436351046",
+            "insertion_dir = [0.8191520442889918, -0.573576436351046",
+        )
+    )
+    assert swapped.count("[needle_arm]") == swapped.count("[probe_arm]") == 1 and "-0.5735" in swapped
+    (tmp_path / "swapped.toml").write_text(swapped)
+    robot, original = load_description(tmp_path / "swapped.toml").robot, described["baxter"]
+    assert np.linalg.det(exact.workspace_frame(robot)) == pytest.approx(1.0, abs=1e-12)
+    assert exact.probe_side(robot) == -1.0 and exact.probe_side(original) == 1.0
+    centre = np.array([0.95, 0.0, 0.15])
+    mirror = np.array([1.0, -1.0, 1.0])
+    for which in ("rtip1", "rtip2"):  # mirrored about the cube's x-z plane, to the 1 µm rounding
+        mirrored = (exact.reference_tips(original)[which] - centre) * mirror + centre
+        assert np.allclose(exact.reference_tips(robot)[which], mirrored, atol=1e-9)
+    truth = exact.default_truth(robot)
+    result = calibrate(exact.exact_session(robot, truth), robot, ("kabsch",))
+    # 1e-9 m: noise-free data leave only rounding; a wrong arm or a mirrored orientation is off by mm.
+    assert np.allclose(result.T_ER_Ntip[:3, 3], truth.T_ER_Ntip[:3, 3], atol=1e-9)
+    assert np.allclose(result.T_EL_Ptip, truth.T_EL_Ptip, atol=1e-9)
 
 
 #: ``--robot`` refusals of the twin's commands: one line, exit 2, nothing written (``tests/hostile.py``).

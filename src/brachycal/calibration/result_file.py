@@ -13,6 +13,11 @@ refuses a robot of another name or other joints (its flanges are other links: th
 be applied to the wrong arm), and warns when the description file changed since. Files written
 before it (no ``robot`` key; ``robot_model`` only) are read as they are: the SDA10F was then the
 only robot, and nothing is checked.
+
+A URDF written by ``brachycal export`` records the result it came from (the file's SHA-256) and
+which of its corrections the joints carry (:meth:`StoredCalibration.export_record`);
+:meth:`StoredCalibration.software_robot` reads that record, so that corrections are applied once
+even for files that store joint offsets without the corrected joint origins.
 """
 
 from __future__ import annotations
@@ -203,6 +208,57 @@ class StoredCalibration:
     source: str = ""
     #: The robot it was calibrated with (the ``robot`` block); None in files written before it.
     robot: RobotRecord | None = None
+    #: SHA-256 of the result file's bytes ("" for a result not read from a file).
+    sha256: str = ""
+
+    def best_method(self) -> str:
+        """The image calibration to use when none is asked for (``locate``, ``export``, ``view``).
+
+        The whole chain's if the result has it (``chain+robot``, then ``chain``): it is solved over
+        all the data with its own uncertainty. Otherwise the registration with the lowest
+        leave-one-out RMSE in the result (``loocv.<method>.rmse_mm``); RMSEs within 1e-9 relative
+        of each other are ties (Kabsch and Horn solve the same least squares and differ only in
+        rounding), broken by Table II's order (icp, kabsch, horn, similarity, scaled_uv); methods
+        without a leave-one-out RMSE come last.
+        """
+        for chain in ("chain+robot", "chain"):
+            if chain in self.image:
+                return chain
+        loocv = self.raw.get("loocv", {}) if isinstance(self.raw.get("loocv"), dict) else {}
+
+        def rmse(method: str) -> float:
+            entry = loocv.get(method)
+            value = entry.get("rmse_mm") if isinstance(entry, dict) else None
+            return float(value) if isinstance(value, int | float) and np.isfinite(value) else np.inf
+
+        order = list(dict.fromkeys(m for m in (*METHODS, *self.image) if m in self.image))
+        best = min(rmse(m) for m in order)
+        # The first in Table II's order within the tie tolerance of the best (all inf: the first).
+        return next(m for m in order if rmse(m) <= best * (1 + TIE_RELATIVE))
+
+    def corrections(self) -> list[str]:
+        """Which robot corrections the result carries: ``joint_origins`` (identified geometry, or
+        joint offsets stored as corrected origins), ``joint_offsets`` (zero offsets); empty: none."""
+        out = []
+        if self.joint_origins:
+            out.append("joint_origins")
+        if self.joint_offsets_rad:
+            out.append("joint_offsets")
+        return out
+
+    def export_record(self, method: str) -> dict[str, str]:
+        """The ``<brachycal_export>`` attributes of a URDF written from this result: the result file
+        and its SHA-256, the image method, and what the URDF carries (``tool_frames`` always, and
+        :meth:`corrections`)."""
+        from brachycal import __version__
+
+        return {
+            "result": Path(self.source).name,
+            "result_sha256": self.sha256,
+            "method": method,
+            "carries": " ".join(["tool_frames", *self.corrections()]),
+            "brachycal": __version__,
+        }
 
     def check_robot(self, robot: Robot) -> None:
         """Refuse a robot other than the one the result was calibrated with (nothing to check for
@@ -259,15 +315,40 @@ class StoredCalibration:
         (identified geometry or joint offsets), applied exactly once.
 
         A robot whose joint origins already are the corrected ones (the URDF ``brachycal export``
-        wrote) is returned as it is; one whose origins are the calibrated URDF's is corrected.
+        wrote) is returned as it is; one whose origins are the calibrated URDF's is corrected. For
+        a result that stores no corrected origins (no corrections, or joint offsets in files
+        written before the origins were stored), the URDF's ``<brachycal_export>`` records decide:
+        a URDF exported from this very result (same SHA-256) already carries its offsets and is
+        returned as it is; one exported from another result that corrected the robot is refused,
+        unless this result was calibrated on that very URDF (the result's ``robot.urdf_sha256``).
 
         Raises:
             InputError: ``robot`` is not the robot the result was calibrated with
-                (:meth:`check_robot`), or the result corrects the robot and ``robot``'s joint
-                origins are neither (another calibration's corrections: they would be mixed).
+                (:meth:`check_robot`); the result corrects the robot and ``robot``'s joint origins
+                are neither (another calibration's corrections: they would be mixed); or the result
+                stores no corrected origins and ``robot`` is a URDF exported from another result
+                that corrected the robot, which this result was not calibrated on.
         """
         self.check_robot(robot)
         if not self.joint_origins:
+            records = robot.export_records
+            if self.joint_offsets_rad and any(
+                r.get("result_sha256") == self.sha256 and _carries_joints(r) for r in records
+            ):
+                return robot  # exported from this result: its offsets are in the joints already
+            others = [r for r in records if _carries_joints(r) and r.get("result_sha256") != self.sha256]
+            calibrated_on_it = self.robot is not None and self.robot.urdf_sha256 == sha256_bytes(robot.urdf_xml)
+            if others and not calibrated_on_it:
+                why = (
+                    "this result's joint offsets would be added to those corrections"
+                    if self.joint_offsets_rad
+                    else "this result was not calibrated with those corrections"
+                )
+                raise InputError(
+                    f"the robot model is a URDF exported from another result ({others[-1].get('result', '?')}) "
+                    f"that corrected the robot: {why}; use the URDF this result was calibrated with",
+                    file=self.source,
+                )
             return robot.with_joint_offsets(self.joint_offsets_rad) if self.joint_offsets_rad else robot
         names = [name for name in self.joint_origins if name in robot.joint_names]
         if len(names) != len(self.joint_origins):
@@ -285,6 +366,17 @@ class StoredCalibration:
                 file=self.source,
             )
         return robot.with_joint_origins({n: self.joint_origins[n][1] for n in names})
+
+
+def _carries_joints(record: dict[str, str]) -> bool:
+    """Whether an export record says its URDF's joints carry robot corrections."""
+    return bool({"joint_origins", "joint_offsets"} & set(record.get("carries", "").split()))
+
+
+#: Leave-one-out RMSEs closer than this (relative) are a tie in :meth:`StoredCalibration.best_method`:
+#: far above rounding (two methods that solve the same least squares agree to ~1e-14), far below
+#: any difference between methods that matters (a nanometre in a millimetre).
+TIE_RELATIVE = 1e-9
 
 
 #: Two joint origins are the same when no entry differs by more than this (metres, and unitless
@@ -339,6 +431,7 @@ def read_result(path: str | os.PathLike[str]) -> StoredCalibration:
         joint_origins=_joint_origins(raw, path),
         source=str(path),
         robot=_robot_record(raw, path),
+        sha256=sha256_file(path),
     )
 
 

@@ -254,11 +254,6 @@ class Selection:
     def total_minutes(self) -> float:
         return float(sum(self.minutes))
 
-    @property
-    def improvement(self) -> float:
-        """Relative fall of the predicted RMS."""
-        return 1.0 - self.rms_mm / self.rms_before_mm
-
 
 def greedy(
     criterion: Criterion,

@@ -44,7 +44,7 @@ The result (brachycal-result/1, JSON, metres) and the report are written togethe
 nothing, when everything succeeded; neither replaces an existing file without --force.
 
 example:
-  brachycal calibrate examples/session --out result.json
+  brachycal calibrate examples/twin_session --out twin_result.json
 """
 
 

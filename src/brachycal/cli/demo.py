@@ -39,9 +39,9 @@ replaced only with --force.
 
 examples:
   brachycal demo                      simulate with seed 0 (= examples/twin_session)
-  brachycal demo --seed 7             another simulated session
-  brachycal demo --example            calibrate the committed examples/twin_session
-  brachycal demo --robot baxter       the same main job on a Baxter
+  brachycal demo --seed 7 --out demo_seed7         another simulated session
+  brachycal demo --example --out demo_example      calibrate the committed examples/twin_session
+  brachycal demo --robot baxter --out demo_baxter  the same main job on a Baxter
 """
 
 

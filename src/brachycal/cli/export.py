@@ -16,16 +16,28 @@ if TYPE_CHECKING:
 HELP = "export a result: calibrated URDF, 3D Slicer/ITK transforms, PLUS CoordinateDefinitions, ROS static TFs"
 DESCRIPTION = """\
 Writes into DIR: <robot>_calibrated.urdf (sda10f_calibrated.urdf for the default robot; tool
-joints replaced and, for a result that identified the robot, its corrected joint origins; loads in
-ROS/MoveIt, Pinocchio, MuJoCo), ImageToProbe.tfm / ProbeToLeftFlange.tfm /
+joints replaced and, for a result that corrected the robot, its corrected joint origins; loads in
+ROS/MoveIt, Pinocchio, MuJoCo) with a meshes/ folder holding a copy of every mesh it names (the
+folder is self-contained: copy it anywhere), ImageToProbe.tfm / ProbeToLeftFlange.tfm /
 NeedleTipToRightFlange.tfm (3D Slicer and ITK transform files, millimetres; ImageToProbe maps
-pixels and carries the spacing; the flanges are named Left/Right when the robot's flange links
-say their side, else Probe/Needle), PlusCoordinateDefinitions.xml (a PLUS <CoordinateDefinitions>
-element) and static_transforms.yaml (ROS static transforms with the static_transform_publisher
-command for each). --robot must be the robot the result was calibrated with (the result records it).
+pixels and carries the spacing, its third column the mean spacing as PLUS writes it; the flanges
+are named Left/Right when the robot's flange links say their side, else Probe/Needle),
+PlusCoordinateDefinitions.xml (a PLUS <CoordinateDefinitions> element) and static_transforms.yaml
+(ROS static transforms with the static_transform_publisher command for ROS 2 and for ROS 1).
+The URDF records the result it was written from and the corrections it carries: given back with
+--urdf and the same result, locate, plan and export apply nothing twice.
+
+--ros-package NAME also writes DIR/NAME/, a ROS 2 (ament_cmake) description package: package.xml,
+CMakeLists.txt, urdf/ (package://NAME/meshes/... URIs), meshes/, config/static_transforms.yaml and
+launch/NAME.launch.py (robot_state_publisher with the calibrated URDF; publish_robot:=false
+starts one static_transform_publisher per calibrated transform instead).
+
+--method defaults to the best image calibration in the result: the whole chain's if present
+(chain+robot, then chain), else the registration with the lowest leave-one-out RMSE (ties in Table
+II's order). --robot must be the robot the result was calibrated with (the result records it).
 
 example:
-  brachycal export result.json --out calibration_exports
+  brachycal export twin_result.json --out calibration_exports
 """
 
 
@@ -40,7 +52,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--method",
         choices=tuple(ALL_LABELS),
-        help="which image calibration (default: chain if present, else kabsch)",
+        help="which image calibration (default: the result's best: chain if present, else the lowest "
+        "leave-one-out RMSE)",
+    )
+    parser.add_argument(
+        "--ros-package",
+        metavar="NAME",
+        help="also write DIR/NAME/, a ROS 2 description package (lowercase letters, digits, underscores)",
     )
     add_robot_option(parser)
     parser.add_argument("--force", action="store_true", help="replace existing files")
@@ -48,14 +66,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from brachycal.export import export_files
+    from brachycal.export import check_ros_package_name, export_files, ros_package_files
     from brachycal.files import OutputSet
 
+    if args.ros_package is not None:
+        check_ros_package_name(args.ros_package)
     # The robot names the files (<robot>_calibrated.urdf, the flanges' .tfm): loaded before the claims.
     robot = load_robot(args)
     with OutputSet(force=args.force) as outputs:
         for name in export_files(robot.rig):
             outputs.claim(Path(args.out) / name, make_parents=True)
+        if args.ros_package is not None:
+            for name in ros_package_files(robot.rig, args.ros_package):
+                outputs.claim(Path(args.out) / args.ros_package / name, make_parents=True)
         _run(args, robot, outputs)
     for path in outputs.written:
         print(f"wrote {path}")
@@ -65,13 +88,17 @@ def run(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace, robot: Robot, outputs: OutputSet) -> None:
     """Write every export of the result into ``outputs`` (``robot``: the one of --robot/--urdf)."""
     from brachycal.calibration import read_result
-    from brachycal.export import write_exports
+    from brachycal.export import write_exports, write_ros_package
 
     stored = read_result(args.result)
-    method = args.method or ("chain" if "chain" in stored.image else "kabsch")
+    method = args.method or stored.best_method()
     if method not in stored.image:
         raise InputError(f"the result has no method {method!r} (it has {', '.join(stored.image)})", file=args.result)
     software = stored.software_robot(robot)  # refuses another robot; corrections applied once
-    write_exports(
-        software, stored.T_ER_Ntip, stored.T_EL_Ptip, stored.image[method], args.out, force=args.force, outputs=outputs
-    )
+    calibration = (stored.T_ER_Ntip, stored.T_EL_Ptip, stored.image[method])
+    record = stored.export_record(method)
+    write_exports(software, *calibration, args.out, force=args.force, outputs=outputs, record=record)
+    if args.ros_package is not None:
+        write_ros_package(
+            software, *calibration, args.out, args.ros_package, force=args.force, outputs=outputs, record=record
+        )

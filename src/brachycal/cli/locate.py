@@ -14,11 +14,13 @@ Computes p_R = T_R_EL(q) @ T_EL_Ptip @ T_Ptip_I @ (u*s_u, v*s_v, 0): the point o
 base frame that pixel (u, v) shows, with the robot at configuration q (EL: the probe arm's flange).
 RESULT is a calibration result file (brachycal calibrate); JOINTS is a CSV file whose header names
 the robot's joints (radians; the SDA10F's 15), one configuration per row (a joint log works; its
-time column is ignored). Prints one line per row: row,x,y,z in metres. --robot must be the robot
-the result was calibrated with (the result records it).
+time column is ignored). Prints one line per row: row,x,y,z in metres. --method defaults to the
+best image calibration in the result: the whole chain's if present (chain+robot, then chain), else
+the registration with the lowest leave-one-out RMSE (ties in Table II's order), as for export.
+--robot must be the robot the result was calibrated with (the result records it).
 
 example:
-  brachycal locate result.json joints.csv --uv 540,300
+  brachycal locate twin_result.json examples/joints.csv --uv 540,300
 """
 
 
@@ -40,9 +42,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--method",
-        default="kabsch",
         choices=tuple(ALL_LABELS),
-        help="which image calibration of the result (default kabsch)",
+        help="which image calibration of the result (default: the result's best: chain if present, else the "
+        "lowest leave-one-out RMSE)",
     )
     add_robot_option(parser)
     parser.set_defaults(run=run)
@@ -55,14 +57,13 @@ def run(args: argparse.Namespace) -> int:
     stored = read_result(args.result)
     # The result knows its images' size (older result files do not: then argparse's bound stands).
     uv = check_pixel(args.uv, "--uv", size_px=stored.image_size_px)[None]
-    if args.method not in stored.image:
-        raise InputError(
-            f"the result has no method {args.method!r} (it has {', '.join(stored.image)})", file=args.result
-        )
+    method = args.method or stored.best_method()
+    if method not in stored.image:
+        raise InputError(f"the result has no method {method!r} (it has {', '.join(stored.image)})", file=args.result)
     robot = stored.software_robot(load_robot(args))
     rows, Q = read_configurations(args.joints, robot)
     print("row,x,y,z")
     for row, q in zip(rows, Q, strict=True):
-        p = locate(robot, q, uv, stored.T_EL_Ptip, stored.image[args.method])[0]
+        p = locate(robot, q, uv, stored.T_EL_Ptip, stored.image[method])[0]
         print(f"{row},{p[0]:.9f},{p[1]:.9f},{p[2]:.9f}")
     return 0

@@ -17,7 +17,22 @@ from collections.abc import Collection, Iterator, Sequence
 from contextlib import contextmanager
 
 from brachycal import __version__
-from brachycal.cli import calibrate, demo, design, export, fk, locate, model, nwire, pivot, plan, session, study, view
+from brachycal.cli import (
+    calibrate,
+    demo,
+    design,
+    examples,
+    export,
+    fk,
+    locate,
+    model,
+    nwire,
+    pivot,
+    plan,
+    session,
+    study,
+    view,
+)
 from brachycal.errors import BrachycalError
 
 DESCRIPTION = """\
@@ -28,6 +43,7 @@ otherwise (u_px, mae_mm).
 
 start here:
   brachycal demo                      calibrate the bundled example (a digital twin)
+  brachycal examples examples         copy the example files the commands below can use into ./examples
   brachycal model                     joints, limits and tool frames of the robot model
   brachycal fk LOG --frames needle_tip,probe_tip --out poses.csv
                                       tool poses from a joint log (CSV or ROS bag)
@@ -71,6 +87,7 @@ COMMANDS = {
     "study": study,
     "design": design,
     "view": view,
+    "examples": examples,
 }
 
 

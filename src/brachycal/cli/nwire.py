@@ -16,7 +16,8 @@ validated on the validation frames: 3D reprojection error (all points, and the b
 reports it) and per-wire 2D errors in pixels. Writes JSON (metres; 'affine_mm' in PLUS's units).
 
 example:
-  brachycal nwire PlusDeviceSet_fCal_Sim_SpatialCalibration_2.0.xml fCal_3NWires_segmented_frames.xml --out nwire.json
+  brachycal nwire examples/nwire/PlusDeviceSet_twin_fCal2.xml examples/nwire/twin_segmented_frames.xml \\
+      --out nwire.json
 """
 
 

@@ -17,7 +17,7 @@ coordinates, as SciKit-Surgery reports) and in 3D (RMS of the N distances).
 methods: algebraic (linear least squares, Yaniv 2015) or robust (soft-L1 loss, flags outliers).
 
 example:
-  brachycal pivot tracked_pointer_pivot.csv --units mm --out pivot.json
+  brachycal pivot examples/pivot/pointer_pivot.csv --units mm --out pivot.json
 """
 
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import os
 import pickle
 import subprocess
 import sys
@@ -57,7 +56,7 @@ workspace; docs/robots.md).
 example:
   brachycal plan --out plan.csv
   brachycal plan --robot baxter --out baxter_plan.csv
-  brachycal plan --result result.json --centre-mm 800,100,1050 --edge-mm 30 --out plan.csv
+  brachycal plan --result result.json --centre-mm 800,100,1050 --edge-mm 30 --out plan_30mm.csv
 """
 
 
@@ -185,9 +184,9 @@ def _tool_options(t: argparse._ArgumentGroup) -> None:
     t.add_argument("--result", metavar="JSON", help="plan with a calibration result's tool frames")
     t.add_argument(
         "--method",
-        default="kabsch",
         choices=tuple(ALL_LABELS),
-        help="which image calibration of --result (default kabsch)",
+        help="which image calibration of --result (default: the result's best, as locate and export: "
+        "chain+robot, then chain, else the lowest leave-one-out RMSE)",
     )
     add_robot_option(t)
     clearance = finite_float(low=MIN_COLLISION_MARGIN_M * 1e3, high=MAX_COLLISION_MARGIN_M * 1e3, unit="mm")
@@ -221,10 +220,6 @@ def run(args: argparse.Namespace) -> int:
     check_excitation_options(args)
     if args.excitation is not None:
         return run_excitation(args)
-    # The planner uses MuJoCo's collision distances, never its rendering: unset, importing mink
-    # (through mujoco) loads GLFW and probes for a display, ~0.1 s of start-up. A user's own
-    # MUJOCO_GL stands; this changes the environment of this command's process (and its figure child) only.
-    os.environ.setdefault("MUJOCO_GL", "disable")
     with OutputSet(force=args.force) as outputs, _FigureProcess() as drawer:
         _run(args, outputs, drawer)
     print("wrote " + ", ".join(map(str, outputs.written)))
@@ -250,9 +245,12 @@ def _run(args: argparse.Namespace, outputs: OutputSet, drawer: _FigureProcess) -
         from brachycal.export import calibrated_robot
 
         stored = read_result(args.result)
-        if args.method not in stored.image:
-            raise InputError(f"the result has no method {args.method!r}", file=args.result)
-        image = stored.image[args.method]
+        method = args.method or stored.best_method()
+        if method not in stored.image:
+            raise InputError(
+                f"the result has no method {method!r} (it has {', '.join(stored.image)})", file=args.result
+            )
+        image = stored.image[method]
         robot = calibrated_robot(stored.software_robot(robot), stored.T_ER_Ntip, stored.T_EL_Ptip, image)
         if args.spacing_mm is None:
             spec = replace(spec, spacing_m=image.spacing_m)

@@ -27,7 +27,7 @@ joint order, radians and degrees, what each pose is). When they would improve th
 less than its own uncertainty (or 1 %), says that the session is enough and writes nothing.
 
 example:
-  brachycal plan --excitation session --excitation-minutes 5 --robot-accuracy-mm 0.1 \\
+  brachycal plan --excitation run/built_session --excitation-minutes 5 --robot-accuracy-mm 0.1 \\
       --robot-accuracy-deg 0.01 --out excitation.csv
 """
 
@@ -74,7 +74,6 @@ def run_excitation(args: argparse.Namespace) -> int:
     from brachycal.planning import Thresholds
     from brachycal.planning.excitation import plan_excitation, write_excitation
 
-    check_excitation_options(args)
     thresholds = Thresholds(
         collision_margin_m=args.collision_margin_mm * 1e-3, joint_margin_rad=float(np.radians(args.joint_margin_deg))
     )
@@ -83,6 +82,12 @@ def run_excitation(args: argparse.Namespace) -> int:
     with OutputSet(force=args.force) as outputs:
         staged = outputs.claim(out, label="--out")
         robot = load_robot(args)
+        rig = robot.rig
+        if not rig.shared_joints and max(len(rig.needle_arm.joints), len(rig.probe_arm.joints)) <= 6:
+            raise InputError(
+                f"robot {rig.name!r} can reach a sample only one way: no arm with more than 6 axes (no "
+                "self-motion) and no joint shared by both arms, so it has no excitation poses to offer"
+            )
         session = read_session(args.excitation, robot)
         initial = calibrate(session, robot, ("scaled_uv",))
         choice, identified = choose_and_identify(session, robot, initial, accuracy)

@@ -41,11 +41,14 @@ spread and speed, skipped frames and why, planned samples missing), all or nothi
 files are replaced only with --force.
 
 examples:
-  brachycal session build log.csv --marks marks.csv --images images.csv --plan plan.csv \\
-      --template session.toml --out session
-  brachycal session build run.bag --marks-topic /marks --images frames.csv --markups tips.mrk.json \\
-      --spacing-mm 0.19,0.19 --size-px 1080,720 --top-model-tip-mm 0,0,150 --out session
-  brachycal calibrate session --out result.json
+  brachycal demo --recording --out run     (the twin's recording: run/recording)
+  brachycal session build run/recording/joint_log.csv --marks run/recording/marks.csv \\
+      --images run/recording/images.csv --plan run/recording/plan.csv \\
+      --template run/recording/session.toml --out run/built_session
+  brachycal session build run/recording/bag --marks-topic /brachycal/marks --images run/recording/images.csv \\
+      --plan run/recording/plan.csv --spacing-mm 0.19,0.19 --size-px 1080,720 --top-model-tip-mm 0,0,150 \\
+      --out run/session_from_bag
+  brachycal calibrate run/built_session --out result.json --report report
 """
 
 

@@ -16,10 +16,10 @@ through the poses with the slider, Ctrl-C to stop. What it shows:
   (nothing given)          the robot at its ready stance, its tool frames and image plane
   --plan PLAN.csv          the robot at each planned pose (brachycal plan)
   --session DIR            the robot at each image sample of a session
-  RESULT --session DIR     also, per sample, the needle tip through the needle arm (red) and
-                           through the probe arm and the image (blue) with their residual, and
+  RESULT --session DIR     also, per sample, the needle tip through the needle arm (crimson)
+                           and through the probe arm and the image (teal) with their residual, and
                            the sample cube; if DIR is a twin's session (brachycal demo: it has
-                           truth.json), targets (green) and where the needle landed (magenta)
+                           truth.json), targets (lime) and where the needle landed (magenta)
 Everything in the robot's base frame. --host 0.0.0.0 serves it to other machines.
 
 example:
@@ -41,7 +41,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--method",
         choices=tuple(ALL_LABELS),
-        help="which image calibration of RESULT (default: chain if present, else kabsch)",
+        help="which image calibration of RESULT (default: the result's best: chain if present, else the lowest "
+        "leave-one-out RMSE)",
     )
     targets = bounded_int(low=1, high=1000)
     parser.add_argument(
@@ -86,8 +87,7 @@ def _content(args: argparse.Namespace):  # -> ViewContent (imported lazily)
         from brachycal.data import read_session
 
         stored = read_result(args.result)
-        stored.check_robot(robot)
-        method = args.method or ("chain" if "chain" in stored.image else "kabsch")
+        method = args.method or stored.best_method()  # the robot is checked with the result's corrections
         session = read_session(args.session, robot)
         twin = None
         if (Path(args.session) / "truth.json").is_file():

@@ -269,8 +269,8 @@ class BackgroundPoseWriter:
 
     def _raise_error(self) -> None:
         if self._error is not None:
+            self._stop.set()  # first: the worker must not write another block after the failed one
             error, self._error = self._error, None
-            self._stop.set()
             raise error
 
     def write(self, time: ArrayLike, T_base_frames: ArrayLike) -> None:

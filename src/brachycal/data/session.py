@@ -1,6 +1,6 @@
 """Calibration sessions, format ``brachycal-session/1`` (a folder; ``docs/conventions.md``).
 
-- ``session.toml``: format, image spacing and size, the top-model tip on the right flange.
+- ``session.toml``: format, image spacing and size, the top-model tip on the needle flange (the SDA10F's right flange).
 - ``touches.csv``: ``tool,reference,trial,<joints>``; tools ``top_model``, ``needle``,
   ``probe``; references ``rtip1`` (calibration) and ``rtip2`` (validation).
 - ``axes.csv``: ``tool,point,<joints>``; tools ``needle``, ``probe``; points ``p1``–``p3``.
@@ -56,7 +56,7 @@ class Session:
     Attributes:
         spacing_m: ``(2,)`` nominal pixel spacing ``(s_u, s_v)``, metres per pixel.
         size_px: ``(2,)`` image ``(width, height)`` in pixels.
-        p_ER_Mtip: ``(3,)`` top-model tip on the right flange, metres.
+        p_ER_Mtip: ``(3,)`` top-model tip on the needle flange (the SDA10F's right), metres.
         touches: ``(tool, reference)`` → :class:`Touches`, trials sorted.
         axes: tool → point (``p1``…``p3``) → configuration ``(nq,)``.
         sample_ids: ``(N,)`` sample names.

@@ -5,16 +5,26 @@
   ``us_image`` joints (for ROS/MoveIt), and, for a result that corrects the robot, the corrected
   joint origins (the robot given is the software robot, corrected exactly once). The URDF frame
   ``us_image`` is rigid; the pixel spacing stays in the result file (and in the PLUS/Slicer image
-  transforms below).
+  transforms below). The folder is self-contained: a ``meshes/`` folder beside the URDF holds a
+  copy of every mesh it names (only those), by relative path, so the folder loads wherever it is
+  copied. A ``<brachycal_export>`` element records the result it was written from (SHA-256) and
+  which of its corrections the joints carry, so that they are never applied twice.
+- **ROS 2 package** (:func:`write_ros_package`, ``export --ros-package NAME``): an ament_cmake
+  description package with the same URDF (``package://NAME/meshes/...``), the meshes, a launch
+  file and the static transforms.
 - **3D Slicer / ITK** ``.tfm``: ``#Insight Transform File V1.0`` with an ``AffineTransform_double_3_3``.
   ITK files store the *resampling* transform (Slicer's "from parent") in LPS; Slicer converts to
   RAS and shows the inverse as "to parent". So for a to-parent matrix ``M`` (RAS, mm) the file
   holds ``F M⁻¹ F`` with ``F = diag(-1, -1, 1)``, and Slicer displays ``M`` again.
 - **PLUS** ``CoordinateDefinitions``: ``<Transform From="Image" To="Probe" Matrix="…"/>`` in PLUS's
   convention (``From A To B`` maps A into B; millimetres; ``Image`` in pixels, so the matrix
-  carries the pixel spacing), plus ``Probe→LeftFlange`` and ``NeedleTip→RightFlange``.
-- **ROS** static transforms (YAML): parent, child, translation (m), rotation (x, y, z, w), one entry
-  per calibrated joint, with the ``static_transform_publisher`` command line for each.
+  carries the pixel spacing, and its third column is the image normal scaled by the mean pixel
+  spacing, as PLUS's fCal writes it: :func:`image_to_probe_mm`), plus ``Probe→LeftFlange`` and
+  ``NeedleTip→RightFlange``.
+- **ROS** static transforms (YAML, written by a YAML library: numbers are YAML floats that YAML 1.1
+  readers such as PyYAML read as numbers too): parent, child, translation (m), rotation (x, y, z,
+  w), one entry per calibrated joint, with the ``static_transform_publisher`` command line for
+  each in ROS 2's named-argument form and in ROS 1's argument order.
 """
 
 from __future__ import annotations
@@ -22,6 +32,8 @@ from __future__ import annotations
 import io
 import os
 import re
+import shutil
+from collections.abc import Mapping
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, cast
@@ -91,11 +103,24 @@ def calibrated_robot(robot: Robot, T_ER_Ntip: ArrayLike, T_EL_Ptip: ArrayLike, i
 
 
 def image_to_probe_mm(image: ImageCalibration) -> FloatArray:
-    """``(4, 4)`` pixel → probe-tip millimetres: ``T_Ptip_I`` with the pixel spacing in its columns."""
-    M = image.T_Ptip_I @ np.diag([image.spacing_m[0], image.spacing_m[1], 1.0, 1.0])
-    M = M.copy()
-    M[:3, :] *= 1e3
-    M[3] = [0.0, 0.0, 0.0, 1.0]
+    """``(4, 4)`` pixel → probe-tip millimetres, as PLUS's fCal writes ``ImageToProbe``.
+
+    Columns 1 and 2 are ``T_Ptip_I``'s x and y axes times the pixel spacing (mm per pixel), the
+    last column the image origin in mm. The third column is the image normal ``x × y`` scaled by
+    the mean of the first two columns' lengths (the mean pixel spacing, mm): PLUS completes its
+    projection matrix so ("Make the z vector have about the same length as x and y"; PlusLib
+    ``src/PlusCalibration/vtkProbeCalibrationAlgo/vtkPlusProbeCalibrationAlgo.cxx``,
+    ``ComputeImageToProbeTransformByLinearLeastSquaresMethod``). A 2D image's pixels have z = 0, so
+    this column changes no pixel's position (3D Slicer applies the matrix to pixel indices with
+    z = 0); it only sets the slice thickness direction of a volume, and keeps the matrix invertible.
+    """
+    spacing_mm = 1e3 * np.asarray(image.spacing_m, dtype=float)
+    M = np.eye(4)
+    M[:3, 0] = image.T_Ptip_I[:3, 0] * spacing_mm[0]
+    M[:3, 1] = image.T_Ptip_I[:3, 1] * spacing_mm[1]
+    normal = np.cross(M[:3, 0], M[:3, 1])
+    M[:3, 2] = normal / np.linalg.norm(normal) * (np.linalg.norm(M[:3, 0]) + np.linalg.norm(M[:3, 1])) / 2
+    M[:3, 3] = image.T_Ptip_I[:3, 3] * 1e3
     return M
 
 
@@ -163,6 +188,67 @@ def plus_coordinate_definitions(
     return f"{header}{body}\n</CoordinateDefinitions>\n"
 
 
+def _yaml_float(representer, value: float):  # ruamel's representer type is not exported
+    """A float as YAML 1.1 and 1.2 both read it: always with a dot (``1.0e-05``, not ``1e-05``,
+    which PyYAML and ROS 1's rosparam would read as a string)."""
+    text = repr(float(value))
+    if "e" in text and "." not in text:
+        text = text.replace("e", ".0e")
+    return representer.represent_scalar("tag:yaml.org,2002:float", text)
+
+
+def _yaml_text(data: object, header: str) -> str:
+    from ruamel.yaml import YAML
+
+    yaml = YAML(typ="safe", pure=True)
+    yaml.default_flow_style = None  # lists of numbers on one line, mappings in blocks
+    yaml.width = 4096  # a command line stays on one line
+    yaml.sort_base_mapping_type_on_output = False  # type: ignore[assignment]  # keys in the order written
+    yaml.representer.add_representer(float, _yaml_float)
+    buffer = io.StringIO()
+    yaml.dump(data, buffer)
+    return header + buffer.getvalue()
+
+
+def static_transforms(
+    T_ER_Ntip: ArrayLike,
+    T_EL_Ptip: ArrayLike,
+    image: ImageCalibration,
+    flanges: tuple[str, str] = ("arm_right_link_tool0", "arm_left_link_tool0"),
+) -> list[tuple[str, str, FloatArray, FloatArray]]:
+    """``[(parent, child, translation (3,) m, quaternion (x, y, z, w))]`` of the calibrated joints:
+    needle tip on its flange, probe tip on its flange, image on the probe tip."""
+    needle_flange, probe_flange = flanges
+    out = []
+    for parent, child, T in (
+        (needle_flange, NEEDLE_TIP, T_ER_Ntip),
+        (probe_flange, PROBE_TIP, T_EL_Ptip),
+        (PROBE_TIP, US_IMAGE, image.T_Ptip_I),
+    ):
+        p, q = to_position_quaternion(np.asarray(T, dtype=float))
+        out.append((parent, child, p, q))
+    return out
+
+
+def _numbers(values: ArrayLike) -> list[str]:
+    return [repr(float(v)) for v in np.asarray(values, dtype=float)]
+
+
+def ros2_arguments(parent: str, child: str, p: ArrayLike, q: ArrayLike) -> list[str]:
+    """``static_transform_publisher``'s arguments in ROS 2's named form (Humble and later)."""
+    x, y, z = _numbers(p)
+    qx, qy, qz, qw = _numbers(q)
+    return [
+        *("--x", x, "--y", y, "--z", z, "--qx", qx, "--qy", qy, "--qz", qz, "--qw", qw),
+        *("--frame-id", parent, "--child-frame-id", child),
+    ]
+
+
+def ros1_arguments(parent: str, child: str, p: ArrayLike, q: ArrayLike) -> list[str]:
+    """``static_transform_publisher``'s arguments in ROS 1's order: x y z qx qy qz qw frame_id child_frame_id."""
+    return [*_numbers(p), *_numbers(q), parent, child]
+
+
 def ros_static_transforms(
     T_ER_Ntip: ArrayLike,
     T_EL_Ptip: ArrayLike,
@@ -171,32 +257,30 @@ def ros_static_transforms(
 ) -> str:
     """ROS static transforms as YAML (metres, quaternion x, y, z, w) with publisher commands.
 
-    ``flanges``: the needle and probe flange links, the tools' parents (``rig.needle_flange``,
-    ``rig.probe_flange``; default the SDA10F's).
+    Per transform: ``parent``, ``child``, ``translation``, ``rotation``, and the
+    ``static_transform_publisher`` command for ROS 2 (``ros2``, named arguments) and ROS 1
+    (``ros1``, positional x y z qx qy qz qw frame_id child_frame_id). ``flanges``: the needle and
+    probe flange links, the tools' parents (``rig.needle_flange``, ``rig.probe_flange``; default
+    the SDA10F's). Numbers are written in full (``repr``) precision.
     """
-    needle_flange, probe_flange = flanges
-    lines = [
-        "# brachycal calibration: static transforms (metres; quaternion x, y, z, w).",
-        "# The image's pixel spacing (not a transform) is given as us_image_spacing_m.",
-        f"us_image_spacing_m: [{image.spacing_m[0]!r}, {image.spacing_m[1]!r}]",
-        "transforms:",
-    ]
-    for parent, child, T in (
-        (needle_flange, NEEDLE_TIP, T_ER_Ntip),
-        (probe_flange, PROBE_TIP, T_EL_Ptip),
-        (PROBE_TIP, US_IMAGE, image.T_Ptip_I),
-    ):
-        p, q = to_position_quaternion(np.asarray(T, dtype=float))
-        lines += [
-            f"  - parent: {parent}",
-            f"    child: {child}",
-            f"    translation: [{', '.join(repr(float(v)) for v in p)}]",
-            f"    rotation: [{', '.join(repr(float(v)) for v in q)}]",
-            f"    # ros2 run tf2_ros static_transform_publisher --x {p[0]:.9f} --y {p[1]:.9f} --z {p[2]:.9f} "
-            f"--qx {q[0]:.12f} --qy {q[1]:.12f} --qz {q[2]:.12f} --qw {q[3]:.12f} "
-            f"--frame-id {parent} --child-frame-id {child}",
-        ]
-    return "\n".join(lines) + "\n"
+    transforms = []
+    for parent, child, p, q in static_transforms(T_ER_Ntip, T_EL_Ptip, image, flanges):
+        transforms.append(
+            {
+                "parent": parent,
+                "child": child,
+                "translation": [float(v) for v in p],
+                "rotation": [float(v) for v in q],
+                "ros2": "ros2 run tf2_ros static_transform_publisher " + " ".join(ros2_arguments(parent, child, p, q)),
+                "ros1": "rosrun tf2_ros static_transform_publisher " + " ".join(ros1_arguments(parent, child, p, q)),
+            }
+        )
+    header = (
+        "# brachycal calibration: static transforms (metres; quaternion x, y, z, w).\n"
+        "# The image's pixel spacing (not a transform) is given as us_image_spacing_m.\n"
+    )
+    data = {"us_image_spacing_m": [float(v) for v in image.spacing_m], "transforms": transforms}
+    return _yaml_text(data, header)
 
 
 def read_ros_static_transforms(text: str) -> dict[tuple[str, str], FloatArray]:
@@ -212,6 +296,31 @@ def read_ros_static_transforms(text: str) -> dict[tuple[str, str], FloatArray]:
     return out
 
 
+def _write_urdf_folder(
+    robot: Robot,
+    staged_urdf: Path,
+    mesh_folder: Path,
+    mesh_prefix: str,
+    record: Mapping[str, str] | None,
+    out: OutputSet,
+) -> list[Path]:
+    """Write ``robot``'s URDF to ``staged_urdf`` with its meshes copied below ``mesh_folder`` (each
+    claimed in ``out``); returns the meshes' final paths."""
+    text, copies = robot.bundled_urdf(mesh_prefix, record)
+    with atomic_open(staged_urdf, force=out.force) as f:
+        f.write(text)
+    written = []
+    for relative, source in copies.items():
+        destination = mesh_folder / relative
+        staged = out.path(destination, make_parents=True)
+        try:
+            shutil.copyfile(source, staged)
+        except OSError as exc:
+            raise InputError(f"cannot copy mesh {source} ({exc.strerror or exc})", file=robot.source) from None
+        written.append(destination)
+    return written
+
+
 def write_exports(
     robot: Robot,
     T_ER_Ntip: ArrayLike,
@@ -221,15 +330,17 @@ def write_exports(
     *,
     force: bool = False,
     outputs: OutputSet | None = None,
+    record: Mapping[str, str] | None = None,
 ) -> list[Path]:
     """Write every export (:func:`export_files` of ``robot.rig``) into ``folder`` (created if
-    needed), all or nothing.
+    needed), with a ``meshes/`` folder holding a copy of each mesh the URDF names, all or nothing.
 
     ``robot`` is the model to write: for a result that corrects the robot, the corrected one
     (:meth:`~brachycal.calibration.StoredCalibration.software_robot`); only its tool joints are
-    replaced here. With ``outputs`` (a command's :class:`~brachycal.files.OutputSet`) the files join
-    that set and are committed with it; without, they are committed together on return. Returns the
-    files' final paths.
+    replaced here. ``record``: the ``<brachycal_export>`` attributes the URDF carries
+    (:meth:`~brachycal.calibration.StoredCalibration.export_record`). With ``outputs`` (a command's
+    :class:`~brachycal.files.OutputSet`) the files join that set and are committed with it; without,
+    they are committed together on return. Returns the files' final paths (the meshes last).
     """
     folder = Path(folder)
     rig = robot.rig
@@ -238,7 +349,8 @@ def write_exports(
     labels = flange_labels(rig)
     with output_set(outputs, force=force) as out:
         staged = {name: out.path(folder / name, make_parents=True) for name in names}
-        calibrated_robot(robot, T_ER_Ntip, T_EL_Ptip, image).write_urdf(staged[urdf], force=force)
+        calibrated = calibrated_robot(robot, T_ER_Ntip, T_EL_Ptip, image)
+        meshes = _write_urdf_folder(calibrated, staged[urdf], folder / "meshes", "meshes", record, out)
         for name, M in (
             (image_tfm, image_to_probe_mm(image)),
             (probe_tfm, _mm(T_EL_Ptip)),
@@ -251,4 +363,171 @@ def write_exports(
         ):
             with atomic_open(staged[name], force=force) as f:
                 f.write(text)
-    return [folder / name for name in names]
+    return [*(folder / name for name in names), *meshes]
+
+
+#: ROS package names (REP 144): lowercase letters, digits and underscores, starting with a letter.
+ROS_PACKAGE_NAME = re.compile(r"[a-z][a-z0-9_]*")
+
+
+def check_ros_package_name(name: str) -> str:
+    """``name`` if it is a ROS package name (REP 144), else a one-line refusal naming ``--ros-package``.
+
+    Raises:
+        InputError: not lowercase letters, digits and underscores starting with a letter, or a
+            double or trailing underscore (which REP 144 does not allow).
+    """
+    if not ROS_PACKAGE_NAME.fullmatch(name) or "__" in name or name.endswith("_"):
+        raise InputError(
+            f"--ros-package {name!r} is not a ROS package name: lowercase letters, digits and single "
+            "underscores, starting with a letter (REP 144), e.g. sda10f_calibration"
+        )
+    return name
+
+
+def ros_package_files(rig: Rig, name: str) -> tuple[str, ...]:
+    """The files :func:`write_ros_package` writes below ``DIR/name/``, besides the meshes."""
+    return (
+        "package.xml",
+        "CMakeLists.txt",
+        f"urdf/{rig.name}_calibrated.urdf",
+        f"launch/{name}.launch.py",
+        "config/static_transforms.yaml",
+    )
+
+
+_PACKAGE_XML = """<?xml version="1.0"?>
+<?xml-model href="http://download.ros.org/schema/package_format3.xsd" schematypens="http://www.w3.org/2001/XMLSchema"?>
+<package format="3">
+  <name>{name}</name>
+  <version>0.1.0</version>
+  <description>Calibrated {robot} description written by brachycal: the URDF with the calibrated needle,
+    probe and ultrasound image frames, its meshes, and a launch file that publishes them.</description>
+  <!-- brachycal cannot know who maintains this calibration: edit the maintainer and the license
+       (the meshes keep the license of the robot description they were copied from). -->
+  <maintainer email="maintainer@example.com">Maintainer of this calibration</maintainer>
+  <license>TODO</license>
+
+  <buildtool_depend>ament_cmake</buildtool_depend>
+
+  <exec_depend>launch</exec_depend>
+  <exec_depend>launch_ros</exec_depend>
+  <exec_depend>robot_state_publisher</exec_depend>
+  <exec_depend>tf2_ros</exec_depend>
+
+  <export>
+    <build_type>ament_cmake</build_type>
+  </export>
+</package>
+"""
+
+_CMAKE_LISTS = """cmake_minimum_required(VERSION 3.8)
+project({name} NONE)
+
+find_package(ament_cmake REQUIRED)
+
+install(DIRECTORY {folders} DESTINATION share/${{PROJECT_NAME}})
+
+ament_package()
+"""
+
+_LAUNCH = '''"""Calibrated {robot} (brachycal): the robot and its calibrated tool and image frames on /tf.
+
+publish_robot:=true (default): robot_state_publisher with the calibrated URDF, which carries the
+calibrated needle_tip, probe_tip and us_image frames as fixed joints (and any corrected joint
+origins). publish_robot:=false: only the calibrated transforms, one static_transform_publisher
+each, for a set-up whose robot description another package publishes.
+"""
+
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.conditions import IfCondition, UnlessCondition
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+
+def generate_launch_description():
+    share = get_package_share_directory("{name}")
+    with open(os.path.join(share, "urdf", "{urdf}")) as f:
+        robot_description = f.read()
+    publish_robot = LaunchConfiguration("publish_robot")
+    return LaunchDescription([
+        DeclareLaunchArgument("publish_robot", default_value="true"),
+        Node(
+            package="robot_state_publisher",
+            executable="robot_state_publisher",
+            parameters=[{{"robot_description": robot_description}}],
+            condition=IfCondition(publish_robot),
+        ),
+{nodes}    ])
+'''
+
+_LAUNCH_NODE = """        Node(
+            package="tf2_ros",
+            executable="static_transform_publisher",
+            name="{node}",
+            arguments={arguments},
+            condition=UnlessCondition(publish_robot),
+        ),
+"""
+
+
+def _launch_file(name: str, rig: Rig, urdf: str, transforms: list[tuple[str, str, FloatArray, FloatArray]]) -> str:
+    nodes = "".join(
+        _LAUNCH_NODE.format(node=f"{parent}_to_{child}", arguments=repr(ros2_arguments(parent, child, p, q)))
+        for parent, child, p, q in transforms
+    )
+    return _LAUNCH.format(robot=rig.name, name=name, urdf=urdf, nodes=nodes)
+
+
+def write_ros_package(
+    robot: Robot,
+    T_ER_Ntip: ArrayLike,
+    T_EL_Ptip: ArrayLike,
+    image: ImageCalibration,
+    folder: str | os.PathLike[str],
+    name: str,
+    *,
+    force: bool = False,
+    outputs: OutputSet | None = None,
+    record: Mapping[str, str] | None = None,
+) -> list[Path]:
+    """Write a ROS 2 (ament_cmake) description package ``folder/name/``, all or nothing.
+
+    It holds ``package.xml`` (format 3), ``CMakeLists.txt`` (installs ``urdf/``, ``meshes/``,
+    ``launch/``, ``config/`` into the package's share folder), the calibrated URDF with
+    ``package://name/meshes/...`` mesh URIs, the meshes it names, ``launch/name.launch.py``
+    (robot_state_publisher with the URDF, or with ``publish_robot:=false`` one
+    static_transform_publisher per calibrated transform, ROS 2 Humble's named arguments) and
+    ``config/static_transforms.yaml`` (:func:`ros_static_transforms`). Other arguments as
+    :func:`write_exports`. Returns the files' final paths (the meshes last).
+
+    Raises:
+        InputError: ``name`` is not a ROS package name (:func:`check_ros_package_name`).
+    """
+    name = check_ros_package_name(name)
+    package = Path(folder) / name
+    rig = robot.rig
+    files = ros_package_files(rig, name)
+    xml, cmake, urdf, launch, config = files
+    flanges = (rig.needle_flange, rig.probe_flange)
+    with output_set(outputs, force=force) as out:
+        staged = {file: out.path(package / file, make_parents=True) for file in files}
+        calibrated = calibrated_robot(robot, T_ER_Ntip, T_EL_Ptip, image)
+        meshes = _write_urdf_folder(
+            calibrated, staged[urdf], package / "meshes", f"package://{name}/meshes", record, out
+        )
+        folders = " ".join(["urdf", *(["meshes"] if meshes else []), "launch", "config"])
+        transforms = static_transforms(T_ER_Ntip, T_EL_Ptip, image, flanges)
+        for file, text in (
+            (xml, _PACKAGE_XML.format(name=name, robot=rig.name)),
+            (cmake, _CMAKE_LISTS.format(name=name, folders=folders)),
+            (launch, _launch_file(name, rig, Path(urdf).name, transforms)),
+            (config, ros_static_transforms(T_ER_Ntip, T_EL_Ptip, image, flanges)),
+        ):
+            with atomic_open(staged[file], force=force) as f:
+                f.write(text)
+    return [*(package / file for file in files), *meshes]

@@ -23,6 +23,7 @@ import functools
 import importlib.metadata
 import math
 import os
+import re
 import tomllib
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping
@@ -737,6 +738,8 @@ def _load(path: Path) -> RobotDescription:
     if data["format"] != FORMAT:
         raise r.fail("format", f"must be {FORMAT!r}, got {data['format']!r}")
     name = r.string(data["name"], "name")
+    if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_.-]*", name):  # it names files (the exported URDF): no paths
+        raise r.fail("name", f"must be letters, digits, '_', '.', '-' starting with a letter, got {name!r}")
     summary = str(data.get("summary", ""))
     base = r.string(data["base"], "base")
     folder = path.parent

@@ -370,6 +370,31 @@ class Robot:
             handle.write(urdf_text.to_text(root))
         return path
 
+    def bundled_urdf(
+        self, mesh_prefix: str = "meshes", record: Mapping[str, str] | None = None
+    ) -> tuple[str, dict[str, Path]]:
+        """``(URDF text, {mesh copy below mesh_prefix: source file})`` for a self-contained folder.
+
+        Every mesh path of the text points below ``mesh_prefix`` (``"meshes"``: a ``meshes/`` folder
+        next to the URDF; ``"package://NAME/meshes"``: a ROS package), and the returned files are
+        the copies to make there (only the meshes this URDF names): the folder then loads wherever
+        it is copied. ``record`` (attributes of a ``<brachycal_export>`` element: which result the
+        text was written from and which corrections it carries) is added to the text.
+
+        Raises:
+            InputError: a mesh of the URDF is not a readable file.
+        """
+        root = urdf_text.parse(self.urdf_xml, self.source)
+        copies = urdf_text.bundle_meshes(root, self.base_dir, mesh_prefix, self.source)
+        if record is not None:
+            urdf_text.set_export_record(root, dict(record))
+        return urdf_text.to_text(root), copies
+
+    @property
+    def export_records(self) -> list[dict[str, str]]:
+        """The ``<brachycal_export>`` records of this URDF (:meth:`bundled_urdf`; empty: none)."""
+        return urdf_text.export_records(self._root)
+
     # --- other libraries' views of the same file ------------------------------------------
     def collision_model(self) -> pin.GeometryModel:
         """Pinocchio collision geometry (the URDF's ``<collision>`` meshes)."""

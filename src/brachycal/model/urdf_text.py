@@ -1,4 +1,4 @@
-"""Reading and editing URDF text: tool joints and mesh paths.
+"""Reading and editing URDF text: tool joints, mesh paths and the record of what an export carries.
 
 The URDF text is the single source of truth of a :class:`~brachycal.model.robot.Robot`; a
 calibrated robot is the same text with new ``<origin>`` values on the tool frames' fixed joints.
@@ -105,6 +105,65 @@ def rebase_mesh_paths(root: ET.Element, from_dir: Path, to_dir: Path) -> None:
         if "://" in path or os.path.isabs(path):
             continue
         element.set(attribute, os.path.relpath((from_dir / path).resolve(), to_dir.resolve()))
+
+
+def bundle_meshes(root: ET.Element, base_dir: Path, uri_prefix: str, source: str) -> dict[str, Path]:
+    """Point every mesh of the URDF at a copy below ``uri_prefix`` (in place); returns
+    ``{path of the copy below the prefix: file to copy}``.
+
+    Relative and absolute mesh paths (resolved against ``base_dir``) are bundled; each copy keeps
+    its path below the deepest folder common to all the meshes, so two meshes of the same name in
+    different folders (Baxter's ``upper_shoulder/``, ``lower_elbow/``...) stay apart, and a mesh
+    used twice (the UR5 cell's two arms) is copied once. MuJoCo's ``<compiler meshdir>`` is pointed
+    at the prefix. ``package://`` and other URIs are left as they are (nothing to copy from here).
+
+    Raises:
+        InputError: a mesh the URDF names is not a readable file (naming ``source``).
+    """
+    elements: list[tuple[ET.Element, Path]] = []
+    for mesh in root.iter("mesh"):
+        name = mesh.get("filename", "")
+        if "://" in name:
+            continue
+        path = (base_dir / name).resolve()
+        if not path.is_file():
+            raise InputError(f"mesh {name} is not a file (looked for {path})", file=source)
+        elements.append((mesh, path))
+    if not elements:
+        return {}
+    files = sorted({path for _, path in elements})
+    common = Path(os.path.commonpath([str(f.parent) for f in files]))
+    copies = {path: path.relative_to(common).as_posix() for path in files}
+    for mesh, path in elements:
+        mesh.set("filename", f"{uri_prefix}/{copies[path]}")
+    for compiler in root.iter("compiler"):
+        if compiler.get("meshdir"):
+            compiler.set("meshdir", uri_prefix)
+    return {relative: path for path, relative in copies.items()}
+
+
+#: The element a URDF written by ``brachycal export`` carries at the top of ``<robot>``: which
+#: result it was written from and which of that result's corrections its joints hold. URDF readers
+#: (urdfdom/ROS, Pinocchio, yourdfpy, MuJoCo) ignore elements they do not know.
+EXPORT_RECORD = "brachycal_export"
+
+
+def export_records(root: ET.Element) -> list[dict[str, str]]:
+    """The attributes of each ``<brachycal_export>`` element of the URDF, in file order (empty: none)."""
+    return [dict(element.attrib) for element in root.findall(EXPORT_RECORD)]
+
+
+def set_export_record(root: ET.Element, record: dict[str, str]) -> None:
+    """Add ``<brachycal_export>`` with ``record``'s attributes (in place), replacing a record of the
+    same ``result_sha256``; records of other results stay (their corrections are still in the joints)."""
+    for element in root.findall(EXPORT_RECORD):
+        if element.get("result_sha256") == record.get("result_sha256"):
+            root.remove(element)
+    children = list(root)
+    position = max((k + 1 for k, child in enumerate(children) if child.tag == EXPORT_RECORD), default=0)
+    element = ET.Element(EXPORT_RECORD, {k: str(v) for k, v in record.items()})
+    element.tail = "\n  "
+    root.insert(position, element)
 
 
 def to_text(root: ET.Element) -> str:

@@ -313,7 +313,8 @@ class ExcitationPlan:
     """The chosen excitation poses and the criterion's figures.
 
     Attributes:
-        chosen: in visiting order of the greedy choice.
+        chosen: in the greedy choice's order, best gain per minute first (:func:`write_excitation`
+            writes them in visiting order, :func:`tour`).
         rms_before_mm: predicted RMS landing error of the session alone (mm).
         rms_after_mm: with the chosen poses (mm; equal to before when nothing is chosen).
         resolution: relative SD of the predicted RMS (:func:`~brachycal.calibration.robot_observability.resolution`).

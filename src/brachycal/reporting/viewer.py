@@ -113,14 +113,27 @@ class Viewer:
 
     def __init__(self, content: ViewContent, host: str = "127.0.0.1", port: int = 0) -> None:
         import viser
-        import yourdfpy
-        from viser.extras import ViserUrdf
 
         if port == 0:
             port = _free_port(host)
         self.content = content
         self.server: viser.ViserServer = viser.ViserServer(host=host, port=port, label="brachycal", verbose=False)
         self.host, self.port = host, self.server.get_port()  # viser moves to the next port if one is taken
+        try:
+            self._build()
+        except OSError as exc:  # a mesh that will not load: named as such (not as a server problem)
+            self.server.stop()
+            where = f"{exc.filename}: " if exc.filename else ""
+            raise InputError(f"cannot load the robot's meshes for the view: {where}{exc.strerror or exc}") from None
+        except BaseException:  # no server left running
+            self.server.stop()
+            raise
+
+    def _build(self) -> None:
+        import yourdfpy
+        from viser.extras import ViserUrdf
+
+        content = self.content
         scene = self.server.scene
         scene.set_up_direction("+z")
         robot = content.robot

@@ -162,7 +162,8 @@ def compare_excitation(
     design's :data:`MECHANICAL_MINUTES` and samples).
 
     Raises:
-        InputError: an unknown level, a seed count or budget out of range.
+        InputError: an unknown level, a seed count or budget out of range, a robot without a
+            shared joint.
     """
     from brachycal.simulation.excitation_twin import evaluate_excitation
     from brachycal.simulation.settings import ROBOT_ERROR_LEVELS
@@ -172,6 +173,11 @@ def compare_excitation(
     check_range(budget_minutes, "excitation budget", low=0.0, high=MAX_BUDGET_MINUTES, low_open=True, unit="min")
     if level not in ROBOT_ERROR_LEVELS:
         raise InputError(f"unknown robot-error level {level!r}; choose from {', '.join(ROBOT_ERROR_LEVELS)}")
+    if not robot.rig.shared_indices:  # before minutes of work: the held-out postures turn the torso
+        raise InputError(
+            f"robot {robot.rig.name!r} has no joint shared by both arms: the excitation poses are judged at "
+            "held-out postures made by turning it"
+        )
     rows = []
     for seed in range(seeds):
         rows.append({"design": "grid 4x4x4 + excitation", **evaluate_excitation(robot, seed, level, budget_minutes)})

@@ -8,9 +8,10 @@ errors, planned poses) builds on this.
 Geometry, on any rig (:attr:`Robot.rig <brachycal.model.robot.Robot.rig>`): every place is an
 offset from the rig's sample cube (``workspace.cube_centre_m``) in its *workspace frame*
 (:func:`workspace_frame`: x forward, the probe's depth direction made horizontal; z up, the
-base's z; y to the probe arm's side), so a robot description places the whole session by its
-cube. The reference tips lie 0.2 m below the cube, in front of the needle arm; tools approach
-them pointing forward and down, each trial from another direction; the axes moves start 0.1 m
+base's z; the offsets' y towards the probe arm's side, :func:`probe_side`), so a robot
+description places the whole session by its cube. The reference tips lie 0.2 m below the cube,
+in front of the needle arm; tools approach them pointing forward and down, each trial from
+another direction; the axes moves start 0.1 m
 below and behind the cube, each on its arm's side. Image samples sweep a 4×4 grid of pixels over
 the image for each of several probe poses that step the image plane through the needle's
 workspace, so the needle tips fill a volume. Places are rounded to 1 µm, so a cube given in round
@@ -57,14 +58,13 @@ PLACE_GRID_DECIMALS = 6
 
 
 def workspace_frame(robot: Robot) -> FloatArray:
-    """``R_base_ws (3, 3)``: the rig's workspace frame, columns forward, side, up (in the base frame).
+    """``R_base_ws (3, 3)``: the rig's workspace frame, a rotation, columns forward, left, up (in the
+    base frame).
 
     Up is the base's z (the tips lie below the cube, tools approach downwards); forward is the
     probe's depth direction (``workspace.image_depth_dir``) made horizontal, or the needle's
-    insertion direction if the probe points straight down; the side axis points from the needle
-    arm towards the probe arm (their flanges at the ready stance), so the places of
-    :data:`REFERENCE_TIP_OFFSETS_M` and :data:`AXES_START_OFFSETS_M` fall on the side of the arm that uses them
-    whichever arm holds the needle. Identity on the three bundled robots.
+    insertion direction if the probe points straight down; left is up × forward. Identity on the
+    three bundled robots. Which side the probe arm is on is :func:`probe_side`.
 
     Raises:
         InputError: both directions are vertical (no forward direction).
@@ -82,19 +82,27 @@ def workspace_frame(robot: Robot) -> FloatArray:
             "the twin needs a forward direction",
             file=rig.source,
         )
-    side = np.cross(up, forward)
+    return np.column_stack([forward, np.cross(up, forward), up])
+
+
+def probe_side(robot: Robot) -> float:
+    """``+1`` when the probe arm stands to the left of the needle arm in :func:`workspace_frame`
+    (their flanges at the ready stance; the bundled robots), ``-1`` when to the right: the offsets'
+    side component (:data:`REFERENCE_TIP_OFFSETS_M`...) is multiplied by it, so that each place falls
+    on the side of the arm that uses it whichever arm holds the needle. Orientations are not
+    mirrored (a mirror is not a rotation)."""
+    rig = robot.rig
     ready = rig.ready
     towards_probe = robot.fk(rig.probe_flange, ready)[:3, 3] - robot.fk(rig.needle_flange, ready)[:3, 3]
-    if towards_probe @ side < 0:  # the needle arm stands on the +side: mirror
-        side = -side
-    return np.column_stack([forward, side, up])
+    return -1.0 if towards_probe @ workspace_frame(robot)[:, 1] < 0 else 1.0
 
 
 def place(robot: Robot, offset_m: tuple[float, float, float]) -> FloatArray:
-    """``(3,)`` the point ``offset_m`` (workspace frame, metres) from the rig's cube centre, in the base
-    frame, rounded to 1 µm (:data:`PLACE_GRID_DECIMALS`)."""
+    """``(3,)`` the point ``offset_m`` (forward, towards the probe arm's side, up; metres) from the
+    rig's cube centre, in the base frame, rounded to 1 µm (:data:`PLACE_GRID_DECIMALS`)."""
     centre = np.asarray(robot.rig.workspace.cube_centre_m, dtype=float)
-    return np.round(centre + workspace_frame(robot) @ np.asarray(offset_m, dtype=float), PLACE_GRID_DECIMALS)
+    offset = np.asarray(offset_m, dtype=float) * np.array([1.0, probe_side(robot), 1.0])
+    return np.round(centre + workspace_frame(robot) @ offset, PLACE_GRID_DECIMALS)
 
 
 def reference_tips(robot: Robot) -> dict[str, FloatArray]:

@@ -35,14 +35,12 @@ from brachycal.calibration.metrics import ErrorStats
 from brachycal.errors import InputError, SolverError
 from brachycal.imaging.pixels import image_points, pixels
 from brachycal.model.ik import solve_ik
-from brachycal.model.names import JOINT_NAMES, NEEDLE_TIP, US_IMAGE
+from brachycal.model.names import NEEDLE_TIP, US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, make_transform
 from brachycal.simulation.twin import STREAMS, Twin, streams
 from brachycal.validate import MAX_TARGETS, check_int, check_range
 
-#: The SDA10F's torso index in a configuration (it carries both arms); any robot: :func:`torso_index`.
-TORSO = JOINT_NAMES.index("torso_joint_b1")
 #: Largest torso turn of the held-out configurations: beyond ~0.1 rad the arms leave the reach of
 #: some targets from the sample poses' neighbourhood.
 MAX_TORSO_TURN_RAD = 0.2
@@ -50,7 +48,7 @@ MAX_TORSO_TURN_RAD = 0.2
 
 @dataclass(frozen=True)
 class TargetingResult:
-    """Targets (``(M, 3)``, physical, base_link), where the needle landed, and the error stats.
+    """Targets (``(M, 3)``, physical, in the robot's base frame), where the needle landed, and the error stats.
 
     ``uv_px (M, 2)`` and ``q_read (M, nq)`` are the pixel and the read joints (probe imaging, needle
     arm at its start pose) each target was computed from — what a prediction of the error uses.
@@ -70,7 +68,7 @@ def torso_index(robot: Robot) -> int | None:
 
 
 def random_targets(twin: Twin, n: int) -> FloatArray:
-    """``(n, 3)`` points uniformly inside the planning cube, in ``base_link`` (seeded by the twin)."""
+    """``(n, 3)`` points uniformly inside the planning cube, in the robot's base frame (seeded by the twin)."""
     spec = twin.config.spec
     rng = streams(twin.config.seed)[STREAMS[-1]]
     offsets = rng.uniform(-0.5, 0.5, size=(n, 3)) * spec.edge_m

@@ -101,29 +101,31 @@ _SWITCHES = (
 )
 
 
-#: The default plan spec of :class:`TwinConfig`: "the simulated robot's own workspace". One shared
-#: (frozen) instance, so :func:`simulate` can tell a spec left at its default (``is``) from one given.
-_ROBOT_WORKSPACE = PlanSpec()
+class _RobotWorkspace(PlanSpec):
+    """:class:`PlanSpec`'s defaults standing for "the simulated robot's own workspace": the default
+    of :attr:`TwinConfig.spec`, told apart by its type (which, unlike an object's identity, survives
+    pickling and copying: a config sent to a worker process still means the robot's workspace)."""
 
 
 def _robot_workspace() -> PlanSpec:
-    return _ROBOT_WORKSPACE
+    return _RobotWorkspace()
 
 
 def spec_for(nominal: Robot, config: TwinConfig) -> PlanSpec:
     """The plan spec a twin of ``nominal`` uses: ``config.spec`` if one was given; left at its default,
     the robot's own workspace (:meth:`PlanSpec.for_robot`), or :class:`PlanSpec`'s defaults
-    themselves when the workspace is theirs (the SDA10F's: its directions agree to 1e-12 but the
-    TOML's cos 35° is one bit off NumPy's, and the committed example was planned with NumPy's).
+    themselves when the workspace is theirs (the SDA10F's: its directions agree to 1e-12, but
+    normalising the description's insertion direction moves its last bit, and the committed example
+    was planned with :class:`PlanSpec`'s).
     """
-    if config.spec is not _ROBOT_WORKSPACE:
+    if not isinstance(config.spec, _RobotWorkspace):
         return config.spec
-    own = PlanSpec.for_robot(nominal)
+    own, defaults = PlanSpec.for_robot(nominal), PlanSpec()
     same = all(
-        np.allclose(getattr(own, name), getattr(_ROBOT_WORKSPACE, name), rtol=0.0, atol=1e-12)
+        np.allclose(getattr(own, name), getattr(defaults, name), rtol=0.0, atol=1e-12)
         for name in ("cube_centre_m", "insertion_dir", "image_depth_dir", "image_lateral_dir")
     )
-    return _ROBOT_WORKSPACE if same else own
+    return defaults if same else own
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,45 @@
+"""Regenerate the examples the README's commands use besides the sessions and the joint log.
+
+Run from the repository root: ``python examples/make_example_files.py``. Deterministic. Writes:
+
+- ``joints.csv``: three configurations of the robot (for ``brachycal locate``): the twin session's
+  first, middle and last samples as read (``examples/twin_session/samples.csv``), radians.
+- ``pivot/``: a tracked pointer pivoting about a fixed point, in the pose-list format of
+  SciKit-Surgery's real recording (``timestamp_ns,m00,…,m33``, millimetres), and its truth
+  (:func:`brachycal.simulation.example_files.simulate_pivot_recording`).
+- ``nwire/``: a PLUS device-set configuration (fCal 2.0 phantom) and a segmented-frames file of a
+  tracked probe over it, in PLUS's formats, and their truth (the twin's tracker route,
+  :func:`brachycal.simulation.nwire_twin.simulate_nwire`).
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+from brachycal.files import OutputSet
+from brachycal.model.names import JOINT_NAMES
+from brachycal.simulation.example_files import write_example_files
+
+HERE = Path(__file__).parent
+#: The twin session's samples (rows of samples.csv) copied into joints.csv: first, middle, last.
+SAMPLES = (0, 31, 63)
+
+
+def main() -> None:
+    with (HERE / "twin_session" / "samples.csv").open(newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    with OutputSet(force=True) as outputs:
+        staged = outputs.claim(HERE / "joints.csv")
+        with staged.open("w", newline="") as handle:
+            writer = csv.writer(handle, lineterminator="\n")
+            writer.writerow(JOINT_NAMES)
+            for sample in SAMPLES:
+                writer.writerow(rows[sample][name] for name in JOINT_NAMES)
+        written = write_example_files(HERE, force=True, outputs=outputs)
+    for path in [HERE / "joints.csv", *written]:
+        print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,101 @@
+"""``brachycal examples``: copy the bundled example files out, so that every documented command runs."""
+
+from __future__ import annotations
+
+import argparse
+import filecmp
+from pathlib import Path
+
+HELP = "copy the bundled example files (joint log, sessions, pivot and N-wire files) into a folder"
+DESCRIPTION = """\
+Copies the example files that ship with brachycal into DIR: a joint log and a few configurations,
+a noise-free session and the digital twin's session (each with its truth), a tracked-pointer pivot
+recording and PLUS N-wire files made by the twin (each with its truth), and the scripts that made
+them. The README's and the documentation's commands refer to them as examples/...: run them in the
+folder where DIR is examples (in a clone of the repository they are there already).
+
+Files already in DIR with the same content are left as they are; a file with other content is
+refused (nothing is copied) unless --force replaces it. Other files in DIR are not touched.
+
+example:
+  brachycal examples examples
+"""
+
+#: What the copy leaves out: Python's caches (an installed package may have them next to the scripts).
+_SKIPPED_PARTS = {"__pycache__"}
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "examples", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("folder", metavar="DIR", help="folder to copy the examples into (created if missing)")
+    parser.add_argument("--force", action="store_true", help="replace files in DIR whose content differs")
+    parser.set_defaults(run=run)
+
+
+def bundled_example_files() -> tuple[Path, list[Path]]:
+    """``(the bundled examples folder, its files as paths relative to it, sorted)``."""
+    from brachycal.files import bundled
+
+    source = bundled("examples")
+    files = sorted(
+        path.relative_to(source)
+        for path in source.rglob("*")
+        if path.is_file()
+        and not _SKIPPED_PARTS.intersection(path.relative_to(source).parts)
+        and not path.name.startswith(".")
+    )
+    return source, files
+
+
+def run(args: argparse.Namespace) -> int:
+    import shutil
+
+    from brachycal.errors import BrachycalError, InputError
+    from brachycal.files import OutputSet
+
+    source, files = bundled_example_files()
+    if not files:
+        raise BrachycalError(f"no bundled examples found in {source} (a broken installation: reinstall brachycal)")
+    folder = Path(args.folder)
+    if folder.exists() and not folder.is_dir():
+        raise InputError("DIR exists and is not a folder", file=folder)
+    # Decide everything before writing: same content is kept, other content needs --force.
+    to_copy: list[Path] = []
+    differing: list[Path] = []
+    for name in files:
+        target = folder / name
+        if target.is_file() and filecmp.cmp(source / name, target, shallow=False):
+            continue
+        if target.exists() or target.is_symlink():
+            if not target.is_file():
+                raise InputError("exists and is not a file (an example file goes there)", file=target)
+            differing.append(name)
+        to_copy.append(name)
+    if differing and not args.force:
+        more = f" and {len(differing) - 1} other file(s)" if len(differing) > 1 else ""
+        raise InputError(
+            f"has other content than the bundled example{more} (nothing copied; --force replaces them)",
+            file=folder / differing[0],
+        )
+    with OutputSet(force=args.force) as outputs:
+        for name in to_copy:
+            staged = outputs.claim(folder / name, make_parents=True, label="DIR")
+            shutil.copyfile(source / name, staged)
+    kept = len(files) - len(to_copy)
+    replaced = f", {len(differing)} replaced" if differing else ""
+    print(f"wrote {len(to_copy)} example files to {folder}{replaced} ({kept} already there, the same)")
+    for name in to_copy:
+        print(f"  {folder / name}")
+    d = folder.as_posix()
+    print("try (from this folder; the README shows more):")
+    for line in (
+        f"brachycal fk {d}/joint_log.csv --frames needle_tip,probe_tip --out poses.csv",
+        f"brachycal calibrate {d}/twin_session --out result.json",
+        f"brachycal locate result.json {d}/joints.csv --uv 540,300",
+        f"brachycal pivot {d}/pivot/pointer_pivot.csv --units mm --out pivot.json",
+        f"brachycal nwire {d}/nwire/PlusDeviceSet_twin_fCal2.xml {d}/nwire/twin_segmented_frames.xml --out nwire.json",
+    ):
+        print(f"  {line}")
+    return 0

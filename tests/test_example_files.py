@@ -1,0 +1,167 @@
+"""The shipped example files: made by brachycal, read by the real readers, calibrated to their truth;
+``brachycal examples DIR`` copies them out all or nothing."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import ROOT, assert_same_files
+from hostile import Case, check_refusal
+
+from brachycal.calibration import nwire_from_files, pivot_from_file
+from brachycal.cli.examples import bundled_example_files
+from brachycal.cli.main import main
+from brachycal.data.plus_files import read_plus_config, read_segmented_frames
+from brachycal.data.pose_list import read_pose_list
+from brachycal.se3 import inverse
+from brachycal.simulation.example_files import (
+    NWIRE_CONFIG_NAME,
+    NWIRE_FRAMES_NAME,
+    PIVOT_NAME,
+    simulate_pivot_recording,
+    write_example_files,
+)
+from brachycal.simulation.nwire_twin import FCAL2_LANDMARKS_MM, NWireSimConfig
+
+EXAMPLES = ROOT / "examples"
+MADE = ["joints.csv", PIVOT_NAME, "pivot/truth.json", NWIRE_CONFIG_NAME, NWIRE_FRAMES_NAME, "nwire/truth.json"]
+
+
+def test_committed_example_files_are_what_the_script_makes(tmp_path):
+    copy = tmp_path / "examples"
+    shutil.copytree(EXAMPLES, copy)
+    for name in MADE:
+        (copy / name).unlink()
+    subprocess.run([sys.executable, str(copy / "make_example_files.py")], check=True, capture_output=True)
+    # Numbers within conftest's TOLERANCE_* (1e-9 SI and mm-valued matrix entries, 1e-6 px): the
+    # files are written with full precision, so another machine differs in the last bits only.
+    assert_same_files(copy, EXAMPLES, MADE)
+
+
+def test_example_files_are_small():
+    """They ship inside the package: all the files brachycal bundles stay well under 1 MB."""
+    source, files = bundled_example_files()
+    assert sum((source / name).stat().st_size for name in files) < 1_000_000
+
+
+def test_pivot_example_reads_back_and_calibrates_to_its_truth():
+    names, T, _ = read_pose_list(EXAMPLES / PIVOT_NAME)
+    assert len(names) == len(T) == 200 and names[0].isdigit()  # keyed by timestamp_ns, like the real file
+    truth = json.loads((EXAMPLES / "pivot/truth.json").read_text())
+    calibration = pivot_from_file(EXAMPLES / PIVOT_NAME, "algebraic", "mm")
+    result = calibration.result
+    # The fit's own predicted 3D SD (from its residuals) sets the bound: 3 SD in 3D is exceeded with
+    # ~3 % chance by a 3D Gaussian error, 4 SD (~0.1 %) leaves no flakiness for this fixed seed.
+    tip_error = np.linalg.norm(result.p_marker_tip - truth["p_marker_tip_mm"])
+    pivot_error = np.linalg.norm(result.p_ref_pivot - truth["p_tracker_pivot_mm"])
+    assert tip_error < 4 * result.tip_sd and pivot_error < 4 * result.pivot_sd
+    # The residual per axis is the tracker noise put in (0.144 mm per axis) plus its rotation
+    # part (0.02° at the 0.4 m tip: 0.14 mm): within 30 % of their root sum of squares.
+    lever_mm = np.radians(truth["noise_sd_deg"]) * np.linalg.norm(truth["p_marker_tip_mm"])
+    expected = np.hypot(truth["noise_sd_mm"], lever_mm)
+    assert abs(result.rms_per_axis / expected - 1) < 0.3
+
+
+def test_pivot_recording_without_noise_is_exact():
+    recording = simulate_pivot_recording(seed=3, poses=20, noise_sd_mm=0.0, noise_sd_deg=0.0)
+    T = recording.T_tracker_marker_mm
+    tips = np.einsum("nij,j->ni", T[:, :3, :3], recording.p_marker_tip_mm) + T[:, :3, 3]
+    assert np.abs(tips - recording.p_tracker_pivot_mm).max() < 1e-9  # mm: round-off only
+
+
+def test_nwire_example_reads_back_and_calibrates_to_its_truth():
+    config = read_plus_config(EXAMPLES / NWIRE_CONFIG_NAME)
+    calibration, validation = read_segmented_frames(EXAMPLES / NWIRE_FRAMES_NAME)
+    assert len(config.patterns) == 3 and ("Phantom", "Reference") in config.transforms
+    assert len(calibration) == 40 and len(validation) == 20 and all(f.ok for f in calibration + validation)
+    truth = json.loads((EXAMPLES / "nwire/truth.json").read_text())
+    run = nwire_from_files(EXAMPLES / NWIRE_CONFIG_NAME, EXAMPLES / NWIRE_FRAMES_NAME)
+    estimate = run.calibration
+    T_true, spacing_true = np.array(truth["T_probe_image"]), np.array(truth["spacing_mm"]) * 1e-3
+    # Where the estimate puts the wires' pixels in the probe frame, against the truth. What does not
+    # average over frames sets the bound: the tracker's repeatable error field (its stated 0.25 mm
+    # 3D RMS accuracy), the phantom's registration from 8 landmarks touched with 0.3 mm SD per axis
+    # (3D: 0.3·√3/√8 = 0.18 mm) and its printing tolerance (0.1 mm per axis, 0.17 mm 3D): 0.35 mm
+    # root sum of squares. Averaged terms (0.5 px segmentation over 120 points, tracker jitter over
+    # 20 frames) add ~0.01 mm. Measured: 0.35 mm RMS (0.17 without the tracker error, 0.27 with it
+    # alone). The RMS must stay within twice that budget.
+    sim = NWireSimConfig()
+    budget_m = np.sqrt(
+        sim.tracker_accuracy_m**2
+        + 3 * sim.landmark_sd_m**2 / len(FCAL2_LANDMARKS_MM)
+        + 3 * sim.phantom_tolerance_sd_m**2
+    )
+    uv = np.array([uv for frame in validation for uv in frame.points_px.values()])
+    got = estimate.to_probe(uv)
+    want = (T_true @ np.c_[uv * spacing_true, np.zeros(len(uv)), np.ones(len(uv))].T).T[:, :3]
+    rms_m = np.sqrt(np.mean(np.sum((got - want) ** 2, axis=1)))
+    assert rms_m < 2 * budget_m, f"{rms_m * 1e3:.3f} mm RMS, budget {budget_m * 1e3:.3f} mm"
+    # The spacings within 1 %: a wrong scale of 1 % is 0.4 mm at the 40 mm the wires span.
+    assert np.allclose(estimate.spacing_m, spacing_true, rtol=0.01)
+    assert np.allclose(inverse(T_true), truth["T_image_probe"], atol=1e-12)
+
+
+def test_written_files_are_all_or_nothing(tmp_path):
+    (tmp_path / "nwire").mkdir()
+    (tmp_path / NWIRE_FRAMES_NAME).write_text("mine")
+    with pytest.raises(Exception, match="exists"):
+        write_example_files(tmp_path)
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["nwire", "twin_segmented_frames.xml"]
+    assert (tmp_path / NWIRE_FRAMES_NAME).read_text() == "mine"
+
+
+# --- brachycal examples DIR -----------------------------------------------------------------------
+
+
+def test_examples_command_copies_every_bundled_file_and_then_has_nothing_to_do(tmp_path, capsys):
+    source, files = bundled_example_files()
+    assert "joint_log.csv" in {str(f) for f in files} and any(str(f) == PIVOT_NAME for f in files)
+    assert main(["examples", str(tmp_path / "ex")]) == 0
+    assert sorted(p.relative_to(tmp_path / "ex") for p in (tmp_path / "ex").rglob("*") if p.is_file()) == files
+    assert all((tmp_path / "ex" / f).read_bytes() == (source / f).read_bytes() for f in files)
+    assert f"wrote {len(files)} example files" in capsys.readouterr().out
+    assert main(["examples", str(tmp_path / "ex")]) == 0  # the same files: nothing to do, not an error
+    assert f"wrote 0 example files to {tmp_path / 'ex'} ({len(files)} already there" in capsys.readouterr().out
+
+
+def test_examples_command_replaces_changed_files_only_with_force(tmp_path, capsys):
+    assert main(["examples", str(tmp_path)]) == 0
+    (tmp_path / "joints.csv").write_text("changed")
+    (tmp_path / "mine.txt").write_text("kept")
+    assert main(["examples", str(tmp_path), "--force"]) == 0
+    assert (tmp_path / "joints.csv").read_bytes() == (EXAMPLES / "joints.csv").read_bytes()
+    assert (tmp_path / "mine.txt").read_text() == "kept"  # other files are not touched
+
+
+def _changed_copy(tmp: Path) -> None:
+    assert main(["examples", str(tmp / "ex")]) == 0
+    (tmp / "ex" / "joints.csv").write_text("changed")
+    (tmp / "ex" / "pivot" / "truth.json").unlink()  # would be copied: but nothing is, on a refusal
+
+
+def _a_file_named_f(tmp: Path) -> None:
+    (tmp / "f").write_text("x")
+
+
+def _a_file_where_the_pivot_folder_goes(tmp: Path) -> None:
+    (tmp / "ex").mkdir()
+    (tmp / "ex" / "pivot").write_text("x")
+
+
+CASES = [
+    Case("dir-is-a-file", ["examples", "{tmp}/f"], ("f", "not a folder"), setup=_a_file_named_f),
+    Case("changed-file", ["examples", "{tmp}/ex"], ("joints.csv", "other content", "--force"), setup=_changed_copy),
+    Case("file-where-a-folder-goes", ["examples", "{tmp}/ex"], ("pivot",), setup=_a_file_where_the_pivot_folder_goes),
+    Case("no-dir", ["examples"], ("DIR",)),
+]
+
+
+@pytest.mark.parametrize("case", CASES, ids=lambda c: c.id)
+def test_examples_command_refuses(case, tmp_path):
+    check_refusal(case, tmp_path)

@@ -1,0 +1,225 @@
+"""Every command the documentation shows runs as written.
+
+The commands are read from the documents themselves: every ``brachycal …`` line of the ```sh
+blocks of README.md and docs/procedure.md (``\\`` continuations joined, ``# comments`` dropped) and
+every line of the ``example:``/``examples:`` section of each sub-command's ``--help``. They run
+in-process (``brachycal.cli.main.main``), in document order, README first, then the procedure, then
+the ``--help`` examples, all in one empty folder that holds nothing but what they make: the first
+README command is ``brachycal examples examples``, which copies the bundled example files there, as
+a user outside a clone does. A command that an earlier document already ran (the same words) is not
+run again: the documents repeat a prerequisite (``brachycal demo`` before ``brachycal view``) as a
+reminder, and its outputs are already there (running it again would refuse to replace them).
+
+Not run here, each for its stated reason (:data:`NOT_RUN`): long jobs that their own tests run
+(``study``, ``design``, robot identification, excitation poses) and the commands on outside
+recordings (``../shared/reference``), which :func:`test_commands_on_outside_recordings_run` runs
+where that data is. ``brachycal view`` serves until stopped: the walk starts each in a process of
+its own (on a free port, ``--port 0`` added), waits for its address and stops it with SIGTERM.
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import re
+import shlex
+import signal
+import subprocess
+import sys
+import threading
+import time
+from contextlib import redirect_stderr, redirect_stdout
+from pathlib import Path
+
+import pytest
+from conftest import REFERENCE, ROOT, reference
+
+from brachycal.cli.main import COMMANDS, build_parser, main
+
+DOCUMENTS = [ROOT / "README.md", ROOT / "docs" / "procedure.md"]
+#: Commands on outside data: the documents' path to the team's copy, replaced by :data:`REFERENCE`.
+OUTSIDE = "../shared/reference/"
+#: Commands not run by the ordered walk: the sub-command and words it contains, and why. Each is
+#: a job of several seconds to minutes of CPU that its own tests run; the walk stays within
+#: :data:`CPU_BUDGET_S`.
+NOT_RUN = {
+    ("study",): "a sweep over twin sessions (5 seeds x 9 settings: minutes of CPU); tests/test_twin.py runs study",
+    ("design",): "simulates and calibrates several twin sessions per design (minutes of CPU)",
+    ("calibrate", "--identify-robot"): "robot identification with its cross-validation, ~24 s of CPU; "
+    "tests/test_robot_identification.py runs it",
+    ("plan", "--excitation"): "identifies the robot, then scores 364 candidate poses, ~11 s of CPU; "
+    "tests/test_excitation.py runs it",
+}
+#: CPU budget of the ordered walk in this process, seconds (measured ~40 s on a 2-core x86_64 VM).
+CPU_BUDGET_S = 60.0
+
+
+def _join_continuations(lines: list[str]) -> list[str]:
+    joined: list[str] = []
+    pending = ""
+    for line in lines:
+        stripped = line.rstrip()
+        if stripped.endswith("\\"):
+            pending += stripped[:-1].strip() + " "
+            continue
+        joined.append((pending + stripped.strip()).strip())
+        pending = ""
+    return joined
+
+
+def document_commands(path: Path) -> list[list[str]]:
+    """``argv`` (without ``brachycal``) of every ``brachycal`` line in the ```sh blocks of ``path``."""
+    commands: list[list[str]] = []
+    block: list[str] | None = None
+    for line in path.read_text().splitlines():
+        if block is None:
+            if line.strip().startswith("```sh"):
+                block = []
+            continue
+        if line.strip().startswith("```"):
+            for command in _join_continuations(block):
+                words = shlex.split(command, comments=True)
+                if words and words[0] == "brachycal":
+                    commands.append(words[1:])
+            block = None
+            continue
+        block.append(line)
+    return commands
+
+
+def help_commands() -> list[list[str]]:
+    """``argv`` of every line of the ``example:``/``examples:`` sections of each sub-command's ``--help``
+    (its description and epilog, as argparse prints them).
+
+    An example line is ``brachycal …`` up to two spaces in a row (what follows is its comment).
+    """
+    commands: list[list[str]] = []
+    for name in COMMANDS:
+        for text in _help_texts(build_parser(full=(name,)), name):
+            commands += _examples(text)
+    return commands
+
+
+def _help_texts(parser: argparse.ArgumentParser, name: str) -> list[str]:
+    """The ``--help`` text of sub-command ``name`` and of its own sub-commands (``session build``)."""
+    texts: list[str] = []
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub_name, sub in action.choices.items():
+                if sub_name == name or not name:
+                    texts.append(sub.format_help())
+                    texts += _help_texts(sub, "")
+    return texts
+
+
+def _examples(text: str) -> list[list[str]]:
+    """The ``brachycal`` lines of the ``example:``/``examples:`` sections of one help text."""
+    commands: list[list[str]] = []
+    for match in re.finditer(r"^examples?:\n((?:[ \t]+.*\n?)+)", text, flags=re.MULTILINE):
+        for command in _join_continuations(match.group(1).splitlines()):
+            words = shlex.split(re.split(r"\s{2,}", command.strip())[0])
+            if words and words[0] == "brachycal":
+                commands.append(words[1:])
+    return commands
+
+
+def _not_run(argv: list[str]) -> str | None:
+    if any(OUTSIDE in word for word in argv):
+        return "outside data: test_commands_on_outside_recordings_run"
+    return next((why for words, why in NOT_RUN.items() if argv[0] == words[0] and set(words) <= set(argv)), None)
+
+
+def _run(argv: list[str]) -> tuple[int, str]:
+    out, err = io.StringIO(), io.StringIO()
+    with redirect_stdout(out), redirect_stderr(err):
+        code = main(argv)
+    return code, err.getvalue()
+
+
+def test_the_documents_show_the_commands_this_test_runs():
+    """The extraction finds what the documents show (a broken parser must not pass by finding nothing)."""
+    readme = document_commands(ROOT / "README.md")
+    assert readme[0] == ["examples", "examples"]  # the walk starts in an empty folder
+    shown = {argv[0] for argv in readme + document_commands(DOCUMENTS[1]) + help_commands() if argv[0] in COMMANDS}
+    # Every sub-command is shown somewhere (model has no --help example: the README shows it).
+    assert shown == set(COMMANDS)
+    # Continuations joined: the session build of the "Using it" block is one command with all its options.
+    build = next(argv for argv in readme if argv[:2] == ["session", "build"])
+    assert "--template" in build and "--out" in build
+
+
+#: The order the ``--help`` examples run in (after the documents' commands, in the same folder):
+#: each after those that make its inputs (``calibrate`` writes what ``locate`` and ``export`` read).
+HELP_ORDER = ["examples", "demo", "model", "fk", "session", "calibrate", "locate", "export", "pivot", "nwire", "plan"]
+
+
+def test_every_documented_command_runs_as_written(tmp_path, monkeypatch):
+    """README, then the procedure, then the --help examples (HELP_ORDER), in one folder."""
+    monkeypatch.chdir(tmp_path)
+    commands = [(path.name, argv) for path in DOCUMENTS for argv in document_commands(path)]
+    shown = sorted(help_commands(), key=lambda argv: HELP_ORDER.index(argv[0]) if argv[0] in HELP_ORDER else 99)
+    commands += [(f"brachycal {argv[0]} --help", argv) for argv in shown]
+    cpu = time.process_time()
+    ran: list[list[str]] = []
+    failures: list[str] = []
+    for source, argv in commands:
+        if argv in ran or _not_run(argv):
+            continue
+        ran.append(argv)
+        if argv[0] == "view":  # serves until stopped: started in a process of its own and stopped
+            _serves(argv, tmp_path)
+            continue
+        code, err = _run(argv)
+        if code != 0:
+            failures.append(f"{source}: brachycal {shlex.join(argv)} -> exit {code}: {err.strip()}")
+    cpu = time.process_time() - cpu
+    assert not failures, "\n".join(failures)
+    assert len(ran) >= 20  # 24 distinct commands today: a parser finding far fewer is broken
+    # The views' own processes are not counted here (~4 s of CPU each).
+    assert cpu < CPU_BUDGET_S, f"the documented commands took {cpu:.0f} s of CPU in this process"
+
+
+def test_commands_on_outside_recordings_run(tmp_path, monkeypatch):
+    """The README's commands on PLUS's and SciKit-Surgery's real recordings, where that data is."""
+    reference("sksurgery_pivot", "tracked_pointer_pivot.csv")
+    reference("plus_fcal_nwire", "fCal_3NWires_segmented_frames.xml")
+    monkeypatch.chdir(tmp_path)
+    outside = [argv for path in DOCUMENTS for argv in document_commands(path) if any(OUTSIDE in w for w in argv)]
+    assert {argv[0] for argv in outside} >= {"pivot", "nwire"}
+    for argv in outside:
+        argv = [word.replace(OUTSIDE, f"{REFERENCE}/") for word in argv]
+        code, err = _run(argv)
+        assert code == 0, f"brachycal {shlex.join(argv)}: {err}"
+
+
+def _serves(argv: list[str], cwd: Path) -> None:
+    """Start ``brachycal view …`` (on a free port), wait for its address, stop it with SIGTERM."""
+    process = subprocess.Popen(
+        [sys.executable, "-m", "brachycal.cli.main", *argv, "--port", "0"],
+        cwd=cwd,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    # A view that hangs before serving is killed (then its address never comes and the test fails).
+    watchdog = threading.Timer(120, process.kill)
+    watchdog.start()
+    try:
+        # viser prints its own banner first; the command's address line follows it.
+        lines = iter(process.stdout.readline, "") if process.stdout else iter(())
+        address = next((line for line in lines if line.startswith("brachycal view: ")), "")
+        assert address.startswith("brachycal view: http"), f"brachycal {shlex.join(argv)} printed no address"
+    finally:
+        watchdog.cancel()
+        process.send_signal(signal.SIGTERM)
+        _, err = process.communicate(timeout=60)
+    # SIGTERM: the command's own one-line "terminated", exit 143 (cli/main.py), no traceback.
+    assert process.returncode == 143, err
+    assert "Traceback" not in err
+
+
+@pytest.mark.parametrize("argv", [["view", "--robot", "nonexistent"]])
+def test_a_view_that_cannot_start_is_not_taken_for_serving(argv, tmp_path):
+    """The check above can fail: a view that refuses does not print an address."""
+    with pytest.raises(AssertionError):
+        _serves(argv, tmp_path)
