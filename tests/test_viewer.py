@@ -7,7 +7,8 @@ import os
 import shutil
 import subprocess
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 
@@ -166,23 +167,32 @@ def test_a_headless_browser_shows_the_robot_and_the_points(calibrated, tmp_path:
     assert not [name for name, check in checks.items() if not check(shot)]
 
 
-def test_the_command_serves_the_view_and_stops_on_sigterm(calibrated, tmp_path: Path) -> None:
-    stored = calibrated[2]
-    _chromium()
+@contextmanager
+def _served(result: str) -> Iterator[tuple[subprocess.Popen[str], str]]:
+    """``brachycal view RESULT --session EXAMPLE --port 0`` running; yields it and its address, then
+    sends SIGTERM (the caller checks how it ended)."""
     view = subprocess.Popen(
-        [sys.executable, "-m", "brachycal.cli.main", "view", stored.source, "--session", str(EXAMPLE), "--port", "0"],
+        [sys.executable, "-m", "brachycal.cli.main", "view", result, "--session", str(EXAMPLE), "--port", "0"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
     )
     try:
         lines: list[str] = []
-        while len(lines) < 20 and not lines[-1:] == [""]:  # viser's own banner comes first; "" is the end
+        while len(lines) < 20 and lines[-1:] != [""]:  # viser's own banner comes first; "" is the end
             lines.append(view.stdout.readline())
             if lines[-1].startswith("brachycal view: http://127.0.0.1:"):
                 break
         assert lines[-1].startswith("brachycal view: "), "".join(lines)
-        url = lines[-1].split()[2]
+        yield view, lines[-1].split()[2]
+    finally:
+        view.terminate()
+        view.wait(timeout=30)
+
+
+def test_the_command_serves_the_view_and_stops_on_sigterm(calibrated, tmp_path: Path) -> None:
+    _chromium()
+    with _served(calibrated[2].source) as (view, url):
         # The robot, and the image plane in half-transparent orange (Chromium's "software WebGL"
         # notice has ~750 px of its hue).
         checks = {
@@ -193,34 +203,14 @@ def test_the_command_serves_the_view_and_stops_on_sigterm(calibrated, tmp_path: 
             url, tmp_path / "view.png", tmp_path / "profile", lambda s: all(c(s) for c in checks.values())
         )
         assert not [name for name, check in checks.items() if not check(shot)]
-    finally:
-        view.terminate()
-        _, err = view.communicate(timeout=30)
-    assert view.returncode == 143, err
-    assert err.strip().splitlines()[-1] == "brachycal: terminated"
+    assert view.returncode == 143, view.stderr.read()
+    assert view.stderr.read().strip().splitlines()[-1] == "brachycal: terminated"
 
 
 def test_the_command_serves_a_page_without_a_browser_and_stops_on_sigterm(calibrated) -> None:
     """Serving and stopping need no browser: this runs everywhere (the screenshots need Chromium)."""
     from urllib.request import urlopen
 
-    stored = calibrated[2]
-    view = subprocess.Popen(
-        [sys.executable, "-m", "brachycal.cli.main", "view", stored.source, "--session", str(EXAMPLE), "--port", "0"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    try:
-        lines: list[str] = []
-        while len(lines) < 20 and lines[-1:] != [""]:
-            lines.append(view.stdout.readline())
-            if lines[-1].startswith("brachycal view: http://127.0.0.1:"):
-                break
-        assert lines[-1].startswith("brachycal view: "), "".join(lines)
-        with urlopen(lines[-1].split()[2], timeout=30) as page:
-            assert page.status == 200 and b"<html" in page.read().lower()
-    finally:
-        view.terminate()
-        _, err = view.communicate(timeout=30)
-    assert view.returncode == 143, err
+    with _served(calibrated[2].source) as (view, url), urlopen(url, timeout=30) as page:
+        assert page.status == 200 and b"<html" in page.read().lower()
+    assert view.returncode == 143

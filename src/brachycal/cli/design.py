@@ -6,7 +6,8 @@ import argparse
 from pathlib import Path
 
 from brachycal.cli.common import add_robot_option, load_robot, progress_bar
-from brachycal.validate import MAX_SEEDS, bounded_int, finite_float, name_list
+from brachycal.cli.plan_excitation import add_excitation_minutes_option
+from brachycal.validate import MAX_SEEDS, bounded_int, name_list
 
 HELP = "compare sample designs (4x4x4, 3x3x3, random, optimal) by predicted targeting error per robot minute"
 DESCRIPTION = """\
@@ -31,7 +32,6 @@ example:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from brachycal.planning.excitation_budget import DEFAULT_BUDGET_MINUTES, MAX_BUDGET_MINUTES
     from brachycal.simulation.settings import DESIGNS, ROBOT_ERROR_LEVELS
 
     parser = sub.add_parser(
@@ -54,14 +54,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         choices=tuple(level for level in ROBOT_ERROR_LEVELS if level != "well-built"),
         help="evaluate excitation poses on twins with this robot error instead (see below)",
     )
-    budget = finite_float(low=0.0, high=MAX_BUDGET_MINUTES, low_open=True, unit="min")
-    parser.add_argument(
-        "--excitation-minutes",
-        type=budget,
-        default=DEFAULT_BUDGET_MINUTES,
-        help=f"with --robot-error: extra robot time for the excitation poses, {budget.rule} "
-        f"(default {DEFAULT_BUDGET_MINUTES:g})",
-    )
+    add_excitation_minutes_option(parser, "with --robot-error")
     parser.add_argument("--force", action="store_true", help="replace existing outputs")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(run=run)

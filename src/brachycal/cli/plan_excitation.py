@@ -32,22 +32,28 @@ example:
 """
 
 
-def add_excitation_options(group: argparse._ArgumentGroup) -> None:
-    """``--excitation``, ``--excitation-minutes``, ``--robot-accuracy-mm/-deg``."""
+def add_excitation_minutes_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup, when: str) -> None:
+    """``--excitation-minutes``: the extra robot time the excitation poses may take (``plan``, ``design``)."""
     from brachycal.planning.excitation_budget import DEFAULT_BUDGET_MINUTES, MAX_BUDGET_MINUTES
 
+    minutes = finite_float(low=0.0, high=MAX_BUDGET_MINUTES, low_open=True, unit="min")
+    parser.add_argument(
+        "--excitation-minutes",
+        type=minutes,
+        metavar="MIN",
+        default=DEFAULT_BUDGET_MINUTES,
+        help=f"{when}: extra robot time for the excitation poses, {minutes.rule} (default {DEFAULT_BUDGET_MINUTES:g})",
+    )
+
+
+def add_excitation_options(group: argparse._ArgumentGroup) -> None:
+    """``--excitation``, ``--excitation-minutes``, ``--robot-accuracy-mm/-deg``."""
     group.add_argument(
         "--excitation",
         metavar="SESSION",
         help="plan excitation poses for this recorded session instead of the sample grid (see below)",
     )
-    minutes = finite_float(low=0.0, high=MAX_BUDGET_MINUTES, low_open=True, unit="min")
-    group.add_argument(
-        "--excitation-minutes",
-        type=minutes,
-        default=DEFAULT_BUDGET_MINUTES,
-        help=f"with --excitation: extra robot time allowed, {minutes.rule} (default {DEFAULT_BUDGET_MINUTES:g})",
-    )
+    add_excitation_minutes_option(group, "with --excitation")
     add_robot_accuracy_options(group, "with --excitation", zero=False, note=" (the identification's prior)")
 
 
