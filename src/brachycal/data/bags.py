@@ -329,15 +329,9 @@ def read_bag_log(path: str | os.PathLike[str], robot: Robot, topic: str = DEFAUL
         InputError: unreadable bag, missing topic, or any refusal of
             :func:`~brachycal.data.joint_log.joint_log_from_columns`.
     """
-    blocks = list(bag_log_blocks(path, robot, topic))
-    return JointLog(
-        time=np.concatenate([b.time for b, _ in blocks]),
-        q=np.concatenate([q for _, q in blocks]),
-        joint_names=robot.joint_names,
-        source=str(bag_folder(path)),
-        rows=np.concatenate([b.rows for b, _ in blocks]),
-        row_label="message",
-    )
+    from brachycal.data.csv_log import joint_log_from_blocks
+
+    return joint_log_from_blocks(bag_log_blocks(path, robot, topic), robot, str(bag_folder(path)), "message")
 
 
 def write_bag_log(

@@ -21,7 +21,7 @@ import io
 import os
 import queue
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, BinaryIO, TextIO, TypeVar
@@ -425,13 +425,22 @@ def read_csv_log(path: str | os.PathLike[str], robot: Robot) -> JointLog:
     Raises:
         InputError: one line naming the file, row and column of the first problem.
     """
-    blocks = list(csv_log_blocks(path, robot))
+    return joint_log_from_blocks(csv_log_blocks(path, robot), robot, str(Path(path)))
+
+
+def joint_log_from_blocks(
+    blocks: Iterable[tuple[LogBlock, FloatArray]], robot: Robot, source: str, row_label: str = "row"
+) -> JointLog:
+    """One :class:`JointLog` of streamed, already checked ``(block, q)`` pairs (:func:`csv_log_blocks`,
+    :func:`~brachycal.data.bags.bag_log_blocks`)."""
+    blocks = list(blocks)
     return JointLog(
         time=np.concatenate([b.time for b, _ in blocks]),
         q=np.concatenate([q for _, q in blocks]),
         joint_names=robot.joint_names,
-        source=str(Path(path)),
+        source=source,
         rows=np.concatenate([b.rows for b, _ in blocks]),
+        row_label=row_label,
     )
 
 
