@@ -236,6 +236,17 @@ class StoredCalibration:
         # The first in Table II's order within the tie tolerance of the best (all inf: the first).
         return next(m for m in order if rmse(m) <= best * (1 + TIE_RELATIVE))
 
+    def method(self, asked: str | None) -> str:
+        """The image calibration ``asked`` for (an option's value), or :meth:`best_method` for None.
+
+        Raises:
+            InputError: the result has no such method (naming the result file and what it has).
+        """
+        method = asked or self.best_method()
+        if method not in self.image:
+            raise InputError(f"the result has no method {method!r} (it has {', '.join(self.image)})", file=self.source)
+        return method
+
     def corrections(self) -> list[str]:
         """Which robot corrections the result carries: ``joint_origins`` (identified geometry, or
         joint offsets stored as corrected origins), ``joint_offsets`` (zero offsets); empty: none."""

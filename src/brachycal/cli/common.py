@@ -143,3 +143,16 @@ def robot_accuracy(args: argparse.Namespace) -> RobotAccuracy:
         default.encoder_sd_rad,
         f"--robot-accuracy-mm {mm:g} --robot-accuracy-deg {deg:g} (encoder SD: the default)",
     )
+
+
+def add_method_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup, of: str) -> None:
+    """``--method``: which image calibration of a result (:meth:`StoredCalibration.method
+    <brachycal.calibration.result_file.StoredCalibration.method>`; default the result's best)."""
+    from brachycal.calibration.labels import ALL_LABELS
+
+    parser.add_argument(
+        "--method",
+        choices=tuple(ALL_LABELS),
+        help=f"which image calibration of {of} (default: the result's best: chain+robot, then chain, else the "
+        "lowest leave-one-out RMSE)",
+    )

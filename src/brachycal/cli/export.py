@@ -6,8 +6,7 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from brachycal.cli.common import add_robot_option, load_robot
-from brachycal.errors import InputError
+from brachycal.cli.common import add_method_option, add_robot_option, load_robot
 
 if TYPE_CHECKING:
     from brachycal.files import OutputSet
@@ -42,19 +41,13 @@ example:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from brachycal.calibration.labels import ALL_LABELS
 
     parser = sub.add_parser(
         "export", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("result", metavar="RESULT", help="calibration result (JSON)")
     parser.add_argument("--out", required=True, metavar="DIR", help="folder to write")
-    parser.add_argument(
-        "--method",
-        choices=tuple(ALL_LABELS),
-        help="which image calibration (default: the result's best: chain if present, else the lowest "
-        "leave-one-out RMSE)",
-    )
+    add_method_option(parser, "the result")
     parser.add_argument(
         "--ros-package",
         metavar="NAME",
@@ -91,9 +84,7 @@ def _run(args: argparse.Namespace, robot: Robot, outputs: OutputSet) -> None:
     from brachycal.export import write_exports, write_ros_package
 
     stored = read_result(args.result)
-    method = args.method or stored.best_method()
-    if method not in stored.image:
-        raise InputError(f"the result has no method {method!r} (it has {', '.join(stored.image)})", file=args.result)
+    method = stored.method(args.method)
     software = stored.software_robot(robot)  # refuses another robot; corrections applied once
     calibration = (stored.T_ER_Ntip, stored.T_EL_Ptip, stored.image[method])
     record = stored.export_record(method)

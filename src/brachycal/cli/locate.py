@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from brachycal.cli.common import add_robot_option, load_robot
-from brachycal.errors import InputError
+from brachycal.cli.common import add_method_option, add_robot_option, load_robot
 from brachycal.validate import MAX_IMAGE_PX, check_pixel, number_list
 
 HELP = "map an image pixel to base_link through the calibrated chain (targeting)"
@@ -25,7 +24,6 @@ example:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from brachycal.calibration.labels import ALL_LABELS
 
     parser = sub.add_parser(
         "locate", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -40,12 +38,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="U,V",
         help=f"pixel: column u, row v, {uv.rule}, inside the result's image (-0.5 <= u <= width - 0.5, likewise v)",
     )
-    parser.add_argument(
-        "--method",
-        choices=tuple(ALL_LABELS),
-        help="which image calibration of the result (default: the result's best: chain if present, else the "
-        "lowest leave-one-out RMSE)",
-    )
+    add_method_option(parser, "the result")
     add_robot_option(parser)
     parser.set_defaults(run=run)
 
@@ -57,9 +50,7 @@ def run(args: argparse.Namespace) -> int:
     stored = read_result(args.result)
     # The result knows its images' size (older result files do not: then argparse's bound stands).
     uv = check_pixel(args.uv, "--uv", size_px=stored.image_size_px)[None]
-    method = args.method or stored.best_method()
-    if method not in stored.image:
-        raise InputError(f"the result has no method {method!r} (it has {', '.join(stored.image)})", file=args.result)
+    method = stored.method(args.method)
     robot = stored.software_robot(load_robot(args))
     rows, Q = read_configurations(args.joints, robot)
     print("row,x,y,z")

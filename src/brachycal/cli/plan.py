@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from brachycal.cli.common import add_robot_option, load_robot, progress_bar
+from brachycal.cli.common import add_method_option, add_robot_option, load_robot, progress_bar
 from brachycal.errors import InputError
 from brachycal.planning.spec import EDGE_RANGE_M, MAX_CENTRE_M, MAX_SECTOR_DEPTH_M, PlanSpec, RectFOV, SectorFOV
 from brachycal.validate import (
@@ -173,7 +173,6 @@ def _imaging_options(i: argparse._ArgumentGroup, d: PlanSpec) -> None:
 
 
 def _tool_options(t: argparse._ArgumentGroup) -> None:
-    from brachycal.calibration.labels import ALL_LABELS
     from brachycal.planning.verify import (
         MAX_COLLISION_MARGIN_M,
         MAX_JOINT_MARGIN_RAD,
@@ -182,12 +181,7 @@ def _tool_options(t: argparse._ArgumentGroup) -> None:
     )
 
     t.add_argument("--result", metavar="JSON", help="plan with a calibration result's tool frames")
-    t.add_argument(
-        "--method",
-        choices=tuple(ALL_LABELS),
-        help="which image calibration of --result (default: the result's best, as locate and export: "
-        "chain+robot, then chain, else the lowest leave-one-out RMSE)",
-    )
+    add_method_option(t, "--result")
     add_robot_option(t)
     clearance = finite_float(low=MIN_COLLISION_MARGIN_M * 1e3, high=MAX_COLLISION_MARGIN_M * 1e3, unit="mm")
     t.add_argument(
@@ -245,12 +239,7 @@ def _run(args: argparse.Namespace, outputs: OutputSet, drawer: _FigureProcess) -
         from brachycal.export import calibrated_robot
 
         stored = read_result(args.result)
-        method = args.method or stored.best_method()
-        if method not in stored.image:
-            raise InputError(
-                f"the result has no method {method!r} (it has {', '.join(stored.image)})", file=args.result
-            )
-        image = stored.image[method]
+        image = stored.image[stored.method(args.method)]
         robot = calibrated_robot(stored.software_robot(robot), stored.T_ER_Ntip, stored.T_EL_Ptip, image)
         if args.spacing_mm is None:
             spec = replace(spec, spacing_m=image.spacing_m)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from brachycal.cli.common import add_robot_option, load_robot
+from brachycal.cli.common import add_method_option, add_robot_option, load_robot
 from brachycal.errors import InputError
 from brachycal.validate import bounded_int
 
@@ -29,7 +29,6 @@ example:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from brachycal.calibration.labels import ALL_LABELS
 
     parser = sub.add_parser(
         "view", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -38,12 +37,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     source = parser.add_mutually_exclusive_group()
     source.add_argument("--session", metavar="DIR", help="session folder: the robot at its image samples")
     source.add_argument("--plan", metavar="CSV", help="plan (brachycal plan): the robot at its poses")
-    parser.add_argument(
-        "--method",
-        choices=tuple(ALL_LABELS),
-        help="which image calibration of RESULT (default: the result's best: chain if present, else the lowest "
-        "leave-one-out RMSE)",
-    )
+    add_method_option(parser, "RESULT")
     targets = bounded_int(low=1, high=1000)
     parser.add_argument(
         "--targets", type=targets, default=50, help=f"targets shown for a twin's session, {targets.rule} (default 50)"
@@ -87,7 +81,7 @@ def _content(args: argparse.Namespace):  # -> ViewContent (imported lazily)
         from brachycal.data import read_session
 
         stored = read_result(args.result)
-        method = args.method or stored.best_method()  # the robot is checked with the result's corrections
+        method = stored.method(args.method)  # the robot is checked with the result's corrections
         session = read_session(args.session, robot)
         twin = None
         if (Path(args.session) / "truth.json").is_file():

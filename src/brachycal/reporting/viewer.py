@@ -279,8 +279,7 @@ def calibration_content(
     from brachycal.calibration.sequential import locate
     from brachycal.export.formats import calibrated_robot
 
-    if method not in stored.image:
-        raise InputError(f"the result has no method {method!r} (it has {', '.join(stored.image)})", file=stored.source)
+    method = stored.method(method)
     software = stored.software_robot(robot)
     image = stored.image[method]
     shown = calibrated_robot(software, stored.T_ER_Ntip, stored.T_EL_Ptip, image)
