@@ -41,7 +41,6 @@ example:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-
     parser = sub.add_parser(
         "export", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )

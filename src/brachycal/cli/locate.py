@@ -24,7 +24,6 @@ example:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-
     parser = sub.add_parser(
         "locate", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )

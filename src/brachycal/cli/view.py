@@ -29,7 +29,6 @@ example:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-
     parser = sub.add_parser(
         "view", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
