@@ -23,10 +23,10 @@ from brachycal.calibration.nwire import (
     wire_point_pairs,
 )
 from brachycal.cli.main import main
+from brachycal.data.metaimage import read_sequence_header
 from brachycal.data.plus_files import (
     read_plus_config,
     read_segmented_frames,
-    read_sequence_header,
     sequence_transform,
 )
 from brachycal.se3 import inverse, make_transform

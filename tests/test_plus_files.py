@@ -16,13 +16,13 @@ from conftest import REFERENCE, reference
 
 from brachycal import InputError
 from brachycal.calibration.nwire import best_fraction, calibrate_nwire, reprojection_errors, wire_point_pairs
+from brachycal.data.metaimage import read_sequence_header
 from brachycal.data.plus_files import (
     NWIRE_RIGID_TOLERANCE,
     TRACKER_RIGID_TOLERANCE,
     read_coordinate_definitions,
     read_plus_config,
     read_segmented_frames,
-    read_sequence_header,
     sequence_transform,
 )
 

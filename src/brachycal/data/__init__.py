@@ -7,7 +7,8 @@ seconds and configurations in radians, model joint order); tables of configurati
 (:func:`read_session`, :func:`write_session`: a :class:`Session`); a lab's recording (marks, image
 frames, Slicer markups) built into a session (:func:`build_session_from_files`); pose lists of tracked tools
 (:func:`read_pose_list`); PLUS files (:func:`read_plus_config`, :func:`read_segmented_frames`,
-:func:`read_coordinate_definitions`, :func:`read_sequence_header`: millimetres in, metres out).
+:func:`read_coordinate_definitions`: millimetres in, metres out); MetaImage sequences of B-mode
+frames with their per-frame fields (:func:`read_image_sequence`, :func:`write_image_sequence`).
 Every reader refuses bad input with one :class:`~brachycal.errors.InputError` naming the file,
 row and column.
 """
@@ -30,6 +31,7 @@ if TYPE_CHECKING:  # imported on first use: `brachycal <command> --help` and `fk
         joint_columns,
         joint_log_from_columns,
     )
+    from brachycal.data.metaimage import ImageSequence, read_image_sequence, read_sequence_header, write_image_sequence
     from brachycal.data.plus_files import (
         PlusConfig,
         SegmentedFrame,
@@ -37,7 +39,6 @@ if TYPE_CHECKING:  # imported on first use: `brachycal <command> --help` and `fk
         read_coordinate_definitions,
         read_plus_config,
         read_segmented_frames,
-        read_sequence_header,
     )
     from brachycal.data.pose_list import read_pose_list
     from brachycal.data.pose_table import PoseTableWriter, read_pose_table, write_pose_table
@@ -88,6 +89,7 @@ __all__ = [
     "DEFAULT_TOPIC",
     "BuildReport",
     "Frame",
+    "ImageSequence",
     "ImageSettings",
     "JointLog",
     "JointLogChecker",
@@ -115,6 +117,7 @@ __all__ = [
     "read_configurations",
     "read_coordinate_definitions",
     "read_csv_log",
+    "read_image_sequence",
     "read_images",
     "read_joint_log",
     "read_marks",
@@ -132,6 +135,7 @@ __all__ = [
     "still_configuration",
     "write_bag_log",
     "write_build",
+    "write_image_sequence",
     "write_pose_table",
     "write_session",
 ]

@@ -1,4 +1,4 @@
-"""PLUS toolkit files: device-set configuration, calibration results XML, sequence-file headers.
+"""PLUS toolkit files: device-set configuration, calibration results XML, tracker readings of sequence files.
 
 Read with ``defusedxml`` (no entity expansion, no external entities): these files come from
 other machines. Every refusal is one :class:`~brachycal.errors.InputError` naming the file and,
@@ -13,7 +13,6 @@ give a wrong calibration with a normal-looking error report.
 from __future__ import annotations
 
 import os
-import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -343,107 +342,6 @@ def read_segmented_frames(
         _frames(data.find("CalibrationData"), path, "CalibrationData", tolerance),
         _frames(data.find("ValidationData"), path, "ValidationData", tolerance),
     )
-
-
-_FRAME_FIELD = re.compile(r"^Seq_Frame(\d+)_(\w+)\s*=\s*(.*)$")
-#: Longest header line read (bytes): a 4×4 matrix in text is ~200; more means pixel data or not MetaImage.
-_MAX_HEADER_LINE = 1 << 16
-#: Bytes per element of MetaImage element types (to check that the pixel data are all there).
-_ELEMENT_BYTES = {
-    "MET_CHAR": 1,
-    "MET_UCHAR": 1,
-    "MET_SHORT": 2,
-    "MET_USHORT": 2,
-    "MET_INT": 4,
-    "MET_UINT": 4,
-    "MET_LONG": 8,
-    "MET_ULONG": 8,
-    "MET_FLOAT": 4,
-    "MET_DOUBLE": 8,
-}
-
-
-def _whole(text: str, fail: _Fail) -> list[int]:
-    try:
-        values = [int(v) for v in text.split()]
-    except ValueError:
-        raise fail(f"expected whole numbers, got {text!r}") from None
-    if not values or min(values) < 0:
-        raise fail(f"expected non-negative whole numbers, got {text!r}")
-    return values
-
-
-def read_sequence_header(path: str | os.PathLike[str]) -> tuple[dict[str, str], list[dict[str, str]]]:
-    """Header of a MetaImage sequence (``.igs.mha``/``.seq.mha``) without reading the pixels.
-
-    Reads up to the ``ElementDataFile`` line and no further (a large compressed file costs only its
-    header); checks that the pixel data announced by the header are all in the file.
-
-    Returns ``(image fields, per-frame fields)``; per-frame fields are PLUS's ``Seq_FrameNNNN_*``
-    entries (e.g. ``ProbeToTrackerTransform`` as text), one dict per frame of ``DimSize``.
-
-    Raises:
-        InputError: not a MetaImage header, a header cut short (no ``ElementDataFile``), frames
-            missing or beyond ``DimSize``, or pixel data shorter than announced.
-    """
-    path = Path(path)
-    header: dict[str, str] = {}
-    frames: dict[int, dict[str, str]] = {}
-    data_offset = None
-    number = 0
-    try:
-        with path.open("rb") as handle:
-            while True:
-                raw = handle.readline(_MAX_HEADER_LINE + 1)
-                if not raw:
-                    break
-                number += 1
-                if len(raw) > _MAX_HEADER_LINE:
-                    raise InputError("header line longer than 64 KiB: not a MetaImage header", file=path, row=number)
-                line = raw.decode("latin-1").strip()
-                if not line:
-                    continue
-                match = _FRAME_FIELD.match(line)
-                if match:
-                    frames.setdefault(int(match[1]), {})[match[2]] = match[3].strip()
-                    continue
-                key, sep, value = line.partition("=")
-                if not sep:
-                    raise InputError("not a MetaImage header line", file=path, row=number)
-                header[key.strip()] = value.strip()
-                if key.strip() == "ElementDataFile":
-                    data_offset = handle.tell()
-                    break
-            size = os.fstat(handle.fileno()).st_size
-    except OSError as exc:
-        raise InputError(f"cannot read ({exc.strerror})", file=path) from None
-    if header.get("ObjectType") != "Image" or "DimSize" not in header:
-        raise InputError("not a MetaImage file (ObjectType/DimSize missing)", file=path)
-    if data_offset is None:
-        raise InputError(f"no ElementDataFile line after {number} lines: the header is cut short", file=path)
-    dims = _whole(header["DimSize"], _at(path, column="DimSize"))
-    ndims = _whole(header.get("NDims", str(len(dims))), _at(path, column="NDims"))
-    if ndims != [len(dims)]:
-        raise InputError(f"NDims {header.get('NDims')!r} does not match DimSize {header['DimSize']!r}", file=path)
-    n = dims[-1] if len(dims) == 3 else len(frames)
-    missing = [k for k in range(n) if k not in frames]
-    if missing:
-        raise InputError(f"no fields for frame {missing[0]} of {n}", file=path)
-    extra = sorted(k for k in frames if k >= n)
-    if extra:
-        raise InputError(f"fields for frame {extra[0]}, but DimSize announces {n} frames", file=path)
-    if header["ElementDataFile"] == "LOCAL":
-        available = size - data_offset
-        if header.get("CompressedData", "False").lower() == "true":
-            expected = _whole(header.get("CompressedDataSize", "0"), _at(path, column="CompressedDataSize"))[0]
-        else:
-            channels = _whole(header.get("ElementNumberOfChannels", "1"), _at(path, column="ElementNumberOfChannels"))
-            expected = int(np.prod(dims)) * channels[0] * _ELEMENT_BYTES.get(header.get("ElementType", ""), 0)
-        if available < expected:
-            raise InputError(
-                f"pixel data cut short: {available} bytes after the header, which announces {expected}", file=path
-            )
-    return header, [frames[k] for k in range(n)]
 
 
 def sequence_transform(
