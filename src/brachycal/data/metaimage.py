@@ -115,13 +115,14 @@ def _read_header(path: Path) -> _Header:
     if ndims != [len(dims)]:
         raise InputError(f"NDims {header.get('NDims')!r} does not match DimSize {header['DimSize']!r}", file=path)
     n = dims[-1] if len(dims) == 3 else len(frames)
-    missing = [k for k in range(n) if k not in frames]
+    # a plain image (no Seq_Frame fields at all) is a sequence whose frames carry no fields
+    missing = [k for k in range(n) if k not in frames] if frames else []
     if missing:
         raise InputError(f"no fields for frame {missing[0]} of {n}", file=path)
     extra = sorted(k for k in frames if k >= n)
     if extra:
         raise InputError(f"fields for frame {extra[0]}, but DimSize announces {n} frames", file=path)
-    parsed = _Header(header, [frames[k] for k in range(n)], dims, data_offset, size)
+    parsed = _Header(header, [frames.get(k, {}) for k in range(n)], dims, data_offset, size)
     if header["ElementDataFile"] == "LOCAL":
         available = size - data_offset
         expected = _compressed_size(parsed, path) if _compressed(parsed) else _raw_size(parsed, path)
