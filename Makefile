@@ -34,6 +34,10 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/chain_checks.py
 	$(BIN)/python benchmarks/table3.py
 	$(BIN)/python benchmarks/robot_identification.py
+	$(BIN)/python benchmarks/nwire_segmentation.py
+	$(BIN)/python benchmarks/nwire_variants.py
+	$(BIN)/python benchmarks/needle_tip.py
+	$(BIN)/python benchmarks/verify_check.py
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)

@@ -14,6 +14,11 @@ Run: ``.venv/bin/python benchmarks/calibrate_speed.py``. Figures:
   :func:`~brachycal.calibration.chain.cross_validate`), best of 3, so that the end-to-end figure
   can be read as start-up + sequential + chain (+ reading the session and writing the result).
 
+Cores: the sequential method's image-to-probe methods, the model choice's refits and the
+leave-one-out's runs of folds share the cores (:func:`brachycal.calibration.parallel.parallel_map`,
+forked workers; the figures are the same on any number of cores), so the stages are printed on
+all of this process's cores and, for comparison, on one.
+
 BLAS threads: on this 2-core machine the figures are measured as the command runs by default;
 run with ``OMP_NUM_THREADS=1`` to compare (the problems are small: one thread is as fast).
 """
@@ -22,12 +27,16 @@ from __future__ import annotations
 
 import sys
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from timing import best_of, best_wall, brachycal_command, record
 
+import brachycal.calibration.parallel as parallel
 from brachycal.calibration import calibrate
 from brachycal.calibration.chain import cross_validate, fit_chain, select_model
+from brachycal.calibration.parallel import available_workers
 from brachycal.data.session import read_session
 from brachycal.model import Robot
 
@@ -58,28 +67,41 @@ def startup(repeats: int = 3) -> float:
 
 
 def stages(repeats: int = 3) -> None:
-    """Print the chain's stages timed in this process (best of ``repeats``)."""
+    """Print the chain's stages timed in this process (best of ``repeats``), on all cores and on one."""
     robot = Robot.load()
     session = read_session(SESSION, robot)
-    sequential_s = best_of(repeats, lambda: calibrate(session, robot))
     result = calibrate(session, robot)
     choice = select_model(session, robot, result)
     fit = fit_chain(session, robot, result, choice.model)
     n = len(session.uv_px)
-    timings = {
-        "sequential method (Tables I and II)": sequential_s,
-        "chain: model choice (4 models x 8 folds)": best_of(repeats, lambda: select_model(session, robot, result)),
-        "chain: final fit with the robot term": best_of(
-            repeats, lambda: fit_chain(session, robot, result, choice.model)
-        ),
-        f"chain: leave-one-out ({n} refits)": best_of(
-            repeats, lambda: cross_validate(session, robot, result, choice.model, folds=n, start=fit)
-        ),
-    }
+    with parallel.forking_workers():  # as `brachycal calibrate` allows (a library call runs in turn)
+        cores = available_workers()
     print(f"new process, imports only (best of {repeats}): {startup(repeats):.2f} s")
-    print(f"in process, {n} samples (best of {repeats}):")
-    for name, seconds in timings.items():
-        print(f"  {name:<45} {seconds:6.2f} s")
+    print(f"in process, {n} samples (best of {repeats}; {cores} cores | 1 core):")
+    for name, run in {
+        "sequential method (Tables I and II)": lambda w: calibrate(session, robot),
+        "chain: model choice (4 models x 8 folds)": lambda w: select_model(session, robot, result, workers=w),
+        "chain: final fit with the robot term": lambda w: fit_chain(session, robot, result, choice.model),
+        f"chain: leave-one-out ({n} refits)": lambda w: cross_validate(
+            session, robot, result, choice.model, folds=n, start=fit, workers=w
+        ),
+    }.items():
+        with parallel.forking_workers():
+            shared = best_of(repeats, lambda run=run: run(None))
+        with _one_core():
+            alone = best_of(repeats, lambda run=run: run(1))
+        print(f"  {name:<45} {shared:6.2f} s | {alone:6.2f} s")
+
+
+@contextmanager
+def _one_core() -> Iterator[None]:
+    """Everything :func:`~brachycal.calibration.parallel.parallel_map` runs, in this process alone."""
+    saved = parallel.can_fork
+    parallel.can_fork = lambda: False
+    try:
+        yield
+    finally:
+        parallel.can_fork = saved
 
 
 def main() -> None:

@@ -1,14 +1,18 @@
-"""Table III on the twin: the tracker route against the fusion methods, over seeds, with the spread.
+"""Table III on the twin, complete: fusion, whole chain and three phantom routes, over seeds, with the spread.
 
-Run: ``.venv/bin/python benchmarks/table3.py [--seeds N] [--targets M] [--no-chain]`` (defaults:
-seeds 0–9, 50 targets per seed; about 15 s per seed on one core). For each seed the twin session
-is simulated, calibrated by the fusion methods, and the same simulated robot is calibrated by the
-tracker route (:mod:`brachycal.simulation.nwire_twin`, its defaults: NDI Polaris Spectra
-0.25 mm RMS per marker, 20 frames averaged per static capture, wire beam thickness, phantom
-tolerance, landmark registration). Every method is judged by the whole-system targeting error
-(MAE over the targets, mm); the table gives the mean ± SD over seeds, the smallest and largest
-seed, and the per-seed MAEs. A second table changes one assumption of the tracker route at a
-time, to show what each one is worth.
+Run: ``.venv/bin/python benchmarks/table3.py [--seeds N] [--targets M] [--no-chain] [--no-variants]``
+(defaults: seeds 0–9, 50 targets per seed; about 5 s per seed for the table on one core, ~10 s more
+with the variants). For each seed the twin session is simulated and calibrated by the paper's
+fusion methods (ICP, Kabsch, landmark/Horn) and brachycal's whole chain; the same simulated robot
+is calibrated by the tracker route with three phantoms: N-wire
+(:mod:`brachycal.simulation.nwire_twin`), multi-wedge and arbitrary wire
+(:mod:`brachycal.simulation.phantom_twin`), all with the N-wire twin's tracker practice (NDI
+Polaris Spectra 0.25 mm RMS per marker, 20 frames averaged per static capture, phantom print
+tolerance, landmark registration, beam thickness) and one shared hand–eye calibration. Every
+method is judged by the whole-system targeting error (MAE over the targets, mm); the table gives
+the mean ± SD over seeds, the smallest and largest seed, the per-seed MAEs and the paper's figure.
+A second table changes one assumption of the N-wire route at a time, to show what each is worth.
+``brachycal demo --table3`` prints the first table (brachycal.simulation.demo.table3).
 """
 
 from __future__ import annotations
@@ -20,11 +24,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from brachycal.calibration import calibrate, fit_chain, select_model
 from brachycal.model import Robot
+from brachycal.simulation.demo import Table3, table3_text, table3_twin
 from brachycal.simulation.nwire_twin import NWireSimConfig, tracker_route
 from brachycal.simulation.targeting import targeting_error
-from brachycal.simulation.twin import Twin, TwinConfig, simulate
+from brachycal.simulation.twin import TwinConfig, simulate
 
 #: The tracker route under other assumptions: label → change from the defaults.
 VARIANTS: dict[str, Callable[[NWireSimConfig], NWireSimConfig]] = {
@@ -50,43 +54,30 @@ VARIANTS: dict[str, Callable[[NWireSimConfig], NWireSimConfig]] = {
 }
 
 
-def _mae(twin: Twin, T_ER_Ntip: np.ndarray, T_EL_probe: np.ndarray, image, targets: int) -> float:
-    return targeting_error(twin, T_ER_Ntip, T_EL_probe, image, targets).stats.mae_mm
-
-
-def run(seeds: int, targets: int, chain: bool) -> tuple[dict[str, list[float]], dict[str, list[float]], list[str]]:
-    """Per-seed MAEs (mm) of the methods and of the tracker-route variants, and the chain's models."""
+def run(
+    seeds: int, targets: int, chain: bool, variants: bool
+) -> tuple[dict[str, list[float]], dict[str, list[float]], list[str]]:
+    """Per-seed MAEs (mm) of Table III's rows and of the N-wire route's variants, and the chain's models."""
     robot = Robot.load()
-    methods: dict[str, list[float]] = {"N-wire + optical tracker (hand-eye)": [], "Kabsch (paper)": []}
-    methods["Scaled u/v"] = []
-    if chain:
-        methods["Chain (model by cross-validation)"] = []
-    variants: dict[str, list[float]] = {label: [] for label in VARIANTS}
+    methods: dict[str, list[float]] = {}
+    changed: dict[str, list[float]] = {label: [] for label in VARIANTS} if variants else {}
     chosen = []
     for seed in range(seeds):
         start = time.perf_counter()
         twin = simulate(robot, TwinConfig(seed=seed))
-        result = calibrate(twin.session, robot, ("kabsch", "scaled_uv"))
-        needle = result.T_ER_Ntip
-        sim = NWireSimConfig(seed=seed)
-        route = tracker_route(twin, sim)
-        methods["N-wire + optical tracker (hand-eye)"].append(
-            _mae(twin, needle, route.T_EL_marker, route.image, targets)
-        )
-        methods["Kabsch (paper)"].append(_mae(twin, needle, result.T_EL_Ptip, result.image["kabsch"], targets))
-        methods["Scaled u/v"].append(_mae(twin, needle, result.T_EL_Ptip, result.image["scaled_uv"], targets))
-        if chain:
-            model = select_model(twin.session, robot, result).model
-            fit = fit_chain(twin.session, robot, result, model)
+        row, model, result = table3_twin(robot, twin, targets, chain)
+        for label, value in row.items():
+            methods.setdefault(label, []).append(value)
+        if model is not None:
             chosen.append(model)
-            methods["Chain (model by cross-validation)"].append(
-                _mae(twin, fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image, targets)
-            )
-        for label, change in VARIANTS.items():
+        sim = NWireSimConfig(seed=seed)
+        for label, change in VARIANTS.items() if variants else ():
             other = tracker_route(twin, change(sim))
-            variants[label].append(_mae(twin, needle, other.T_EL_marker, other.image, targets))
+            changed[label].append(
+                targeting_error(twin, result.T_ER_Ntip, other.T_EL_marker, other.image, targets).stats.mae_mm
+            )
         print(f"  seed {seed} done in {time.perf_counter() - start:.1f} s", flush=True)
-    return methods, variants, chosen
+    return methods, changed, chosen
 
 
 def _row(label: str, maes: list[float], width: int) -> str:
@@ -100,32 +91,32 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=10, help="seeds 0..N-1 (default 10)")
     parser.add_argument("--targets", type=int, default=50, help="targets per seed (default 50)")
     parser.add_argument("--no-chain", action="store_true", help="leave out the whole-chain method (the slowest)")
+    parser.add_argument("--no-variants", action="store_true", help="leave out the N-wire route's variants")
     args = parser.parse_args()
-    methods, variants, chosen = run(args.seeds, args.targets, not args.no_chain)
+    methods, variants, chosen = run(args.seeds, args.targets, not args.no_chain, not args.no_variants)
     n = args.seeds
+    print()
+    table = Table3.from_rows(range(n), args.targets, methods, chosen)
+    print(table3_text(table))
+    methods = table.maes_mm
     width = max(map(len, [*methods, *variants]))
-    print(f"\nTABLE III on the twin: whole-system targeting error, MAE over {args.targets} targets, seeds 0–{n - 1}")
-    print(f"  {'method':<{width}} mean ± SD over seeds (mm)   min–max")
-    for label, maes in methods.items():
-        print(_row(label, maes, width))
-    if chosen:
-        print(f"  (chain's image model per seed: {', '.join(chosen)})")
     print("\n  per seed (mm):")
     for label, maes in methods.items():
         print(f"  {label:<{width}} " + " ".join(f"{m:.3f}" for m in maes))
-    tracker = np.asarray(methods["N-wire + optical tracker (hand-eye)"])
+    tracker = np.asarray(methods["N-wire + tracker"])
     for label, maes in methods.items():
         if label.startswith("N-wire"):
             continue
         diff = tracker - np.asarray(maes)
         print(
-            f"  tracker route − {label}: {diff.mean():+.3f} ± {diff.std(ddof=1) if n > 1 else 0:.3f} mm, "
-            f"tracker route better on {int((diff < 0).sum())} of {n} seeds"
+            f"  N-wire route − {label}: {diff.mean():+.3f} ± {diff.std(ddof=1) if n > 1 else 0:.3f} mm, "
+            f"N-wire route better on {int((diff < 0).sum())} of {n} seeds"
         )
-    print("\nThe tracker route with one assumption changed (MAE mm, mean ± SD over seeds, min–max):")
-    print(_row("defaults (as above)", list(tracker), width))
-    for label, maes in variants.items():
-        print(_row(label, maes, width))
+    if variants:
+        print("\nThe N-wire route with one assumption changed (MAE mm, mean ± SD over seeds, min–max):")
+        print(_row("defaults (as above)", list(tracker), width))
+        for label, maes in variants.items():
+            print(_row(label, maes, width))
 
 
 if __name__ == "__main__":

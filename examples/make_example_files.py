@@ -10,6 +10,9 @@ Run from the repository root: ``python examples/make_example_files.py``. Determi
 - ``nwire/``: a PLUS device-set configuration (fCal 2.0 phantom) and a segmented-frames file of a
   tracked probe over it, in PLUS's formats, and their truth (the twin's tracker route,
   :func:`brachycal.simulation.nwire_twin.simulate_nwire`).
+- ``phantom/``: a multi-wedge and an arbitrary-wire session of the same tracked probe (observations
+  CSV and each phantom's geometry TOML with the session's landmark registration) and their truth
+  (:func:`brachycal.simulation.phantom_twin.simulate_phantom`), for ``brachycal phantom``.
 """
 
 from __future__ import annotations

@@ -248,7 +248,7 @@ CASES = [
     Case(
         "nwire-configured-diagonal-parallel-to-its-sides",
         NWIRE,
-        ("config.xml", "Pattern 1", "'7:G1_g1' is parallel to the diagonal '8:L1_h1'"),
+        ("config.xml", "PhantomDefinition/Geometry/Pattern[1]", "'7:G1_g1' is parallel to the diagonal '8:L1_h1'"),
         plus_files(edit_config=make_diagonal_parallel),
     ),
     Case(

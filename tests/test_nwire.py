@@ -211,5 +211,9 @@ def test_frame_or_configuration_without_a_transform_is_refused_naming_it():
         lambda: wire_point_pairs(unregistered, frames),
         lambda: wire_errors_2d(calibration, unregistered, frames),
     ):
-        with pytest.raises(InputError, match=r"^device_set\.xml: the configuration has no Phantom->Reference"):
+        with pytest.raises(
+            InputError,
+            match=r"^device_set\.xml: no Phantom->Reference transform .*: missing "
+            r"PlusConfiguration/CoordinateDefinitions/Transform\[@From='Phantom'\]\[@To='Reference'\]$",
+        ):
             refused()

@@ -8,6 +8,7 @@ with two optimisation settings, and its temporal-calibration recording.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -63,7 +64,13 @@ def test_variant_device_sets_read_the_fcal_phantom_and_registration(name):
 
 
 def test_temporal_device_set_reads_its_two_n_wire_patterns():
-    config = read_plus_config(reference("plus_temporal", "PlusDeviceSet_fCal_Sim_TemporalCalibration.xml"))
+    path = reference("plus_temporal", "PlusDeviceSet_fCal_Sim_TemporalCalibration.xml")
+    # A temporal-calibration device set has no phantom registration: the N-wire reader refuses it
+    # naming the element, and reads its phantom when asked for the phantom alone.
+    missing = "PlusConfiguration/CoordinateDefinitions/Transform[@From='Phantom'][@To='Reference']"
+    with pytest.raises(InputError, match=rf"^{path}: no phantom registration: missing {re.escape(missing)}"):
+        read_plus_config(path)
+    config = read_plus_config(path, require_registration=False)
     assert [[w.name for w in pattern] for pattern in config.patterns] == [
         ["1:E3_e3", "2:F3_j3", "3:K3_k3"],
         ["4:E4_e4", "5:J4_f4", "6:K4_k4"],
@@ -252,7 +259,8 @@ def test_every_reader_on_every_plus_file_gives_a_result_or_one_line(reader):
             outcomes[path.name] = "refused"
     # Each reader reads the files of its kind and refuses the others.
     kinds = {
-        "read_plus_config": lambda name: name.startswith("PlusDeviceSet_"),
+        # a device set with its phantom registration (the temporal one has none)
+        "read_plus_config": lambda name: name.startswith("PlusDeviceSet_") and "Temporal" not in name,
         "read_segmented_frames": lambda name: name.endswith("results.xml") or name.endswith("segmented_frames.xml"),
         "read_coordinate_definitions": lambda name: name.endswith(".xml"),
         "read_sequence_header": lambda name: name.endswith(".mha"),

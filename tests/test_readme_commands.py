@@ -34,7 +34,7 @@ from pathlib import Path
 import pytest
 from conftest import REFERENCE, ROOT, reference
 
-from brachycal.cli.main import COMMANDS, build_parser, main
+from brachycal.cli.main import COMMANDS, build_parser, joined_command, main
 
 DOCUMENTS = [ROOT / "README.md", ROOT / "docs" / "procedure.md"]
 #: Commands on outside data: the documents' path to the team's copy, replaced by :data:`REFERENCE`.
@@ -49,6 +49,11 @@ NOT_RUN = {
     "tests/test_robot_identification.py runs it",
     ("plan", "--excitation"): "identifies the robot, then scores 364 candidate poses, ~11 s of CPU; "
     "tests/test_excitation.py runs it",
+    ("demo", "--table3"): "Table III simulates and calibrates a twin per seed by seven methods (~5 s of CPU a "
+    "seed); tests/test_phantom_twin.py runs it",
+    ("demo", "--images"): "a second demo (~30 s of CPU) plus 66 rendered frames; tests/test_needle_tip.py renders a "
+    "twin's recording and runs brachycal tips on it",
+    ("tips",): "needs the frames of demo --images (above): ~0.15 s of CPU a frame; tests/test_needle_tip.py runs it",
 }
 #: CPU budget of the ordered walk in this process, seconds (measured ~40 s on a 2-core x86_64 VM).
 CPU_BUDGET_S = 60.0
@@ -140,7 +145,8 @@ def test_the_documents_show_the_commands_this_test_runs():
     """The extraction finds what the documents show (a broken parser must not pass by finding nothing)."""
     readme = document_commands(ROOT / "README.md")
     assert readme[0] == ["examples", "examples"]  # the walk starts in an empty folder
-    shown = {argv[0] for argv in readme + document_commands(DOCUMENTS[1]) + help_commands() if argv[0] in COMMANDS}
+    every = readme + document_commands(DOCUMENTS[1]) + help_commands()
+    shown = {joined_command(argv)[0] for argv in every} & set(COMMANDS)  # `nwire segment` is nwire-segment
     # Every sub-command is shown somewhere (model has no --help example: the README shows it).
     assert shown == set(COMMANDS)
     # Continuations joined: the session build of the "Using it" block is one command with all its options.

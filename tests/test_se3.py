@@ -75,3 +75,19 @@ def test_batched_shapes():
 
 def test_reflection_is_not_rigid():
     assert not se3.is_rigid(np.diag([1.0, 1.0, -1.0, 1.0]))
+
+
+@given(quaternions, arrays(np.float64, 3, elements=st.floats(0.05, 5.0)))
+def test_nearest_rotation_of_scaled_columns_is_their_rotation(q, scales):
+    """A rotation with its columns scaled (an Image→Probe matrix and its spacings) gives back that rotation."""
+    R = Rotation.from_quat(q).as_matrix()
+    np.testing.assert_allclose(se3.nearest_rotation(R * scales), R, atol=1e-9)  # well-conditioned SVD
+
+
+def test_nearest_rotation_agrees_with_scipy_on_a_noisy_matrix():
+    """An independent second computation: SciPy's Kabsch alignment of the identity basis with M's columns."""
+    rng = np.random.default_rng(3)
+    M = Rotation.random(random_state=4).as_matrix() + 0.05 * rng.normal(size=(3, 3))
+    R, _ = Rotation.align_vectors(M.T, np.eye(3))
+    np.testing.assert_allclose(se3.nearest_rotation(M), R.as_matrix(), atol=1e-9)
+    assert np.linalg.det(se3.nearest_rotation(np.diag([1.0, 1.0, -1.0]))) > 0  # a reflection gives a rotation

@@ -51,8 +51,11 @@ COMMANDS = [
     "export",
     "pivot",
     "nwire",
+    "phantom",
     "study",
     "design",
+    "tips",
+    "verify",
 ]
 
 

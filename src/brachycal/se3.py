@@ -101,6 +101,17 @@ def rigidity_error(T_a_b: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray
     return orthonormality, np.linalg.det(R), last_row
 
 
+def nearest_rotation(M: ArrayLike) -> FloatArray:
+    """``(3, 3)`` the rotation nearest ``M (3, 3)`` in the Frobenius norm (polar decomposition, det +1).
+
+    For a matrix with scaled columns (an Image→Probe matrix with its pixel spacings) this is its
+    rotation part; a reflection in ``M`` is turned into the nearest proper rotation.
+    """
+    U, _, Vt = np.linalg.svd(np.asarray(M, dtype=float))
+    d = np.sign(np.linalg.det(U @ Vt)) or 1.0
+    return U @ np.diag([1.0, 1.0, d]) @ Vt
+
+
 def is_rigid(T_a_b: ArrayLike, tol: float = 1e-9) -> bool:
     """Whether ``T_a_b`` ``(*, 4, 4)`` is a proper rigid transform (orthonormal, det +1) within ``tol``.
 

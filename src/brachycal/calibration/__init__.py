@@ -16,7 +16,10 @@ Beyond the paper: the whole chain as one least-squares problem (:func:`calibrate
 :func:`fit_chain`, :func:`select_model`; its uncertainty with :func:`landing_covariance` and
 :func:`predicted_rms_mm`); pivot calibration (:func:`pivot_algebraic`, :func:`pivot_robust`, and
 of a pose-list file :func:`pivot_from_file`); N-wire phantom calibration from PLUS files
-(:func:`nwire_from_files`); hand–eye calibration (:func:`hand_eye`); the robot's own geometry
+(:func:`nwire_from_files`); the multi-wedge and arbitrary-wire phantoms (:func:`read_wedge_phantom`,
+:func:`calibrate_wedge`, :func:`image_pose_in_phantom`, :func:`read_wire_phantom`, :func:`calibrate_wire`,
+:func:`read_phantom_observations`: a :class:`PhantomCalibration`); hand–eye calibration (:func:`hand_eye`);
+the robot's own geometry
 identified with the chain (:func:`identify_robot`, :class:`RobotIdentification`,
 :func:`corrected_robot`, :func:`cross_validate_identification`) and which extra observations would
 identify it best (:func:`base_criterion`, :func:`observation_rows`: the A-optimal criterion on the
@@ -24,7 +27,9 @@ landing error, :class:`Criterion`; an :class:`Observation` is a touch or an imag
 ``brachycal-result/1`` (:func:`write_result`, :func:`read_result`; :class:`RobotRecord` says which
 robot a result was calibrated with), ``brachycal-pivot/1``
 (:func:`write_pivot`, :func:`read_pivot`), ``brachycal-nwire/1`` (:func:`write_nwire`,
-:func:`read_nwire`).
+:func:`read_nwire`). Temporal calibration: the lag between two time-stamped position signals
+(:func:`estimate_lag`, a :class:`LagEstimate`), from PLUS's water-tank recordings
+(:func:`lag_from_plus_files`) or any video and pose stream (:func:`lag_from_signals`).
 """
 
 from typing import TYPE_CHECKING
@@ -40,6 +45,10 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
     from brachycal.calibration.metrics import ErrorStats
     from brachycal.calibration.nwire import NWireCalibration, calibrate_nwire, wire_point_pairs
     from brachycal.calibration.nwire_file import NWireRun, StoredNWire, nwire_from_files, read_nwire, write_nwire
+    from brachycal.calibration.phantom_file import PhantomObservations
+    from brachycal.calibration.phantom_file import read_observations as read_phantom_observations
+    from brachycal.calibration.phantom_file import write_observations as write_phantom_observations
+    from brachycal.calibration.phantom_fit import PhantomCalibration
     from brachycal.calibration.pivot import PivotResult, pivot_algebraic, pivot_robust
     from brachycal.calibration.pivot_file import (
         PIVOT_METHODS,
@@ -59,12 +68,28 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
     from brachycal.calibration.robot_observability import Criterion, Observation, base_criterion, observation_rows
     from brachycal.calibration.sequential import CalibrationResult, ToolCalibration, calibrate, locate, loo_points
     from brachycal.calibration.session_calibration import SessionCalibration, calibrate_folder
+    from brachycal.calibration.temporal import (
+        LagEstimate,
+        TemporalCalibration,
+        estimate_lag,
+        lag_from_plus_files,
+        lag_from_signals,
+        principal_motion,
+    )
     from brachycal.calibration.uncertainty import (
         inside_ellipsoid,
         landing_covariance,
         landing_jacobian,
         predicted_rms_mm,
     )
+    from brachycal.calibration.wedge_phantom import (
+        WedgePhantom,
+        calibrate_wedge,
+        calibrate_wedge_files,
+        image_pose_in_phantom,
+        read_wedge_phantom,
+    )
+    from brachycal.calibration.wire_phantom import WirePhantom, calibrate_wire, calibrate_wire_files, read_wire_phantom
 
 __getattr__, __dir__ = attach(__name__, __file__)
 
@@ -81,9 +106,12 @@ __all__ = [
     "Criterion",
     "ErrorStats",
     "ImageCalibration",
+    "LagEstimate",
     "NWireCalibration",
     "NWireRun",
     "Observation",
+    "PhantomCalibration",
+    "PhantomObservations",
     "PivotCalibration",
     "PivotResult",
     "PredictedUncertainty",
@@ -93,18 +121,29 @@ __all__ = [
     "StoredCalibration",
     "StoredNWire",
     "StoredPivot",
+    "TemporalCalibration",
     "ToolCalibration",
+    "WedgePhantom",
+    "WirePhantom",
     "base_criterion",
     "calibrate",
     "calibrate_chain",
     "calibrate_folder",
     "calibrate_nwire",
+    "calibrate_wedge",
+    "calibrate_wedge_files",
+    "calibrate_wire",
+    "calibrate_wire_files",
     "corrected_robot",
     "cross_validate_identification",
+    "estimate_lag",
     "fit_chain",
     "hand_eye",
     "identify_robot",
+    "image_pose_in_phantom",
     "inside_ellipsoid",
+    "lag_from_plus_files",
+    "lag_from_signals",
     "landing_covariance",
     "landing_jacobian",
     "locate",
@@ -115,12 +154,17 @@ __all__ = [
     "pivot_from_file",
     "pivot_robust",
     "predicted_rms_mm",
+    "principal_motion",
     "read_nwire",
+    "read_phantom_observations",
     "read_pivot",
     "read_result",
+    "read_wedge_phantom",
+    "read_wire_phantom",
     "select_model",
     "wire_point_pairs",
     "write_nwire",
+    "write_phantom_observations",
     "write_pivot",
     "write_result",
 ]

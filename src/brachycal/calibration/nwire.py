@@ -33,7 +33,7 @@ from brachycal.calibration.metrics import ErrorStats
 from brachycal.data.plus_files import PlusConfig, SegmentedFrame, Wire
 from brachycal.errors import DegenerateDataError, InputError
 from brachycal.imaging.pixels import image_points
-from brachycal.se3 import FloatArray, inverse, transform_points
+from brachycal.se3 import FloatArray, inverse, nearest_rotation, transform_points
 from brachycal.validate import check_finite
 
 
@@ -102,7 +102,9 @@ def _phantom_registration(config: PlusConfig) -> FloatArray:
     T_reference_phantom = config.transforms.get(("Phantom", "Reference"))
     if T_reference_phantom is None:
         raise InputError(
-            "the configuration has no Phantom->Reference transform (phantom registration)", file=config.source
+            "no Phantom->Reference transform (phantom registration): missing "
+            "PlusConfiguration/CoordinateDefinitions/Transform[@From='Phantom'][@To='Reference']",
+            file=config.source,
         )
     return T_reference_phantom
 
@@ -126,6 +128,15 @@ def _T_probe_phantom(frame: SegmentedFrame, T_reference_phantom: FloatArray) -> 
             row_label=frame.label,
         )
     return inverse(T_tracker_probe) @ T_tracker_reference @ T_reference_phantom
+
+
+def phantom_to_probe(config: PlusConfig, frame: SegmentedFrame) -> FloatArray:
+    """``T_probe_phantom (4, 4)``, metres, of a segmented frame: its tracker readings and the registration.
+
+    Raises:
+        InputError: the configuration has no Phantom→Reference transform, or the frame lacks a reading.
+    """
+    return _T_probe_phantom(frame, _phantom_registration(config))
 
 
 def wire_point_pairs(config: PlusConfig, frames: list[SegmentedFrame]) -> tuple[FloatArray, FloatArray, np.ndarray]:
@@ -183,10 +194,20 @@ class NWireCalibration:
     residuals_m: FloatArray
 
     def to_probe(self, uv_px: ArrayLike, model: str = "rigid") -> FloatArray:
+        """Pixels ``(N, 2)`` mapped into the probe frame by ``model`` (``"affine"``, ``"rigid"``), metres ``(N, 3)``."""
         uv = np.atleast_2d(np.asarray(uv_px, dtype=float))
         if model == "affine":
             return uv @ self.affine[:3, :2].T + self.affine[:3, 3]
         return transform_points(self.T_probe_image, image_points(uv, self.spacing_m))
+
+    def matrix(self, model: str = "rigid") -> FloatArray:
+        """``model``'s Image→Probe ``(4, 4)`` as PLUS writes it (pixels → metres; the rigid model's
+        columns scaled by ``(s_u, s_v, (s_u + s_v)/2)``)."""
+        if model == "affine":
+            return self.affine.copy()
+        M = self.T_probe_image.copy()
+        M[:3, :3] = M[:3, :3] * np.array([*self.spacing_m, self.spacing_m.mean()])
+        return M
 
 
 def _lsq_reject(design: FloatArray, target: FloatArray, reject_sd: float) -> tuple[FloatArray, np.ndarray]:
@@ -288,13 +309,20 @@ def wire_errors_2d(
             reading, a frame's wire names differ from the configuration's, or a wire has no
             usable point in any frame (its statistics would be NaN).
     """
+    return matrix_wire_errors_2d(calibration.matrix(model), config, frames)
+
+
+def matrix_wire_errors_2d(
+    image_to_probe: FloatArray, config: PlusConfig, frames: list[SegmentedFrame]
+) -> dict[str, FloatArray]:
+    """:func:`wire_errors_2d` of any Image→Probe ``(4, 4)`` (pixels → metres, invertible).
+
+    Raises:
+        InputError: as :func:`wire_errors_2d`.
+    """
     T_reference_phantom = _phantom_registration(config)
-    if model == "affine":
-        T_image_probe = np.linalg.inv(calibration.affine)
-        to_px = np.eye(2)
-    else:
-        T_image_probe = inverse(calibration.T_probe_image)
-        to_px = np.diag(1.0 / calibration.spacing_m)
+    T_image_probe = np.linalg.inv(image_to_probe)
+    to_px = np.eye(2)
     out: dict[str, list[FloatArray]] = {w.name: [] for pattern in config.patterns for w in pattern}
     for frame in frames:
         if not frame.ok:
@@ -319,10 +347,5 @@ def wire_errors_2d(
 
 def rotation_difference_deg(A: FloatArray, B: FloatArray) -> float:
     """Angle between the rotations of two (possibly scaled) 4×4 matrices, degrees (via SVD)."""
-
-    def rotation(T: FloatArray) -> FloatArray:
-        U, _, Vt = np.linalg.svd(T[:3, :3])
-        return U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
-
-    R = rotation(A).T @ rotation(B)
+    R = nearest_rotation(A[:3, :3]).T @ nearest_rotation(B[:3, :3])
     return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0))))

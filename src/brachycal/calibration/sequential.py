@@ -23,6 +23,7 @@ import numpy as np
 from brachycal.calibration import image_to_probe
 from brachycal.calibration.image_to_probe import METHODS, ImageCalibration
 from brachycal.calibration.metrics import ErrorStats
+from brachycal.calibration.parallel import available_workers, parallel_map
 from brachycal.calibration.tool_rotation import ToolRotation, tool_rotation
 from brachycal.calibration.tool_tips import (
     TipEstimate,
@@ -130,6 +131,23 @@ def _tool(session: Session, robot: Robot, tool: str, rtip1: TipEstimate) -> Tool
     return ToolCalibration(make_transform(rotation.R_E_tool, p_E_tool), validation, rotation, tip)
 
 
+#: Relative cost of each image-to-probe method's fit and leave-one-out (64 samples): ICP's
+#: multi-start nearest-neighbour iterations cost about three closed-form fits.
+METHOD_COST = {"icp": 3.0}
+
+
+def _method_groups(methods: tuple[str, ...], workers: int) -> list[tuple[str, ...]]:
+    """``methods`` in at most ``workers`` groups of about equal cost (:data:`METHOD_COST`, 1 by default),
+    the costliest placed first (each into the cheapest group so far)."""
+    groups: list[list[str]] = [[] for _ in range(max(1, min(workers, len(methods))))]
+    costs = [0.0] * len(groups)
+    for method in sorted(methods, key=lambda m: -METHOD_COST.get(m, 1.0)):
+        k = costs.index(min(costs))
+        groups[k].append(method)
+        costs[k] += METHOD_COST.get(method, 1.0)
+    return [tuple(g) for g in groups if g]
+
+
 def calibrate(
     session: Session,
     robot: Robot,
@@ -169,21 +187,41 @@ def calibrate(
     p_ER_Ntip = needle.T_E_tool[:3, 3]
     p_Ptip = image_to_probe.probe_points(T_R_ER, T_R_EL, p_ER_Ntip, probe.T_E_tool)
     p_real = transform_points(T_R_ER, p_ER_Ntip)
+
+    def fit_methods(group: tuple[str, ...]) -> dict[str, tuple[ImageCalibration, ErrorStats] | DegenerateDataError]:
+        """Each method's fit on all samples and its leave-one-out figures (or its refusal)."""
+        out: dict[str, tuple[ImageCalibration, ErrorStats] | DegenerateDataError] = {}
+        for method in group:
+            try:
+                with _data_of("samples.csv"):
+                    full = image_to_probe.fit(method, session.uv_px, p_Ptip, session.spacing_m, T_Ptip_I_init)
+                    loo = image_to_probe.leave_one_out(
+                        method,
+                        session.uv_px,
+                        T_R_ER,
+                        T_R_EL,
+                        p_ER_Ntip,
+                        probe.T_E_tool,
+                        session.spacing_m,
+                        T_Ptip_I_init,
+                        full=full,
+                    )
+            except DegenerateDataError as exc:  # raised below in the methods' order, as in turn
+                out[method] = exc
+            else:
+                out[method] = (full, loo)
+        return out
+
+    # The methods are independent: they share the cores (parallel_map), each computed as alone.
+    fitted: dict[str, tuple[ImageCalibration, ErrorStats] | DegenerateDataError] = {}
+    for part in parallel_map(fit_methods, _method_groups(methods, available_workers())):
+        fitted.update(part)
     image, residuals, loocv = {}, {}, {}
     for method in methods:
-        with _data_of("samples.csv"):
-            image[method] = image_to_probe.fit(method, session.uv_px, p_Ptip, session.spacing_m, T_Ptip_I_init)
-            loocv[method] = image_to_probe.leave_one_out(
-                method,
-                session.uv_px,
-                T_R_ER,
-                T_R_EL,
-                p_ER_Ntip,
-                probe.T_E_tool,
-                session.spacing_m,
-                T_Ptip_I_init,
-                full=image[method],
-            )
+        outcome = fitted[method]
+        if isinstance(outcome, DegenerateDataError):  # the first method that fails, as in turn
+            raise outcome
+        image[method], loocv[method] = outcome
         p_cal = image_to_probe.predict_base(image[method], T_R_EL, probe.T_E_tool, session.uv_px)
         residuals[method] = ErrorStats.between(p_real, p_cal)
     return CalibrationResult(

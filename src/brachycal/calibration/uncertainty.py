@@ -36,7 +36,6 @@ from statistics import NormalDist
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.optimize import approx_fprime, least_squares
 
 from brachycal.calibration.chain import (
     ChainData,
@@ -145,7 +144,21 @@ def landing_jacobian(
     def landing(x: FloatArray) -> FloatArray:
         return _landing(x, fit, spacing, robot, q, uv).ravel()
 
-    return approx_fprime(fit.x, landing, finite_difference_steps(fit.x)).reshape(len(uv), 3, len(fit.x))
+    return _forward_differences(landing, fit.x, finite_difference_steps(fit.x)).reshape(len(uv), 3, len(fit.x))
+
+
+def _forward_differences(f: Callable[[FloatArray], FloatArray], x: FloatArray, h: FloatArray) -> FloatArray:
+    """``(M, P)`` forward differences of ``f`` (``(M,)`` values) at ``x (P,)`` with steps ``h (P,)``, divided by
+    the step as represented, ``(x + h) − x``: the arithmetic of SciPy's ``approx_fprime`` (``tests/test_chain.py``),
+    without importing ``scipy.optimize`` (~0.1 s of every ``calibrate --method chain``)."""
+    x = np.asarray(x, dtype=float)
+    f0 = f(x)
+    J = np.empty((f0.size, x.size))
+    for i in range(x.size):
+        moved = x.copy()
+        moved[i] = x[i] + h[i]
+        J[:, i] = (f(moved) - f0) / ((x[i] + h[i]) - x[i])
+    return J
 
 
 def predicted_rms_mm(covariance: FloatArray) -> FloatArray:
@@ -212,6 +225,8 @@ def bootstrap(
     h = leverages(J)[rows["touch"]]
     touch = (r0[rows["touch"]] / np.sqrt(np.clip(1.0 - h, 1e-6, None))).reshape(-1, 3) * fit.sigma_m["touch"]
     touch -= touch.mean(axis=0)
+    from scipy.optimize import least_squares  # here, not at the top: only the bootstrap needs it (~0.1 s)
+
     out: dict[str, list] = {"spacing_m": [], "p_ER_Ntip": [], "p_EL_Ptip": [], "sound_speed_m_s": []}
     for _ in range(replicates):
         pick = rng.choice(used, size=len(used), replace=True)

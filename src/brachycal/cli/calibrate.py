@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from contextlib import nullcontext
 from pathlib import Path
 
 from brachycal.cli.common import add_robot_accuracy_options, add_robot_option, load_robot, progress_bar, robot_accuracy
@@ -104,6 +105,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from brachycal.calibration import calibrate_folder, write_result
+    from brachycal.calibration.parallel import forking_workers
     from brachycal.files import OutputSet
     from brachycal.reporting import chain_summary, table_i, table_ii, uncertainty_table
 
@@ -124,7 +126,10 @@ def run(args: argparse.Namespace) -> int:
             for name in REPORT_FILES:
                 outputs.claim(Path(args.report) / name, make_parents=True, label=f"--report's {name}")
         robot = load_robot(args)
-        with progress_bar(args.bootstrap, "bootstrap", args.quiet or not args.bootstrap) as bar:
+        # This command owns its process: its independent refits may share the cores (forked workers).
+        # The bar only with --bootstrap: tqdm's monitor thread, started by any bar, rules out forking.
+        bar_context = progress_bar(args.bootstrap, "bootstrap", args.quiet) if args.bootstrap else nullcontext()
+        with forking_workers(), bar_context as bar:
             calibrated = calibrate_folder(
                 args.session,
                 robot,
@@ -132,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
                 chain=args.method == "chain",
                 bootstrap_replicates=args.bootstrap,
                 joint_offsets=args.joint_offsets,
-                progress=bar.update,
+                progress=None if bar is None else bar.update,
                 robot_accuracy=robot_accuracy(args),
                 identify_robot=args.identify_robot,
             )

@@ -37,12 +37,23 @@ bundled robot reaches is in the README (Robots).
 The files are written together when the demo succeeded; an earlier demo's files in DIR are
 replaced only with --force.
 
+Table III complete (--table3): every method of the paper's Table III on the twin, over --seeds
+seeds, with the spread and the paper's figure beside: the paper's fusion methods (ICP, Kabsch,
+landmark/Horn), brachycal's whole chain, and the three phantom routes with an optical tracker
+(N-wire, multi-wedge, arbitrary wire: src/brachycal/simulation/phantom_twin.py states each
+figure of their practice). Prints the table and writes nothing.
+
 examples:
   brachycal demo                      simulate with seed 0 (= examples/twin_session)
+  brachycal demo --table3 --seeds 3   Table III over seeds 0-2 (about 5 s a seed)
   brachycal demo --seed 7 --out demo_seed7         another simulated session
   brachycal demo --example --out demo_example      calibrate the committed examples/twin_session
   brachycal demo --robot baxter --out demo_baxter  the same main job on a Baxter
 """
+
+
+#: Seeds of ``--table3`` by default: about 5 s each on an idle core, within a minute or two.
+TABLE3_SEEDS = 10
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -58,11 +69,27 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--targets", type=targets, default=50, help=f"targets for the targeting error, {targets.rule} (default 50)"
     )
     parser.add_argument("--force", action="store_true", help="replace the outputs of an earlier demo in DIR")
+    seeds = bounded_int(low=1, high=100)
+    parser.add_argument(
+        "--table3",
+        action="store_true",
+        help="print Table III (fusion, whole chain, N-wire, multi-wedge, arbitrary wire) over --seeds seeds; "
+        "writes nothing",
+    )
+    parser.add_argument(
+        "--seeds", type=seeds, default=None, help=f"with --table3: seeds 0..N-1, {seeds.rule} (default 10)"
+    )
     parser.add_argument(
         "--recording",
         action="store_true",
         help="also write DIR/recording: the twin's session as a lab records it (100 Hz joint log, marks.csv, "
         "images.csv, plan.csv, session.toml, a ROS 2 bag), for `brachycal session build`",
+    )
+    parser.add_argument(
+        "--images",
+        action="store_true",
+        help="with --recording: also render its frames as B-mode images, DIR/recording/frames.mha (one per row "
+        "of images.csv) and their true tips, frames_truth.csv, for `brachycal tips`",
     )
     parser.set_defaults(run=run)
 
@@ -76,7 +103,17 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     from brachycal.simulation.demo import check_example_robot
 
+    if args.images and not args.recording:
+        from brachycal.errors import InputError
+
+        raise InputError("--images renders the recording's frames: give --recording too")
     robot = load_robot(args)  # a bad description is refused before anything is claimed
+    if args.table3:
+        return _table3(args, robot, start)
+    if args.seeds is not None:
+        from brachycal.errors import InputError
+
+        raise InputError("--seeds is the number of seeds of --table3: give --table3 too (or --seed for one session)")
     if args.example:
         check_example_robot(robot)
     out = Path(args.out)
@@ -90,7 +127,10 @@ def run(args: argparse.Namespace) -> int:
         write_demo_report(demo, out / "report", outputs=outputs)
         if args.recording:
             rec = record(robot, TwinConfig(seed=args.seed))
-            write_recording(rec, out / "recording", bag="sqlite3", force=args.force, outputs=outputs)
+            from brachycal.simulation.bmode import BModeSettings
+
+            images = BModeSettings(seed=args.seed) if args.images else None
+            write_recording(rec, out / "recording", bag="sqlite3", images=images, force=args.force, outputs=outputs)
         print(demo_text(demo))
     report = out / "report"
     print(
@@ -105,5 +145,30 @@ def run(args: argparse.Namespace) -> int:
             f"--plan {rec_dir}/plan.csv --template {rec_dir}/session.toml --out {out}/built_session"
             + (f" --robot {args.robot}" if args.robot is not None else "")
         )
+        if args.images:
+            print(
+                f"its frames as B-mode images: {rec_dir}/frames.mha; propose the tips with:\n  brachycal tips "
+                f"{rec_dir}/frames.mha --out {out}/images_detected.csv --sheet {out}/tips_sheet.png"
+            )
+    print(f"done in {time.perf_counter() - start:.1f} s")
+    return 0
+
+
+def _table3(args: argparse.Namespace, robot, start: float) -> int:
+    """``--table3``: Table III over seeds 0..N-1, with a progress bar on stderr; no files."""
+    import sys
+
+    from tqdm import tqdm
+
+    from brachycal.errors import InputError
+    from brachycal.simulation.demo import table3, table3_text
+
+    for option in ("example", "recording", "force"):
+        if getattr(args, option):
+            raise InputError(f"--table3 writes nothing and simulates its own sessions: drop --{option}")
+    seeds = TABLE3_SEEDS if args.seeds is None else args.seeds
+    with tqdm(total=seeds, desc="Table III", unit="seed", leave=False, file=sys.stderr, disable=None) as bar:
+        table = table3(robot, range(seeds), args.targets, progress=bar.update)
+    print(table3_text(table))
     print(f"done in {time.perf_counter() - start:.1f} s")
     return 0

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 from brachycal.cli.common import add_robot_option, load_robot, progress_bar
 from brachycal.files import OutputSet
-from brachycal.validate import name_list
+from brachycal.validate import finite_float, name_list
 
 if TYPE_CHECKING:
     import numpy as np
@@ -60,6 +60,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", required=True, metavar="CSV", help="pose table to write")
     parser.add_argument(
         "--times", metavar="CSV", help="evaluate at these times: a CSV file with a 'time' column (seconds)"
+    )
+    parser.add_argument(
+        "--lag-s",
+        type=finite_float(unit="s"),
+        default=0.0,
+        metavar="L",
+        help="with --times: clock lag of the joint log behind those times (brachycal temporal's lag_s); the log is "
+        "read at t + L, and the table keeps the times t as given (default 0)",
     )
     parser.add_argument("--topic", default=DEFAULT_TOPIC, help=f"JointState topic in a bag (default {DEFAULT_TOPIC})")
     parser.add_argument(
@@ -108,6 +116,8 @@ def run(args: argparse.Namespace) -> int:
     from brachycal.data.pose_table import BackgroundPoseWriter, PoseTableWriter
     from brachycal.errors import InputError
 
+    if args.lag_s != 0.0 and args.times is None:
+        raise InputError("--lag-s applies to --times (the frames' times on another clock)")
     robot = load_robot(args)
     frames = args.frames  # names checked by argparse (none empty, no repeats)
     for frame in frames:
@@ -123,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
             # Formatted and written in a thread while the next block is computed (BackgroundPoseWriter).
             writer = BackgroundPoseWriter(PoseTableWriter(handle, frames, continuity=args.quaternion_continuity))
             with writer:
-                _compute(robot, frames, blocks, times, writer, args.log)
+                _compute(robot, frames, blocks, times, writer, args.log, lag_s=args.lag_s)
             samples = len(times) if times is not None else writer.writer.rows // len(frames)
     if not args.quiet:
         print(f"wrote {samples * len(frames)} poses ({samples} samples x {len(frames)} frames) to {out}")
@@ -137,15 +147,17 @@ def _compute(
     times: np.ndarray | None,
     writer: BackgroundPoseWriter,
     source: str,
+    lag_s: float = 0.0,
 ) -> None:
-    """Poses of ``frames`` for every sample of ``blocks`` (or at ``times`` ``(M,)`` s, interpolated), to ``writer``."""
+    """Poses of ``frames`` for every sample of ``blocks`` (or at ``times`` ``(M,)`` s, interpolated at
+    ``times + lag_s`` on the log's clock and written with ``times``), to ``writer``."""
     from brachycal.data.joint_log import interpolate_blocks
 
     if times is None:
         for time, q in blocks:
             writer.write(time, robot.fk_frames(frames, q))
         return
-    Q = interpolate_blocks(blocks, times, source=source)
+    Q = interpolate_blocks(blocks, times + lag_s, source=source)
     step = 16_384  # poses of this many times at once: a few MB
     for start in range(0, len(times), step):
         writer.write(times[start : start + step], robot.fk_frames(frames, Q[start : start + step]))

@@ -27,10 +27,15 @@ from brachycal.cli import (
     locate,
     model,
     nwire,
+    nwire_segment,
+    phantom,
     pivot,
     plan,
     session,
     study,
+    temporal,
+    tips,
+    verify,
     view,
 )
 from brachycal.errors import BrachycalError
@@ -50,17 +55,27 @@ start here:
   brachycal plan --out plan.csv        plan the 4x4x4 calibration sample poses
   brachycal session build LOG --marks marks.csv --images images.csv --out SESSION
                                       a session folder from a lab's recording (joint log, marks, frames)
+  brachycal tips FRAMES.mha --out images.csv
+                                      propose the needle tip in each B-mode frame (for session build)
   brachycal calibrate SESSION --out result.json
                                       calibrate a session folder (Tables I and II)
   brachycal locate RESULT JOINTS --uv U,V
                                       where an image pixel is in base_link
   brachycal export RESULT --out DIR   calibrated URDF, Slicer/ITK, PLUS and ROS files
+  brachycal verify RESULT CHECK_SESSION --out record.json
+                                      is the calibration still good? (a check before each procedure)
   brachycal view RESULT --session SESSION
                                       the calibrated session in 3D, in the browser
   brachycal pivot POSES.csv --out pivot.json
                                       pivot calibration of a tracked tool
   brachycal nwire CONFIG FRAMES --out nwire.json
                                       N-wire phantom calibration of a tracked probe (PLUS files)
+  brachycal nwire segment CAL.mha VAL.mha --config CONFIG --out frames.xml
+                                      the N-wire phantom's points in tracked B-mode sequences
+  brachycal phantom --method wedge|wire|nwire GEOMETRY OBSERVATIONS --out result.json
+                                      multi-wedge, arbitrary-wire or N-wire phantom calibration
+  brachycal temporal VIDEO.mha TRACKER.mha --out lag.json
+                                      lag of the tracker (or joint log) behind the ultrasound frames
   brachycal study --out DIR           how many samples? truth error vs LOO on the twin
   brachycal design --out DIR          which sample design gives most accuracy per robot minute
 """
@@ -84,10 +99,15 @@ COMMANDS = {
     "export": export,
     "pivot": pivot,
     "nwire": nwire,
+    nwire_segment.NAME: nwire_segment,
+    "phantom": phantom,
+    "temporal": temporal,
     "study": study,
     "design": design,
     "view": view,
+    "verify": verify,
     "examples": examples,
+    "tips": tips,
 }
 
 
@@ -150,9 +170,23 @@ def _command_environment() -> Iterator[None]:
                 signal.signal(signal.SIGTERM, previous)
 
 
+#: Two-word commands: ``brachycal nwire segment …`` is the command ``nwire-segment``.
+TWO_WORD_COMMANDS = {("nwire", "segment"): nwire_segment.NAME}
+
+
+def joined_command(arguments: list[str]) -> list[str]:
+    """``arguments`` with a two-word command (:data:`TWO_WORD_COMMANDS`) joined into its one name."""
+    words = [k for k, word in enumerate(arguments) if not word.startswith("-")][:2]
+    if len(words) == 2 and words[1] == words[0] + 1:
+        name = TWO_WORD_COMMANDS.get((arguments[words[0]], arguments[words[1]]))
+        if name is not None:
+            return [*arguments[: words[0]], name, *arguments[words[1] + 1 :]]
+    return arguments
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     try:
-        arguments = sys.argv[1:] if argv is None else list(argv)
+        arguments = joined_command(sys.argv[1:] if argv is None else list(argv))
         command = _command(arguments)
         args = build_parser(full=() if command is None else (command,)).parse_args(arguments)
     except SystemExit as exc:  # --help, --version, or a usage error (already printed, one line)

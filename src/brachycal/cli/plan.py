@@ -10,7 +10,7 @@ import sys
 from collections import Counter
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, BinaryIO
 
 import numpy as np
 
@@ -86,7 +86,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     from brachycal.cli.plan_excitation import EPILOG, add_excitation_options
 
     add_excitation_options(parser.add_argument_group("excitation poses (robot identification)"))
-    parser.epilog = EPILOG
+    from brachycal.cli.plan_check import EPILOG_CHECK, add_check_options
+
+    add_check_options(parser.add_argument_group("check before each procedure (brachycal verify)"))
+    parser.epilog = EPILOG + "\n" + EPILOG_CHECK
     parser.set_defaults(run=run)
 
 
@@ -208,9 +211,13 @@ def _tool_options(t: argparse._ArgumentGroup) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from brachycal.cli.plan_check import check_check_options, run_check_plan
     from brachycal.cli.plan_excitation import check_excitation_options, run_excitation
     from brachycal.files import OutputSet
 
+    check_check_options(args)
+    if args.verify:
+        return run_check_plan(args, _settings(args))
     check_excitation_options(args)
     if args.excitation is not None:
         return run_excitation(args)
@@ -292,6 +299,8 @@ class _FigureProcess:
         # Ctrl-C reaches both processes; the child inherits "ignore" from here, so only this one reacts.
         previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if in_main_thread else None
         try:
+            # A spawned process, not a fork: a forked copy of this command (its signal handlers, its
+            # locks, pytest's state when run in-process) could hang where a fresh interpreter cannot.
             self._process = subprocess.Popen(
                 [sys.executable, "-c", "from brachycal.cli.plan import _draw_in_child; _draw_in_child()"],
                 stdin=subprocess.PIPE,
@@ -359,8 +368,8 @@ class _FigureProcess:
                 pipe.close()
 
 
-def _draw_in_child() -> None:
-    """The drawing process: import matplotlib now, then draw the plan sent on stdin.
+def _draw_in_child(inbox: BinaryIO | None = None, outbox: BinaryIO | None = None) -> None:
+    """The drawing process: import matplotlib now, then draw the plan sent on stdin (``inbox``).
 
     Writes ``(None or the error, [warning messages])`` pickled on stdout; prints nothing else.
     SIGTERM (the command failed or was stopped) becomes SystemExit, so that a half-written figure
@@ -369,18 +378,27 @@ def _draw_in_child() -> None:
     import signal
     import warnings
 
+    inbox = sys.stdin.buffer if inbox is None else inbox
+    outbox = sys.stdout.buffer if outbox is None else outbox
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the command's: it ends this process
     signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(143))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("default")
         try:
-            from brachycal.reporting import plot_plan
+            import select
 
-            plot_plan(*pickle.load(sys.stdin.buffer))
+            from brachycal.reporting import plot_plan
+            from brachycal.reporting.plan_plot import warm_up_plan_figure
+
+            if not select.select([inbox], [], [], 0)[0]:  # the planner still runs: draw warm (~0.25 s less)
+                warm_up_plan_figure()
+            plot_plan(*pickle.load(inbox))
             outcome: object = None
         except (Exception, SystemExit) as exc:
             outcome = exc if isinstance(exc, OSError) else f"{type(exc).__name__}: {' '.join(str(exc).split())}"
     with contextlib.suppress(OSError):  # the command is gone: nothing to tell
-        pickle.dump((outcome, [" ".join(str(w.message).split()) for w in caught]), sys.stdout.buffer)
+        pickle.dump((outcome, [" ".join(str(w.message).split()) for w in caught]), outbox)
+        outbox.flush()
 
 
 def _settings(args: argparse.Namespace) -> tuple[PlanSpec, IKSettings, Thresholds]:

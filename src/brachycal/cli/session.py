@@ -120,6 +120,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="V",
         help=f"largest joint speed of a still robot, {speed.rule} (default {MAX_SPEED_RAD_S:g})",
     )
+    build.add_argument(
+        "--lag-s",
+        type=finite_float(unit="s"),
+        default=0.0,
+        metavar="L",
+        help="clock lag of the joint log behind the frames (brachycal temporal's lag_s): each frame's time t in "
+        "--images becomes t + L on the log's clock before its pose is taken (default 0)",
+    )
+    build.add_argument(
+        "--lag-sd-s",
+        type=finite_float(low=0.0, unit="s"),
+        default=0.0,
+        metavar="SD",
+        help="the lag's SD: warn about frames whose still window fails within 2 SD of the lag (default 0: no check)",
+    )
     add_robot_option(build)
     build.add_argument("--out", required=True, metavar="SESSION", help="session folder to write (created if needed)")
     build.add_argument("--force", action="store_true", help="replace the files of an existing session in SESSION")
@@ -163,6 +178,8 @@ def run_build(args: argparse.Namespace) -> int:
             plan=args.plan,
             settings=settings,
             still=still,
+            lag_s=args.lag_s,
+            lag_sd_s=args.lag_sd_s,
         )
         write_build(build, out, force=args.force, outputs=outputs)
     print(build.report.summary())

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING
 from brachycal._lazy import attach
 
 if TYPE_CHECKING:  # imported on first use: `brachycal <command> --help` and `fk` need only a few of these
+    from brachycal.data.bag_images import read_bag_images
     from brachycal.data.bags import DEFAULT_TOPIC, bag_log_blocks, is_bag, read_bag_log, write_bag_log
     from brachycal.data.csv_log import csv_log_blocks, read_configurations, read_csv_log, read_times
     from brachycal.data.joint_log import (
@@ -40,6 +41,8 @@ if TYPE_CHECKING:  # imported on first use: `brachycal <command> --help` and `fk
         read_plus_config,
         read_segmented_frames,
     )
+    from brachycal.data.plus_segmentation import read_segmentation_parameters
+    from brachycal.data.plus_segmented_xml import write_segmented_frames
     from brachycal.data.pose_list import read_pose_list
     from brachycal.data.pose_table import PoseTableWriter, read_pose_table, write_pose_table
     from brachycal.data.recording import (
@@ -112,6 +115,7 @@ __all__ = [
     "is_bag",
     "joint_columns",
     "joint_log_from_columns",
+    "read_bag_images",
     "read_bag_log",
     "read_bag_marks",
     "read_configurations",
@@ -125,6 +129,7 @@ __all__ = [
     "read_plus_config",
     "read_pose_list",
     "read_pose_table",
+    "read_segmentation_parameters",
     "read_segmented_frames",
     "read_sequence_header",
     "read_session",
@@ -137,5 +142,6 @@ __all__ = [
     "write_build",
     "write_image_sequence",
     "write_pose_table",
+    "write_segmented_frames",
     "write_session",
 ]

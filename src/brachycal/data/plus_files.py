@@ -22,7 +22,7 @@ import defusedxml.ElementTree as SafeET
 import numpy as np
 
 from brachycal.errors import InputError
-from brachycal.se3 import FloatArray
+from brachycal.se3 import FloatArray, inverse
 from brachycal.validate import check_transform
 
 MM = 1e-3
@@ -53,6 +53,27 @@ class Wire:
     back_m: FloatArray
 
 
+#: PLUS's default names of the frames its probe calibration joins (``vtkPlusProbeCalibrationAlgo``'s
+#: ``PhantomCoordinateFrame`` and ``ReferenceCoordinateFrame`` attributes, when the device set has none).
+DEFAULT_PHANTOM_FRAME = "Phantom"
+DEFAULT_REFERENCE_FRAME = "Reference"
+#: The elements that hold coordinate definitions: a device set's, and a results file's calibration.
+_DEFINITION_PARENTS = ("CoordinateDefinitions", "CalibrationResults")
+
+
+@dataclass(frozen=True)
+class PlusOptimization:
+    """PLUS fCal's refinement setting in a device set (``vtkPlusProbeCalibrationAlgo`` attributes).
+
+    Attributes:
+        method: ``"NONE"``, ``"2D"`` (all wires' in-plane distance) or ``"3D"`` (middle wires' 3D distance).
+        isotropic: ``IsotropicPixelSpacing`` (one pixel size for u and v).
+    """
+
+    method: str
+    isotropic: bool
+
+
 @dataclass(frozen=True)
 class PlusConfig:
     """What the N-wire calibration needs from a PLUS device-set configuration.
@@ -61,15 +82,19 @@ class PlusConfig:
         patterns: the N-wire patterns, each three wires (side, diagonal, side) in file order.
         transforms: ``(From, To)`` → ``T_To_From (4, 4)`` from ``CoordinateDefinitions``
             (translations in metres; a scaling transform such as Image→Probe keeps its matrix).
-            ``Phantom→Reference``, if present, has been checked to be rigid.
+            The phantom registration is always under ``("Phantom", "Reference")`` (whatever the
+            device set names those frames, and inverted if the file holds Reference→Phantom), checked
+            to be rigid.
         approximate_spacing_m: the segmentation's approximate pixel spacing (metres per pixel).
         source: the file it was read from (for messages), None if built in code.
+        optimization: PLUS's ``OptimizationMethod`` setting in the file, None if it states none.
     """
 
     patterns: list[tuple[Wire, Wire, Wire]]
     transforms: dict[tuple[str, str], FloatArray]
     approximate_spacing_m: float | None
     source: str | None = None
+    optimization: PlusOptimization | None = None
 
 
 def _parse(path: Path) -> Element:
@@ -81,6 +106,15 @@ def _parse(path: Path) -> Element:
         raise InputError(f"not valid XML ({exc})", file=path) from None
     except Exception as exc:  # defusedxml's refusals of entities and DTDs
         raise InputError(f"refused unsafe XML ({type(exc).__name__})", file=path) from None
+
+
+def parse_xml(path: str | os.PathLike[str]) -> Element:
+    """The root element of an XML file read safely (no entities, no DTDs).
+
+    Raises:
+        InputError: naming the file, when it cannot be read, is not XML or is refused as unsafe.
+    """
+    return _parse(Path(path))
 
 
 def _numbers(text: str | None, count: int, fail: _Fail) -> FloatArray:
@@ -115,59 +149,124 @@ def _metres(M: FloatArray) -> FloatArray:
     return M
 
 
+def _in_element(path: Path, place: str) -> _Fail:
+    """A function making the InputError for one XML element (or attribute) of ``path``, named XPath-like."""
+
+    def fail(message: str) -> InputError:
+        return InputError(f"{place}: {message}", file=path)
+
+    return fail
+
+
+def _transform_place(parent: str, key: tuple[str, str]) -> str:
+    return f"{parent}/Transform[@From='{key[0]}'][@To='{key[1]}']"
+
+
 def _coordinate_definitions(root: Element, path: Path) -> dict[tuple[str, str], FloatArray]:
+    """Every ``Transform`` defined under ``CoordinateDefinitions`` or ``CalibrationResults``, mm.
+
+    Only those: a ``<Transform Name="ProbeToTracker"/>`` elsewhere (PLUS 1.x ``DataCollection``,
+    an OpenIGTLink server's ``TransformNames``) names a transform to send or record, not a matrix.
+    """
     out: dict[tuple[str, str], FloatArray] = {}
-    for element in root.iter("Transform"):
-        key = (element.get("From", ""), element.get("To", ""))
-        where = f"Transform {key[0]}->{key[1]}"
-
-        def fail(message: str, where: str = where) -> InputError:
-            return InputError(message, file=path, column=where)
-
-        if not all(key):
-            raise fail("a <Transform> needs both From and To attributes")
-        if key in out:
-            raise fail("defined twice")
-        M = _numbers(element.get("Matrix"), 16, fail).reshape(4, 4)
-        if np.abs(M[3] - [0, 0, 0, 1]).max() > 1e-9:
-            raise fail("bottom row of the matrix must be 0 0 0 1")
-        out[key] = M
+    parents = [(root.tag, root)] if root.tag in _DEFINITION_PARENTS else []
+    parents += [(f"{root.tag}/{e.tag}", e) for e in root if e.tag in _DEFINITION_PARENTS]
+    if not parents:  # nested deeper in a layout we have not seen: still only these parents
+        parents = [(f"{root.tag}//{e.tag}", e) for tag in _DEFINITION_PARENTS for e in root.iter(tag)]
+    for parent_place, parent in parents:
+        for element in parent.findall("Transform"):
+            key = (element.get("From", ""), element.get("To", ""))
+            fail = _in_element(path, _transform_place(parent_place, key))
+            if not all(key):
+                raise fail("a coordinate definition needs both From and To attributes")
+            if key in out:
+                raise fail("defined twice")
+            M = _numbers(element.get("Matrix"), 16, _in_element(path, _transform_place(parent_place, key) + "/@Matrix"))
+            M = M.reshape(4, 4)
+            if np.abs(M[3] - [0, 0, 0, 1]).max() > 1e-9:
+                raise fail("bottom row of the matrix must be 0 0 0 1")
+            out[key] = M
     return out
 
 
 def read_coordinate_definitions(path: str | os.PathLike[str]) -> dict[tuple[str, str], FloatArray]:
-    """``(From, To)`` → matrix ``(4, 4)`` of every ``<Transform>`` in a PLUS XML, in the file's units (mm).
+    """``(From, To)`` → matrix ``(4, 4)`` of every coordinate definition in a PLUS XML, in the file's units (mm).
 
     Reads device sets (``CoordinateDefinitions``) and calibration results (``CalibrationResults``)
-    alike; matrices are returned as written (Image→Probe carries the pixel scales).
+    alike; matrices are returned as written (Image→Probe carries the pixel scales). ``Transform``
+    elements elsewhere (transform names to record or send) are not definitions and are skipped.
     """
     path = Path(path)
     return _coordinate_definitions(_parse(path), path)
 
 
-def read_plus_config(path: str | os.PathLike[str]) -> PlusConfig:
+def _calibration_settings(root: Element) -> tuple[str, str, PlusOptimization | None]:
+    """Phantom and reference frame names and PLUS's refinement setting of the probe calibration element."""
+    element = next(
+        (e for tag in ("vtkPlusProbeCalibrationAlgo", "vtkProbeCalibrationAlgo") for e in root.iter(tag)), None
+    )
+    if element is None:
+        return DEFAULT_PHANTOM_FRAME, DEFAULT_REFERENCE_FRAME, None
+    method = element.get("OptimizationMethod")
+    optimization = None
+    if method is not None and method.upper() in {"NONE", "2D", "3D"}:
+        isotropic = (element.get("IsotropicPixelSpacing") or "FALSE").strip().upper() == "TRUE"
+        optimization = PlusOptimization(method.upper(), isotropic)
+    return (
+        element.get("PhantomCoordinateFrame") or DEFAULT_PHANTOM_FRAME,
+        element.get("ReferenceCoordinateFrame") or DEFAULT_REFERENCE_FRAME,
+        optimization,
+    )
+
+
+def read_plus_config(path: str | os.PathLike[str], *, require_registration: bool = True) -> PlusConfig:
     """Read the phantom definition and coordinate definitions of a PLUS device-set XML.
 
+    Every layout PLUS has shipped keeps the phantom's wires in ``PhantomDefinition/Geometry/Pattern``
+    and the phantom registration in ``CoordinateDefinitions`` (the frames it joins named by the
+    ``vtkPlusProbeCalibrationAlgo`` element, ``Phantom`` → ``Reference`` by default; a
+    Reference → Phantom definition is inverted). ``Transform`` elements outside
+    ``CoordinateDefinitions`` (PLUS 1.x ``DataCollection`` and OpenIGTLink ``TransformNames``) only
+    name transforms and are not read.
+
+    Args:
+        path: the device set.
+        require_registration: refuse a file without the phantom registration (the N-wire method
+            needs it); False reads the phantom alone (e.g. a temporal-calibration device set).
+
     Raises:
-        InputError: unreadable or unsafe XML, an N-wire pattern without exactly three named wires,
-            a wire name used twice, no N-wire pattern, a Phantom→Reference matrix that is not
-            rigid (:data:`NWIRE_RIGID_TOLERANCE`), a pixel spacing that is not a positive number.
+        InputError: unreadable or unsafe XML, no ``PhantomDefinition`` or no N-wire ``Pattern`` in
+            it, an N-wire pattern without exactly three named wires, a wire name used twice, a
+            phantom registration that is missing (with ``require_registration``) or not rigid
+            (:data:`NWIRE_RIGID_TOLERANCE`), a pixel spacing that is not a positive number — each
+            naming the element XPath-like (``PlusConfiguration/PhantomDefinition/Geometry/Pattern[1]``).
     """
     path = Path(path)
     root = _parse(path)
+    top = root.tag
+    phantom = root.find("PhantomDefinition")
+    phantom_place = f"{top}/PhantomDefinition"
+    if phantom is None:
+        phantom = next(root.iter("PhantomDefinition"), None)
+        phantom_place = f"{top}//PhantomDefinition"
+    if phantom is None:
+        raise InputError(f"no N-wire patterns: missing {top}/PhantomDefinition (the phantom's wires)", file=path)
+    pattern_elements = phantom.findall("Geometry/Pattern") or list(phantom.iter("Pattern"))
+    nwire_elements = [p for p in pattern_elements if p.get("Type") == "NWire"]
+    if not nwire_elements:
+        raise InputError(
+            f"no N-wire patterns: missing {phantom_place}/Geometry/Pattern[@Type='NWire']",
+            file=path,
+        )
     patterns: list[tuple[Wire, Wire, Wire]] = []
     seen: set[str] = set()
-    for k, pattern in enumerate(root.iter("Pattern")):
-        if pattern.get("Type") != "NWire":
-            continue
-        wires = []
+    for k, pattern in enumerate(nwire_elements):
+        place = f"{phantom_place}/Geometry/Pattern[{k + 1}]"
+        wires: list[Wire] = []
         for wire in pattern.iter("Wire"):
             name = wire.get("Name")
-            where = f"Pattern {k + 1} Wire {name!r}"
-
-            def fail(message: str, where: str = where) -> InputError:
-                return InputError(message, file=path, column=where)
-
+            wire_place = f"{place}/Wire[@Name='{name}']" if name else f"{place}/Wire[{len(wires) + 1}]"
+            fail = _in_element(path, wire_place)
             if not name:
                 raise fail("a wire needs a Name (the segmented points refer to it)")
             if name in seen:
@@ -176,34 +275,40 @@ def read_plus_config(path: str | os.PathLike[str]) -> PlusConfig:
             wires.append(
                 Wire(
                     name,
-                    _numbers(wire.get("EndPointFront"), 3, fail) * MM,
-                    _numbers(wire.get("EndPointBack"), 3, fail) * MM,
+                    _numbers(wire.get("EndPointFront"), 3, _in_element(path, wire_place + "/@EndPointFront")) * MM,
+                    _numbers(wire.get("EndPointBack"), 3, _in_element(path, wire_place + "/@EndPointBack")) * MM,
                 )
             )
         if len(wires) != 3:
-            raise InputError(f"N-wire pattern {k + 1} has {len(wires)} wires, expected 3", file=path)
-        _check_n_shape(wires, _at(path, column=f"Pattern {k + 1}"))
+            raise InputError(f"{place}: an N-wire pattern has {len(wires)} wires, expected 3", file=path)
+        _check_n_shape(wires, _in_element(path, place))
         patterns.append((wires[0], wires[1], wires[2]))
-    if not patterns:
-        raise InputError("no N-wire patterns in PhantomDefinition", file=path)
     definitions = _coordinate_definitions(root, path)
-    if ("Phantom", "Reference") in definitions:
-        at_registration = _at(path, column="Transform Phantom->Reference")
-        _check_rigid(definitions["Phantom", "Reference"], at_registration, NWIRE_RIGID_TOLERANCE)
+    phantom_frame, reference_frame, optimization = _calibration_settings(root)
     transforms = {key: _metres(M) for key, M in definitions.items()}
-    segmentation = next(root.iter("Segmentation"), None)
-    spacing = segmentation.get("ApproximateSpacingMmPerPixel") if segmentation is not None else None
+    forward, backward = (phantom_frame, reference_frame), (reference_frame, phantom_frame)
+    registration_place = _transform_place(f"{top}/CoordinateDefinitions", forward)
+    if forward in definitions or backward in definitions:
+        key = forward if forward in definitions else backward
+        place = _transform_place(f"{top}/CoordinateDefinitions", key) + f" ({key[0]}->{key[1]})"
+        T = _check_rigid(transforms[key], _in_element(path, place), NWIRE_RIGID_TOLERANCE)
+        transforms["Phantom", "Reference"] = T if key == forward else inverse(T)
+    elif require_registration:
+        raise InputError(
+            f"no phantom registration: missing {registration_place} ({phantom_frame}->{reference_frame})", file=path
+        )
     spacing_m = None
+    segmentation = root.find("Segmentation")
+    if segmentation is None:
+        segmentation = next((e for e in root.iter("Segmentation") if "ApproximateSpacingMmPerPixel" in e.attrib), None)
+    spacing = segmentation.get("ApproximateSpacingMmPerPixel") if segmentation is not None else None
     if spacing is not None:
-        value = _numbers(spacing, 1, _at(path, column="Segmentation ApproximateSpacingMmPerPixel"))[0]
+        place = f"{top}/Segmentation/@ApproximateSpacingMmPerPixel"
+        value = _numbers(spacing, 1, _in_element(path, place))[0]
         if value <= 0:
-            raise InputError(
-                f"must be a positive spacing, got {spacing!r}",
-                file=path,
-                column="Segmentation ApproximateSpacingMmPerPixel",
-            )
+            raise InputError(f"{place}: must be a positive spacing, got {spacing!r}", file=path)
         spacing_m = float(value) * MM
-    return PlusConfig(patterns, transforms, spacing_m, str(path))
+    return PlusConfig(patterns, transforms, spacing_m, str(path), optimization)
 
 
 def _check_n_shape(wires: list[Wire], fail: _Fail) -> None:
@@ -219,11 +324,19 @@ def _check_n_shape(wires: list[Wire], fail: _Fail) -> None:
             raise fail(f"side wire {wires[side].name!r} is parallel to the diagonal {wires[1].name!r}: not an N")
 
 
-def _at(path: Path, *, row: int | None = None, row_label: str = "row", column: str | None = None) -> _Fail:
-    """A function making the InputError for one place of ``path``."""
+def _at(
+    path: Path,
+    *,
+    row: int | None = None,
+    row_label: str = "row",
+    column: str | None = None,
+    element: str | None = None,
+) -> _Fail:
+    """A function making the InputError for one place of ``path`` (``element``: an XML child, XPath-like)."""
 
     def fail(message: str) -> InputError:
-        return InputError(message, file=path, row=row, row_label=row_label, column=column)
+        text = f"{element}: {message}" if element is not None else message
+        return InputError(text, file=path, row=row, row_label=row_label, column=column)
 
     return fail
 
@@ -282,15 +395,18 @@ def _frames(parent: Element | None, path: Path, which: str, tolerance: float) ->
                 raise fail("a segmented <Point> has no WireName")
             if name in points:
                 raise fail(f"wire {name!r} segmented twice")
-            points[name] = _numbers(point.get("Position"), 3, _at(path, row=index, row_label=label, column=name))[:2]
+            points[name] = _numbers(
+                point.get("Position"), 3, _at(path, row=index, row_label=label, element=f"Point[@WireName='{name}']")
+            )[:2]
         fields = {f.get("Name"): f.get("Value") for f in element.iter("CustomFrameField")}
         tracked = {}
         for name in ("ProbeToTrackerTransform", "ReferenceToTrackerTransform"):
             if name not in fields:
-                raise fail(f"missing {name}")
+                raise fail(f"missing {name} (TrackedFrame/CustomFrameField[@Name='{name}'])")
             if fields.get(name + "Status", "OK") != "OK":
                 raise fail(f"{name} status is {fields.get(name + 'Status')!r}")
-            tracked[name] = _rigid_mm(fields[name], _at(path, row=index, row_label=label, column=name), tolerance)
+            where = _at(path, row=index, row_label=label, element=f"CustomFrameField[@Name='{name}']")
+            tracked[name] = _rigid_mm(fields[name], where, tolerance)
         middle = [_numbers(m.get("PositionInProbeFrame"), 4, fail)[:3] * MM for m in element.iter("MiddleWire")]
         frames.append(
             SegmentedFrame(

@@ -23,6 +23,7 @@ The build report is written into the session folder beside the session's files:
 from __future__ import annotations
 
 import os
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -58,7 +59,7 @@ from brachycal.data.recording import (
     still_configuration,
 )
 from brachycal.data.session import Session, Touches, read_session_toml, write_session
-from brachycal.errors import InputError
+from brachycal.errors import BrachycalWarning, InputError
 from brachycal.files import OutputSet, output_set, sha256_file, write_csv, write_json
 from brachycal.se3 import FloatArray
 from brachycal.validate import MAX_IMAGE_PX, check_pixel, check_range, check_spacing_mm, check_vector
@@ -305,6 +306,8 @@ class BuildReport:
         plan: the plan's source (``""`` without a plan); ``planned`` its sample names.
         planned_missing: planned samples without a used frame, in plan order.
         inputs: input name → SHA-256 (filled by :func:`build_session_from_files`).
+        lag_s, lag_sd_s: the frames' clock lag applied (:func:`build_session`) and its SD, seconds.
+        lag_sensitive: frames whose still window would not hold at the lag ± :data:`LAG_COVERAGE_SD` SD.
     """
 
     log: str
@@ -317,6 +320,9 @@ class BuildReport:
     planned: tuple[str, ...] = ()
     planned_missing: tuple[str, ...] = ()
     inputs: dict[str, str] = field(default_factory=dict)
+    lag_s: float = 0.0
+    lag_sd_s: float = 0.0
+    lag_sensitive: tuple[str, ...] = ()
 
     @property
     def marks(self) -> list[BuildEntry]:
@@ -380,6 +386,7 @@ class BuildReport:
                 "planned_missing": len(self.planned_missing),
             },
             "plan": {"source": self.plan, "missing": list(self.planned_missing)},
+            "clock": {"lag_s": self.lag_s, "lag_sd_s": self.lag_sd_s, "lag_sensitive": list(self.lag_sensitive)},
             "entries": [e.as_dict() for e in self.entries],
             "inputs": dict(self.inputs),
         }
@@ -571,8 +578,17 @@ def build_session(
     settings: ImageSettings,
     plan: PlannedSamples | None = None,
     still: StillSettings = StillSettings(),
+    lag_s: float = 0.0,
+    lag_sd_s: float = 0.0,
 ) -> SessionBuild:
     """Assemble a session from a joint log, the marks and the frames.
+
+    The frames' times may be on the ultrasound's clock: ``lag_s`` (``brachycal temporal``'s lag of
+    the joint log behind the video) moves each to ``time_s + lag_s`` on the log's clock before its
+    pose is taken. With ``lag_sd_s`` > 0, a used frame whose still window would not hold at the lag
+    ± :data:`LAG_COVERAGE_SD` SD (the robot moves within the lag's uncertainty of it, or the log
+    ends there) is warned about (:class:`~brachycal.errors.BrachycalWarning`) and listed in the
+    report's ``lag_sensitive``. Marks stay on the log's clock.
 
     Args:
         log: the joint log (its configurations in ``robot``'s joint order).
@@ -582,6 +598,8 @@ def build_session(
         settings: the session's image spacing and size and the top-model tip.
         plan: the planned samples, to name frames and report the ones missing.
         still: what "still" means.
+        lag_s: added to every frame's time (seconds): the log's clock minus the frames'.
+        lag_sd_s: the lag's standard deviation (seconds), for the warning above.
 
     Returns:
         the :class:`SessionBuild` (session in SI units, and the report).
@@ -594,9 +612,14 @@ def build_session(
     """
     if tuple(log.joint_names) != tuple(robot.joint_names):
         raise InputError("the joint log's joints are not the robot's", file=log.source)
+    lag_s = check_range(lag_s, "--lag-s", unit="s")
+    lag_sd_s = check_range(lag_sd_s, "--lag-sd-s", low=0.0, unit="s")
     limits, units = _speed_limits(robot, still.max_speed_rad_s)
     touches, axes, mark_entries = _marks(log, marks, still, limits, units)
+    if lag_s != 0.0:
+        frames = [replace(frame, time_s=frame.time_s + lag_s) for frame in frames]
     names, samples_q, uv, frame_entries = _frames(log, frames, settings, plan, still, limits, units)
+    sensitive = _lag_sensitive(log, frame_entries, lag_s, lag_sd_s, still, limits, units)
     images = frames[0].source if frames else "images"
     if len(names) < 3:
         raise InputError(
@@ -629,8 +652,49 @@ def build_session(
         plan=plan.source if plan is not None else "",
         planned=tuple(plan.names) if plan is not None else (),
         planned_missing=tuple(n for n in plan.names if n not in used_planned) if plan is not None else (),
+        lag_s=lag_s,
+        lag_sd_s=lag_sd_s,
+        lag_sensitive=sensitive,
     )
     return SessionBuild(session, report)
+
+
+#: A frame's pose must hold over the lag ± this many of its SDs (2: a normal lag error's 95 % interval).
+LAG_COVERAGE_SD = 2.0
+
+
+def _lag_sensitive(
+    log: JointLog,
+    entries: Sequence[BuildEntry],
+    lag_s: float,
+    lag_sd_s: float,
+    still: StillSettings,
+    limits: FloatArray,
+    units: list[str],
+) -> tuple[str, ...]:
+    """Used frames whose still window fails at ``time ± LAG_COVERAGE_SD × lag_sd_s``, each warned about."""
+    if lag_sd_s <= 0:
+        return ()
+    margin = LAG_COVERAGE_SD * lag_sd_s
+    sensitive = []
+    for entry in entries:
+        if entry.kind != "frame" or not entry.used:
+            continue
+        for shift in (-margin, margin):
+            try:
+                _window(log, entry.time_s + shift, still, limits, units)
+            except InputError as exc:
+                sensitive.append(entry.what)
+                where = f" ({entry.source}, row {entry.row})" if entry.source else ""
+                warnings.warn(
+                    f"{entry.what}{where}: its pose depends on the clock lag: with the lag at "
+                    f"{(lag_s + shift) * 1e3:+.1f} ms ({lag_s * 1e3:+.1f} ms {'+' if shift > 0 else '-'} "
+                    f"{LAG_COVERAGE_SD:g} SD) {exc.problem}",
+                    BrachycalWarning,
+                    stacklevel=3,
+                )
+                break
+    return tuple(sensitive)
 
 
 def build_session_from_files(
@@ -646,6 +710,8 @@ def build_session_from_files(
     plan: str | os.PathLike[str] | None = None,
     settings: ImageSettings,
     still: StillSettings = StillSettings(),
+    lag_s: float = 0.0,
+    lag_sd_s: float = 0.0,
 ) -> SessionBuild:
     """:func:`build_session` from files: everything is read and validated before anything is built.
 
@@ -659,6 +725,8 @@ def build_session_from_files(
         plan: the plan CSV of ``brachycal plan``.
         settings: the session's image and top-model settings (:func:`session_settings`).
         still: what "still" means.
+        lag_s: the frames' clock lag (:func:`build_session`), seconds.
+        lag_sd_s: its standard deviation, seconds.
 
     Raises:
         InputError: marks given both ways or neither, a marks topic on a CSV log, or any refusal
@@ -680,7 +748,17 @@ def build_session_from_files(
         markup_uv = read_slicer_markups(markups, spacing)
     frame_list = read_images(images, markups=markup_uv, markups_source=str(markups) if markups else "")
     planned = read_plan(plan, robot) if plan is not None else None
-    build = build_session(log, mark_list, frame_list, robot=robot, settings=settings, plan=planned, still=still)
+    build = build_session(
+        log,
+        mark_list,
+        frame_list,
+        robot=robot,
+        settings=settings,
+        plan=planned,
+        still=still,
+        lag_s=lag_s,
+        lag_sd_s=lag_sd_s,
+    )
     inputs = {"log": sha256_file(log_path), "images": sha256_file(Path(images))}
     for name, path in (("marks", marks), ("markups", markups), ("plan", plan)):
         if path is not None:

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 from brachycal._lazy import attach
 
 if TYPE_CHECKING:  # imported on first use (matplotlib ~0.5 s, trimesh ~0.6 s to load)
+    from brachycal.reporting.contact_sheet import contact_sheet, contact_sheet_figure
     from brachycal.reporting.demo_report import DEMO_REPORT_FILES, demo_text, write_demo_report
     from brachycal.reporting.figures import (
         error_histogram,
@@ -54,6 +55,8 @@ __all__ = [
     "Viewer",
     "calibration_content",
     "chain_summary",
+    "contact_sheet",
+    "contact_sheet_figure",
     "demo_text",
     "design_table",
     "error_histogram",

@@ -105,3 +105,64 @@ def _write_report(
     ]
     with atomic_open(staged["report.html"], force=force) as handle:
         handle.write("\n".join(parts))
+
+
+def verification_page(record: dict) -> str:
+    """The HTML page of a verification record (``brachycal verify --report``; ``record``: the
+    ``brachycal-verification/1`` dict of :func:`brachycal.calibration.check.outcome_json`)."""
+    test = record["test"]
+    verdict = record["verdict"]
+    colour = "#1a7f37" if verdict == "PASS" else "#b3261e"
+    rows = [
+        ("result", f"{record['result']['file']} (method {record['result']['method']})"),
+        ("result SHA-256", record["result"]["sha256"]),
+        (
+            "check session",
+            f"{record['check_session']['folder']}: {record['samples']} samples, {record['touches']} touches",
+        ),
+        ("date (UTC)", record["date_utc"]),
+        ("test", f"{test['statistic']}; {test['value']:.1f} on {test['dof']} degrees of freedom"),
+        (
+            "threshold",
+            f"{test['threshold']:.1f} ({100 * test['false_alarm']:g} % false alarms), p = {test['p_value']:.3g}",
+        ),
+        ("sample residuals at the check poses", f"{record['residual_rms_mm']:.2f} mm RMS (noise included)"),
+    ]
+    if record["part"] is not None:
+        rows += [
+            ("part that most likely moved", record["part"]),
+            ("by", record["size"]),
+            ("targeting error if ignored", f"{record['targeting_if_ignored_mm']:.2f} mm RMS over the check poses"),
+        ]
+    hypotheses = "".join(
+        f"<tr><td>{html.escape(h['part'])}</td><td>{h['determined']}/{h['parameters']}</td>"
+        f"<td>{h['explained_chi2']:.1f}</td><td>{h['remaining_chi2']:.1f} / {h['remaining_dof']}</td>"
+        f"<td>{h['remaining_p']:.3g}</td><td>{h['targeting_if_ignored_mm']:.2f}</td><td>{html.escape(h['size'])}</td></tr>"
+        for h in record["hypotheses"]
+    )
+    samples = "".join(
+        f"<tr><td>{html.escape(name)}</td>" + "".join(f"<td>{v:+.3f}</td>" for v in e) + "</tr>"
+        for name, e in record["sample_residuals_mm"].items()
+    )
+    return "\n".join(
+        [
+            "<!DOCTYPE html><html><head><meta charset='utf-8'><title>brachycal verification</title>",
+            f"<style>{STYLE}</style></head><body>",
+            "<h1>brachycal verification: is the calibration still good?</h1>",
+            f"<p style='font-size:1.4em;color:{colour}'><b>{html.escape(verdict)}</b></p><table>",
+            *(f"<tr><th>{html.escape(k)}</th><td>{html.escape(str(v))}</td></tr>" for k, v in rows),
+            "</table><h2>Which part moved: each hypothesis fitted alone</h2>",
+            "<table><tr><th>part</th><th>determined</th><th>explained χ²</th><th>remaining χ² / dof</th>"
+            f"<th>p (remaining)</th><th>targeting if ignored (mm)</th><th>size</th></tr>{hypotheses}</table>",
+            "<h2>Sample residuals (mm: lateral, depth, normal of the image)</h2>",
+            f"<table><tr><th>sample</th><th>lateral</th><th>depth</th><th>normal</th></tr>{samples}</table>",
+            "</body></html>",
+        ]
+    )
+
+
+def write_verification_page(path: str | os.PathLike[str], record: dict, *, force: bool = False) -> Path:
+    """Write :func:`verification_page` to ``path`` (atomically; replaces a file only with ``force``)."""
+    with atomic_open(path, force=force) as handle:
+        handle.write(verification_page(record))
+    return Path(path)

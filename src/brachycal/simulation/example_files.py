@@ -1,13 +1,16 @@
-"""Example files in outside formats, made by the twin: a tracked-pointer pivot recording and PLUS N-wire files.
+"""Example files made by the twin: a tracked-pointer pivot recording, PLUS N-wire files, phantom sessions.
 
 What ``brachycal pivot`` and ``brachycal nwire`` read in a lab comes from other software: a pose
 list from a tracker (SciKit-Surgery's CSV form: ``timestamp_ns,m00,…,m33``, millimetres) and a
 PLUS device-set configuration with the segmented frames of an fCal session. This module writes
 the same formats from simulated data with a known truth, so that the commands can be shown on
 files that ship with brachycal (``examples/pivot``, ``examples/nwire``; the real recordings stay
-outside, README "Credits"). Every file here is read back by the real readers
+outside, README "Credits"). ``examples/phantom`` holds a multi-wedge and an arbitrary-wire session
+of the twin in brachycal's own phantom formats (:mod:`brachycal.calibration.phantom_file`), for
+``brachycal phantom``. Every file here is read back by the real readers
 (:func:`~brachycal.data.pose_list.read_pose_list`, :func:`~brachycal.data.plus_files.read_plus_config`,
-:func:`~brachycal.data.plus_files.read_segmented_frames`) in the tests and calibrated to its truth.
+:func:`~brachycal.data.plus_files.read_segmented_frames`, :func:`~brachycal.calibration.phantom_file.read_observations`)
+in the tests and calibrated to its truth.
 
 Deterministic: the same seed gives the same numbers; numbers are written with Python's shortest
 round-trip form (``repr``), so that the files hold exactly what was simulated.
@@ -17,6 +20,7 @@ from __future__ import annotations
 
 import csv
 import os
+import re
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -25,17 +29,23 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from brachycal.calibration.phantom_file import write_observations
 from brachycal.data.plus_files import PlusConfig, SegmentedFrame
 from brachycal.data.pose_list import COLUMNS
-from brachycal.files import OutputSet, json_text, output_set
+from brachycal.files import OutputSet, bundled, json_text, output_set
 from brachycal.se3 import FloatArray, inverse, make_transform
 from brachycal.simulation.nwire_twin import FCAL2_LANDMARKS_MM, NWireSimConfig, simulate_nwire
+from brachycal.simulation.phantom_twin import simulate_phantom
 
 __all__ = [
     "NWIRE_CONFIG_NAME",
     "NWIRE_FRAMES_NAME",
+    "PHANTOM_FILES",
+    "PHANTOM_FRAMES",
+    "PHANTOM_TRUTH_NAME",
     "PIVOT_NAME",
     "PivotRecording",
+    "phantom_geometry_text",
     "simulate_pivot_recording",
     "write_example_files",
     "write_plus_config",
@@ -48,6 +58,16 @@ MM = 1e-3
 PIVOT_NAME = "pivot/pointer_pivot.csv"
 NWIRE_CONFIG_NAME = "nwire/PlusDeviceSet_twin_fCal2.xml"
 NWIRE_FRAMES_NAME = "nwire/twin_segmented_frames.xml"
+#: The phantom sessions' files per method: (geometry TOML, observations CSV, the geometry's kind).
+PHANTOM_FILES = {
+    "wedge": ("phantom/multi_wedge.toml", "phantom/wedge_observations.csv", "multi-wedge"),
+    "wire": ("phantom/arbitrary_wire.toml", "phantom/wire_observations.csv", "wire"),
+}
+PHANTOM_TRUTH_NAME = "phantom/truth.json"
+#: Frames of the phantom examples: small files (~100 kB together), and enough that neither fit draws
+#: the conditioning warning (predicted SD 50 mm from the image centre above 0.5 mm with the fit's
+#: residual level): with seed 0 the multi-wedge's is 0.57 mm at 30 frames, 0.44 mm at 50.
+PHANTOM_FRAMES = {"wedge": 50, "wire": 30}
 #: Seeds of the example files' random streams (tagged so that they never coincide with the twin's).
 _PIVOT_TAG = 0x5056
 
@@ -274,16 +294,52 @@ NWIRE_SPACING_M = np.array([0.19e-3, 0.1828e-3])
 NWIRE_SIZE_PX = (1080, 720)
 
 
+#: The bundled geometries' registration paragraph: its comment lines and the matrix line.
+_REGISTRATION = re.compile(
+    r"^# The phantom's pose on its reference body.*?^T_reference_phantom_mm = [^\n]*\n", re.MULTILINE | re.DOTALL
+)
+
+
+def phantom_geometry_text(method: str, T_reference_phantom: FloatArray, *, seed: int) -> str:
+    """The bundled geometry of ``method`` (``"wedge"`` or ``"wire"``) with a lab's registration in it.
+
+    The bundled file's text (its comments kept) with ``T_reference_phantom_mm`` replaced by
+    ``T_reference_phantom`` (``(4, 4)``, metres; written in millimetres, full precision): the
+    twin lab's landmark registration, as a lab's file holds its own.
+    """
+    name = PHANTOM_FILES[method][0].split("/")[-1]
+    text = bundled("phantoms", name).read_text(encoding="utf-8")
+    T = _mm(T_reference_phantom)
+    rows = ", ".join("[" + ", ".join(repr(float(v)) for v in row) + "]" for row in T)
+    paragraph = (
+        "# The phantom's pose on its reference body (its registration: PLUS's Phantom->Reference), translation\n"
+        f"# in mm: the twin lab's, from touching the landmarks below (brachycal examples, seed {seed}).\n"
+        f"T_reference_phantom_mm = [{rows}]\n"
+    )
+    text, count = _REGISTRATION.subn(lambda _: paragraph, text)
+    if count != 1:  # the bundled file's layout changed: say so rather than ship a file without the registration
+        raise ValueError(f"the bundled {name} has no registration paragraph to replace")
+    header = (
+        f"# brachycal's example (examples/phantom/{name}): the bundled geometry with the twin lab's registration,\n"
+        "# written by brachycal.simulation.example_files (python examples/make_example_files.py).\n"
+    )
+    return header + text
+
+
 def write_example_files(
     folder: str | os.PathLike[str], *, seed: int = 0, force: bool = False, outputs: OutputSet | None = None
 ) -> list[Path]:
-    """Write the pivot and N-wire example files, each set with its truth, into ``folder``.
+    """Write the pivot, N-wire and phantom example files, each set with its truth, into ``folder``.
 
     Writes ``pivot/pointer_pivot.csv`` (:func:`simulate_pivot_recording`, 200 poses, millimetres),
     ``pivot/truth.json``, ``nwire/PlusDeviceSet_twin_fCal2.xml`` and ``nwire/twin_segmented_frames.xml``
     (:func:`~brachycal.simulation.nwire_twin.simulate_nwire` with its default error sources, 40
-    calibration and 20 validation frames) and ``nwire/truth.json``. All or nothing; existing files
-    are replaced only with ``force``.
+    calibration and 20 validation frames) and ``nwire/truth.json``; and for ``brachycal phantom``
+    (:data:`PHANTOM_FILES`) a multi-wedge and an arbitrary-wire session on the same probe
+    (:func:`~brachycal.simulation.phantom_twin.simulate_phantom`, its default error sources,
+    :data:`PHANTOM_FRAMES` frames), each phantom's geometry with the session's landmark
+    registration, and ``phantom/truth.json``. All or nothing; existing files are replaced only
+    with ``force``.
 
     Returns:
         The paths written.
@@ -308,7 +364,23 @@ def write_example_files(
         "size_px": list(NWIRE_SIZE_PX),
         "T_image_probe": inverse(NWIRE_T_PROBE_IMAGE).tolist(),
     }
+    phantoms = {
+        method: simulate_phantom(
+            method, NWIRE_T_PROBE_IMAGE, NWIRE_SPACING_M, NWIRE_SIZE_PX, sim, frames=PHANTOM_FRAMES[method]
+        )
+        for method in PHANTOM_FILES
+    }
+    phantom_truth = {
+        "what": "truth of the phantom examples (brachycal.simulation.phantom_twin.simulate_phantom, default errors): "
+        "the image on the probe's marker body, as the N-wire example's",
+        "seed": seed,
+        "frames": PHANTOM_FRAMES,
+        "T_marker_image": NWIRE_T_PROBE_IMAGE.tolist(),
+        "spacing_mm": (NWIRE_SPACING_M / MM).tolist(),
+        "size_px": list(NWIRE_SIZE_PX),
+    }
     names = [PIVOT_NAME, "pivot/truth.json", NWIRE_CONFIG_NAME, NWIRE_FRAMES_NAME, "nwire/truth.json"]
+    names += [name for files in PHANTOM_FILES.values() for name in files[:2]] + [PHANTOM_TRUTH_NAME]
     with output_set(outputs, force=force) as out:
         staged = {name: out.claim(folder / name, make_parents=True) for name in names}
         write_pose_list(staged[PIVOT_NAME], pivot.timestamps_ns.tolist(), pivot.T_tracker_marker_mm, key="timestamp_ns")
@@ -316,4 +388,10 @@ def write_example_files(
         write_plus_config(staged[NWIRE_CONFIG_NAME], config, name="brachycal twin: fCal 2.0 phantom, 3 N-wires")
         write_segmented_frames(staged[NWIRE_FRAMES_NAME], calibration, validation)
         staged["nwire/truth.json"].write_text(json_text(nwire_truth))
+        for method, (geometry_name, observations_name, kind) in PHANTOM_FILES.items():
+            session = phantoms[method]
+            T_reference_phantom = session.phantom.geometry.registration()
+            staged[geometry_name].write_text(phantom_geometry_text(method, T_reference_phantom, seed=seed))
+            write_observations(staged[observations_name], kind, session.observations)
+        staged[PHANTOM_TRUTH_NAME].write_text(json_text(phantom_truth))
     return [folder / name for name in names]

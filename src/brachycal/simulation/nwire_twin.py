@@ -415,3 +415,9 @@ def _hand_eye_session(twin: Twin, sim: NWireSimConfig, tracker: Tracker, encoder
     A = np.array([inverse(T_flange[i]) @ T_flange[j] for i, j in pairs])
     B = np.array([inverse(T_marker[i]) @ T_marker[j] for i, j in pairs])
     return hand_eye(A, B)
+
+
+#: The tracker route's streams and its hand–eye session, for the other phantoms' routes
+#: (:mod:`brachycal.simulation.phantom_twin`: the same tracker field and the same robot turns).
+nwire_streams = _streams
+hand_eye_session = _hand_eye_session

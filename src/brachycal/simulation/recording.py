@@ -32,6 +32,7 @@ import shutil
 import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -47,6 +48,9 @@ from brachycal.planning.output import write_plan
 from brachycal.se3 import FloatArray
 from brachycal.simulation.twin import Twin, TwinConfig, simulate
 from brachycal.validate import check_int, check_range
+
+if TYPE_CHECKING:
+    from brachycal.simulation.bmode import BModeSettings
 
 __all__ = [
     "MARKS_TOPIC",
@@ -80,6 +84,11 @@ class RecordingConfig:
         margin_s: least time between a hold's ends and its still windows, seconds, in [0, 10].
         start_time_s: clock time of the first reading, seconds (ROS time: since 1970).
         unannotated_frames: extra frames captured at sample stops and left without annotation.
+        image_lag_s: the joint log's clock lag behind the ultrasound's (``brachycal temporal``'s
+            sign), seconds, in [-10, 10]: a frame captured at log time ``t`` is stamped
+            ``t - image_lag_s`` (plus the drift), so ``session build --lag-s image_lag_s`` undoes it.
+        image_clock_drift_ppm: the ultrasound clock's rate error, parts per million, in
+            [-1000, 1000]: its stamps gain ``drift × 1e-6 × (t − start_time_s)`` over the recording.
     """
 
     rate_hz: float = 100.0
@@ -89,6 +98,8 @@ class RecordingConfig:
     margin_s: float = 0.25
     start_time_s: float = 1.7e9
     unannotated_frames: int = 2
+    image_lag_s: float = 0.0
+    image_clock_drift_ppm: float = 0.0
 
     def __post_init__(self) -> None:
         check_range(self.rate_hz, "recording rate", low=10.0, high=1000.0, unit="Hz")
@@ -98,6 +109,13 @@ class RecordingConfig:
         check_range(self.hold_s, "recording hold_s", low=STILL_WINDOW_S + 2 * self.margin_s, high=600.0, unit="s")
         check_range(self.start_time_s, "recording start_time_s", low=0.0, high=4e9, unit="s")
         check_int(self.unannotated_frames, "recording unannotated_frames", low=0, high=1000)
+        check_range(self.image_lag_s, "recording image_lag_s", low=-10.0, high=10.0, unit="s")
+        check_range(self.image_clock_drift_ppm, "recording image_clock_drift_ppm", low=-1000.0, high=1000.0, unit="ppm")
+
+    def image_time(self, log_time_s: float) -> float:
+        """The ultrasound clock's stamp of the moment ``log_time_s`` on the joint log's clock, seconds."""
+        elapsed = log_time_s - self.start_time_s
+        return log_time_s - self.image_lag_s + self.image_clock_drift_ppm * 1e-6 * elapsed
 
 
 @dataclass(frozen=True, eq=False)  # holds arrays: compare fields, not objects
@@ -110,7 +128,8 @@ class Recording:
         q_true: ``(N, nq)`` the true joints.
         joint_names: names of the columns of ``q``.
         marks: the operator's marks, in time order.
-        frames: the captured frames, in time order (annotated, or not).
+        frames: the captured frames, in time order (annotated, or not), stamped on the ultrasound's
+            clock (:meth:`RecordingConfig.image_time`; the log's clock when lag and drift are 0).
         plan: the plan whose poses the samples are.
         twin: the twin (encoder noise off): its ``session`` is the direct session, with the true
             joints of every stop.
@@ -219,6 +238,8 @@ def record(nominal: Robot, config: TwinConfig | None = None, recording: Recordin
         q_true[mask] = q0 + _min_jerk(s)[:, None] * (q1 - q0)
     noise = np.random.default_rng([config.seed, _ENCODER])
     q = q_true + noise.normal(scale=config.encoder_sd_rad, size=q_true.shape) if config.encoder_noise else q_true.copy()
+    if recording.image_lag_s != 0.0 or recording.image_clock_drift_ppm != 0.0:
+        frames = [replace(f, time_s=recording.image_time(f.time_s)) for f in frames]
     frames.sort(key=lambda f: f.time_s)
     return Recording(
         time=recording.start_time_s + clock,
@@ -297,6 +318,7 @@ def write_recording(
     folder: str | os.PathLike[str],
     *,
     bag: str | None = None,
+    images: BModeSettings | None = None,
     force: bool = False,
     outputs: OutputSet | None = None,
 ) -> Path:
@@ -307,6 +329,8 @@ def write_recording(
         folder: created if needed.
         bag: also write the joint states (``/joint_states``) and the marks (:data:`MARKS_TOPIC`) as
             a ROS 2 bag folder ``folder/bag``: ``"sqlite3"`` or ``"mcap"``; ``None`` for none.
+        images: also render the frames as B-mode images with these settings: ``frames.mha`` and
+            ``frames_truth.csv`` (:func:`brachycal.simulation.bmode.write_recording_frames`).
         force: replace existing files.
         outputs: a command's :class:`~brachycal.files.OutputSet` to join (all or nothing with it).
 
@@ -322,6 +346,10 @@ def write_recording(
         _write_marks_csv(out.path(folder / "marks.csv", make_parents=True), rec)
         _write_images_csv(out.path(folder / "images.csv", make_parents=True), rec)
         write_plan(rec.plan, rec.twin.nominal, out.path(folder / "plan.csv", make_parents=True))
+        if images is not None:
+            from brachycal.simulation.bmode import write_recording_frames
+
+            write_recording_frames(rec, folder, images, out)
         # The session.toml of the set-up (what the lab knows before recording), as a template.
         with tempfile.TemporaryDirectory(prefix="brachycal-recording-") as tmp:
             write_session(rec.session, tmp)

@@ -76,8 +76,13 @@ Modules (one concept each): ``image_models`` (the table), ``layout`` (the parame
 ``robot_terms`` (:class:`RobotAccuracy`, :func:`joint_twists`, :func:`robot_jacobian`), ``noise``,
 ``conditioning``, ``solver`` (the small dense least-squares solver every stage uses), ``problem``
 (:class:`ChainProblem`: one solve), ``fit`` (:func:`fit_chain`'s
-stages), ``result`` (:class:`ChainFit`), ``model_choice`` (:func:`select_model`) and
-``identifiability``.
+stages), ``result`` (:class:`ChainFit`), ``model_choice`` (:func:`select_model`, :func:`cross_validate`)
+and ``identifiability``.
+
+Cross-validation's refits are independent of one another: model choice (each model's K folds, the
+most flexible model's fit) and leave-one-out (runs of at most :data:`FOLDS_PER_RUN` warm-started
+folds) share the cores (:func:`brachycal.calibration.parallel.parallel_map`), with the same figures
+on any number of cores.
 """
 
 from __future__ import annotations
@@ -130,8 +135,10 @@ from brachycal.calibration.chain.layout import (
     ParameterLayout,
 )
 from brachycal.calibration.chain.model_choice import (
+    FOLDS_PER_RUN,
     ModelChoice,
     cross_validate,
+    fold_errors,
     select_model,
 )
 from brachycal.calibration.chain.noise import (
@@ -176,6 +183,7 @@ __all__ = [
     "DEFAULT_ROBOT_ACCURACY",
     "FIXED_BLOCKS",
     "FLAG_ROUNDS",
+    "FOLDS_PER_RUN",
     "GROUPS",
     "IDENTIFIABLE_TOLERANCE",
     "IMAGE_MODELS",
@@ -216,6 +224,7 @@ __all__ = [
     "finite_difference_steps",
     "fit_chain",
     "fit_problem",
+    "fold_errors",
     "identifiable_joint_offsets",
     "image_model",
     "image_residuals",

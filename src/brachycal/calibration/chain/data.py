@@ -98,6 +98,20 @@ class ChainData:
         return np.stack([self.needle_axes, self.probe_axes])
 
     @cached_property
+    def axes_terms(self) -> tuple[FloatArray, FloatArray, np.ndarray, np.ndarray]:
+        """The axes moves' constant parts, one row per residual (:data:`AXES_MOVES`, tool-major):
+        ``A (2, R, 3, 3) = R_a0ᵀ (R_ai − R_a0)`` and ``b (2, R, 3) = R_a0ᵀ (t_ai − t_a0)`` of the row's move
+        from p1 to point ``i``, so that the move of a tip ``p`` in the p1 flange frame is ``A p + b``; the
+        row's ``points (R,)`` and the tool's ``columns (R,)`` it is measured along (``R`` = 4)."""
+        points = np.array([point for point, _, across in AXES_MOVES for _ in across])
+        columns = np.array([c for _, _, across in AXES_MOVES for c in across])
+        R_a, t_a = self.axes_T[:, :, :3, :3], self.axes_T[:, :, :3, 3]  # (2, 3, 3, 3), (2, 3, 3)
+        R_a0_T = np.swapaxes(R_a[:, 0], -1, -2)[:, None]  # (2, 1, 3, 3)
+        A = R_a0_T @ (R_a[:, points] - R_a[:, :1])
+        b = (R_a0_T @ (t_a[:, points] - t_a[:, :1])[..., None])[..., 0]
+        return A, b, points, columns
+
+    @cached_property
     def _touch_jacobian(self) -> dict[int, FloatArray]:
         # The touches' Jacobian rows do not depend on x: computed once per parameter-vector length.
         return {}

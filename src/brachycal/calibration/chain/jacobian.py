@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from brachycal.calibration.chain.data import AXES_MOVES, N_AXES_ROWS, ChainData
+from brachycal.calibration.chain.data import N_AXES_ROWS, ChainData
 from brachycal.calibration.chain.layout import ParameterLayout
 from brachycal.calibration.chain.rotations import left_jacobian, skew
 from brachycal.se3 import FloatArray
@@ -34,34 +34,32 @@ def chain_jacobian(
     return J
 
 
-def _cross(a: FloatArray, b: FloatArray) -> FloatArray:
-    """``a × b`` of two ``(3,)`` vectors (``np.cross`` costs 20× more on single vectors)."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-
-
 def _axes_rows(
     x: FloatArray, layout: ParameterLayout, data: ChainData, T_ER_Ntip: FloatArray, T_EL_Ptip: FloatArray
 ) -> FloatArray:
-    """Axes moves: ``(R_a0 R_tool e_c) · (tip_i − tip_0)`` for the two columns ``c`` across the move."""
+    """Axes moves: ``(R_a0 R_tool e_c) · (tip_i − tip_0)`` for the two columns ``c`` across the move,
+    i.e. ``v · (A p + b)`` with ``v = R_tool e_c`` (:attr:`ChainData.axes_terms`): ``∂/∂p = vᵀ A`` and,
+    as ``R_tool = exp(ω) R_base`` moves ``v`` by ``−[v]× J_l dω``, ``∂/∂ω = (v × (A p + b))ᵀ J_l``."""
     b = layout.blocks()
-    axes = np.zeros((N_AXES_ROWS, layout.size))
-    row = 0
-    for T_axes, T_tool, rot, tip in (
-        (data.needle_axes, T_ER_Ntip, "rot_ER_Ntip", "p_ER_Ntip"),
-        (data.probe_axes, T_EL_Ptip, "rot_EL_Ptip", "p_EL_Ptip"),
-    ):
-        R_a, t_a = T_axes[:, :3, :3], T_axes[:, :3, 3]
-        R_tool, p_tool = T_tool[:3, :3], T_tool[:3, 3]
-        J_l = left_jacobian(x[b[rot]])
-        for point, _, across in AXES_MOVES:
-            dR = R_a[point] - R_a[0]
-            w = R_a[0].T @ (dR @ p_tool + t_a[point] - t_a[0])
-            for c in across:
-                v = R_tool[:, c]
-                axes[row, b[tip]] = (R_a[0] @ v) @ dR
-                axes[row, b[rot]] = _cross(v, w) @ J_l
-                row += 1
-    return axes
+    A, offset, _, columns = data.axes_terms
+    R_tools = np.stack([T_ER_Ntip[:3, :3], T_EL_Ptip[:3, :3]])
+    v = np.swapaxes(R_tools[:, :, columns], 1, 2)  # (2, R, 3) the tools' columns the rows are measured along
+    w = (A @ np.stack([T_ER_Ntip[:3, 3], T_EL_Ptip[:3, 3]])[:, None, :, None])[..., 0] + offset  # (2, R, 3) moves
+    tip_rows = (v[:, :, None, :] @ A)[:, :, 0, :]
+    # v × w written out (np.cross costs more than the rest on arrays this small)
+    v_x_w = np.stack(
+        [
+            v[..., 1] * w[..., 2] - v[..., 2] * w[..., 1],
+            v[..., 2] * w[..., 0] - v[..., 0] * w[..., 2],
+            v[..., 0] * w[..., 1] - v[..., 1] * w[..., 0],
+        ],
+        axis=-1,
+    )
+    axes = np.zeros((2, N_AXES_ROWS // 2, layout.size))
+    for k, (rot, tip) in enumerate((("rot_ER_Ntip", "p_ER_Ntip"), ("rot_EL_Ptip", "p_EL_Ptip"))):
+        axes[k, :, b[tip]] = tip_rows[k]
+        axes[k, :, b[rot]] = v_x_w[k] @ left_jacobian(x[b[rot]])
+    return axes.reshape(N_AXES_ROWS, layout.size)
 
 
 def _image_rows(

@@ -12,10 +12,20 @@ from brachycal.calibration.chain.layout import ParameterLayout
 from brachycal.calibration.chain.problem import ChainProblem
 from brachycal.calibration.chain.result import ChainFit
 from brachycal.calibration.metrics import ErrorStats
+from brachycal.calibration.parallel import parallel_map
 from brachycal.calibration.sequential import CalibrationResult
 from brachycal.data.session import Session
 from brachycal.errors import DegenerateDataError
 from brachycal.model.robot import Robot
+from brachycal.se3 import FloatArray
+
+#: Most folds in one run of warm starts (each fold starting from the previous one's fit). Longer
+#: cross-validations (leave-one-out: one fold per sample) are cut into runs of at most this many
+#: folds, each starting from the same fit, which different cores then share (:func:`parallel_map`):
+#: a fold starts a few samples' pull away from its start either way, so a run's length changes only
+#: where the folds start, not what they converge to. The runs depend on the number of folds alone,
+#: never on the cores, so the figures are the same on any machine.
+FOLDS_PER_RUN = 32
 
 
 def cross_validate(
@@ -27,6 +37,9 @@ def cross_validate(
     seed: int = 0,
     exclude: np.ndarray | None = None,
     start: ChainFit | None = None,
+    *,
+    folds_per_run: int | None = FOLDS_PER_RUN,
+    workers: int | None = None,
 ) -> ErrorStats:
     """K-fold cross-validated image error of a chain model: each fold's samples predicted by a fit
     without them (a full refit: robust stage, flags, settled noise levels, solved to the last
@@ -34,37 +47,74 @@ def cross_validate(
 
     ``start``: a fit of this model on the same session from the same sequential result (e.g. the
     final fit, which each leave-one-out fold is close to), whose estimate and settled noise levels
-    the first fold starts from (else the sequential result); each next fold starts from the
-    previous fold's fit. The folds' estimates do not depend on where they start (each stage is
-    solved to its tolerance, the noise levels settle to their fixed point), only their iterations
-    do (:func:`~brachycal.calibration.chain.fit.fit_problem`).
+    the first fold of each run starts from (else the sequential result); each next fold of a run
+    starts from the previous fold's fit. The folds' estimates do not depend on where they start
+    (each stage is solved to its tolerance, the noise levels settle to their fixed point), only
+    their iterations do (:func:`~brachycal.calibration.chain.fit.fit_problem`), and where the noise
+    levels' fixed-point iteration stops (relative change below 1e-6): a fold's error moves by up to
+    ~3e-8 mm with its start, the figures over all folds by ~1e-9 mm (``tests/test_chain_parallel.py``).
+
+    ``folds_per_run``: at most this many folds per run of warm starts (:data:`FOLDS_PER_RUN`;
+    None: one run); the runs share ``workers`` processes (default: the cores, :func:`parallel_map`).
 
     Raises:
         DegenerateDataError: a fold's training samples do not determine the chain.
     """
+    errors = fold_errors(session, robot, initial, model, folds, seed, start, folds_per_run, workers)
+    keep = np.ones(len(errors), dtype=bool) if exclude is None else ~np.asarray(exclude, dtype=bool)
+    return ErrorStats(errors[keep])
+
+
+def fold_errors(
+    session: Session,
+    robot: Robot,
+    initial: CalibrationResult,
+    model: str,
+    folds: int = 8,
+    seed: int = 0,
+    start: ChainFit | None = None,
+    folds_per_run: int | None = FOLDS_PER_RUN,
+    workers: int | None = None,
+) -> FloatArray:
+    """``(N,)`` each sample's cross-validated image error (metres) of :func:`cross_validate`, outliers
+    included."""
     n = len(session.uv_px)
     order = np.random.default_rng(seed).permutation(n)
-    errors = np.empty(n)
     problem, x = ChainProblem.start(session, robot, initial, ParameterLayout(model))  # flange poses once
     settled = None
     if start is not None:
         x = start.x[: problem.layout.size]  # the fixed blocks and scales come first (then any joint offsets)
         settled = start.sigma_m
-    for fold in range(folds):
-        held = np.zeros(n, dtype=bool)
-        held[order[fold::folds]] = True
-        try:
-            fit = fit_problem(problem, x, samples=~held, rounds=1, robot_accuracy=None, settle_from=settled)
-        except DegenerateDataError as exc:
-            left_out = ", ".join(session.sample_ids[i] for i in np.flatnonzero(held)[:3])
-            raise DegenerateDataError(f"{model} cross-validation without sample(s) {left_out}: {exc.problem}") from None
-        # The next fold starts here: its estimates differ from this fold's by a few samples' pull (its
-        # robust stage from this one's, both with rounds=1; its noise levels from these settled ones).
-        x = fit.robust_x if fit.robust_x is not None else fit.x
-        settled = fit.sigma_m
-        errors[held] = np.linalg.norm(fit.image_residuals[held], axis=1)
-    keep = np.ones(n, dtype=bool) if exclude is None else ~np.asarray(exclude, dtype=bool)
-    return ErrorStats(errors[keep])
+    size = folds if folds_per_run is None else max(1, folds_per_run)
+    runs = [range(first, min(first + size, folds)) for first in range(0, folds, size)]
+
+    def run(fold_range: range) -> list[tuple[np.ndarray, FloatArray]]:
+        x_fold, settled_fold = x, settled
+        out = []
+        for fold in fold_range:
+            held = np.zeros(n, dtype=bool)
+            held[order[fold::folds]] = True
+            try:
+                fit = fit_problem(
+                    problem, x_fold, samples=~held, rounds=1, robot_accuracy=None, settle_from=settled_fold
+                )
+            except DegenerateDataError as exc:
+                left_out = ", ".join(session.sample_ids[i] for i in np.flatnonzero(held)[:3])
+                raise DegenerateDataError(
+                    f"{model} cross-validation without sample(s) {left_out}: {exc.problem}"
+                ) from None
+            # The next fold starts here: its estimates differ from this fold's by a few samples' pull (its
+            # robust stage from this one's, both with rounds=1; its noise levels from these settled ones).
+            x_fold = fit.robust_x if fit.robust_x is not None else fit.x
+            settled_fold = fit.sigma_m
+            out.append((held, np.linalg.norm(fit.image_residuals[held], axis=1)))
+        return out
+
+    errors = np.empty(n)
+    for part in parallel_map(run, runs, workers):
+        for held, e in part:
+            errors[held] = e
+    return errors
 
 
 @dataclass(frozen=True)
@@ -91,7 +141,13 @@ class ModelChoice:
 
 
 def select_model(
-    session: Session, robot: Robot, initial: CalibrationResult, models: tuple[str, ...] = MODELS, folds: int = 8
+    session: Session,
+    robot: Robot,
+    initial: CalibrationResult,
+    models: tuple[str, ...] = MODELS,
+    folds: int = 8,
+    *,
+    workers: int | None = None,
 ) -> ModelChoice:
     """Choose the image model by K-fold CV: the simplest model within one standard error of the best.
 
@@ -99,27 +155,53 @@ def select_model(
     scores (they would dominate every model's error alike). A model the data cannot determine
     (:func:`check_conditioning`) is left out of the choice, with its reason.
 
+    The most flexible model's fit and every model's cross-validation are independent refits: they
+    share ``workers`` processes (default: the cores, :func:`parallel_map`); each is the same as run
+    alone.
+
     Raises:
         DegenerateDataError: no model is determined by the data.
     """
+    by_complexity = sorted(models, key=lambda m: -image_model(m).complexity)
+
+    def job(item: tuple[str, str]) -> tuple[str, object]:
+        """``("ok", outliers or errors)``, ``("undetermined", reason)`` or ``("error", exception)`` of one
+        fit or one model's CV."""
+        kind, m = item
+        try:
+            if kind == "flags":
+                return "ok", fit_chain(session, robot, initial, m, robot_accuracy=None).outliers
+            return "ok", cross_validate(session, robot, initial, m, folds).errors_m  # every sample scored
+        except DegenerateDataError as exc:
+            return "undetermined", exc.problem
+        except Exception as exc:  # raised below if this model's CV is used (run alone, it would not be otherwise)
+            return "error", exc
+
+    outcomes = parallel_map(job, [("flags", by_complexity[0]), *(("cv", m) for m in models)], workers)
     undetermined: dict[str, str] = {}
     flagged = None
-    for m in sorted(models, key=lambda m: -image_model(m).complexity):
-        try:
-            flagged = fit_chain(session, robot, initial, m, robot_accuracy=None).outliers
+    for m in by_complexity:  # the most flexible determined model flags the outliers
+        kind, value = job(("flags", m)) if m != by_complexity[0] else outcomes[0]
+        if kind == "error":
+            assert isinstance(value, Exception)
+            raise value
+        if kind == "ok":
+            flagged = np.asarray(value, dtype=bool)
             break
-        except DegenerateDataError as exc:
-            undetermined[m] = exc.problem
+        undetermined[m] = str(value)
     if flagged is None:
         raise DegenerateDataError(next(iter(undetermined.values())))
     cv = {}
-    for m in models:
+    for m, (kind, value) in zip(models, outcomes[1:], strict=True):
         if m in undetermined:
             continue
-        try:
-            cv[m] = cross_validate(session, robot, initial, m, folds, exclude=flagged)
-        except DegenerateDataError as exc:
-            undetermined[m] = exc.problem
+        if kind == "error":
+            assert isinstance(value, Exception)
+            raise value
+        if kind == "ok":
+            cv[m] = ErrorStats(np.asarray(value)[~flagged])
+        else:
+            undetermined[m] = str(value)
     if not cv:
         raise DegenerateDataError(next(iter(undetermined.values())))
     rule = "simplest model within one standard error of the lowest cross-validated RMSE (outliers not scored)"

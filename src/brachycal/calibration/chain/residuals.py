@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from brachycal.calibration.chain.data import AXES_MOVES, ChainData
+from brachycal.calibration.chain.data import ChainData
 from brachycal.calibration.chain.layout import ParameterLayout
 from brachycal.se3 import FloatArray
 
@@ -26,15 +26,13 @@ def chain_residuals(
     R_touch = data.touch_T[:, :3, :3]
     touch = (R_touch @ p_tools[:, :, None])[:, :, 0] + data.touch_T[:, :3, 3] - rtips[data.touch_ref]
     parts = [touch.ravel() / sigma["touch"]]
-    # Axes moves, both tools at once (rows tool-major, then move, then column).
-    T_axes = data.axes_T
-    p_axes = np.stack([T_ER_Ntip[:3, 3], T_EL_Ptip[:3, 3]])
-    tips = (T_axes[:, :, :3, :3] @ p_axes[:, None, :, None])[..., 0] + T_axes[:, :, :3, 3]  # (2, 3, 3)
-    R_tools = T_axes[:, 0, :3, :3] @ np.stack([T_ER_Ntip[:3, :3], T_EL_Ptip[:3, :3]])
-    moves = [
-        np.einsum("kic,ki->kc", R_tools[:, :, across], tips[:, point] - tips[:, 0]) for point, _, across in AXES_MOVES
-    ]
-    parts.append(np.concatenate(moves, axis=1).ravel() / sigma["axes"])
+    # Axes moves, both tools at once (rows tool-major, then move, then column): the tool's column v
+    # (in the p1 flange frame) along the tip's move A p + b (ChainData.axes_terms).
+    A, offset, _, columns = data.axes_terms
+    p_axes = np.stack([T_ER_Ntip[:3, 3], T_EL_Ptip[:3, 3]])  # (2, 3)
+    moves = (A @ p_axes[:, None, :, None])[..., 0] + offset  # (2, R, 3)
+    v = np.stack([T_ER_Ntip[:3, :3], T_EL_Ptip[:3, :3]])[:, :, columns]  # (2, 3, R)
+    parts.append(np.einsum("kir,kri->kr", v, moves).ravel() / sigma["axes"])
     samples = np.asarray(samples, dtype=bool)
     kept = data if samples.all() else data.subset(samples)
     parts.append(image_residuals(kept, T_ER_Ntip, T_EL_Ptip @ T_Ptip_I, spacing).ravel() / sigma["image"])

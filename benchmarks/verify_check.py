@@ -1,0 +1,148 @@
+"""The pre-procedure check (``brachycal plan --verify`` + ``brachycal verify``) measured on the twin.
+
+Run: ``.venv/bin/python benchmarks/verify_check.py [SEEDS] [CHECKS] [LEVEL,...] [--poses N] [--touches WHICH]``
+(default: the check of ``plan --verify``, 6 samples + 2 touches; ``--touches`` both, probe or none:
+which tools touch ``rtip1`` once, ``plan --verify-touches``; 20 seeds, 10 checks per seed for
+the unchanged set-up and 5 per seed for each change; the ``well-built`` and ``real-arm`` robots;
+about 20 minutes on a busy 2-core machine).
+
+Per robot-error level (:data:`brachycal.simulation.twin.ROBOT_ERROR_LEVELS`) and seed, the twin's
+session is calibrated with the whole chain (:class:`~brachycal.simulation.check_twin.CalibratedTwin`)
+and the check's poses are chosen from the same grid (``plan --verify``'s criterion). Then each
+change of :data:`~brachycal.simulation.check_twin.CHANGES` is applied and a check session is
+recorded with fresh noise (the checks of one seed share its calibration: the rates are over
+seeds × checks, and the binomial 95 % interval printed assumes independent checks, which the
+shared calibrations make a little optimistic). Printed per change: how often the verdict is
+RECALIBRATE (the false-alarm rate for "unchanged", else the detection rate) with its Wilson 95 %
+interval, how often the named part is the one that moved, and the true targeting change (RMS over
+the check poses of the change of the noise-free check residual: what ignoring it would cost).
+
+Goals (issue 22): false alarms ≤ 5 % on unchanged set-ups; detection ≥ 95 % for changes that move
+targeting by more than 0.5 mm; robot time per check < 2 min at 10 s per sample. The well-built
+level's figures go to ``benchmarks/results.json`` (:func:`timing.record`).
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+import time
+from collections import defaultdict
+
+import numpy as np
+
+from brachycal.planning.check_plan import DEFAULT_CHECK_POSES as DEFAULT_POSES  # the figures recorded are for it
+from brachycal.planning.check_plan import DEFAULT_TOUCHES, TOUCH_CHOICES
+
+#: The part each change should be named as (probe mount: a remount moves the probe with its image).
+EXPECTED_PART = {
+    "probe remounted 0.5 mm / 0.5 deg": "probe mount",
+    "probe remounted 1 mm / 1 deg": "probe mount",
+    "needle tip bent 0.3 mm": "needle tip",
+    "another needle (tip 3 mm along it)": "needle tip",
+    "speed of sound 1482 -> 1510 m/s": "image scale",
+    "probe-arm joint 2 zero drift 0.03 deg": "robot",
+    "probe re-seated (image 0.5 mm / 0.5 deg)": "image transform",
+}
+
+
+def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """Wilson 95 % interval of a binomial proportion ``k / n``."""
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def main(argv: list[str]) -> None:
+    from timing import record
+
+    from brachycal.model import Robot
+    from brachycal.simulation.check_twin import CHANGES, CalibratedTwin
+
+    flags = [a for a in argv if a.startswith("--")]
+    words = [a for a in argv if not a.startswith("--")]
+    poses = DEFAULT_POSES
+    if "--poses" in argv:
+        poses = int(argv[argv.index("--poses") + 1])
+        words.remove(str(poses))
+    touches = DEFAULT_TOUCHES
+    if "--touches" in argv:
+        touches = argv[argv.index("--touches") + 1]
+        words.remove(touches)
+        if touches not in TOUCH_CHOICES:
+            raise SystemExit(f"--touches must be one of {', '.join(TOUCH_CHOICES)}")
+    unknown = set(flags) - {"--poses", "--touches"}
+    if unknown:
+        raise SystemExit(f"unknown option(s): {', '.join(sorted(unknown))}")
+    touched = len(TOUCH_CHOICES[touches])
+    seeds = int(words[0]) if words else 20
+    checks = int(words[1]) if len(words) > 1 else 10
+    levels = words[2].split(",") if len(words) > 2 else ["well-built", "real-arm"]
+    robot = Robot.load(None)
+    start = time.perf_counter()
+    with tempfile.TemporaryDirectory() as folder:
+        for level in levels:
+            verdicts: dict[str, list[bool]] = defaultdict(list)
+            named: dict[str, list[bool]] = defaultdict(list)
+            change_mm: dict[str, list[float]] = defaultdict(list)
+            minutes = []
+            for seed in range(seeds):
+                twin = CalibratedTwin(seed, robot, folder, robot_error=level, count=poses, touches=touches)
+                minutes.append(twin.check_plan.robot_minutes)
+                for name, change in CHANGES.items():
+                    n = checks if name == "unchanged" else max(1, checks // 2)
+                    for k in range(n):
+                        outcome = twin.trial(change, k)
+                        verdicts[name].append(outcome.verdict == "RECALIBRATE")
+                        if name != "unchanged":
+                            named[name].append(outcome.part == EXPECTED_PART[name])
+                            change_mm[name].append(outcome.targeting_change_mm)
+                print(f"  {level} seed {seed} done ({time.perf_counter() - start:.0f} s)", flush=True)
+            setup = f"{poses} samples" + (f" + {touched} touch{'es' if touched > 1 else ''}" if touched else "")
+            setup += f" ({touches})" if touched == 1 else ""
+            print(f"\n{level} robot, {setup}, {seeds} calibrations: robot time {np.mean(minutes):.1f} min per check")
+            print("| change | targeting change (mm, mean) | RECALIBRATE | 95 % interval | part named right |")
+            print("|---|---|---|---|---|")
+            for name in CHANGES:
+                v = verdicts[name]
+                k, n = int(np.sum(v)), len(v)
+                lo, hi = wilson(k, n)
+                moved = f"{np.mean(change_mm[name]):.2f}" if name != "unchanged" else "0"
+                right = f"{int(np.sum(named[name]))}/{k}" if name != "unchanged" else "-"
+                right = right if name == "unchanged" else f"{int(np.sum(np.array(named[name]) & np.array(v)))}/{k}"
+                print(
+                    f"| {name} | {moved} | {k}/{n} ({100 * k / n:.1f} %) | {100 * lo:.1f}–{100 * hi:.1f} % | {right} |"
+                )
+            # the README's run: only the default check's figures are recorded
+            if level == "well-built" and touches == DEFAULT_TOUCHES and poses == DEFAULT_POSES and seeds >= 20:
+                v = verdicts["unchanged"]
+                rate = float(np.mean(v))
+                record(
+                    f"verify: false-alarm rate, unchanged twin ({setup})",
+                    100 * rate,
+                    "%",
+                    goal="<= 5 %",
+                    met=rate <= 0.05,
+                )
+                big = [n for n in EXPECTED_PART if np.mean(change_mm[n]) > 0.5]
+                worst = min(float(np.mean(verdicts[n])) for n in big)
+                record(
+                    "verify: lowest detection rate, changes moving targeting > 0.5 mm",
+                    100 * worst,
+                    "%",
+                    goal=">= 95 %",
+                    met=worst >= 0.95,
+                )
+                record(
+                    "verify: robot time per check (10 s per sample, 30 s per touch)",
+                    float(np.mean(minutes)),
+                    "min",
+                    goal="< 2 min",
+                    met=float(np.mean(minutes)) < 2.0,
+                )
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(__import__("pathlib").Path(__file__).parent))
+    main(sys.argv[1:])

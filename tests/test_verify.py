@@ -1,0 +1,311 @@
+"""The check before each procedure: ``brachycal plan --verify`` and ``brachycal verify``.
+
+A twin session (seed 0) is calibrated with the whole chain once; check sessions are recorded on
+it at the check poses, unchanged or after one part moved (:mod:`brachycal.simulation.check_twin`).
+The false-alarm and detection rates over seeds are the benchmark's (``benchmarks/verify_check.py``);
+here each outcome is a specification on fixed noise draws.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from hostile import run_cli
+
+from brachycal.calibration.check import (
+    DEFAULT_FALSE_ALARM,
+    GROSS_PRIOR_MULTIPLES,
+    PARTS,
+    check_calibration,
+    chi2_isf,
+    chi2_sf,
+    fit_part,
+    read_check_session,
+    verdict_text,
+)
+from brachycal.model import Robot
+from brachycal.planning.check_plan import DEFAULT_CHECK_POSES, DEFAULT_TOUCHES, SECONDS_PER_TOUCH, TOUCH_CHOICES
+from brachycal.simulation.check_twin import CHANGES, CalibratedTwin, changed_setup, record_check, write_check_session
+
+REMOUNT = "probe remounted 1 mm / 1 deg"
+#: Single touches in the default check (plan --verify).
+DEFAULT_TOUCH_COUNT = len(TOUCH_CHOICES[DEFAULT_TOUCHES])
+
+
+@pytest.fixture(scope="module")
+def calibrated(tmp_path_factory) -> CalibratedTwin:
+    folder = tmp_path_factory.mktemp("calibrated")
+    return CalibratedTwin(0, Robot.load(None), folder, result_path=folder / "result.json")
+
+
+def check(calibrated: CalibratedTwin, change: str, seed: int = 1, *, touches: str = DEFAULT_TOUCHES):
+    rng = np.random.default_rng([0, seed, 7])
+    setup = changed_setup(calibrated.twin, CHANGES[change], rng)
+    session, _ = record_check(calibrated.twin, setup, calibrated.q_planned, calibrated.uv_planned, rng, touches=touches)
+    return session, check_calibration(calibrated.stored, calibrated.method, calibrated.robot, session)
+
+
+def test_chi_square_helpers_agree_with_scipy_stats():
+    from scipy.stats import chi2
+
+    for dof in (3, 24, 30, 48):
+        # Both are SciPy's incomplete gamma functions: agreement to 1e-10 relative guards a slip of a
+        # factor 2 in the arguments, not rounding.
+        assert chi2_isf(0.05, dof) == pytest.approx(chi2.isf(0.05, dof), rel=1e-10)
+        assert chi2_sf(dof + 3.0, dof) == pytest.approx(chi2.sf(dof + 3.0, dof), rel=1e-10)
+
+
+def test_a_part_fit_recovers_the_change_that_made_the_residuals():
+    rng = np.random.default_rng(3)
+    J = rng.normal(size=(30, 6))
+    delta = rng.normal(size=6)
+    fit, fitted = fit_part("probe mount", J, -J @ delta, n_samples=8)
+    # Exact data: the change comes back to rounding (1e-9 guards the solve, not the last bits).
+    np.testing.assert_allclose(fit.delta, delta, atol=1e-9)
+    assert fit.remaining == pytest.approx(0.0, abs=1e-9)
+    assert fit.rank == 6 and fit.dof == 24
+    assert fitted.shape == (8, 3)
+
+
+def test_an_undetermined_direction_is_left_out_with_an_infinite_sd():
+    J = np.zeros((12, 3))
+    J[:, 0] = 1.0
+    J[:, 1] = np.arange(12.0)  # the third parameter is not seen at all
+    fit, _ = fit_part("needle tip", J, np.ones(12), n_samples=4)
+    assert fit.rank == 2
+    assert np.isinf(fit.sd[2]) and np.all(np.isfinite(fit.sd[:2]))
+
+
+def test_the_check_plan_takes_few_minutes_and_spreads_over_the_cube(calibrated):
+    plan = calibrated.check_plan
+    assert len(plan.plan.poses) == DEFAULT_CHECK_POSES
+    # Spread: the picked grid points use both ends of each of the cube's three axes.
+    index = np.array([p.point.index for p in plan.plan.poses])
+    assert all(index[:, axis].min() == 0 and index[:, axis].max() == 3 for axis in range(3))
+    # 6 x 10 s of samples, the motion (seconds at full speed) and the default's 30 s touches.
+    assert plan.touches == DEFAULT_TOUCH_COUNT
+    assert plan.robot_minutes < 2.1
+    assert plan.robot_minutes - DEFAULT_TOUCH_COUNT * SECONDS_PER_TOUCH / 60 < 1.1
+    # The greedy D-optimal criterion only grows with each pick.
+    assert np.all(np.diff(plan.log_det) > 0)
+
+
+def test_an_unchanged_set_up_passes(calibrated):
+    _, outcome = check(calibrated, "unchanged")
+    assert outcome.verdict == "PASS" and outcome.part is None
+    assert outcome.dof == 3 * (DEFAULT_CHECK_POSES + DEFAULT_TOUCH_COUNT)
+    assert outcome.statistic <= outcome.threshold
+    assert outcome.false_alarm == DEFAULT_FALSE_ALARM
+
+
+@pytest.mark.parametrize(
+    ("change", "part"),
+    [
+        (REMOUNT, "probe mount"),
+        ("another needle (tip 3 mm along it)", "needle tip"),
+        ("speed of sound 1482 -> 1510 m/s", "image scale"),
+        ("probe re-seated (image 0.5 mm / 0.5 deg)", "image transform"),
+    ],
+)
+def test_each_kind_of_change_is_detected_and_named(calibrated, change, part):
+    _, outcome = check(calibrated, change)
+    assert outcome.verdict == "RECALIBRATE"
+    assert outcome.part is not None and outcome.part.part == part
+    # Naming it means its fit leaves noise: the remaining chi-square is plausible at the test's level.
+    assert outcome.part.p_remaining > outcome.false_alarm
+
+
+def test_a_joint_drift_is_detected_and_named_robot(calibrated):
+    from dataclasses import replace
+
+    drift = replace(CHANGES["unchanged"], name="drift", joint_drift_rad=np.radians(0.1))
+    rng = np.random.default_rng([0, 1, 7])
+    setup = changed_setup(calibrated.twin, drift, rng)
+    session, _ = record_check(calibrated.twin, setup, calibrated.q_planned, calibrated.uv_planned, rng)
+    outcome = check_calibration(calibrated.stored, calibrated.method, calibrated.robot, session)
+    assert outcome.verdict == "RECALIBRATE" and outcome.part is not None and outcome.part.part == "robot"
+
+
+def test_the_size_of_a_remount_is_measured(calibrated):
+    _, outcome = check(calibrated, REMOUNT)
+    part = outcome.part
+    assert part is not None
+    shift_mm, turn_deg = np.linalg.norm(part.delta[:3]) * 1e3, np.degrees(np.linalg.norm(part.delta[3:]))
+    # 1 mm / 1 deg moved; the fit's SDs are ~0.1 mm / ~0.2 deg per axis: within 0.3 mm / 0.5 deg.
+    assert shift_mm == pytest.approx(1.0, abs=0.3)
+    assert turn_deg == pytest.approx(1.0, abs=0.5)
+    # Ignoring a 1 mm / 1 deg remount costs more than the 0.5 mm the check exists for.
+    assert part.targeting_mm > 0.5
+
+
+def test_without_a_probe_touch_a_remount_and_an_image_change_are_named_together(calibrated):
+    from brachycal.calibration.check import verdict_text
+
+    _, outcome = check(calibrated, REMOUNT, touches="none")
+    assert outcome.verdict == "RECALIBRATE"
+    assert {outcome.part.part, *outcome.alternatives} == {"probe mount", "image transform"}
+    assert "cannot tell them apart" in verdict_text(outcome)
+
+
+def test_with_the_probe_touch_alone_a_remount_is_told_from_an_image_change(calibrated):
+    # The probe's touch sees its mount but not the image on it: a remount is named alone ...
+    session, outcome = check(calibrated, REMOUNT, touches="probe")
+    assert [t[0] for t in session.touches] == ["probe"]
+    assert outcome.dof == 3 * (DEFAULT_CHECK_POSES + 1)
+    assert outcome.verdict == "RECALIBRATE"
+    assert outcome.part is not None and outcome.part.part == "probe mount"
+    assert "image transform" not in outcome.alternatives and "cannot tell them apart" not in verdict_text(outcome)
+    # ... and an image change (the probe tip stays) is not blamed on the mount. (Which image part is
+    # named, transform or scale, is the benchmark's rate, not one draw's.)
+    _, outcome = check(calibrated, "probe re-seated (image 0.5 mm / 0.5 deg)", touches="probe")
+    assert outcome.verdict == "RECALIBRATE"
+    assert outcome.part is not None and outcome.part.part != "probe mount"
+    assert "probe mount" not in outcome.alternatives
+    # A needle change shows in the samples alone.
+    _, outcome = check(calibrated, "another needle (tip 3 mm along it)", touches="probe")
+    assert outcome.verdict == "RECALIBRATE" and outcome.part is not None and outcome.part.part == "needle tip"
+
+
+def test_the_probe_only_check_takes_a_minute_and_a_half(calibrated):
+    from brachycal.planning.check_plan import SECONDS_PER_SAMPLE, plan_check
+
+    full = calibrated.check_plan.plan  # the default check's six poses: the pick keeps them all
+    image = calibrated.stored.image[calibrated.method]
+    plan = plan_check(
+        full,
+        calibrated.robot,
+        calibrated.stored.T_ER_Ntip,
+        calibrated.stored.T_EL_Ptip,
+        image.T_Ptip_I,
+        image.spacing_m,
+        touches="probe",
+    )
+    assert plan.touches == 1 and plan.touch_tools == ("probe",)
+    # 60 s of samples + about a second of motion + one 30 s touch: the stated 1.5 minutes (0.05 min
+    # is the rounding of the printed figure, and allows the motion up to ~4 s).
+    expected = (DEFAULT_CHECK_POSES * SECONDS_PER_SAMPLE + plan.motion_s + SECONDS_PER_TOUCH) / 60
+    assert plan.robot_minutes == pytest.approx(expected, rel=1e-12)
+    assert plan.robot_minutes == pytest.approx(1.5, abs=0.05)
+
+
+def test_an_unknown_touch_choice_is_refused(calibrated):
+    from brachycal.errors import InputError
+
+    with pytest.raises(InputError, match="touches must be one of both, probe, none"):
+        check(calibrated, "unchanged", touches="needle")
+
+
+def test_a_touch_at_the_wrong_reference_tip_is_not_reported_as_a_size(calibrated):
+    """A touch labelled rtip2 that was made at rtip1 (tens of cm off) must not read as a robot that
+    moved 47 degrees: no small change of one part explains it, and the verdict says to check the data."""
+    session, _ = check(calibrated, "unchanged")
+    tool, _, trial, q = session.touches[-1]
+    wrong = replace(session, touches=[*session.touches[:-1], (tool, "rtip2", trial, q)])
+    outcome = check_calibration(calibrated.stored, calibrated.method, calibrated.robot, wrong)
+    assert outcome.verdict == "RECALIBRATE"
+    assert outcome.part is not None and outcome.part.prior_multiples > GROSS_PRIOR_MULTIPLES
+    text = verdict_text(outcome)
+    assert "no small change of one part explains the check" in text and "check the session's labels" in text
+    # the honest case keeps its size: a remount of 1 mm / 1 deg is within the linear model's range
+    _, remounted = check(calibrated, REMOUNT)
+    assert remounted.part is not None and remounted.part.prior_multiples < GROSS_PRIOR_MULTIPLES
+    assert "most likely moved, by" in verdict_text(remounted)
+
+
+def test_every_hypothesis_is_reported(calibrated):
+    _, outcome = check(calibrated, REMOUNT)
+    assert [f.part for f in outcome.fits] == list(PARTS)
+
+
+@pytest.fixture(scope="module")
+def check_folders(calibrated, tmp_path_factory) -> dict[str, object]:
+    folder = tmp_path_factory.mktemp("checks")
+    out = {"result": calibrated.stored.source}
+    for name, change in (("unchanged", "unchanged"), ("remounted", REMOUNT)):
+        session, _ = check(calibrated, change)
+        out[name] = write_check_session(session, calibrated.twin, folder / name, calibrated.robot)
+    return out
+
+
+def test_a_written_check_session_reads_back(calibrated, check_folders):
+    session = read_check_session(check_folders["unchanged"], calibrated.robot)
+    assert len(session.sample_ids) == DEFAULT_CHECK_POSES and len(session.touches) == DEFAULT_TOUCH_COUNT
+    assert set(session.inputs) == {"session.toml", "samples.csv", "touches.csv"}
+
+
+def test_a_probe_only_check_session_reads_back_with_one_touch(calibrated, tmp_path):
+    session, _ = check(calibrated, "unchanged", touches="probe")
+    folder = write_check_session(session, calibrated.twin, tmp_path / "probe_only", calibrated.robot)
+    back = read_check_session(folder, calibrated.robot)
+    assert [(t[0], t[1], t[2]) for t in back.touches] == [("probe", "rtip1", 1)]
+    # Joints are written with repr: they read back exactly.
+    np.testing.assert_array_equal(back.touches[0][3], session.touches[0][3])
+    outcome = check_calibration(calibrated.stored, calibrated.method, calibrated.robot, back)
+    assert outcome.verdict == "PASS" and outcome.dof == 3 * (DEFAULT_CHECK_POSES + 1)
+
+
+def test_verify_exits_0_on_pass_and_writes_a_record(check_folders, tmp_path):
+    record = tmp_path / "record.json"
+    report = tmp_path / "record.html"
+    outcome = run_cli(
+        [
+            "verify",
+            check_folders["result"],
+            str(check_folders["unchanged"]),
+            "--out",
+            str(record),
+            "--report",
+            str(report),
+        ]
+    )
+    assert outcome.code == 0, outcome.err
+    assert outcome.out.startswith("PASS")
+    data = json.loads(record.read_text())  # the reader refuses NaN: the record has none (write_json)
+    assert data["format"] == "brachycal-verification/1"
+    assert data["verdict"] == "PASS" and data["part"] is None
+    assert len(data["result"]["sha256"]) == 64
+    assert set(data["check_session"]["inputs"]) == {"session.toml", "samples.csv", "touches.csv"}
+    assert (
+        data["test"]["dof"] == 3 * (DEFAULT_CHECK_POSES + DEFAULT_TOUCH_COUNT)
+        and data["test"]["value"] <= data["test"]["threshold"]
+    )
+    assert "PASS" in report.read_text()
+
+
+def test_verify_exits_1_on_recalibrate_naming_the_part(check_folders, tmp_path):
+    record = tmp_path / "record.json"
+    outcome = run_cli(["verify", check_folders["result"], str(check_folders["remounted"]), "--out", str(record)])
+    assert outcome.code == 1, outcome.err
+    assert outcome.out.startswith("RECALIBRATE: the probe mount most likely moved")
+    data = json.loads(record.read_text())
+    assert data["verdict"] == "RECALIBRATE" and data["part"] == "probe mount"
+    assert data["targeting_if_ignored_mm"] > 0.5
+
+
+def test_plan_verify_writes_a_plan_of_the_check_poses(tmp_path):
+    out = tmp_path / "check_plan.csv"
+    outcome = run_cli(["plan", "--verify", "--out", str(out), "--quiet"])
+    assert outcome.code == 0, outcome.err
+    lines = out.read_text().splitlines()
+    assert lines[0].startswith("order,point,i,j,k,x,y,z,u_px,v_px")
+    assert len(lines) == 1 + DEFAULT_CHECK_POSES
+    assert "robot time" in outcome.out and "min" in outcome.out
+    assert not (tmp_path / "check_plan.png").exists()
+
+
+def test_plan_verify_with_the_probe_touch_alone_states_a_minute_and_a_half(tmp_path):
+    out = tmp_path / "check_plan.csv"
+    outcome = run_cli(["plan", "--verify", "--verify-touches", "probe", "--out", str(out), "--quiet"])
+    assert outcome.code == 0, outcome.err
+    assert len(out.read_text().splitlines()) == 1 + DEFAULT_CHECK_POSES
+    assert "1 touch x 30 s (probe on rtip1) = 1.5 min" in outcome.out
+
+
+def test_verify_touches_goes_with_verify(tmp_path):
+    outcome = run_cli(["plan", "--verify-touches", "probe", "--out", str(tmp_path / "plan.csv")])
+    assert outcome.code == 2
+    assert "--verify-touches goes with --verify" in outcome.err
+    assert not any(tmp_path.iterdir())
