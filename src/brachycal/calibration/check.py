@@ -94,8 +94,8 @@ class CheckSession:
 
 def read_check_session(folder: str | os.PathLike[str], robot: Robot) -> CheckSession:
     """Read a check session (module docstring); refuses with one line naming the file, row and column."""
-    from brachycal.data.csv_log import read_table, table_configurations, to_float, unique_names
-    from brachycal.data.session import REFERENCES, check_robot_columns, read_session_toml
+    from brachycal.data.csv_log import read_table, table_configurations, to_float
+    from brachycal.data.session import REFERENCES, check_robot_columns, read_sample_table, read_session_toml
     from brachycal.files import sha256_file
 
     def labels(path: Path, header: list[str], rows: list[int], records: list[list[str]], column: str, allowed):
@@ -120,18 +120,7 @@ def read_check_session(folder: str | os.PathLike[str], robot: Robot) -> CheckSes
             raise InputError("missing check session file", file=folder / name)
     spacing_m, size_px, _ = read_session_toml(folder / "session.toml")
     path = folder / "samples.csv"
-    header, rows, records = read_table(path, ["sample", "u_px", "v_px"])
-    check_robot_columns(path, header, robot)
-    ids = unique_names(path, header, rows, records, "sample")
-    uv = to_float(path, header, rows, records, ["u_px", "v_px"])
-    for axis, name in enumerate(("u_px", "v_px")):
-        bad = ~np.isfinite(uv[:, axis]) | (uv[:, axis] < -0.5) | (uv[:, axis] > size_px[axis] - 0.5)
-        if bad.any():
-            i = int(np.argmax(bad))
-            raise InputError(
-                f"{uv[i, axis]:g} is outside the image (0..{size_px[axis] - 1} px)", file=path, row=rows[i], column=name
-            )
-    q = table_configurations(path, robot, header, rows, records)
+    ids, q, uv = read_sample_table(path, robot, size_px)
     if len(ids) < MIN_CHECK_SAMPLES:
         raise DegenerateDataError(
             f"{len(ids)} samples: a check needs at least {MIN_CHECK_SAMPLES} (brachycal plan --verify plans 5 to 16)",

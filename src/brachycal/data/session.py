@@ -239,7 +239,10 @@ def _read_axes(path: Path, robot: Robot) -> dict[str, dict[str, FloatArray]]:
     return axes
 
 
-def _read_samples(path: Path, robot: Robot, size_px: np.ndarray) -> tuple[list[str], FloatArray, FloatArray]:
+def read_sample_table(path: Path, robot: Robot, size_px: np.ndarray) -> tuple[list[str], FloatArray, FloatArray]:
+    """``(ids, q (N, nq) radians, uv (N, 2) px)`` of a ``samples.csv``: unique sample names, the robot's
+    joint columns, annotated tips inside the ``size_px`` image; one-line refusals naming row and column.
+    How many samples are enough is the caller's to say (a session's, a check's)."""
     header, rows, records = read_table(path, ["sample", "u_px", "v_px"])
     check_robot_columns(path, header, robot)
     ids = unique_names(path, header, rows, records, "sample")
@@ -251,7 +254,11 @@ def _read_samples(path: Path, robot: Robot, size_px: np.ndarray) -> tuple[list[s
             raise InputError(
                 f"{uv[i, axis]:g} is outside the image (0..{size_px[axis] - 1} px)", file=path, row=rows[i], column=name
             )
-    q = table_configurations(path, robot, header, rows, records)
+    return ids, table_configurations(path, robot, header, rows, records), uv
+
+
+def _read_samples(path: Path, robot: Robot, size_px: np.ndarray) -> tuple[list[str], FloatArray, FloatArray]:
+    ids, q, uv = read_sample_table(path, robot, size_px)
     if len(ids) < 3:
         raise InputError(f"{len(ids)} samples: at least 3 with non-collinear image points are needed", file=path)
     centred = uv - uv.mean(axis=0)
