@@ -205,7 +205,14 @@ def session(file: str, row: int, column: str, value: Callable[[float], float]):
     return setup
 
 
+def unchanged(header: list[str], rows: list[list[str]]) -> None:
+    """The example log as it is: the case's refusal comes from its options."""
+
+
 CASES = [
+    # fk --lag-s: a finite number, and only with --times (the times it shifts)
+    Case("fk-lag-without-times", [*FK, "--lag-s", "0.05"], ("--lag-s applies to --times",), csv_log(unchanged)),
+    Case("fk-lag-not-a-number", [*FK, "--lag-s", "nan"], ("--lag-s", "nan"), csv_log(unchanged)),
     # N-wire: tracker and phantom matrices must be rigid (a rotation ×1.5 gave a wrong spacing and a
     # normal-looking validation error, exit 0).
     Case(

@@ -255,6 +255,9 @@ CASES = [
         with_copy(set_field("plan.csv", 2, "arm_left_joint_2_l", "-57.3")),
     ),
     # --- options ----------------------------------------------------------------------------------
+    Case("lag-not-a-number", [*BUILD, "--lag-s", "nan"], ("--lag-s", "nan"), with_copy()),
+    Case("lag-infinite", [*BUILD, "--lag-s", "inf"], ("--lag-s", "inf"), with_copy()),
+    Case("lag-sd-negative", [*BUILD, "--lag-sd-s", "-0.01"], ("--lag-sd-s", "-0.01"), with_copy()),
     Case(
         "marks-twice",
         [*BUILD, "--marks-topic", "/marks"],
