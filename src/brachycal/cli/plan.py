@@ -10,7 +10,7 @@ import sys
 from collections import Counter
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING, BinaryIO
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -368,8 +368,8 @@ class _FigureProcess:
                 pipe.close()
 
 
-def _draw_in_child(inbox: BinaryIO | None = None, outbox: BinaryIO | None = None) -> None:
-    """The drawing process: import matplotlib now, then draw the plan sent on stdin (``inbox``).
+def _draw_in_child() -> None:
+    """The drawing process: import matplotlib now, then draw the plan sent on stdin.
 
     Writes ``(None or the error, [warning messages])`` pickled on stdout; prints nothing else.
     SIGTERM (the command failed or was stopped) becomes SystemExit, so that a half-written figure
@@ -378,8 +378,7 @@ def _draw_in_child(inbox: BinaryIO | None = None, outbox: BinaryIO | None = None
     import signal
     import warnings
 
-    inbox = sys.stdin.buffer if inbox is None else inbox
-    outbox = sys.stdout.buffer if outbox is None else outbox
+    inbox, outbox = sys.stdin.buffer, sys.stdout.buffer
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the command's: it ends this process
     signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(143))
     with warnings.catch_warnings(record=True) as caught:
@@ -390,7 +389,11 @@ def _draw_in_child(inbox: BinaryIO | None = None, outbox: BinaryIO | None = None
             from brachycal.reporting import plot_plan
             from brachycal.reporting.plan_plot import warm_up_plan_figure
 
-            if not select.select([inbox], [], [], 0)[0]:  # the planner still runs: draw warm (~0.25 s less)
+            try:
+                waiting = not select.select([inbox], [], [], 0)[0]
+            except (OSError, ValueError):  # Windows' select takes sockets only: no warm-up there
+                waiting = False
+            if waiting:  # the planner still runs: draw a stand-in first, the plan's figure then draws warm
                 warm_up_plan_figure()
             plot_plan(*pickle.load(inbox))
             outcome: object = None
