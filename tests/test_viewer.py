@@ -94,33 +94,38 @@ def _screenshot(url: str, png: Path, profile: Path, ready: Callable[[np.ndarray]
     """A screenshot of ``url`` in headless Chromium once ``ready(shot)`` holds, or the last of a few.
 
     The scene reaches the page over a websocket after the page has loaded, and software WebGL draws
-    it slowly on a loaded machine: one fixed wait would be flaky, so each attempt waits longer."""
+    it slowly on a loaded machine: one fixed wait would be flaky, so each attempt waits longer. A
+    Chromium that hangs (seen once with two test suites sharing two cores) is an attempt that failed:
+    the next one starts a new browser; the caller's checks of the shot stay as they are."""
     from PIL import Image
 
     shot = np.zeros((1, 1, 3), dtype=int)
-    for budget_ms in (8_000, 20_000, 45_000):
-        subprocess.run(
-            [
-                _chromium(),
-                "--headless",
-                "--no-sandbox",
-                "--disable-gpu",
-                "--enable-unsafe-swiftshader",
-                "--disable-quic",
-                "--no-first-run",
-                "--disable-background-networking",
-                "--disable-component-update",
-                "--disable-sync",
-                f"--user-data-dir={profile}",
-                "--window-size=900,700",
-                f"--virtual-time-budget={budget_ms}",
-                f"--screenshot={png}",
-                url,
-            ],
-            check=True,
-            capture_output=True,
-            timeout=300,
-        )
+    for budget_ms, timeout_s in ((8_000, 120), (20_000, 180), (45_000, 300)):
+        try:
+            subprocess.run(
+                [
+                    _chromium(),
+                    "--headless",
+                    "--no-sandbox",
+                    "--disable-gpu",
+                    "--enable-unsafe-swiftshader",
+                    "--disable-quic",
+                    "--no-first-run",
+                    "--disable-background-networking",
+                    "--disable-component-update",
+                    "--disable-sync",
+                    f"--user-data-dir={profile / str(budget_ms)}",  # a new one: a hung browser may hold the last
+                    "--window-size=900,700",
+                    f"--virtual-time-budget={budget_ms}",
+                    f"--screenshot={png}",
+                    url,
+                ],
+                check=True,
+                capture_output=True,
+                timeout=timeout_s,
+            )
+        except subprocess.TimeoutExpired:
+            continue
         shot = np.asarray(Image.open(png).convert("RGB")).astype(int)
         if ready(shot):
             break
