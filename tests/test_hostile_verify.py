@@ -63,7 +63,18 @@ def nan_reference_tip(data: dict) -> None:
     data["reference_tips_m"]["rtip1"] = ["x", 0, 0]
 
 
+def copy_session_without_last_sample(tmp: Path) -> None:
+    shutil.copytree(GOOD["session"], tmp / "session")
+    path = tmp / "session" / "samples.csv"
+    path.write_text("\n".join(path.read_text().splitlines()[:-1]) + "\n")
+
+
+def recorded_inputs(data: dict) -> None:
+    data["inputs"] = {"samples.csv": "0" * 64}
+
+
 GOOD: dict[str, str] = {}
+SESSION = ["--calibration-session", "{session}"]
 
 CASES = [
     Case("no-arguments", ["verify"], ("RESULT", "CHECK_SESSION")),
@@ -86,7 +97,7 @@ CASES = [
         "touch-of-an-unknown-tool",
         ["verify", "{result}", "{tmp}/check", *OUT],
         ("touches.csv", "tool"),
-        copy_check(replace_in("touches.csv", "\nneedle,", "\nscalpel,")),
+        copy_check(replace_in("touches.csv", "\nprobe,", "\nscalpel,")),
     ),
     Case(
         "other-image-spacing",
@@ -112,6 +123,24 @@ CASES = [
     Case("false-alarm-nan", ["verify", "{result}", "{check}", "--false-alarm", "nan", *OUT], ("--false-alarm",)),
     Case("result-of-another-robot", ["verify", "{result}", "{check}", "--robot", "baxter", *OUT], ("baxter",)),
     Case("demo-with-result", ["verify", "{result}", "--demo", "{tmp}/demo"], ("--demo",)),
+    Case("demo-with-calibration-session", ["verify", *SESSION, "--demo", "{tmp}/demo"], ("--demo",)),
+    Case(
+        "calibration-session-missing",
+        ["verify", "{result}", "{check}", "--calibration-session", "{tmp}/nowhere", *OUT],
+        ("nowhere",),
+    ),
+    Case(
+        "calibration-session-of-other-samples",
+        ["verify", "{result}", "{check}", "--calibration-session", "{tmp}/session", *OUT],
+        ("samples.csv", "not the session this result was calibrated from"),
+        copy_session_without_last_sample,
+    ),
+    Case(
+        "calibration-session-files-differ-from-the-results-inputs",
+        ["verify", "{tmp}/result.json", "{check}", *SESSION, *OUT],
+        ("samples.csv", "SHA-256"),
+        copy_result(recorded_inputs),
+    ),
     Case("verify-poses-without-verify", ["plan", "--out", "{tmp}/p.csv", "--verify-poses", "6"], ("--verify",)),
     Case(
         "verify-poses-too-few", ["plan", "--verify", "--out", "{tmp}/p.csv", "--verify-poses", "2"], ("--verify-poses",)
@@ -131,7 +160,9 @@ def inputs(tmp_path_factory) -> dict[str, str]:
     folder = tmp_path_factory.mktemp("inputs") / "demo"
     outcome = run_cli(["verify", "--demo", str(folder)])
     assert outcome.code == 0, outcome.err
-    GOOD.update(result=str(folder / "result.json"), check=str(folder / "check_unchanged"))
+    GOOD.update(
+        result=str(folder / "result.json"), check=str(folder / "check_unchanged"), session=str(folder / "session")
+    )
     return dict(GOOD)
 
 

@@ -107,6 +107,10 @@ def _write_report(
         handle.write("\n".join(parts))
 
 
+def _threshold(value: float | None) -> str:
+    return "not tested" if value is None else f"{value:.1f}"
+
+
 def verification_page(record: dict) -> str:
     """The HTML page of a verification record (``brachycal verify --report``; ``record``: the
     ``brachycal-verification/1`` dict of :func:`brachycal.calibration.check.outcome_json`)."""
@@ -136,12 +140,21 @@ def verification_page(record: dict) -> str:
         ]
     hypotheses = "".join(
         f"<tr><td>{html.escape(h['part'])}</td><td>{h['determined']}/{h['parameters']}</td>"
-        f"<td>{h['explained_chi2']:.1f}</td><td>{h['remaining_chi2']:.1f} / {h['remaining_dof']}</td>"
+        f"<td>{h['explained_chi2']:.1f}</td><td>{_threshold(h.get('explained_threshold'))}</td>"
+        f"<td>{h['remaining_chi2']:.1f} / {h['remaining_dof']}</td>"
         f"<td>{h['remaining_p']:.3g}</td><td>{h['targeting_if_ignored_mm']:.2f}</td><td>{html.escape(h['size'])}</td></tr>"
         for h in record["hypotheses"]
     )
+    null = test.get("null_sd_mm", {}).get("per_sample", {})
+
+    def null_cells(name: str) -> str:
+        entry = null.get(name, {})
+        sd = entry.get("sd_mm")
+        match = entry.get("calibration_sample")
+        return f"<td>{'' if sd is None else f'{sd:.3f}'}</td><td>{html.escape(match or '(average)')}</td>"
+
     samples = "".join(
-        f"<tr><td>{html.escape(name)}</td>" + "".join(f"<td>{v:+.3f}</td>" for v in e) + "</tr>"
+        f"<tr><td>{html.escape(name)}</td>" + "".join(f"<td>{v:+.3f}</td>" for v in e) + null_cells(name) + "</tr>"
         for name, e in record["sample_residuals_mm"].items()
     )
     return "\n".join(
@@ -152,10 +165,12 @@ def verification_page(record: dict) -> str:
             f"<p style='font-size:1.4em;color:{colour}'><b>{html.escape(verdict)}</b></p><table>",
             *(f"<tr><th>{html.escape(k)}</th><td>{html.escape(str(v))}</td></tr>" for k, v in rows),
             "</table><h2>Which part moved: each hypothesis fitted alone</h2>",
-            "<table><tr><th>part</th><th>determined</th><th>explained χ²</th><th>remaining χ² / dof</th>"
+            "<table><tr><th>part</th><th>determined</th><th>explained χ²</th><th>its threshold</th>"
+            "<th>remaining χ² / dof</th>"
             f"<th>p (remaining)</th><th>targeting if ignored (mm)</th><th>size</th></tr>{hypotheses}</table>",
-            "<h2>Sample residuals (mm: lateral, depth, normal of the image)</h2>",
-            f"<table><tr><th>sample</th><th>lateral</th><th>depth</th><th>normal</th></tr>{samples}</table>",
+            "<h2>Sample residuals (mm: lateral, depth, normal of the image; null SD per coordinate)</h2>",
+            "<table><tr><th>sample</th><th>lateral</th><th>depth</th><th>normal</th><th>null SD</th>"
+            f"<th>its calibration sample</th></tr>{samples}</table>",
             "</body></html>",
         ]
     )

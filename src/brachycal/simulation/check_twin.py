@@ -217,7 +217,9 @@ class TrialOutcome:
 
 class CalibratedTwin:
     """A twin session, its calibration (a result file in ``folder``) and the check poses, with the
-    single touches of ``touches`` (a :data:`~brachycal.planning.check_plan.TOUCH_CHOICES` key)."""
+    single touches of ``touches`` (a :data:`~brachycal.planning.check_plan.TOUCH_CHOICES` key).
+    With ``pose_nulls`` (default) each check is given the calibration session, for each pose's own
+    null SD (:func:`~brachycal.calibration.check.with_calibration_poses`)."""
 
     def __init__(
         self,
@@ -230,6 +232,7 @@ class CalibratedTwin:
         count: int = DEFAULT_CHECK_POSES,
         touches: str = DEFAULT_TOUCHES,
         result_path: str | os.PathLike[str] | None = None,
+        pose_nulls: bool = True,
     ) -> None:
         from brachycal.calibration import calibrate, read_result, write_result
         from brachycal.calibration.chain_report import calibrate_chain
@@ -261,6 +264,7 @@ class CalibratedTwin:
             touches=touches,
         )
         self.touches = touches
+        self.pose_nulls = pose_nulls
         self.q_planned = np.array([p.q for p in self.check_plan.plan.poses])
         self.uv_planned = np.array([p.point.uv_px for p in self.check_plan.plan.poses])
         self._before: FloatArray | None = None
@@ -278,7 +282,10 @@ class CalibratedTwin:
         session, _ = record_check(
             self.twin, setup, self.q_planned, self.uv_planned, rng, touches=touches or self.touches
         )
-        outcome = check_calibration(self.stored, self.method, self.robot, session, false_alarm=false_alarm)
+        calibration = self.twin.session if self.pose_nulls else None
+        outcome = check_calibration(
+            self.stored, self.method, self.robot, session, false_alarm=false_alarm, calibration=calibration
+        )
         if self._before is None:
             self._before = noise_free_residuals_mm(
                 self.stored, self.method, self.robot, self.twin, unchanged, self.q_planned, self.uv_planned
