@@ -123,6 +123,11 @@ CASES = [
     Case("false-alarm-nan", ["verify", "{result}", "{check}", "--false-alarm", "nan", *OUT], ("--false-alarm",)),
     Case("result-of-another-robot", ["verify", "{result}", "{check}", "--robot", "baxter", *OUT], ("baxter",)),
     Case("demo-with-result", ["verify", "{result}", "--demo", "{tmp}/demo"], ("--demo",)),
+    Case(
+        "update-is-the-record",
+        ["verify", "{result}", "{check}", *OUT, "--update", "{tmp}/record.json"],
+        ("--update", "--out", "same file"),
+    ),
     Case("demo-with-calibration-session", ["verify", *SESSION, "--demo", "{tmp}/demo"], ("--demo",)),
     Case(
         "calibration-session-missing",

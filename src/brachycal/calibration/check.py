@@ -348,7 +348,7 @@ def _rotation(omega: FloatArray) -> FloatArray:
     return np.eye(3) + np.sin(angle) / angle * K + (1 - np.cos(angle)) / angle**2 * K @ K
 
 
-def _motion(v: FloatArray, omega: FloatArray) -> FloatArray:
+def small_motion(v: FloatArray, omega: FloatArray) -> FloatArray:
     """A small rigid motion: rotation vector ``omega`` (rad) then translation ``v`` (m)."""
     return make_transform(_rotation(omega), v)
 
@@ -389,8 +389,8 @@ class ChainModel:
         calibration's image axes (lateral, depth, normal) at each pose, touches in ``base_link``."""
         robot, rig = self.robot, self.robot.rig
         p_ER_Ntip = self.T_ER_Ntip[:3, 3] + x[0:3]
-        T_EL_Ptip = self.T_EL_Ptip @ _motion(x[3:6], x[6:9])
-        T_Ptip_I = self.T_Ptip_I @ _motion(x[9:12], x[12:15])
+        T_EL_Ptip = self.T_EL_Ptip @ small_motion(x[3:6], x[6:9])
+        T_Ptip_I = self.T_Ptip_I @ small_motion(x[9:12], x[12:15])
         spacing = self.spacing_m * (1.0 + x[15:17])
         offsets = x[17:]
         T_R_EL, T_R_ER = self._flanges(session, offsets)

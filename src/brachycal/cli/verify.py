@@ -31,6 +31,13 @@ samples cannot tell a probe remount from an image-transform change: both are nam
 exit 2. --out writes the verification record (JSON: result SHA-256, session files' SHA-256, date,
 statistic, threshold, verdict, part, size); --report an HTML page of it.
 
+--update JSON: instead of recalibrating, where the check fails and one part (needle tip, probe
+mount, image transform or image scale) alone explains it - fully determined, told apart from the
+others by a Bayes factor of 20 or more, what it leaves within noise, a small change - writes the
+stored result with that part changed by its fitted change and the change recorded (its SD says
+how well the check determined it). Otherwise it says why and writes nothing there. Confirm an
+update with a new check of fresh samples.
+
 --calibration-session DIR (the session RESULT was calibrated from): a check pose that repeats one
 of its poses gets that pose's own SD, the larger of the average and its leave-one-out error /
 sqrt(3): the robot's left-over error is repeatable and largest at the cube's corners, where the
@@ -69,6 +76,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "every pose has the average, and false alarms run above --false-alarm on real arms",
     )
     parser.add_argument("--out", metavar="JSON", help="verification record to write")
+    parser.add_argument(
+        "--update",
+        metavar="JSON",
+        help="on RECALIBRATE, where one part alone explains the check and the check determines it, write the "
+        "stored result with that part refitted (else say why not and write nothing there)",
+    )
     parser.add_argument("--report", metavar="HTML", help="HTML page of the verification to write")
     parser.add_argument("--demo", metavar="DIR", help="write a twin's result and two check sessions into DIR")
     parser.add_argument("--force", action="store_true", help="replace existing outputs")
@@ -96,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
     with OutputSet(force=args.force) as outputs:
         staged = outputs.claim(out, label="--out")
         staged_report = outputs.claim(Path(args.report), label="--report") if args.report else None
+        staged_update = outputs.claim(Path(args.update), label="--update") if args.update else None
         stored = read_result(args.result)
         method = stored.method(args.method)
         robot = stored.software_robot(load_robot(args))
@@ -120,6 +134,15 @@ def run(args: argparse.Namespace) -> int:
             from brachycal.reporting.html_report import write_verification_page
 
             write_verification_page(staged_report, record, force=args.force)
+        refusal = None
+        if staged_update is not None:
+            from brachycal.calibration.check_update import update_refusal, updated_result
+
+            refusal = update_refusal(outcome)
+            if refusal is None:
+                write_json(staged_update, updated_result(stored, outcome, session), force=args.force)
+            else:
+                outputs.release(Path(args.update))
     if calibration is None:
         import warnings
 
@@ -132,6 +155,15 @@ def run(args: argparse.Namespace) -> int:
             stacklevel=1,
         )
     print(verdict_text(outcome))
+    if args.update and refusal is not None:
+        print(f"no update written to {args.update}: {refusal}")
+    elif args.update:
+        part = outcome.part
+        assert part is not None
+        print(
+            f"updated: the {part.part} refitted from the check, by {part.size_text()}; "
+            f"confirm it with a new check of fresh samples before use"
+        )
     print("wrote " + ", ".join(map(str, outputs.written)))
     return 0 if outcome.passed else 1
 

@@ -204,6 +204,11 @@ def _adjust(setup: ChangedSetup, q0: FloatArray, uv: FloatArray, e: float, probe
 
 @dataclass(frozen=True)
 class TrialOutcome:
+    """One check's verdict and what the change did to targeting (mm, RMS over the check poses of the
+    noise-free residuals): ``targeting_before_mm`` the calibration's own error before the change,
+    ``targeting_ignored_mm`` after it, ``targeting_change_mm`` of their difference; with an update,
+    ``targeting_updated_mm`` the updated result's error, or ``update_refusal`` why none was made."""
+
     change: str
     seed: int
     check_seed: int
@@ -213,6 +218,10 @@ class TrialOutcome:
     threshold: float
     targeting_change_mm: float
     fitted_targeting_mm: float | None
+    update_refusal: str | None = None
+    targeting_updated_mm: float | None = None
+    targeting_before_mm: float = 0.0
+    targeting_ignored_mm: float = 0.0
 
 
 class CalibratedTwin:
@@ -270,10 +279,19 @@ class CalibratedTwin:
         self._before: FloatArray | None = None
 
     def trial(
-        self, change: Change, check_seed: int, *, touches: str | None = None, false_alarm: float = 0.05
+        self,
+        change: Change,
+        check_seed: int,
+        *,
+        touches: str | None = None,
+        false_alarm: float = 0.05,
+        update: bool = False,
     ) -> TrialOutcome:
         """One check of ``change`` with noise drawn from ``check_seed`` (``touches``: the plan's
-        unless given)."""
+        unless given). With ``update``, a failed check that may update the result
+        (:func:`~brachycal.calibration.check_update.update_refusal`) does, and the outcome has the
+        targeting error of the updated result on the changed set-up (RMS of its noise-free check
+        residuals, mm); else why not."""
         from brachycal.calibration.check import check_calibration
 
         rng = np.random.default_rng([self.twin.config.seed, check_seed, 7])
@@ -295,6 +313,9 @@ class CalibratedTwin:
             self.stored, self.method, self.robot, self.twin, setup, self.q_planned, self.uv_planned
         )
         change_mm = float(np.sqrt(np.mean(np.sum((after - before) ** 2, axis=1))))
+        refusal, updated_mm = None, None
+        if update and outcome.verdict == "RECALIBRATE":
+            refusal, updated_mm = self._update(outcome, session, setup)
         part = outcome.part
         return TrialOutcome(
             change.name,
@@ -306,7 +327,31 @@ class CalibratedTwin:
             outcome.threshold,
             change_mm,
             None if part is None else part.targeting_mm,
+            refusal,
+            updated_mm,
+            float(np.sqrt(np.mean(np.sum(before**2, axis=1)))),
+            float(np.sqrt(np.mean(np.sum(after**2, axis=1)))),
         )
+
+    def _update(self, outcome, session: CheckSession, setup: ChangedSetup) -> tuple[str | None, float | None]:
+        """``(why not, None)`` or ``(None, targeting error of the updated result in mm)``."""
+        import tempfile
+
+        from brachycal.calibration import read_result
+        from brachycal.calibration.check_update import update_refusal, updated_result
+        from brachycal.files import write_json
+
+        refusal = update_refusal(outcome)
+        if refusal is not None:
+            return refusal, None
+        with tempfile.TemporaryDirectory() as folder:
+            updated = read_result(
+                write_json(Path(folder) / "updated.json", updated_result(self.stored, outcome, session))
+            )
+        residuals = noise_free_residuals_mm(
+            updated, self.method, self.robot, self.twin, setup, self.q_planned, self.uv_planned
+        )
+        return None, float(np.sqrt(np.mean(np.sum(residuals**2, axis=1))))
 
 
 def check_trial(
