@@ -147,3 +147,83 @@ def test_landing_jacobian_is_scipys_forward_difference_bit_for_bit(robot, twin):
 
     scipys = approx_fprime(fit.x, landing, finite_difference_steps(fit.x)).reshape(ours.shape)
     assert np.array_equal(ours, scipys)
+
+
+def test_balanced_groups_place_the_costliest_first_into_the_cheapest_group():
+    from brachycal.calibration.parallel import balanced_groups
+
+    groups = balanced_groups([3.0, 1.0, 1.0, 1.0, 2.0], 2)
+    assert sorted(k for g in groups for k in g) == [0, 1, 2, 3, 4]  # every call once
+    assert sorted(sum([3.0, 1.0, 1.0, 1.0, 2.0][k] for k in g) for g in groups) == [4.0, 4.0]
+    assert all(g == sorted(g) for g in groups)  # in index order within a group, as in turn
+    assert balanced_groups([1.0, 1.0], 5) == [[0], [1]] and balanced_groups([], 2) == []
+
+
+def test_parallel_calls_give_what_calls_in_turn_give_and_the_lowest_failure():
+    from brachycal.calibration.parallel import parallel_calls
+
+    calls = [lambda k=k: k * k for k in range(6)]
+    assert parallel_calls(calls, [5.0, 1.0, 1.0, 1.0, 1.0, 1.0], workers=2) == [k * k for k in range(6)]
+
+    def failing(k: int) -> int:
+        if k in (1, 4):
+            raise DegenerateDataError(f"call {k}", file="samples.csv")
+        return k
+
+    # Costs put call 4 first in the parent's group and call 1 in the worker's: the lowest still wins.
+    with pytest.raises(DegenerateDataError, match="call 1"):
+        parallel_calls([lambda k=k: failing(k) for k in range(6)], [1.0, 1.0, 1.0, 1.0, 9.0, 1.0], workers=2)
+    with pytest.raises(ValueError, match="costs"):
+        parallel_calls(calls, [1.0], workers=2)
+
+
+def test_calibrating_a_folder_on_two_cores_is_the_same_as_in_turn(robot, monkeypatch):
+    """``calibrate --method chain``'s path: the sequential method's leave-one-out and the chain's model
+    choice share the cores, then the chain's leave-one-out and predicted landing errors do; every
+    figure is the same arithmetic as in turn, bit for bit."""
+    from pathlib import Path
+
+    from brachycal.calibration import calibrate_folder
+
+    folder = Path(__file__).resolve().parents[1] / "examples" / "twin_session"
+    alone = calibrate_folder(folder, robot, chain=True)  # a library call: in turn
+    monkeypatch.setattr(parallel.threading, "active_count", lambda: 1)  # as in the test above
+    forks: list[int] = []
+    fork = os.fork
+    monkeypatch.setattr(os, "fork", lambda: forks.append(1) or fork())
+    with forking_workers(2):
+        shared = calibrate_folder(folder, robot, chain=True)
+    assert forks, "nothing was shared between two processes"
+    for method, stats in alone.result.loocv.items():
+        assert np.array_equal(stats.errors_m, shared.result.loocv[method].errors_m), method
+        assert np.array_equal(alone.result.image[method].T_Ptip_I, shared.result.image[method].T_Ptip_I), method
+    assert alone.chain is not None and shared.chain is not None
+    assert alone.chain.choice.model == shared.chain.choice.model
+    for model, stats in alone.chain.choice.cv.items():
+        assert np.array_equal(stats.errors_m, shared.chain.choice.cv[model].errors_m), model
+    assert np.array_equal(alone.chain.fit.x, shared.chain.fit.x)
+    assert np.array_equal(alone.chain.loocv.errors_m, shared.chain.loocv.errors_m)
+    assert np.array_equal(alone.chain.predicted_cube_mm, shared.chain.predicted_cube_mm)
+    assert np.array_equal(alone.chain.predicted_fov_mm, shared.chain.predicted_fov_mm)
+
+
+def test_frozen_heap_and_the_command_leave_the_collector_as_they_found_it(tmp_path, capsys):
+    """The command line disables the collector while it imports and freezes the long-lived objects while
+    it computes (forked workers then share their pages); a refusal or a library call leaves neither behind."""
+    import gc
+
+    from brachycal.calibration.parallel import frozen_heap
+    from brachycal.cli.main import main
+
+    assert gc.get_freeze_count() == 0
+    with frozen_heap():
+        assert gc.get_freeze_count() > 0
+    assert gc.get_freeze_count() == 0
+    for enabled in (True, False):
+        (gc.enable if enabled else gc.disable)()
+        try:  # refused after the imports, before any computation
+            code = main(["calibrate", str(tmp_path / "no_session"), "--out", str(tmp_path / "r.json")])
+            assert code == 2 and gc.isenabled() is enabled and gc.get_freeze_count() == 0
+        finally:
+            gc.enable()
+    capsys.readouterr()

@@ -20,7 +20,9 @@ from __future__ import annotations
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from statistics import NormalDist
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -33,18 +35,13 @@ from brachycal.calibration.chain import (
     ChainFit,
     ModelChoice,
     RobotAccuracy,
-    cross_validate,
     fit_chain,
     image_model,
     select_model,
 )
+from brachycal.calibration.chain.model_choice import FoldRuns
 from brachycal.calibration.metrics import ErrorStats
-from brachycal.calibration.robot_identification import (
-    IDENTIFICATION_FOLDS,
-    RobotIdentification,
-    choose_and_identify,
-    cross_validate_identification,
-)
+from brachycal.calibration.parallel import parallel_calls
 from brachycal.calibration.sequential import CalibrationResult
 from brachycal.calibration.uncertainty import Bootstrap, bootstrap, landing_covariance, predicted_rms_mm
 from brachycal.data.session import Session
@@ -52,10 +49,18 @@ from brachycal.errors import ConditioningWarning, InputError
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray
 
+if TYPE_CHECKING:  # imported where used: robot identification only with identify=True
+    from brachycal.calibration.robot_identification import RobotIdentification
+
 #: Predicted landing RMS (mm) above which a chain calibration warns: the paper's leave-one-out
 #: MAE of its rigid method (Table II, 0.65 mm). Sessions spanning the prostate cube predict
 #: 0.27–0.31 mm at the image's far corners (twin seeds 0–19, `benchmarks/chain_checks.py`).
 WARN_LANDING_RMS_MM = 0.65
+#: Cost of one predicted landing error map, milliseconds of one core (~30 on the example session,
+#: its 64 sample poses or its 216-pixel image map alike: mostly the robot's Jacobians' set-up;
+#: :data:`~brachycal.calibration.chain.model_choice.FOLD_COST_MS`'s unit): it only decides which
+#: process computes it beside the leave-one-out's folds, never a result.
+LANDING_COST_MS = 30.0
 
 
 @dataclass(frozen=True)
@@ -141,6 +146,7 @@ def calibrate_chain(
     map_step_px: float = 60.0,
     progress: Callable[[int], None] | None = None,
     identify: bool = False,
+    choice: ModelChoice | None = None,
 ) -> ChainReport:
     """Run the whole-chain method on a session (see the module docstring).
 
@@ -150,6 +156,13 @@ def calibrate_chain(
     chain, that accuracy its prior (:mod:`brachycal.calibration.robot_identification`); the fit,
     leave-one-out and predicted landing error are then on the corrected robot, and the K-fold
     image error at held-out configurations is measured with and without identification.
+
+    ``choice``: the image model already chosen on this session from ``initial``'s start
+    (:class:`~brachycal.calibration.chain.ModelSelection`, e.g. while the sequential method's
+    leave-one-out shared the cores); else :func:`~brachycal.calibration.chain.select_model` runs here.
+
+    The leave-one-out's runs of folds and the two predicted landing errors are independent: they
+    share the cores (:func:`~brachycal.calibration.parallel.parallel_calls`), each computed as alone.
 
     Raises:
         DegenerateDataError: the data do not determine the chain.
@@ -165,25 +178,32 @@ def calibrate_chain(
             raise InputError("robot identification replaces the joint offsets: ask for one or the other")
         if robot_accuracy is None:
             raise InputError("robot identification needs the robot's stated accuracy (its prior)")
+        from brachycal.calibration.robot_identification import choose_and_identify, cross_validate_identification
+
         choice, identification = choose_and_identify(session, robot, initial, robot_accuracy)
         identification_cv = cross_validate_identification(session, robot, initial, choice.model, robot_accuracy)
         fit, nominal, robot = identification.fit, robot, identification.robot(robot)
         joint_origins = _origins(nominal, robot)
     else:
-        choice = select_model(session, robot, initial)
+        if choice is None:
+            choice = select_model(session, robot, initial)
         fit = fit_chain(
             session, robot, initial, choice.model, joint_offsets=joint_offsets, robot_accuracy=robot_accuracy
         )
         if fit.joint_offsets_rad:
             joint_origins = _origins(robot, robot.with_joint_offsets(fit.joint_offsets_rad))
-    loocv = cross_validate(session, robot, initial, choice.model, folds=len(session.uv_px), start=fit)
-    cube = predicted_rms_mm(landing_covariance(fit, robot, session.spacing_m, session.samples_q, session.uv_px))
     width, height = session.size_px
     grid = np.array([(u, v) for v in np.arange(0, height, map_step_px) for u in np.arange(0, width, map_step_px)])
     centre = session.samples_q[np.argmin(np.linalg.norm(session.uv_px - session.uv_px.mean(axis=0), axis=1))]
-    fov = predicted_rms_mm(
-        landing_covariance(fit, robot, session.spacing_m, np.repeat(centre[None], len(grid), 0), grid)
-    )
+    runs = FoldRuns.of(session, robot, initial, choice.model, folds=len(session.uv_px), start=fit)
+    landings = [(session.samples_q, session.uv_px), (np.repeat(centre[None], len(grid), 0), grid)]
+    shared: list[Callable[[], Any]] = [
+        *runs.calls(),
+        *(partial(landing_covariance, fit, robot, session.spacing_m, q, uv) for q, uv in landings),
+    ]
+    outcomes = parallel_calls(shared, [*runs.costs(), *(LANDING_COST_MS for _ in landings)])
+    loocv = ErrorStats(runs.errors(outcomes[: len(runs.runs)]))
+    cube, fov = (predicted_rms_mm(C) for C in outcomes[len(runs.runs) :])
     worst = max(float(fov.max()), float(cube.max()))
     if worst > WARN_LANDING_RMS_MM:
         span = np.ptp(session.uv_px[~fit.outliers], axis=0)
@@ -259,6 +279,8 @@ def chain_json(report: ChainReport, sample_ids: list[str]) -> dict:
 def _robot_json(report: ChainReport) -> dict[str, object]:
     out: dict[str, object] = {}
     if report.identification is not None:
+        from brachycal.calibration.robot_identification import IDENTIFICATION_FOLDS
+
         identified = report.identification.as_json()
         if report.identification_cv is not None:
             chain_alone, identified_cv = report.identification_cv

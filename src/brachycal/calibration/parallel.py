@@ -23,6 +23,7 @@ forked behind its back. Forking also needs CPython 3.11 exactly on Linux: from 3
 from __future__ import annotations
 
 import contextlib
+import gc
 import os
 import pickle
 import signal
@@ -83,6 +84,24 @@ def forking_workers(count: int | None = None) -> Iterator[None]:
         yield
     finally:
         _allowed_workers = previous
+
+
+@contextmanager
+def frozen_heap() -> Iterator[None]:
+    """Within: the objects alive on entry (modules, the robot, the session: long-lived) are left out of
+    the cyclic garbage collector's passes (:func:`gc.freeze`); put back on exit (:func:`gc.unfreeze`).
+
+    For the command line, with :func:`forking_workers`: a forked worker shares this process's memory
+    page by page until either process writes to a page, and a collection writes to every object it
+    scans (its bookkeeping), so each worker's full collections (and this process's) would copy the
+    pages of every module loaded; they also spare scanning those objects again. Library code never
+    calls it (the collector's state is the process's).
+    """
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
 
 
 def parallel_map(fn: Callable[[T], R], items: Sequence[T], workers: int | None = None) -> list[R]:
@@ -152,6 +171,58 @@ def parallel_map(fn: Callable[[T], R], items: Sequence[T], workers: int | None =
             raise value
         results.append(value)  # type: ignore[arg-type]
     return results
+
+
+def balanced_groups(costs: Sequence[float], groups: int) -> list[list[int]]:
+    """Indices of ``costs`` in at most ``groups`` groups of about equal total cost: the costliest
+    placed first, each into the cheapest group so far (longest processing time first, within 4/3 of
+    the best split); each group's indices ascending. Empty groups are left out."""
+    out: list[list[int]] = [[] for _ in range(max(1, min(groups, len(costs))))]
+    totals = [0.0] * len(out)
+    for k in sorted(range(len(costs)), key=lambda k: (-costs[k], k)):
+        g = totals.index(min(totals))
+        out[g].append(k)
+        totals[g] += costs[k]
+    return [sorted(group) for group in out if group]
+
+
+def parallel_calls(calls: Sequence[Callable[[], R]], costs: Sequence[float], workers: int | None = None) -> list[R]:
+    """``[call() for call in calls]``, the calls shared between up to ``workers`` processes (default
+    :func:`available_workers`) in groups of about equal total ``costs`` (:func:`balanced_groups`).
+
+    For work of different kinds and sizes that does not depend on each other (a stage's refits and
+    another stage's): one fork for all of them, and the cores kept busy until the end. ``costs`` are
+    relative (any unit, e.g. measured seconds): they decide which process runs which call, never a
+    result. Each call is what it gives in this process (:func:`parallel_map`'s rules).
+
+    Raises:
+        Whatever the lowest call that raised raised, as running the calls in turn would (within a
+        group the calls run in index order and stop at the first that raises, so every call below
+        it has run).
+    """
+    if len(costs) != len(calls):
+        raise ValueError(f"{len(calls)} calls but {len(costs)} costs")
+    count = available_workers() if workers is None else workers
+
+    def run(group: list[int]) -> list[tuple[int, bool, object]]:
+        out: list[tuple[int, bool, object]] = []
+        for k in group:
+            try:
+                out.append((k, True, calls[k]()))
+            except Exception as exc:
+                out.append((k, False, exc))
+                break
+        return out
+
+    done = {
+        k: (ok, value) for part in parallel_map(run, balanced_groups(costs, count), workers) for k, ok, value in part
+    }
+    for k in sorted(done):
+        ok, value = done[k]
+        if not ok:
+            assert isinstance(value, BaseException)
+            raise value
+    return [done[k][1] for k in range(len(calls))]  # type: ignore[misc]
 
 
 def _run(

@@ -14,16 +14,17 @@ from (``touches.csv``, ``axes.csv``, ``samples.csv``); grey-zone estimates warn
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
 
 from brachycal.calibration import image_to_probe
 from brachycal.calibration.image_to_probe import METHODS, ImageCalibration
 from brachycal.calibration.metrics import ErrorStats
-from brachycal.calibration.parallel import available_workers, parallel_map
+from brachycal.calibration.parallel import parallel_calls
 from brachycal.calibration.tool_rotation import ToolRotation, tool_rotation
 from brachycal.calibration.tool_tips import (
     TipEstimate,
@@ -131,21 +132,190 @@ def _tool(session: Session, robot: Robot, tool: str, rtip1: TipEstimate) -> Tool
     return ToolCalibration(make_transform(rotation.R_E_tool, p_E_tool), validation, rotation, tip)
 
 
-#: Relative cost of each image-to-probe method's fit and leave-one-out (64 samples): ICP's
-#: multi-start nearest-neighbour iterations cost about three closed-form fits.
-METHOD_COST = {"icp": 3.0}
+#: Cost of each image-to-probe method's leave-one-out (and all-sample fit), milliseconds of one core
+#: on the 64-sample example session (`benchmarks/calibrate_speed.py`): ~35 for a closed-form method,
+#: ICP's nearest-neighbour iterations from the all-sample fit 75, scaled u/v's iterative fits 95. They
+#: only decide which process runs which method (:func:`~brachycal.calibration.parallel.parallel_calls`),
+#: never a result; the same unit as the chain's costs, with which they share the cores.
+METHOD_COST_MS = {"icp": 75.0, "scaled_uv": 95.0}
+DEFAULT_METHOD_COST_MS = 35.0
+#: Extra cost of ICP's all-sample fit (its global search from 49 starts), milliseconds as above.
+ICP_FULL_COST_MS = 50.0
+
+#: A method's all-sample fit and leave-one-out figures, or its refusal.
+MethodOutcome = tuple[ImageCalibration, ErrorStats] | DegenerateDataError
 
 
-def _method_groups(methods: tuple[str, ...], workers: int) -> list[tuple[str, ...]]:
-    """``methods`` in at most ``workers`` groups of about equal cost (:data:`METHOD_COST`, 1 by default),
-    the costliest placed first (each into the cheapest group so far)."""
-    groups: list[list[str]] = [[] for _ in range(max(1, min(workers, len(methods))))]
-    costs = [0.0] * len(groups)
-    for method in sorted(methods, key=lambda m: -METHOD_COST.get(m, 1.0)):
-        k = costs.index(min(costs))
-        groups[k].append(method)
-        costs[k] += METHOD_COST.get(method, 1.0)
-    return [tuple(g) for g in groups if g]
+@dataclass(frozen=True)
+class SequentialPlan:
+    """The sequential method cut where its independent work starts: the tools (Table I, computed
+    here) and one call per image-to-probe method (its all-sample fit and leave-one-out), which may
+    share the cores with other work (:func:`~brachycal.calibration.parallel.parallel_calls`).
+
+    :func:`calibrate` is :meth:`prepare`, :meth:`calls`, then :meth:`result`.
+
+    Attributes:
+        session, robot, methods: what is calibrated, with which methods.
+        reference_tips: reference tip → its estimate (``base_link``).
+        needle, probe: the tools on their flanges.
+        T_Ptip_I_init: ``(4, 4)`` ICP's prior.
+        T_R_ER, T_R_EL: ``(N, 4, 4)`` the flanges at the image samples.
+        p_Ptip: ``(N, 3)`` the needle tips in the probe frame (eq. 8); ``p_real`` ``(N, 3)`` in ``base_link``.
+        start: ``(method, its all-sample fit)`` of the method the chain starts from (``scaled_uv``, else
+            the first), computed here (:meth:`start_result`), or None if it was refused (then
+            :meth:`result` raises the refusal, in the methods' order).
+    """
+
+    session: Session
+    robot: Robot
+    methods: tuple[str, ...]
+    reference_tips: dict[str, TipEstimate]
+    needle: ToolCalibration
+    probe: ToolCalibration
+    T_Ptip_I_init: FloatArray
+    T_R_ER: FloatArray
+    T_R_EL: FloatArray
+    p_Ptip: FloatArray
+    p_real: FloatArray
+    start: tuple[str, ImageCalibration] | None = None
+
+    @classmethod
+    def prepare(
+        cls,
+        session: Session,
+        robot: Robot,
+        methods: tuple[str, ...] = METHODS,
+        T_Ptip_I_init: FloatArray | None = None,
+        *,
+        fit_start: bool = False,
+    ) -> SequentialPlan:
+        """The tools (Table I) and the data of the image-to-probe fits (:func:`calibrate`'s arguments);
+        ``fit_start``: also the all-sample fit of the method the chain starts from (:attr:`start`).
+
+        Raises:
+            DegenerateDataError: a tool step's conditioning check failed (names the session file).
+        """
+        needle_flange, probe_flange = robot.rig.needle_flange, robot.rig.probe_flange
+        with _data_of("touches.csv"):
+            check_distinct_touches(session.touches)
+            reference_tips = {
+                ref: reference_tip_estimate(
+                    robot.fk(needle_flange, session.touches["top_model", ref].q), session.p_ER_Mtip
+                )
+                for ref in ("rtip1", "rtip2")
+            }
+            check_separation(reference_tips["rtip1"], reference_tips["rtip2"])
+        for ref, tip in reference_tips.items():
+            check_tip(tip, f"reference tip {ref}")
+        needle = _tool(session, robot, "needle", reference_tips["rtip1"])
+        probe = _tool(session, robot, "probe", reference_tips["rtip1"])
+        if T_Ptip_I_init is None:
+            T_Ptip_I_init = robot.tool_transform(US_IMAGE)[1]
+        T_R_ER = robot.fk(needle_flange, session.samples_q)
+        T_R_EL = robot.fk(probe_flange, session.samples_q)
+        p_ER_Ntip = needle.T_E_tool[:3, 3]
+        plan = cls(
+            session,
+            robot,
+            tuple(methods),
+            reference_tips,
+            needle,
+            probe,
+            T_Ptip_I_init,
+            T_R_ER,
+            T_R_EL,
+            image_to_probe.probe_points(T_R_ER, T_R_EL, p_ER_Ntip, probe.T_E_tool),
+            transform_points(T_R_ER, p_ER_Ntip),
+        )
+        if not fit_start or not methods:
+            return plan
+        method = "scaled_uv" if "scaled_uv" in methods else methods[0]
+        try:
+            return replace(plan, start=(method, plan.full_fit(method)))
+        except DegenerateDataError:  # refused here: raised by result() in the methods' order, as in turn
+            return plan
+
+    def full_fit(self, method: str) -> ImageCalibration:
+        """``method``'s fit on all samples (warns in the grey zone, as :func:`image_to_probe.fit`)."""
+        with _data_of("samples.csv"):
+            return image_to_probe.fit(
+                method, self.session.uv_px, self.p_Ptip, self.session.spacing_m, self.T_Ptip_I_init
+            )
+
+    def fit_method(self, method: str) -> MethodOutcome:
+        """``method``'s all-sample fit and its leave-one-out figures (Table II), or its refusal."""
+        try:
+            full = self.start[1] if self.start is not None and self.start[0] == method else self.full_fit(method)
+            with _data_of("samples.csv"):
+                loo = image_to_probe.leave_one_out(
+                    method,
+                    self.session.uv_px,
+                    self.T_R_ER,
+                    self.T_R_EL,
+                    self.needle.T_E_tool[:3, 3],
+                    self.probe.T_E_tool,
+                    self.session.spacing_m,
+                    self.T_Ptip_I_init,
+                    full=full,
+                )
+        except DegenerateDataError as exc:  # raised by result() in the methods' order, as in turn
+            return exc
+        return full, loo
+
+    def calls(self) -> tuple[list[Callable[[], MethodOutcome]], list[float]]:
+        """One call per method (:meth:`fit_method`, in the methods' order) and their costs
+        (:data:`METHOD_COST_MS`)."""
+        calls: list[Callable[[], MethodOutcome]] = [partial(self.fit_method, m) for m in self.methods]
+        costs = [
+            METHOD_COST_MS.get(m, DEFAULT_METHOD_COST_MS)
+            + (ICP_FULL_COST_MS if m == "icp" and (self.start is None or self.start[0] != m) else 0.0)
+            for m in self.methods
+        ]
+        return calls, costs
+
+    def start_result(self) -> CalibrationResult:
+        """What the chain starts from (:meth:`ParameterLayout.start`): the tools, the reference tips
+        and :attr:`start`'s image calibration, before any leave-one-out figure (those stay empty).
+
+        Raises:
+            ValueError: the plan was prepared without ``fit_start``, or that fit was refused.
+        """
+        if self.start is None:
+            raise ValueError("no starting image calibration: prepare(..., fit_start=True) and check start")
+        method, full = self.start
+        return self._result({method: full}, {}, {})
+
+    def result(self, outcomes: list[MethodOutcome]) -> CalibrationResult:
+        """The :class:`CalibrationResult` from :meth:`calls`' outcomes (methods' order).
+
+        Raises:
+            DegenerateDataError: the first method's refusal, in the methods' order.
+        """
+        image, residuals, loocv = {}, {}, {}
+        for method, outcome in zip(self.methods, outcomes, strict=True):
+            if isinstance(outcome, DegenerateDataError):  # the first method that fails, as in turn
+                raise outcome
+            image[method], loocv[method] = outcome
+            p_cal = image_to_probe.predict_base(image[method], self.T_R_EL, self.probe.T_E_tool, self.session.uv_px)
+            residuals[method] = ErrorStats.between(self.p_real, p_cal)
+        return self._result(image, residuals, loocv)
+
+    def _result(
+        self, image: dict[str, ImageCalibration], residuals: dict[str, ErrorStats], loocv: dict[str, ErrorStats]
+    ) -> CalibrationResult:
+        session = self.session
+        return CalibrationResult(
+            p_R_Rtip={ref: tip.p for ref, tip in self.reference_tips.items()},
+            needle=self.needle,
+            probe=self.probe,
+            image=image,
+            fit_residuals=residuals,
+            loocv=loocv,
+            sample_ids=list(session.sample_ids),
+            inputs=dict(session.inputs),
+            reference_tips=self.reference_tips,
+            image_size_px=(int(session.size_px[0]), int(session.size_px[1])),
+        )
 
 
 def calibrate(
@@ -166,76 +336,9 @@ def calibrate(
     Raises:
         DegenerateDataError: a step's conditioning check failed; the message names the session file.
     """
-    needle_flange, probe_flange = robot.rig.needle_flange, robot.rig.probe_flange
-    with _data_of("touches.csv"):
-        check_distinct_touches(session.touches)
-        reference_tips = {
-            ref: reference_tip_estimate(robot.fk(needle_flange, session.touches["top_model", ref].q), session.p_ER_Mtip)
-            for ref in ("rtip1", "rtip2")
-        }
-        check_separation(reference_tips["rtip1"], reference_tips["rtip2"])
-    for ref, tip in reference_tips.items():
-        check_tip(tip, f"reference tip {ref}")
-    p_R_Rtip = {ref: tip.p for ref, tip in reference_tips.items()}
-    needle = _tool(session, robot, "needle", reference_tips["rtip1"])
-    probe = _tool(session, robot, "probe", reference_tips["rtip1"])
-    if T_Ptip_I_init is None:
-        T_Ptip_I_init = robot.tool_transform(US_IMAGE)[1]
-
-    T_R_ER = robot.fk(needle_flange, session.samples_q)
-    T_R_EL = robot.fk(probe_flange, session.samples_q)
-    p_ER_Ntip = needle.T_E_tool[:3, 3]
-    p_Ptip = image_to_probe.probe_points(T_R_ER, T_R_EL, p_ER_Ntip, probe.T_E_tool)
-    p_real = transform_points(T_R_ER, p_ER_Ntip)
-
-    def fit_methods(group: tuple[str, ...]) -> dict[str, tuple[ImageCalibration, ErrorStats] | DegenerateDataError]:
-        """Each method's fit on all samples and its leave-one-out figures (or its refusal)."""
-        out: dict[str, tuple[ImageCalibration, ErrorStats] | DegenerateDataError] = {}
-        for method in group:
-            try:
-                with _data_of("samples.csv"):
-                    full = image_to_probe.fit(method, session.uv_px, p_Ptip, session.spacing_m, T_Ptip_I_init)
-                    loo = image_to_probe.leave_one_out(
-                        method,
-                        session.uv_px,
-                        T_R_ER,
-                        T_R_EL,
-                        p_ER_Ntip,
-                        probe.T_E_tool,
-                        session.spacing_m,
-                        T_Ptip_I_init,
-                        full=full,
-                    )
-            except DegenerateDataError as exc:  # raised below in the methods' order, as in turn
-                out[method] = exc
-            else:
-                out[method] = (full, loo)
-        return out
-
-    # The methods are independent: they share the cores (parallel_map), each computed as alone.
-    fitted: dict[str, tuple[ImageCalibration, ErrorStats] | DegenerateDataError] = {}
-    for part in parallel_map(fit_methods, _method_groups(methods, available_workers())):
-        fitted.update(part)
-    image, residuals, loocv = {}, {}, {}
-    for method in methods:
-        outcome = fitted[method]
-        if isinstance(outcome, DegenerateDataError):  # the first method that fails, as in turn
-            raise outcome
-        image[method], loocv[method] = outcome
-        p_cal = image_to_probe.predict_base(image[method], T_R_EL, probe.T_E_tool, session.uv_px)
-        residuals[method] = ErrorStats.between(p_real, p_cal)
-    return CalibrationResult(
-        p_R_Rtip=p_R_Rtip,
-        needle=needle,
-        probe=probe,
-        image=image,
-        fit_residuals=residuals,
-        loocv=loocv,
-        sample_ids=list(session.sample_ids),
-        inputs=dict(session.inputs),
-        reference_tips=reference_tips,
-        image_size_px=(int(session.size_px[0]), int(session.size_px[1])),
-    )
+    plan = SequentialPlan.prepare(session, robot, methods, T_Ptip_I_init)
+    # The methods are independent: they share the cores, each computed as alone.
+    return plan.result(parallel_calls(*plan.calls()))
 
 
 def loo_points(session: Session, robot: Robot, result: CalibrationResult, method: str) -> tuple[FloatArray, FloatArray]:

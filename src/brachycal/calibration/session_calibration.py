@@ -12,11 +12,13 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
-from brachycal.calibration.chain import DEFAULT_ROBOT_ACCURACY, RobotAccuracy
+from brachycal.calibration.chain import DEFAULT_ROBOT_ACCURACY, MODELS, ModelChoice, ModelSelection, RobotAccuracy
 from brachycal.calibration.chain_report import ChainReport, calibrate_chain
 from brachycal.calibration.image_to_probe import METHODS
-from brachycal.calibration.sequential import CalibrationResult, calibrate
+from brachycal.calibration.parallel import parallel_calls
+from brachycal.calibration.sequential import CalibrationResult, SequentialPlan, calibrate
 from brachycal.data.session import Session, read_session
 from brachycal.errors import DegenerateDataError
 from brachycal.model.robot import Robot
@@ -69,8 +71,12 @@ def calibrate_folder(
             inside ``folder``.
     """
     session = read_session(folder, robot)
+    choice = None
     try:
-        result = calibrate(session, robot, methods)
+        if chain and not identify_robot:
+            result, choice = _sequential_and_model_choice(session, robot, methods)
+        else:
+            result = calibrate(session, robot, methods)
     except DegenerateDataError as exc:  # the calibration names the session file; say which folder it is in
         if exc.file is None or Path(exc.file).is_absolute() or Path(exc.file).parent != Path():
             raise
@@ -86,5 +92,34 @@ def calibrate_folder(
             progress=progress,
             robot_accuracy=robot_accuracy,
             identify=identify_robot,
+            choice=choice,
         )
     return SessionCalibration(session, result, report)
+
+
+def _sequential_and_model_choice(
+    session: Session, robot: Robot, methods: tuple[str, ...]
+) -> tuple[CalibrationResult, ModelChoice | None]:
+    """The sequential method (:func:`~brachycal.calibration.sequential.calibrate`) and the chain's
+    model choice (:func:`~brachycal.calibration.chain.select_model`), their refits sharing the cores.
+
+    The chain starts from the sequential method's tools and one all-sample image fit
+    (:meth:`~brachycal.calibration.chain.ParameterLayout.start`), never from its leave-one-out
+    figures: once those are fitted, the methods' leave-one-out and the model choice's refits are
+    independent, and run as one set (:func:`~brachycal.calibration.parallel.parallel_calls`), each
+    computed as alone. Returns what the two calls give in turn (the choice None if that starting
+    fit was refused: the sequential result then raises the refusal).
+
+    Raises:
+        DegenerateDataError: as :func:`~brachycal.calibration.sequential.calibrate`.
+    """
+    plan = SequentialPlan.prepare(session, robot, methods, fit_start=True)
+    calls, costs = plan.calls()
+    if plan.start is None:  # the chain's starting fit was refused: the sequential method raises it
+        return plan.result(parallel_calls(calls, costs)), None
+    selection = ModelSelection(session, robot, plan.start_result(), MODELS)
+    choice_calls, choice_costs = selection.calls()
+    shared: list[Callable[[], Any]] = [*calls, *choice_calls]
+    outcomes = parallel_calls(shared, [*costs, *choice_costs])
+    result = plan.result(outcomes[: len(calls)])  # raises the sequential method's refusal first, as in turn
+    return result, selection.choose(outcomes[len(calls) :])

@@ -81,7 +81,7 @@ and ``identifiability``.
 
 Cross-validation's refits are independent of one another: model choice (each model's K folds, the
 most flexible model's fit) and leave-one-out (runs of at most :data:`FOLDS_PER_RUN` warm-started
-folds) share the cores (:func:`brachycal.calibration.parallel.parallel_map`), with the same figures
+folds) share the cores (:func:`brachycal.calibration.parallel.parallel_calls`), with the same figures
 on any number of cores.
 """
 
@@ -136,7 +136,9 @@ from brachycal.calibration.chain.layout import (
 )
 from brachycal.calibration.chain.model_choice import (
     FOLDS_PER_RUN,
+    FoldRuns,
     ModelChoice,
+    ModelSelection,
     cross_validate,
     fold_errors,
     select_model,
@@ -209,8 +211,10 @@ __all__ = [
     "Conditioning",
     "CovarianceTerms",
     "FinalStage",
+    "FoldRuns",
     "ImageModel",
     "ModelChoice",
+    "ModelSelection",
     "NoiseLevel",
     "ParameterLayout",
     "RobotAccuracy",

@@ -7,6 +7,7 @@ from functools import cached_property
 
 import numpy as np
 
+from brachycal.calibration.chain.image_models import ImageModel
 from brachycal.data.session import Session
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray
@@ -131,6 +132,20 @@ class ChainData:
             rows.flags.writeable = False
             self._touch_jacobian[size] = rows
         return self._touch_jacobian[size]
+
+    @cached_property
+    def _spacing_columns(self) -> dict[str, list[FloatArray]]:
+        return {}
+
+    def spacing_columns(self, image: ImageModel) -> list[FloatArray]:
+        """``image.spacing_columns`` of these samples' pixels at the nominal spacing: constant, computed
+        once per image model (read only)."""
+        if image.name not in self._spacing_columns:
+            columns = image.spacing_columns(self.uv_px, self.spacing_m)
+            for d in columns:
+                d.flags.writeable = False
+            self._spacing_columns[image.name] = columns
+        return self._spacing_columns[image.name]
 
     @property
     def n_touch_rows(self) -> int:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from brachycal.calibration.chain.data import N_AXES_ROWS, ChainData
-from brachycal.calibration.chain.layout import ParameterLayout
+from brachycal.calibration.chain.layout import ParameterLayout, Unpacked
 from brachycal.calibration.chain.rotations import left_jacobian, skew
 from brachycal.se3 import FloatArray
 
@@ -17,16 +17,21 @@ def chain_jacobian(
     base: dict[str, FloatArray],
     sigma: dict[str, float],
     samples: np.ndarray,
+    *,
+    unpacked: Unpacked | None = None,
 ) -> FloatArray:
     """Analytic Jacobian ``(M, P)`` of :func:`chain_residuals` (the joint offsets' columns are zero:
-    they move the flange poses, which the caller differentiates).
+    they move the flange poses, which the caller differentiates). ``unpacked``:
+    ``layout.unpack(x, base, data.spacing_m)`` if already known.
 
     A rotation ``R = exp(ω) R_base`` moves a vector ``b`` by ``d(R b) = −[R b]× J_l(ω) dω``.
     """
     samples = np.asarray(samples, dtype=bool)
     kept = data if samples.all() else data.subset(samples)
     rows = data.group_rows(len(kept.uv_px))
-    T_ER_Ntip, T_EL_Ptip, T_Ptip_I, _, spacing = layout.unpack(x, base, data.spacing_m)
+    if unpacked is None:
+        unpacked = layout.unpack(x, base, data.spacing_m)
+    T_ER_Ntip, T_EL_Ptip, T_Ptip_I, _, spacing = unpacked
     J = np.zeros((rows["image"].stop, layout.size))
     J[rows["touch"]] = data.touch_jacobian(layout.size, layout.blocks()) / sigma["touch"]
     J[rows["axes"]] = _axes_rows(x, layout, data, T_ER_Ntip, T_EL_Ptip) / sigma["axes"]
@@ -87,6 +92,6 @@ def _image_rows(
     image[:, :, b["rot_Ptip_I"]] = R_EL_P @ (skew(R_I_p) @ left_jacobian(x[b["rot_Ptip_I"]]))
     if layout.n_scale:
         R_total = R_EL_P @ R_I
-        for k, d in enumerate(layout.image.spacing_columns(uv, data.spacing_m)):
+        for k, d in enumerate(data.spacing_columns(layout.image)):
             image[:, :, b["scale"].start + k] = -(R_total @ d[:, :, None])[:, :, 0]
     return image.reshape(-1, layout.size)

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
@@ -12,7 +14,7 @@ from brachycal.calibration.chain.layout import ParameterLayout
 from brachycal.calibration.chain.problem import ChainProblem
 from brachycal.calibration.chain.result import ChainFit
 from brachycal.calibration.metrics import ErrorStats
-from brachycal.calibration.parallel import parallel_map
+from brachycal.calibration.parallel import parallel_calls
 from brachycal.calibration.sequential import CalibrationResult
 from brachycal.data.session import Session
 from brachycal.errors import DegenerateDataError
@@ -21,7 +23,7 @@ from brachycal.se3 import FloatArray
 
 #: Most folds in one run of warm starts (each fold starting from the previous one's fit). Longer
 #: cross-validations (leave-one-out: one fold per sample) are cut into runs of at most this many
-#: folds, each starting from the same fit, which different cores then share (:func:`parallel_map`):
+#: folds, each starting from the same fit, which different cores then share (:func:`parallel_calls`):
 #: a fold starts a few samples' pull away from its start either way, so a run's length changes only
 #: where the folds start, not what they converge to. The runs depend on the number of folds alone,
 #: never on the cores, so the figures are the same on any machine.
@@ -55,7 +57,7 @@ def cross_validate(
     ~3e-8 mm with its start, the figures over all folds by ~1e-9 mm (``tests/test_chain_parallel.py``).
 
     ``folds_per_run``: at most this many folds per run of warm starts (:data:`FOLDS_PER_RUN`;
-    None: one run); the runs share ``workers`` processes (default: the cores, :func:`parallel_map`).
+    None: one run); the runs share ``workers`` processes (default: the cores, :func:`parallel_calls`).
 
     Raises:
         DegenerateDataError: a fold's training samples do not determine the chain.
@@ -78,22 +80,71 @@ def fold_errors(
 ) -> FloatArray:
     """``(N,)`` each sample's cross-validated image error (metres) of :func:`cross_validate`, outliers
     included."""
-    n = len(session.uv_px)
-    order = np.random.default_rng(seed).permutation(n)
-    problem, x = ChainProblem.start(session, robot, initial, ParameterLayout(model))  # flange poses once
-    settled = None
-    if start is not None:
-        x = start.x[: problem.layout.size]  # the fixed blocks and scales come first (then any joint offsets)
-        settled = start.sigma_m
-    size = folds if folds_per_run is None else max(1, folds_per_run)
-    runs = [range(first, min(first + size, folds)) for first in range(0, folds, size)]
+    runs = FoldRuns.of(session, robot, initial, model, folds, seed, start, folds_per_run)
+    return runs.errors(parallel_calls(runs.calls(), runs.costs(), workers))
 
-    def run(fold_range: range) -> list[tuple[np.ndarray, FloatArray]]:
-        x_fold, settled_fold = x, settled
+
+#: Cost of one fold's refit, milliseconds of one core on the 64-sample example session (8-fold
+#: cross-validation from the sequential start ~11, a leave-one-out fold from the final fit ~9):
+#: it only decides which process runs which run of folds (:func:`parallel_calls`), never a result.
+FOLD_COST_MS = 10.0
+
+
+@dataclass(frozen=True)
+class FoldRuns:
+    """The folds of one cross-validation cut into runs of warm starts (:func:`cross_validate`): one
+    call per run, which other work may share the cores with (:func:`parallel_calls`), then
+    :meth:`errors` of their outcomes."""
+
+    session: Session
+    model: str
+    folds: int
+    order: np.ndarray
+    problem: ChainProblem
+    x: FloatArray
+    settled: dict[str, float] | None
+    runs: tuple[range, ...]
+
+    @classmethod
+    def of(
+        cls,
+        session: Session,
+        robot: Robot,
+        initial: CalibrationResult,
+        model: str,
+        folds: int = 8,
+        seed: int = 0,
+        start: ChainFit | None = None,
+        folds_per_run: int | None = FOLDS_PER_RUN,
+    ) -> FoldRuns:
+        """The runs of :func:`cross_validate` (same arguments)."""
+        n = len(session.uv_px)
+        order = np.random.default_rng(seed).permutation(n)
+        problem, x = ChainProblem.start(session, robot, initial, ParameterLayout(model))  # flange poses once
+        settled = None
+        if start is not None:
+            x = start.x[: problem.layout.size]  # the fixed blocks and scales come first (then any joint offsets)
+            settled = start.sigma_m
+        size = folds if folds_per_run is None else max(1, folds_per_run)
+        runs = tuple(range(first, min(first + size, folds)) for first in range(0, folds, size))
+        return cls(session, model, folds, order, problem, x, settled, runs)
+
+    def calls(self) -> list[Callable[[], list[tuple[np.ndarray, FloatArray]]]]:
+        """One call per run: ``[(held (N,) bool, errors of the held samples (metres)), ...]`` per fold."""
+        return [partial(self.run, r) for r in self.runs]
+
+    def costs(self) -> list[float]:
+        """Each run's cost, milliseconds (:data:`FOLD_COST_MS` per fold)."""
+        return [FOLD_COST_MS * len(r) for r in self.runs]
+
+    def run(self, fold_range: range) -> list[tuple[np.ndarray, FloatArray]]:
+        """The folds of one run, each starting from the previous one's fit."""
+        session, problem, n, folds = self.session, self.problem, len(self.session.uv_px), self.folds
+        x_fold, settled_fold = self.x, self.settled
         out = []
         for fold in fold_range:
             held = np.zeros(n, dtype=bool)
-            held[order[fold::folds]] = True
+            held[self.order[fold::folds]] = True
             try:
                 fit = fit_problem(
                     problem, x_fold, samples=~held, rounds=1, robot_accuracy=None, settle_from=settled_fold
@@ -101,7 +152,7 @@ def fold_errors(
             except DegenerateDataError as exc:
                 left_out = ", ".join(session.sample_ids[i] for i in np.flatnonzero(held)[:3])
                 raise DegenerateDataError(
-                    f"{model} cross-validation without sample(s) {left_out}: {exc.problem}"
+                    f"{self.model} cross-validation without sample(s) {left_out}: {exc.problem}"
                 ) from None
             # The next fold starts here: its estimates differ from this fold's by a few samples' pull (its
             # robust stage from this one's, both with rounds=1; its noise levels from these settled ones).
@@ -110,11 +161,13 @@ def fold_errors(
             out.append((held, np.linalg.norm(fit.image_residuals[held], axis=1)))
         return out
 
-    errors = np.empty(n)
-    for part in parallel_map(run, runs, workers):
-        for held, e in part:
-            errors[held] = e
-    return errors
+    def errors(self, outcomes: list[list[tuple[np.ndarray, FloatArray]]]) -> FloatArray:
+        """``(N,)`` each sample's error (metres) from the runs' outcomes (:meth:`calls`' order)."""
+        errors = np.empty(len(self.session.uv_px))
+        for part in outcomes:
+            for held, e in part:
+                errors[held] = e
+        return errors
 
 
 @dataclass(frozen=True)
@@ -140,6 +193,91 @@ class ModelChoice:
         return out
 
 
+#: Cost of the most flexible model's fit that flags the outliers, milliseconds as :data:`FOLD_COST_MS`.
+FLAGS_COST_MS = 20.0
+
+#: One model-choice call's outcome: ``("ok", outliers or errors)``, ``("undetermined", reason)`` or
+#: ``("error", exception)``.
+ChoiceOutcome = tuple[str, object]
+
+
+@dataclass(frozen=True)
+class ModelSelection:
+    """:func:`select_model` cut into its independent refits: the most flexible model's fit (the
+    outlier flags) and every model's K-fold cross-validation, one call each (:meth:`calls`), which
+    other work may share the cores with (:func:`parallel_calls`); then :meth:`choose`."""
+
+    session: Session
+    robot: Robot
+    initial: CalibrationResult
+    models: tuple[str, ...]
+    folds: int = 8
+
+    @property
+    def by_complexity(self) -> list[str]:
+        return sorted(self.models, key=lambda m: -image_model(m).complexity)
+
+    def job(self, item: tuple[str, str]) -> ChoiceOutcome:
+        """``("ok", outliers or errors)``, ``("undetermined", reason)`` or ``("error", exception)`` of one
+        fit or one model's CV."""
+        kind, m = item
+        try:
+            if kind == "flags":
+                return "ok", fit_chain(self.session, self.robot, self.initial, m, robot_accuracy=None).outliers
+            return "ok", cross_validate(self.session, self.robot, self.initial, m, self.folds).errors_m  # all scored
+        except DegenerateDataError as exc:
+            return "undetermined", exc.problem
+        except Exception as exc:  # raised by choose() if this model's CV is used (run alone, it would not be otherwise)
+            return "error", exc
+
+    def calls(self) -> tuple[list[Callable[[], ChoiceOutcome]], list[float]]:
+        """The flags fit, then each model's CV (:attr:`models`' order), with their costs (milliseconds)."""
+        items = [("flags", self.by_complexity[0]), *(("cv", m) for m in self.models)]
+        costs = [FLAGS_COST_MS, *(FOLD_COST_MS * self.folds for _ in self.models)]
+        return [partial(self.job, item) for item in items], costs
+
+    def choose(self, outcomes: list[ChoiceOutcome]) -> ModelChoice:
+        """The choice from :meth:`calls`' outcomes (:func:`select_model`'s rule).
+
+        Raises:
+            DegenerateDataError: no model is determined by the data.
+        """
+        by_complexity = self.by_complexity
+        undetermined: dict[str, str] = {}
+        flagged = None
+        for m in by_complexity:  # the most flexible determined model flags the outliers
+            kind, value = self.job(("flags", m)) if m != by_complexity[0] else outcomes[0]
+            if kind == "error":
+                assert isinstance(value, Exception)
+                raise value
+            if kind == "ok":
+                flagged = np.asarray(value, dtype=bool)
+                break
+            undetermined[m] = str(value)
+        if flagged is None:
+            raise DegenerateDataError(next(iter(undetermined.values())))
+        cv = {}
+        for m, (kind, value) in zip(self.models, outcomes[1:], strict=True):
+            if m in undetermined:
+                continue
+            if kind == "error":
+                assert isinstance(value, Exception)
+                raise value
+            if kind == "ok":
+                cv[m] = ErrorStats(np.asarray(value)[~flagged])
+            else:
+                undetermined[m] = str(value)
+        if not cv:
+            raise DegenerateDataError(next(iter(undetermined.values())))
+        rule = "simplest model within one standard error of the lowest cross-validated RMSE (outliers not scored)"
+        evidence = ModelChoice("", cv, rule, int((~flagged).sum())).evidence()
+        best = min(evidence, key=lambda m: evidence[m]["cv_rmse_mm"])
+        limit = evidence[best]["cv_rmse_mm"] + evidence[best]["se_mm"]
+        eligible = [m for m in cv if evidence[m]["cv_rmse_mm"] <= limit]
+        chosen = min(eligible, key=lambda m: (image_model(m).complexity, evidence[m]["cv_rmse_mm"]))
+        return ModelChoice(chosen, cv, rule, int((~flagged).sum()), undetermined)
+
+
 def select_model(
     session: Session,
     robot: Robot,
@@ -156,58 +294,11 @@ def select_model(
     (:func:`check_conditioning`) is left out of the choice, with its reason.
 
     The most flexible model's fit and every model's cross-validation are independent refits: they
-    share ``workers`` processes (default: the cores, :func:`parallel_map`); each is the same as run
-    alone.
+    share ``workers`` processes (default: the cores, :func:`parallel_calls`); each is the same as run
+    alone (:class:`ModelSelection`).
 
     Raises:
         DegenerateDataError: no model is determined by the data.
     """
-    by_complexity = sorted(models, key=lambda m: -image_model(m).complexity)
-
-    def job(item: tuple[str, str]) -> tuple[str, object]:
-        """``("ok", outliers or errors)``, ``("undetermined", reason)`` or ``("error", exception)`` of one
-        fit or one model's CV."""
-        kind, m = item
-        try:
-            if kind == "flags":
-                return "ok", fit_chain(session, robot, initial, m, robot_accuracy=None).outliers
-            return "ok", cross_validate(session, robot, initial, m, folds).errors_m  # every sample scored
-        except DegenerateDataError as exc:
-            return "undetermined", exc.problem
-        except Exception as exc:  # raised below if this model's CV is used (run alone, it would not be otherwise)
-            return "error", exc
-
-    outcomes = parallel_map(job, [("flags", by_complexity[0]), *(("cv", m) for m in models)], workers)
-    undetermined: dict[str, str] = {}
-    flagged = None
-    for m in by_complexity:  # the most flexible determined model flags the outliers
-        kind, value = job(("flags", m)) if m != by_complexity[0] else outcomes[0]
-        if kind == "error":
-            assert isinstance(value, Exception)
-            raise value
-        if kind == "ok":
-            flagged = np.asarray(value, dtype=bool)
-            break
-        undetermined[m] = str(value)
-    if flagged is None:
-        raise DegenerateDataError(next(iter(undetermined.values())))
-    cv = {}
-    for m, (kind, value) in zip(models, outcomes[1:], strict=True):
-        if m in undetermined:
-            continue
-        if kind == "error":
-            assert isinstance(value, Exception)
-            raise value
-        if kind == "ok":
-            cv[m] = ErrorStats(np.asarray(value)[~flagged])
-        else:
-            undetermined[m] = str(value)
-    if not cv:
-        raise DegenerateDataError(next(iter(undetermined.values())))
-    rule = "simplest model within one standard error of the lowest cross-validated RMSE (outliers not scored)"
-    evidence = ModelChoice("", cv, rule, int((~flagged).sum())).evidence()
-    best = min(evidence, key=lambda m: evidence[m]["cv_rmse_mm"])
-    limit = evidence[best]["cv_rmse_mm"] + evidence[best]["se_mm"]
-    eligible = [m for m in cv if evidence[m]["cv_rmse_mm"] <= limit]
-    chosen = min(eligible, key=lambda m: (image_model(m).complexity, evidence[m]["cv_rmse_mm"]))
-    return ModelChoice(chosen, cv, rule, int((~flagged).sum()), undetermined)
+    selection = ModelSelection(session, robot, initial, tuple(models), folds)
+    return selection.choose(parallel_calls(*selection.calls(), workers))

@@ -14,7 +14,7 @@ import numpy as np
 
 from brachycal.calibration.chain.data import ChainData
 from brachycal.calibration.chain.jacobian import chain_jacobian
-from brachycal.calibration.chain.layout import ParameterLayout
+from brachycal.calibration.chain.layout import ParameterLayout, Unpacked
 from brachycal.calibration.chain.residuals import chain_residuals, image_residuals
 from brachycal.calibration.chain.solver import Solution, solve_least_squares
 from brachycal.calibration.sequential import CalibrationResult
@@ -55,6 +55,7 @@ class ChainProblem:
     layout: ParameterLayout
     base: dict[str, FloatArray]
     _kept: dict[bytes, ChainData] = field(default_factory=dict, repr=False, compare=False)
+    _unpacked: list[tuple[bytes, Unpacked]] = field(default_factory=list, repr=False, compare=False)
 
     @classmethod
     def start(
@@ -83,11 +84,24 @@ class ChainProblem:
             self._kept[key] = self.data.subset(np.asarray(keep, dtype=bool))
         return self._kept[key]
 
+    def unpack(self, x: FloatArray) -> Unpacked:
+        """:meth:`ParameterLayout.unpack` at ``x (P,)`` about :attr:`base` (read only). The last ``x``'s is
+        kept: the solver evaluates the Jacobian where it has just evaluated the residuals."""
+        key = np.asarray(x, dtype=float).tobytes()
+        if self._unpacked and self._unpacked[0][0] == key:
+            return self._unpacked[0][1]
+        unpacked = self.layout.unpack(x, self.base, self.data.spacing_m)
+        for array in unpacked[:4]:  # new arrays (the spacing may be the session's own: left as it is)
+            array.flags.writeable = False
+        self._unpacked[:] = [(key, unpacked)]
+        return unpacked
+
     def residuals(self, x: FloatArray, sigma: dict[str, float], keep: np.ndarray) -> FloatArray:
         """Normalised residuals (:func:`chain_residuals`), then the joint offsets' prior rows."""
         if not self.estimates_offsets:
             kept = self.kept(keep)
-            return chain_residuals(x, self.layout, kept, self.base, sigma, np.ones(len(kept.uv_px), dtype=bool))
+            everything = np.ones(len(kept.uv_px), dtype=bool)
+            return chain_residuals(x, self.layout, kept, self.base, sigma, everything, unpacked=self.unpack(x))
         r = chain_residuals(x, self.layout, self.data_at(x), self.base, sigma, keep)
         return np.concatenate([r, x[self.layout.blocks()["joint_offsets"]] / OFFSET_PRIOR_SD])
 
@@ -96,7 +110,8 @@ class ChainProblem:
         (they move the flange poses)."""
         if not self.estimates_offsets:
             kept = self.kept(keep)
-            return chain_jacobian(x, self.layout, kept, self.base, sigma, np.ones(len(kept.uv_px), dtype=bool))
+            everything = np.ones(len(kept.uv_px), dtype=bool)
+            return chain_jacobian(x, self.layout, kept, self.base, sigma, everything, unpacked=self.unpack(x))
         at = self.data_at(x)
         J = chain_jacobian(x, self.layout, at, self.base, sigma, keep)  # zero in the joint offsets' columns
         offsets = self.layout.blocks()["joint_offsets"]
@@ -144,7 +159,7 @@ class ChainProblem:
 
     def image_residuals(self, x: FloatArray) -> FloatArray:
         """``(N, 3)`` every sample's image residual at ``x``, metres."""
-        T_ER_Ntip, T_EL_Ptip, T_Ptip_I, _, spacing = self.layout.unpack(x, self.base, self.data.spacing_m)
+        T_ER_Ntip, T_EL_Ptip, T_Ptip_I, _, spacing = self.unpack(x)
         return image_residuals(self.data_at(x), T_ER_Ntip, T_EL_Ptip @ T_Ptip_I, spacing)
 
     def flagged(self, x: FloatArray, sigma: dict[str, float]) -> np.ndarray:

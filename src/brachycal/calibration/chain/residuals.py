@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from brachycal.calibration.chain.data import ChainData
-from brachycal.calibration.chain.layout import ParameterLayout
+from brachycal.calibration.chain.layout import ParameterLayout, Unpacked
 from brachycal.se3 import FloatArray
 
 
@@ -17,11 +17,16 @@ def chain_residuals(
     base: dict[str, FloatArray],
     sigma: dict[str, float],
     samples: np.ndarray,
+    *,
+    unpacked: Unpacked | None = None,
 ) -> FloatArray:
     """``(M,)`` residuals at ``x``, each divided by its group's noise level ``sigma`` (metres per
     coordinate): the touches (3 per touch), the axes moves, then the image samples where
-    ``samples (N,)`` is true (3 each), in the rows of :meth:`ChainData.group_rows`."""
-    T_ER_Ntip, T_EL_Ptip, T_Ptip_I, rtips, spacing = layout.unpack(x, base, data.spacing_m)
+    ``samples (N,)`` is true (3 each), in the rows of :meth:`ChainData.group_rows`. ``unpacked``:
+    ``layout.unpack(x, base, data.spacing_m)`` if already known."""
+    if unpacked is None:
+        unpacked = layout.unpack(x, base, data.spacing_m)
+    T_ER_Ntip, T_EL_Ptip, T_Ptip_I, rtips, spacing = unpacked
     p_tools = np.stack([data.p_ER_Mtip, T_ER_Ntip[:3, 3], T_EL_Ptip[:3, 3]])[data.touch_tool]
     R_touch = data.touch_T[:, :3, :3]
     touch = (R_touch @ p_tools[:, :, None])[:, :, 0] + data.touch_T[:, :3, 3] - rtips[data.touch_ref]
