@@ -265,27 +265,4 @@ def test_quaternions_are_scipys_including_the_sign_convention(robot):
     assert np.abs(quaternions(R) - Rotation.from_matrix(R).as_quat(canonical=True)).max() <= 1e-15
 
 
-def test_ros1_messages_are_rosbags_messages_in_the_same_order(tmp_path, robot):
-    """The ROS 1 fast path reads records at rosbags' index entries: messages of two publishers on
-    one topic, written out of time order, come out as rosbags gives them."""
-    from rosbags.highlevel import AnyReader
-    from rosbags.rosbag1 import Writer
-    from rosbags.typesys import Stores, get_typestore
-
-    from brachycal.data.bags import JOINT_STATE, _ros1_messages
-
-    typestore = get_typestore(Stores.ROS1_NOETIC)
-    path = tmp_path / "two.bag"
-    with Writer(path) as writer:
-        connections = [
-            writer.add_connection("/joint_states", JOINT_STATE, typestore=typestore, callerid=f"/driver{k}")
-            for k in range(2)
-        ]
-        for k in range(40):
-            raw = bytes([k]) * (10 + k)  # opaque payloads: only the records are read here
-            writer.write(connections[k % 2], 10**9 + (k * 7919) % 40 * 1000, raw)
-    with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
-        topic = [c for c in reader.connections if c.topic == "/joint_states"]
-        want = [(t, raw) for _, t, raw in reader.messages(connections=topic)]
-        got = list(_ros1_messages(reader, topic, str(path)))
-    assert got == want and len(got) == 40
+# The order and bytes of the bag fast paths against rosbags' reader: tests/test_bags_records.py

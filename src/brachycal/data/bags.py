@@ -11,9 +11,10 @@ Long bags are streamed (:func:`bag_log_blocks`): messages are gathered into bloc
 :data:`BLOCK_MESSAGES`, and a message laid out byte for byte like the first one (same frame id,
 same joint names in the same order, same number of positions: what a driver publishes at every
 tick) is not deserialised into Python objects: its stamp and positions are cut out of the raw
-bytes at the offsets the first message showed (ROS 1 serialisation or little-endian CDR), and a
-block's worth is converted by NumPy at once. Any other message takes the full path through
-rosbags with every check above.
+bytes at the offsets the first message showed (ROS 1 serialisation or little-endian CDR). The raw
+messages come a chunk of the bag at a time as ``(n, bytes)`` arrays
+(:mod:`brachycal.data.bag_records`), so a run of such messages is cut by NumPy at once, with no
+Python per message. Any other message takes the full path through rosbags with every check above.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ import os
 import struct
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -58,101 +59,6 @@ def bag_folder(path: str | os.PathLike[str]) -> Path:
     return path.parent if path.suffix in {".db3", ".mcap"} else path
 
 
-def _raw_messages(
-    path: str | os.PathLike[str], topic: str, msgtype: str
-) -> Iterator[tuple[str, int, int, bytes, Callable[[bytes], object], bool, int]]:
-    """The raw messages of one topic: ``(source, number, bag_time_ns, raw, deserialise, is_ros2, count)``.
-
-    ``deserialise(raw)`` gives the message; ``count`` is the number of messages on the topic.
-    See :func:`bag_messages` for the checks and errors.
-    """
-    from rosbags.highlevel import AnyReader
-    from rosbags.typesys import Stores, get_typestore
-
-    path = bag_folder(path)
-    source = str(path)
-    try:
-        reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
-        reader.open()
-    except Exception as exc:  # rosbags raises several unrelated types for unreadable input
-        raise InputError(f"not a readable ROS bag ({exc})", file=source) from None
-    try:
-        connections = [c for c in reader.connections if c.topic == topic]
-        if not connections:
-            topics = sorted({c.topic for c in reader.connections})
-            raise InputError(f"no topic {topic!r} (topics: {', '.join(topics) or 'none'})", file=source)
-        for connection in connections:
-            if connection.msgtype != msgtype:
-                raise InputError(f"topic {topic!r} carries {connection.msgtype}, expected {msgtype}", file=source)
-        count = sum(c.msgcount for c in connections)
-
-        def deserialise(raw: bytes) -> object:
-            return reader.deserialize(raw, msgtype)
-
-        messages = _ros1_messages(reader, connections, source)
-        if messages is None:
-            messages = ((time, raw) for _, time, raw in reader.messages(connections=connections))
-        for number, (bag_time, raw) in enumerate(messages, start=1):
-            yield source, number, bag_time, raw, deserialise, bool(reader.is2), count
-    finally:
-        reader.close()
-
-
-def _ros1_messages(reader: Any, connections: list[Any], source: str) -> Iterator[tuple[int, bytes]] | None:
-    """``(bag_time_ns, raw)`` of a ROS 1 bag's messages on ``connections``, in the order of rosbags'
-    ``Reader.messages`` (its index, merged by time), without its per-message parsing of record
-    headers into dictionaries of strings (four fifths of the time of reading a JointState bag).
-
-    Uses the index rosbags built when it opened the bag (``indexes``, ``chunks``, ``bio`` of its
-    ROS 1 reader); returns None (read through rosbags) if this version of rosbags has them not.
-    """
-    import heapq
-
-    bags = getattr(reader, "readers", [])
-    if reader.is2 or len(bags) != 1 or not all(hasattr(bags[0], a) for a in ("indexes", "chunks", "bio")):
-        return None
-    bag = bags[0]
-    try:
-        indexes = [bag.indexes[c.id] for c in connections]
-    except (AttributeError, KeyError, TypeError):
-        return None
-
-    def op(header: bytes) -> int:
-        at = 0
-        while at + 4 <= len(header):
-            size = int.from_bytes(header[at : at + 4], "little")
-            field = header[at + 4 : at + 4 + size]
-            if field.startswith(b"op="):
-                return field[3]
-            at += 4 + size
-        return -1
-
-    def messages() -> Iterator[tuple[int, bytes]]:
-        chunk_pos, data = None, b""
-        for entry in heapq.merge(*indexes):
-            if entry.chunk_pos != chunk_pos:
-                chunk = bag.chunks[entry.chunk_pos]
-                bag.bio.seek(chunk.datapos)
-                data = chunk.decompressor(bag.bio.read(chunk.datasize))
-                chunk_pos = entry.chunk_pos
-            at = entry.offset
-            while True:  # connection records may precede the message (as rosbags skips them)
-                size = int.from_bytes(data[at : at + 4], "little")
-                kind = op(data[at + 4 : at + 4 + size])
-                at += 4 + size
-                length = int.from_bytes(data[at : at + 4], "little")
-                at += 4
-                if kind == 7:  # a connection record
-                    at += length
-                    continue
-                if kind != 2 or at + length > len(data):  # not message data: the index is wrong
-                    raise InputError("not a readable ROS bag (expected message data)", file=source)
-                yield entry.time, data[at : at + length]
-                break
-
-    return messages()
-
-
 def bag_messages(path: str | os.PathLike[str], topic: str, msgtype: str) -> Iterator[tuple[str, int, int, object]]:
     """The messages of one topic of a ROS 1 or ROS 2 bag, checked to be of type ``msgtype``.
 
@@ -163,8 +69,22 @@ def bag_messages(path: str | os.PathLike[str], topic: str, msgtype: str) -> Iter
     Raises:
         InputError: unreadable bag, no such topic, or the topic carries another message type.
     """
-    for source, number, bag_time, raw, deserialise, _, _ in _raw_messages(path, topic, msgtype):
-        yield source, number, bag_time, deserialise(raw)
+    from brachycal.data.bag_records import raw_batches
+
+    folder = bag_folder(path)
+    number = 0
+    for info, batch in raw_batches(folder, str(folder), topic, msgtype):
+        for bag_time, raw in zip(batch.bag_time_ns.tolist(), batch.raw, strict=True):
+            number += 1
+            yield info.source, number, bag_time, _deserialised(bytes(raw), info.deserialise, info.source, number)
+
+
+def _deserialised(raw: bytes, deserialise: Callable[[bytes], object], source: str, number: int) -> object:
+    """``deserialise(raw)``; a message rosbags cannot deserialise (damaged bytes) is refused."""
+    try:
+        return deserialise(raw)
+    except Exception as exc:  # rosbags' AnyReaderError (a SerdeError of any kind underneath)
+        raise InputError(f"not a readable message ({exc})", file=source, row=number, row_label="message") from None
 
 
 def _position_offset(raw: bytes, ros2: bool, msg: JointStateMsg) -> int | None:
@@ -235,83 +155,126 @@ def _bag_blocks(
     path: str | os.PathLike[str], topic: str, block_messages: int, total: Callable[[int], None] | None
 ) -> Iterator[tuple[list[str], LogBlock]]:
     """The joint states of a bag in blocks, not yet checked: ``(joint names, block)``; values in the
-    order of the first message's names. Refuses messages whose names or positions do not fit."""
+    order of the first message's names. Refuses messages whose names or positions do not fit.
+
+    Messages come a chunk of the bag at a time (:func:`~brachycal.data.bag_records.raw_batches`);
+    the runs of those laid out like the first message are cut by NumPy as ``(n, bytes)`` arrays,
+    the others take the full path one by one, so the refusals and their message numbers are those
+    of reading message by message.
+    """
+    from brachycal.data.bag_records import raw_batches
     from brachycal.data.csv_log import LogBlock
 
+    folder = bag_folder(path)
     names: list[str] | None = None
-    layout: tuple[int, int, bytes] | None = None  # raw length, position offset, bytes 12..offset of the first message
-    stamps: list[bytes] = []
-    positions: list[bytes] = []
-    bag_times: list[int] = []
-    numbers: list[int] = []
+    # raw length, position offset, bytes 12..offset of the first message ((k,) uint8)
+    layout: tuple[int, int, np.ndarray] | None = None
+    stamps: list[np.ndarray] = []  # (n, 8) uint8: header.stamp's sec and nanosec
+    positions: list[np.ndarray] = []  # (n, 8 J) uint8: the positions' doubles
+    bag_times: list[np.ndarray] = []  # (n,) int64 ns
+    held = 0  # messages in the lists above
+    number = 0  # messages read
     ros2 = True
 
-    def block() -> tuple[list[str], LogBlock]:
+    def take(n: int) -> tuple[list[str], LogBlock]:
+        """The first ``n`` messages held, as a block."""
+        nonlocal held
         assert names is not None
+
+        def first(parts: list[np.ndarray]) -> np.ndarray:
+            whole = np.concatenate(parts) if len(parts) > 1 else parts[0]
+            parts[:] = [whole[n:]] if len(whole) > n else []
+            return np.ascontiguousarray(whole[:n])
+
         sec = np.dtype("<i4") if ros2 else np.dtype("<u4")
-        stamp = np.frombuffer(b"".join(stamps), dtype=[("sec", sec), ("nanosec", "<u4")])
+        stamp = first(stamps).view([("sec", sec), ("nanosec", "<u4")])[:, 0]
         # the same operations as sec + 1e-9 * nanosec on Python numbers: the same times to the bit
         time = stamp["sec"].astype(float) + 1e-9 * stamp["nanosec"].astype(float)
-        time = np.where(time > 0, time, np.asarray(bag_times, dtype=np.int64) * 1e-9)
-        values = np.frombuffer(b"".join(positions), dtype="<f8").reshape(len(stamps), len(names))
-        rows = np.asarray(numbers)
-        for part in (stamps, positions, bag_times, numbers):
-            part.clear()
+        time = np.where(time > 0, time, first(bag_times) * 1e-9)
+        values = first(positions).view("<f8")
+        rows = np.arange(number - held + 1, number - held + 1 + n)
+        held -= n
         return names, LogBlock(time, values, rows, int(rows[-1]))
 
-    for source, number, bag_time, raw, deserialise, ros2, count in _raw_messages(path, topic, JOINT_STATE):
-        if number == 1 and total is not None:
-            total(count)
-        if layout is not None and len(raw) == layout[0] and raw[12 : layout[1]] == layout[2]:
-            stamps.append(raw[4:12])
-            positions.append(raw[layout[1] : layout[1] + 8 * len(names or ())])
-        else:
-            # The topic was checked to carry JOINT_STATE; rosbags returns `object`.
-            msg = cast("JointStateMsg", deserialise(raw))
-            these = list(msg.name)
-            for k, name in enumerate(these):
-                if name in these[:k]:  # which of the two positions is the joint's? Refuse, as the CSV reader does.
-                    raise InputError(
-                        f"joint {name!r} listed twice (names {these.index(name) + 1} and {k + 1} of the message)",
-                        file=source,
-                        row=number,
-                        row_label="message",
-                    )
-            if names is None:
-                names = these
-            elif these != names:
-                order = {n: k for k, n in enumerate(these)}
-                missing = [n for n in names if n not in order]
-                if missing:
-                    raise InputError(
-                        f"lacks joint(s) {', '.join(missing)} that earlier messages carry",
-                        file=source,
-                        row=number,
-                        row_label="message",
-                    )
-            position = np.asarray(msg.position, dtype=float)
-            if len(position) != len(these):
-                raise InputError(
-                    f"has {len(these)} names but {len(position)} positions",
-                    file=source,
-                    row=number,
-                    row_label="message",
-                )
-            if layout is None and these == names:
-                offset = _position_offset(raw, ros2, msg)
-                if offset is not None:
-                    layout = (len(raw), offset, raw[12:offset])
-            if these != names:
-                position = position[[these.index(n) for n in names]]
-            sec_format = "<iI" if ros2 else "<II"
-            stamps.append(struct.pack(sec_format, msg.header.stamp.sec, msg.header.stamp.nanosec))
-            positions.append(position.astype("<f8").tobytes())
+    def hold(stamp: np.ndarray, position: np.ndarray, bag_time: np.ndarray) -> None:
+        nonlocal held, number
+        stamps.append(stamp)
+        positions.append(position)
         bag_times.append(bag_time)
-        numbers.append(number)
-        if len(numbers) >= block_messages:
-            yield block()
-    if numbers:
-        yield block()
+        held += len(bag_time)
+        number += len(bag_time)
+
+    def full_path(raw: bytes, bag_time: np.ndarray, deserialise: Callable[[bytes], object], source: str) -> None:
+        """One message deserialised by rosbags, with every check."""
+        nonlocal names, layout
+
+        def refusal(message: str) -> InputError:
+            return InputError(message, file=source, row=number + 1, row_label="message")
+
+        # The topic was checked to carry JOINT_STATE; rosbags returns `object`.
+        msg = cast("JointStateMsg", _deserialised(raw, deserialise, source, number + 1))
+        these = list(msg.name)
+        for k, name in enumerate(these):
+            if name in these[:k]:  # which of the two positions is the joint's? Refuse, as the CSV reader does.
+                raise refusal(f"joint {name!r} listed twice (names {these.index(name) + 1} and {k + 1} of the message)")
+        if names is None:
+            names = these
+        elif these != names:
+            order = {n: k for k, n in enumerate(these)}
+            missing = [n for n in names if n not in order]
+            if missing:
+                raise refusal(f"lacks joint(s) {', '.join(missing)} that earlier messages carry")
+        position = np.asarray(msg.position, dtype=float)
+        if len(position) != len(these):
+            raise refusal(f"has {len(these)} names but {len(position)} positions")
+        if layout is None and these == names:
+            offset = _position_offset(raw, ros2, msg)
+            if offset is not None:
+                layout = (len(raw), offset, np.frombuffer(raw[12:offset], dtype=np.uint8))
+        if these != names:
+            position = position[[these.index(n) for n in names]]
+        stamp = struct.pack("<iI" if ros2 else "<II", msg.header.stamp.sec, msg.header.stamp.nanosec)
+        hold(
+            np.frombuffer(stamp, dtype=np.uint8)[None],
+            np.frombuffer(position.astype("<f8").tobytes(), dtype=np.uint8)[None],
+            bag_time,
+        )
+
+    for info, batch in raw_batches(folder, str(folder), topic, JOINT_STATE):
+        if number == 0 and total is not None:
+            total(info.messages)
+        ros2 = info.ros2
+        raws = batch.raw
+        k = 0
+        fits: np.ndarray | None = None  # (n,) which messages of the batch have the layout
+        misfits = np.zeros(0, dtype=np.intp)  # where fits is False, ascending
+        while k < len(raws):
+            if layout is not None and fits is None:
+                if isinstance(raws, np.ndarray):
+                    fits = np.zeros(len(raws), dtype=bool)
+                    if raws.shape[1] == layout[0]:
+                        fits[k:] = (raws[k:, 12 : layout[1]] == layout[2]).all(axis=1)
+                else:
+                    fits = np.array([len(r) == layout[0] and r[12 : layout[1]] == layout[2].tobytes() for r in raws])
+                    fits[:k] = False
+                misfits = np.flatnonzero(~fits)
+            if fits is not None and fits[k]:
+                assert layout is not None and names is not None
+                after = np.searchsorted(misfits, k)
+                stop = int(misfits[after]) if after < len(misfits) else len(raws)
+                if isinstance(raws, np.ndarray):
+                    run = raws[k:stop]
+                else:
+                    run = np.frombuffer(b"".join(raws[k:stop]), dtype=np.uint8).reshape(stop - k, -1)
+                hold(run[:, 4:12], run[:, layout[1] : layout[1] + 8 * len(names)], batch.bag_time_ns[k:stop])
+                k = stop
+            else:
+                full_path(bytes(raws[k]), batch.bag_time_ns[k : k + 1], info.deserialise, info.source)
+                k += 1
+            while held >= block_messages:
+                yield take(block_messages)
+    if held:
+        yield take(held)
 
 
 def read_bag_log(path: str | os.PathLike[str], robot: Robot, topic: str = DEFAULT_TOPIC) -> JointLog:
