@@ -14,10 +14,12 @@ Run: ``.venv/bin/python benchmarks/calibrate_speed.py``. Figures:
   :func:`~brachycal.calibration.chain.cross_validate`), best of 3, so that the end-to-end figure
   can be read as start-up + sequential + chain (+ reading the session and writing the result).
 
-Cores: the sequential method's image-to-probe methods, the model choice's refits and the
-leave-one-out's runs of folds share the cores (:func:`brachycal.calibration.parallel.parallel_map`,
-forked workers; the figures are the same on any number of cores), so the stages are printed on
-all of this process's cores and, for comparison, on one.
+Cores: the command runs the sequential method's leave-one-out with the model choice's refits in
+one forked stage, then the chain's leave-one-out runs with the landing-error maps in another
+(:func:`brachycal.calibration.parallel.parallel_calls`, longest first; the figures are the same on
+any number of cores). The stages printed here are the library calls run one after another, each
+on all of this process's cores and, for comparison, on one: their sum is more than the command's
+share of the end-to-end figure, where the stages overlap.
 
 BLAS threads: on this 2-core machine the figures are measured as the command runs by default;
 run with ``OMP_NUM_THREADS=1`` to compare (the problems are small: one thread is as fast).
