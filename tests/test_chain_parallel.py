@@ -227,3 +227,21 @@ def test_frozen_heap_and_the_command_leave_the_collector_as_they_found_it(tmp_pa
         finally:
             gc.enable()
     capsys.readouterr()
+
+
+def test_frozen_heap_leaves_a_callers_own_freeze_alone():
+    import gc
+
+    from brachycal.calibration.parallel import frozen_heap
+
+    gc.freeze()
+    try:
+        frozen = gc.get_freeze_count()
+        with frozen_heap():
+            pass
+        assert gc.get_freeze_count() == frozen  # not released by the command's exit
+    finally:
+        gc.unfreeze()
+    with frozen_heap():
+        assert gc.get_freeze_count() > 0
+    assert gc.get_freeze_count() == 0

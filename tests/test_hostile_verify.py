@@ -128,6 +128,7 @@ CASES = [
         ["verify", "{result}", "{check}", *OUT, "--update", "{tmp}/record.json"],
         ("--update", "--out", "same file"),
     ),
+    Case("demo-with-update", ["verify", "--update", "{tmp}/u.json", "--demo", "{tmp}/demo"], ("--demo", "--update")),
     Case("demo-with-calibration-session", ["verify", *SESSION, "--demo", "{tmp}/demo"], ("--demo",)),
     Case(
         "calibration-session-missing",

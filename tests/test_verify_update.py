@@ -143,3 +143,34 @@ def test_verify_update_writes_the_updated_result_or_says_why_not(calibrated, tmp
     assert outcome.code == 0, outcome.err
     assert "no update written" in outcome.out and "nothing to update" in outcome.out
     assert not (tmp_path / "none.json").exists() and (tmp_path / "p.json").exists()
+
+
+def test_an_image_update_keeps_the_nominal_spacing_the_next_check_is_held_to(tmp_path):
+    """A sequential result's rigid methods carry the scanner's nominal spacing, which a check session
+    is held to; an image update keeps only the checked method (and may change its spacing), so the
+    file records the nominal spacing: the confirming check is not refused, and a check at another
+    scanner setting still is."""
+    from brachycal.calibration.check import calibrated_nominal_spacing
+    from brachycal.errors import InputError
+
+    twin = CalibratedTwin(0, Robot.load(None), tmp_path, method="sequential")
+    setup = changed_setup(twin.twin, CHANGES["speed of sound 1482 -> 1510 m/s"], np.random.default_rng([0, 11, 7]))
+    session, _ = record_check(twin.twin, setup, twin.q_planned, twin.uv_planned, np.random.default_rng([0, 20, 7]))
+    nominal = calibrated_nominal_spacing(twin.stored)
+    assert nominal is not None
+
+    def check(stored, method, session):
+        return check_calibration(stored, method, twin.robot, session, calibration=twin.twin.session)
+
+    outcome = check(twin.stored, "scaled_uv", session)
+    assert outcome.part is not None and outcome.part.part == "image scale" and update_refusal(outcome) is None
+    # The scaled method's update (the rigid methods dropped) and, the same change written on the
+    # rigid kabsch (its spacing then no longer the nominal one): both keep the nominal spacing.
+    for method in ("scaled_uv", "kabsch"):
+        payload = updated_result(twin.stored, replace(outcome, method=method), session)
+        updated = read_result(write_json(tmp_path / f"{method}.json", payload))
+        assert list(updated.image) == [method]
+        np.testing.assert_array_equal(calibrated_nominal_spacing(updated), nominal)
+        check(updated, method, session)  # the confirming check is held to the nominal spacing: no refusal
+        with pytest.raises(InputError, match="another scanner setting"):
+            check(updated, method, replace(session, spacing_m=session.spacing_m * 1.3))

@@ -734,7 +734,7 @@ def check_calibration(
             model.null, stored, method, robot, calibration, session, calibration_folder=calibration_folder
         )
         model = replace(model, null=null)
-    calibrated = _calibrated_nominal_spacing(stored)
+    calibrated = calibrated_nominal_spacing(stored)
     if calibrated is not None and not np.allclose(session.spacing_m, calibrated, rtol=1e-6, atol=0.0):
         raise InputError(
             f"image spacing {_mm(session.spacing_m)} mm differs from the calibrated session's {_mm(calibrated)} mm: "
@@ -794,22 +794,32 @@ def _mm(spacing_m: FloatArray) -> str:
     return ",".join(f"{v * 1e3:g}" for v in spacing_m)
 
 
-def _calibrated_nominal_spacing(stored: StoredCalibration) -> FloatArray | None:
-    """The nominal spacing of the session the result was calibrated on, if it says (the rigid
-    methods' spacing is the nominal one; the scaled methods estimate theirs)."""
-    for method in ("kabsch", "horn", "icp"):
-        if method in stored.image:
-            return stored.image[method].spacing_m
-    # A whole-chain result keeps the sequential methods' spacings beside its own.
-    sequential = stored.raw.get("sequential", {})
-    spacings = sequential.get("spacing_mm", {}) if isinstance(sequential, dict) else {}
-    for method in ("kabsch", "horn", "icp"):
-        value = spacings.get(method) if isinstance(spacings, dict) else None
+def calibrated_nominal_spacing(stored: StoredCalibration) -> FloatArray | None:
+    """``(2,)`` the nominal spacing (m per pixel) of the session the result was calibrated on, if it
+    says: a result updated from a check records it (``nominal_spacing_mm``: its image may no longer
+    be the rigid methods'); else the rigid methods' spacing is the nominal one (the scaled methods
+    estimate theirs), a whole-chain result keeping the sequential methods' beside its own."""
+
+    def spacing_of(value: object) -> FloatArray | None:
         try:
             spacing = np.array(value, dtype=float) * 1e-3
         except (TypeError, ValueError):
-            continue
+            return None
         if spacing.shape == (2,) and np.all(np.isfinite(spacing)) and np.all(spacing > 0):
+            return spacing
+        return None
+
+    recorded = spacing_of(stored.raw.get("nominal_spacing_mm"))
+    if recorded is not None:
+        return recorded
+    for method in ("kabsch", "horn", "icp"):
+        if method in stored.image:
+            return stored.image[method].spacing_m
+    sequential = stored.raw.get("sequential", {})
+    spacings = sequential.get("spacing_mm", {}) if isinstance(sequential, dict) else {}
+    for method in ("kabsch", "horn", "icp"):
+        spacing = spacing_of(spacings.get(method) if isinstance(spacings, dict) else None)
+        if spacing is not None:
             return spacing
     return None
 

@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from brachycal.calibration.check import GROSS_PRIOR_MULTIPLES, small_motion
+from brachycal.calibration.check import GROSS_PRIOR_MULTIPLES, calibrated_nominal_spacing, small_motion
 
 if TYPE_CHECKING:
     from brachycal.calibration.check import CheckOutcome, CheckSession
@@ -90,6 +90,11 @@ def updated_result(stored: StoredCalibration, outcome: CheckOutcome, session: Ch
     assert part is not None and update_refusal(outcome) is None, "update_refusal() first"
     raw = copy.deepcopy(stored.raw)
     method = outcome.method
+    # The check refuses another scanner setting by the nominal spacing; once the image is updated the
+    # rigid methods' spacing may no longer be it (or be gone): the file keeps it.
+    nominal = calibrated_nominal_spacing(stored)
+    if nominal is not None:
+        raw["nominal_spacing_mm"] = (nominal * 1e3).tolist()
     transforms = raw["transforms"]
     d = np.asarray(part.delta, dtype=float)
     if part.part == "needle tip":

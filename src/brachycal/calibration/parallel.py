@@ -97,6 +97,9 @@ def frozen_heap() -> Iterator[None]:
     pages of every module loaded; they also spare scanning those objects again. Library code never
     calls it (the collector's state is the process's).
     """
+    if gc.get_freeze_count():  # the caller froze its own: unfreezing would release theirs too
+        yield
+        return
     gc.freeze()
     try:
         yield

@@ -91,10 +91,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     if args.demo is not None:
-        if args.result or args.check or args.out or args.report or args.calibration_session:
+        if args.result or args.check or args.out or args.report or args.calibration_session or args.update:
             raise InputError(
                 "--demo writes its own result and sessions: pass no RESULT, CHECK_SESSION, --calibration-session, "
-                "--out or --report"
+                "--out, --report or --update"
             )
         return _demo(args)
     if not args.result or not args.check:
