@@ -29,6 +29,7 @@ from brachycal.validate import (
 
 if TYPE_CHECKING:
     from brachycal.files import OutputSet
+    from brachycal.model.robot import Robot
     from brachycal.planning import IKSettings, Plan, Thresholds
 
 HELP = "plan the calibration sample poses (a grid of needle-tip targets) with mink IK"
@@ -227,6 +228,23 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def planning_robot(args: argparse.Namespace, spec: PlanSpec) -> tuple[Robot, PlanSpec]:
+    """The robot to plan with (``--robot``) and ``spec``: with ``--result``, the robot carries the
+    calibration's tool frames and corrections, and its image spacing unless ``--spacing-mm`` gave one."""
+    robot = load_robot(args)
+    if not args.result:
+        return robot, spec
+    from brachycal.calibration import read_result
+    from brachycal.export import calibrated_robot
+
+    stored = read_result(args.result)
+    image = stored.image[stored.method(args.method)]
+    robot = calibrated_robot(stored.software_robot(robot), stored.T_ER_Ntip, stored.T_EL_Ptip, image)
+    if args.spacing_mm is None:
+        spec = replace(spec, spacing_m=image.spacing_m)
+    return robot, spec
+
+
 def _run(args: argparse.Namespace, outputs: OutputSet, drawer: _FigureProcess) -> None:
     """Plan and write the plan, its figure (drawn by ``drawer``) and (with infeasible points) their
     list into ``outputs``."""
@@ -240,16 +258,7 @@ def _run(args: argparse.Namespace, outputs: OutputSet, drawer: _FigureProcess) -
     staged_infeasible = outputs.claim(infeasible_path(out), label="the list of infeasible points")
     staged_figure = outputs.claim(figure, label="--figure" if args.figure else "the figure (--out with .png)")
     drawer.start()  # loads matplotlib in a second process while this one plans
-    robot = load_robot(args)
-    if args.result:
-        from brachycal.calibration import read_result
-        from brachycal.export import calibrated_robot
-
-        stored = read_result(args.result)
-        image = stored.image[stored.method(args.method)]
-        robot = calibrated_robot(stored.software_robot(robot), stored.T_ER_Ntip, stored.T_EL_Ptip, image)
-        if args.spacing_mm is None:
-            spec = replace(spec, spacing_m=image.spacing_m)
+    robot, spec = planning_robot(args, spec)
     n = args.points**3
     with progress_bar(n, "planning", args.quiet) as bar:
         plan = plan_poses(

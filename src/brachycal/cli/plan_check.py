@@ -68,9 +68,8 @@ def check_check_options(args: argparse.Namespace) -> None:
 def run_check_plan(args: argparse.Namespace, planner: tuple[PlanSpec, IKSettings, Thresholds]) -> int:
     """Plan the grid, pick the check's poses, print and write them (``planner``: the spec, IK
     settings and check thresholds from ``plan``'s options)."""
-    from dataclasses import replace
-
-    from brachycal.cli.common import load_robot, progress_bar
+    from brachycal.cli.common import progress_bar
+    from brachycal.cli.plan import planning_robot
     from brachycal.files import OutputSet
     from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
     from brachycal.planning import plan_poses, write_plan
@@ -87,16 +86,7 @@ def run_check_plan(args: argparse.Namespace, planner: tuple[PlanSpec, IKSettings
     out = Path(args.out)
     with OutputSet(force=args.force) as outputs:
         staged = outputs.claim(out, label="--out")
-        robot = load_robot(args)
-        if args.result:
-            from brachycal.calibration import read_result
-            from brachycal.export import calibrated_robot
-
-            stored = read_result(args.result)
-            image = stored.image[stored.method(args.method)]
-            robot = calibrated_robot(stored.software_robot(robot), stored.T_ER_Ntip, stored.T_EL_Ptip, image)
-            if args.spacing_mm is None:
-                spec = replace(spec, spacing_m=image.spacing_m)
+        robot, spec = planning_robot(args, spec)
         with progress_bar(args.points**3, "planning", args.quiet) as bar:
             full = plan_poses(
                 robot, spec, settings=settings, thresholds=thresholds, speed_scale=args.speed_scale, progress=bar.update
