@@ -108,6 +108,16 @@ def _parse(path: Path) -> Element:
         raise InputError(f"refused unsafe XML ({type(exc).__name__})", file=path) from None
 
 
+def find_section(root: Element, tag: str) -> tuple[Element | None, str]:
+    """The ``tag`` element under ``root`` — a child, else the first anywhere below (device sets nest
+    sections differently) — and where it is, XPath-like (``PlusConfiguration/Segmentation`` or
+    ``PlusConfiguration//Segmentation``) for a refusal that names it."""
+    element = root.find(tag)
+    if element is not None:
+        return element, f"{root.tag}/{tag}"
+    return next(root.iter(tag), None), f"{root.tag}//{tag}"
+
+
 def parse_xml(path: str | os.PathLike[str]) -> Element:
     """The root element of an XML file read safely (no entities, no DTDs).
 
@@ -244,11 +254,7 @@ def read_plus_config(path: str | os.PathLike[str], *, require_registration: bool
     path = Path(path)
     root = _parse(path)
     top = root.tag
-    phantom = root.find("PhantomDefinition")
-    phantom_place = f"{top}/PhantomDefinition"
-    if phantom is None:
-        phantom = next(root.iter("PhantomDefinition"), None)
-        phantom_place = f"{top}//PhantomDefinition"
+    phantom, phantom_place = find_section(root, "PhantomDefinition")
     if phantom is None:
         raise InputError(f"no N-wire patterns: missing {top}/PhantomDefinition (the phantom's wires)", file=path)
     pattern_elements = phantom.findall("Geometry/Pattern") or list(phantom.iter("Pattern"))

@@ -13,7 +13,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from brachycal.data.plus_files import parse_xml
+from brachycal.data.plus_files import find_section, parse_xml
 from brachycal.errors import InputError
 from brachycal.validate import check_range
 
@@ -88,11 +88,7 @@ def read_segmentation_parameters(path: str | os.PathLike[str]) -> NWireSegmentat
     """
     path = Path(path)
     root = parse_xml(path)
-    element = root.find("Segmentation")
-    place = f"{root.tag}/Segmentation"
-    if element is None:
-        element = next(root.iter("Segmentation"), None)
-        place = f"{root.tag}//Segmentation"
+    element, place = find_section(root, "Segmentation")
     if element is None:
         raise InputError(
             f"no <Segmentation> element (PLUS fCal's N-wire segmentation settings) in <{root.tag}>", file=path
