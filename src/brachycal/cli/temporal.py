@@ -6,6 +6,7 @@ import argparse
 from typing import TYPE_CHECKING
 
 from brachycal.cli.common import add_robot_option, load_robot
+from brachycal.validate import finite_float
 
 if TYPE_CHECKING:
     from brachycal.calibration.temporal import TemporalCalibration
@@ -44,17 +45,8 @@ def _clip(text: str) -> tuple[int, int, int, int]:
     return values[0], values[1], values[2], values[3]
 
 
-def _seconds(low_open: float) -> object:
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-        if not (value == value and abs(value) != float("inf") and value > low_open):
-            raise argparse.ArgumentTypeError(f"expected a positive finite number of seconds, got {text!r}")
-        return value
-
-    return parse
+#: A positive, finite number of seconds.
+_SECONDS = finite_float(low=0.0, low_open=True, unit="s")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -74,12 +66,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--topic", help="JointState topic in a bag")
     add_robot_option(parser)
     parser.add_argument("--clip", type=_clip, metavar="U,V,W,H", help="line search rectangle in pixels")
-    parser.add_argument(
-        "--max-lag-s", type=_seconds(0.0), metavar="S", help="search range ±S seconds (default 0.5, PLUS's)"
-    )
-    parser.add_argument(
-        "--resolution-s", type=_seconds(0.0), default=0.001, metavar="S", help="search step (default 0.001)"
-    )
+    parser.add_argument("--max-lag-s", type=_SECONDS, metavar="S", help="search range ±S seconds (default 0.5, PLUS's)")
+    parser.add_argument("--resolution-s", type=_SECONDS, default=0.001, metavar="S", help="search step (default 0.001)")
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     parser.set_defaults(run=run)
 
