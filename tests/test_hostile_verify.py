@@ -128,6 +128,18 @@ CASES = [
         ["verify", "{result}", "{check}", *OUT, "--update", "{tmp}/record.json"],
         ("--update", "--out", "same file"),
     ),
+    Case(
+        "update-exists",
+        ["verify", "{result}", "{check}", *OUT, "--update", "{tmp}/updated.json"],
+        ("updated.json", "--force"),
+        lambda tmp: (tmp / "updated.json").write_text("{}"),
+    ),
+    Case(
+        "update-is-a-folder",
+        ["verify", "{result}", "{check}", *OUT, "--update", "{tmp}/folder"],
+        ("folder",),
+        lambda tmp: (tmp / "folder").mkdir(),
+    ),
     Case("demo-with-update", ["verify", "--update", "{tmp}/u.json", "--demo", "{tmp}/demo"], ("--demo", "--update")),
     Case("demo-with-calibration-session", ["verify", *SESSION, "--demo", "{tmp}/demo"], ("--demo",)),
     Case(

@@ -170,7 +170,8 @@ def test_an_image_update_keeps_the_nominal_spacing_the_next_check_is_held_to(tmp
         payload = updated_result(twin.stored, replace(outcome, method=method), session)
         updated = read_result(write_json(tmp_path / f"{method}.json", payload))
         assert list(updated.image) == [method]
-        np.testing.assert_array_equal(calibrated_nominal_spacing(updated), nominal)
+        # mm in the file, m here: 1e-12 relative guards the value, not the unit conversion's last bit.
+        np.testing.assert_allclose(calibrated_nominal_spacing(updated), nominal, rtol=1e-12, atol=0.0)
         check(updated, method, session)  # the confirming check is held to the nominal spacing: no refusal
         with pytest.raises(InputError, match="another scanner setting"):
             check(updated, method, replace(session, spacing_m=session.spacing_m * 1.3))
