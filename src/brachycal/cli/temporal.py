@@ -66,8 +66,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--topic", help="JointState topic in a bag")
     add_robot_option(parser)
     parser.add_argument("--clip", type=_clip, metavar="U,V,W,H", help="line search rectangle in pixels")
-    parser.add_argument("--max-lag-s", type=_SECONDS, metavar="S", help="search range ±S seconds (default 0.5, PLUS's)")
-    parser.add_argument("--resolution-s", type=_SECONDS, default=0.001, metavar="S", help="search step (default 0.001)")
+    parser.add_argument(
+        "--max-lag-s",
+        type=_SECONDS,
+        metavar="S",
+        help=f"search range ±S seconds, {_SECONDS.rule} (default 0.5, PLUS's)",
+    )
+    parser.add_argument(
+        "--resolution-s",
+        type=_SECONDS,
+        default=0.001,
+        metavar="S",
+        help=f"search step, {_SECONDS.rule} (default 0.001)",
+    )
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     parser.set_defaults(run=run)
 
