@@ -156,3 +156,26 @@ def test_written_files_get_the_usual_permissions(robot, tmp_path):
     finally:
         os.umask(mask)
     assert path.stat().st_mode & 0o777 == 0o644
+
+
+def test_joint_origin_corrections_move_the_tool_on_a_urdf_with_transmissions_first(tmp_path):
+    """The UR10 description of FIGAROH's data lists its <transmission> elements (each holding a
+    <joint name=...>) before the kinematic joints: a correction must land on the real joint."""
+    from conftest import reference
+
+    path = reference("figaroh_mocap", "ur10", "urdf", "ur10_robot.urdf")
+    robot = Robot.load(path)
+    name = "shoulder_lift_joint"
+    T = robot.joint_origin(name)
+    assert not np.allclose(T, np.eye(4))  # the real joint's origin, not the transmission's (none: identity)
+    moved = T.copy()
+    moved[:3, 3] += [0.0, 0.0, 0.010]
+    corrected = robot.with_joint_origins({name: moved})
+    q = robot.neutral()
+    shift = corrected.fk("tool0", q)[:3, 3] - robot.fk("tool0", q)[:3, 3]
+    R_base_joint_parent = robot.fk("shoulder_link", q)[:3, :3]
+    assert np.allclose(shift, R_base_joint_parent @ [0.0, 0.0, 0.010], atol=1e-12)
+    assert np.allclose(corrected.joint_origin(name), moved, atol=1e-12)
+    # Written and loaded back (Pinocchio), the corrected robot has the same FK.
+    reloaded = Robot.load(corrected.write_urdf(tmp_path / "ur10_corrected.urdf"))
+    assert np.allclose(reloaded.fk("tool0", q), corrected.fk("tool0", q), atol=1e-9)

@@ -496,11 +496,11 @@ def _kind(value: object) -> str:
 
 # --- building the URDF ----------------------------------------------------------------------
 def _links(root: ET.Element) -> list[str]:
-    return [str(link.get("name")) for link in root.iter("link")]
+    return [str(link.get("name")) for link in urdf_text.kinematic_links(root)]
 
 
 def _joints(root: ET.Element) -> dict[str, ET.Element]:
-    return {str(joint.get("name")): joint for joint in root.iter("joint") if joint.find("parent") is not None}
+    return {str(joint.get("name")): joint for joint in urdf_text.kinematic_joints(root)}
 
 
 def _child(joint: ET.Element) -> str:

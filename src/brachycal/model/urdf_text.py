@@ -29,8 +29,22 @@ def parse(urdf_xml: str, source: str) -> ET.Element:
     return root
 
 
+def kinematic_joints(root: ET.Element) -> list[ET.Element]:
+    """The ``<joint>`` elements that are direct children of ``<robot>``.
+
+    Only these are the kinematic tree's joints: a ``<transmission>`` (and a ``<gazebo>`` plug-in)
+    holds ``<joint name=...>`` elements of its own, which name a joint without defining it.
+    """
+    return root.findall("joint")
+
+
+def kinematic_links(root: ET.Element) -> list[ET.Element]:
+    """The ``<link>`` elements that are direct children of ``<robot>``."""
+    return root.findall("link")
+
+
 def _fixed_joint_to(root: ET.Element, child: str, source: str) -> ET.Element:
-    for joint in root.iter("joint"):
+    for joint in kinematic_joints(root):
         node = joint.find("child")
         if node is not None and node.get("link") == child:
             if joint.get("type") != "fixed":
@@ -79,10 +93,12 @@ def set_fixed_joint_transform(root: ET.Element, child: str, T_parent_child: Floa
 
 
 def _joint_named(root: ET.Element, name: str, source: str) -> ET.Element:
-    for joint in root.iter("joint"):
-        if joint.get("name") == name:
-            return joint
-    raise InputError(f"no joint {name!r}", file=source)
+    found = [joint for joint in kinematic_joints(root) if joint.get("name") == name]
+    if not found:
+        raise InputError(f"no joint {name!r}", file=source)
+    if len(found) > 1:
+        raise InputError(f"{len(found)} joints are named {name!r}", file=source)
+    return found[0]
 
 
 def joint_origin(root: ET.Element, name: str, source: str) -> FloatArray:
