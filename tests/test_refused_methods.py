@@ -211,6 +211,24 @@ CASES = [
         _result_with(_unchanged),
     ),
     Case(
+        "plan-result-method-icp-refused-at-calibration",
+        ["plan", "--result", "{tmp}/result.json", "--out", "{tmp}/plan.csv", "--method", "icp", "--quiet"],
+        ("result.json", "'icp' was refused", "fits match"),
+        _result_with(_unchanged),
+    ),
+    Case(
+        "view-method-icp-refused-at-calibration",
+        ["view", "{tmp}/result.json", "--session", "{session}", "--method", "icp"],
+        ("result.json", "'icp' was refused", "fits match"),
+        _result_with(_unchanged),
+    ),
+    Case(
+        "verify-method-icp-refused-at-calibration",
+        ["verify", "{tmp}/result.json", "{session}", "--out", "{tmp}/record.json", "--method", "icp"],
+        ("result.json", "'icp' was refused", "fits match"),
+        _result_with(_unchanged),
+    ),
+    Case(
         "result-refused-not-an-object",
         LOCATE,
         ("result.json", "'refused'", "must map refused methods"),
