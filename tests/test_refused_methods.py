@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import tempfile
+from dataclasses import replace
 from functools import cache
 from pathlib import Path
 
@@ -186,6 +187,15 @@ def _both(*setups):
     return setup
 
 
+def _samples_on_one_image_row(tmp: Path) -> None:
+    """``{tmp}/session``: the twin's session with every needle tip annotated on one image row: no
+    method can fix the image plane's tilt from collinear points."""
+    session = _twin().session
+    uv = session.uv_px.copy()
+    uv[:, 1] = uv[0, 1]
+    write_session(replace(session, uv_px=uv), tmp / "session")
+
+
 LOCATE = ["locate", "{tmp}/result.json", "{tmp}/q.csv", "--uv", "500,300"]
 CASES = [
     Case(
@@ -197,6 +207,18 @@ CASES = [
         "calibrate-chain-methods-icp-alone-refused",
         ["calibrate", "{session}", "--out", "{tmp}/result.json", "--methods", "icp", "--method", "chain", "--quiet"],
         ("samples.csv", "icp:", "fits match the samples equally well"),
+    ),
+    Case(
+        "calibrate-every-method-refused",
+        ["calibrate", "{tmp}/session", "--out", "{tmp}/result.json", "--methods", "icp,kabsch,scaled_uv", "--quiet"],
+        ("session", "samples.csv", "collinear"),
+        _samples_on_one_image_row,
+    ),
+    Case(
+        "calibrate-chain-every-method-refused",
+        ["calibrate", "{tmp}/session", "--out", "{tmp}/result.json", "--method", "chain", "--quiet"],
+        ("session", "samples.csv", "collinear"),
+        _samples_on_one_image_row,
     ),
     Case(
         "locate-method-icp-refused-at-calibration",
