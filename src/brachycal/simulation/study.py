@@ -154,7 +154,8 @@ def load_study_robot(name: str) -> Robot:
 
 
 def run_one(params: RunParams) -> list[dict[str, object]]:
-    """Simulate, calibrate and judge one session; one row per method."""
+    """Simulate, calibrate and judge one session; one row per method (a method that refuses the
+    session is a row saying why, ``refused``, with NaN figures; every method refusing, all rows)."""
     robot = load_study_robot(params.robot)
     base = TwinConfig().with_robot_error(params.robot_error)
     config = replace(
@@ -177,7 +178,7 @@ def run_one(params: RunParams) -> list[dict[str, object]]:
     rows = []
     for method in params.methods:
         if result is None or method in result.refused:  # a finding, not a crash
-            figures: dict[str, object] = {"refused": refusal or (result.refused[method] if result else "")}
+            figures: dict[str, object] = {"refused": refusal if result is None else result.refused[method]}
         else:
             try:
                 figures = _judge(twin, robot, result, method, params.targets)
