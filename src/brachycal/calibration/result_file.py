@@ -5,6 +5,10 @@ Transforms are 4×4 row-major lists in metres. Besides the keys of the conventio
 registration method goes with (``spacing_mm``), the reference tips, fit residuals, the samples'
 names, the tool-axes angles, and the software versions that produced it.
 
+``refused`` (added the same way; only in a result where a method refused) maps each registration
+method the samples could not determine to the reason, one line: that method has no transform, and
+asking for it (:meth:`StoredCalibration.method`) is refused with that reason.
+
 ``robot`` (a key added with robot descriptions; the format stays ``brachycal-result/1``, as the
 conventions allow added keys) records which robot the result was calibrated with: the
 description's ``name`` (``--robot``), its file and SHA-256, the SHA-256 of the URDF text the model
@@ -145,6 +149,7 @@ def to_json(
         "inputs": result.inputs,
         "robot_model": {"urdf": robot_source, "sha256": robot_sha256},
         **({"robot": record.as_json()} if record is not None else {}),
+        **({"refused": dict(result.refused)} if result.refused else {}),
         "software": {"brachycal": __version__, "pinocchio": pinocchio.__version__, "numpy": np.__version__},
     }
     if chain is None:
@@ -210,6 +215,8 @@ class StoredCalibration:
     robot: RobotRecord | None = None
     #: SHA-256 of the result file's bytes ("" for a result not read from a file).
     sha256: str = ""
+    #: Method → why it was refused at calibration (the ``refused`` block; empty: none was).
+    refused: dict[str, str] = field(default_factory=dict)
 
     def best_method(self) -> str:
         """The image calibration to use when none is asked for (``locate``, ``export``, ``view``).
@@ -219,7 +226,8 @@ class StoredCalibration:
         leave-one-out RMSE in the result (``loocv.<method>.rmse_mm``); RMSEs within 1e-9 relative
         of each other are ties (Kabsch and Horn solve the same least squares and differ only in
         rounding), broken by Table II's order (icp, kabsch, horn, similarity, scaled_uv); methods
-        without a leave-one-out RMSE come last.
+        without a leave-one-out RMSE come last. A method refused at calibration (:attr:`refused`)
+        has no transform, so it is never chosen.
         """
         for chain in ("chain+robot", "chain"):
             if chain in self.image:
@@ -240,9 +248,17 @@ class StoredCalibration:
         """The image calibration ``asked`` for (an option's value), or :meth:`best_method` for None.
 
         Raises:
-            InputError: the result has no such method (naming the result file and what it has).
+            InputError: the result has no such method, or that method was refused at calibration
+                (naming the result file, and what it has or why it was refused).
         """
         method = asked or self.best_method()
+        if method in self.refused and method not in self.image:
+            raise InputError(
+                f"method {method!r} was refused when this result was calibrated ({self.refused[method]}); "
+                f"choose another (it has {', '.join(self.image)})",
+                file=self.source,
+                column=f"refused.{method}",
+            )
         if method not in self.image:
             raise InputError(f"the result has no method {method!r} (it has {', '.join(self.image)})", file=self.source)
         return method
@@ -443,7 +459,25 @@ def read_result(path: str | os.PathLike[str]) -> StoredCalibration:
         source=str(path),
         robot=_robot_record(raw, path),
         sha256=sha256_file(path),
+        refused=_refused(raw, path, image),
     )
+
+
+def _refused(raw: dict, path: Path, image: dict[str, ImageCalibration]) -> dict[str, str]:
+    """The ``refused`` block: registration method → its reason (empty if the file has none)."""
+    block = raw.get("refused", {})
+    if not isinstance(block, dict):
+        raise InputError("must map refused methods to their reasons", file=path, column="refused")
+    for method, reason in block.items():
+        if method not in METHODS:
+            raise InputError(f"unknown method {method!r}", file=path, column="refused")
+        if not isinstance(reason, str) or not reason.strip():
+            raise InputError("must be the reason, a non-empty string", file=path, column=f"refused.{method}")
+        if method in image:
+            raise InputError(
+                "a method cannot both be refused and have a transform", file=path, column=f"refused.{method}"
+            )
+    return {str(m): str(r) for m, r in block.items()}
 
 
 def _robot_record(raw: dict, path: Path) -> RobotRecord | None:

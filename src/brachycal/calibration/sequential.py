@@ -10,6 +10,11 @@ Every step checks its conditioning (see each module) and refuses data that canno
 estimate with :class:`~brachycal.errors.DegenerateDataError`, naming the session file the data came
 from (``touches.csv``, ``axes.csv``, ``samples.csv``); grey-zone estimates warn
 (:class:`~brachycal.errors.ConditioningWarning`). Each estimate carries its predicted uncertainty.
+
+The image-to-probe methods are alternatives, compared side by side: one method's refusal is that
+method's finding (:attr:`CalibrationResult.refused`, with its reason), and the others proceed. Only
+when every method asked for refuses is the calibration refused (the first refusal, in the methods'
+order): a tool step's refusal refuses it at once, since every method needs the tools.
 """
 
 from __future__ import annotations
@@ -81,6 +86,9 @@ class CalibrationResult:
         inputs: session file → SHA-256.
         image_size_px: ``(width, height)`` of the session's images, pixels (what a pixel given
             to the calibration later must lie inside); None if not known.
+        refused: method → why the samples cannot determine it (the refusal's one line, naming the
+            session file), for each method asked for that refused; those methods have no entry in
+            ``image``, ``fit_residuals`` or ``loocv``.
     """
 
     p_R_Rtip: dict[str, FloatArray]
@@ -93,6 +101,7 @@ class CalibrationResult:
     inputs: dict[str, str] = field(default_factory=dict)
     reference_tips: dict[str, TipEstimate] = field(default_factory=dict)
     image_size_px: tuple[int, int] | None = None
+    refused: dict[str, str] = field(default_factory=dict)
 
     @property
     def T_ER_Ntip(self) -> FloatArray:
@@ -162,8 +171,10 @@ class SequentialPlan:
         T_R_ER, T_R_EL: ``(N, 4, 4)`` the flanges at the image samples.
         p_Ptip: ``(N, 3)`` the needle tips in the probe frame (eq. 8); ``p_real`` ``(N, 3)`` in ``base_link``.
         start: ``(method, its all-sample fit)`` of the method the chain starts from (``scaled_uv``, else
-            the first), computed here (:meth:`start_result`), or None if it was refused (then
-            :meth:`result` raises the refusal, in the methods' order).
+            the first whose all-sample fit is not refused), computed here (:meth:`start_result`), or
+            None if every method's was refused (then :meth:`result` raises the first refusal).
+        start_refusals: method → the refusal of its all-sample fit, for the methods tried before
+            :attr:`start` (:meth:`fit_method` returns it without fitting again).
     """
 
     session: Session
@@ -178,6 +189,7 @@ class SequentialPlan:
     p_Ptip: FloatArray
     p_real: FloatArray
     start: tuple[str, ImageCalibration] | None = None
+    start_refusals: dict[str, DegenerateDataError] = field(default_factory=dict)
 
     @classmethod
     def prepare(
@@ -227,13 +239,15 @@ class SequentialPlan:
             image_to_probe.probe_points(T_R_ER, T_R_EL, p_ER_Ntip, probe.T_E_tool),
             transform_points(T_R_ER, p_ER_Ntip),
         )
-        if not fit_start or not methods:
+        if not fit_start:
             return plan
-        method = "scaled_uv" if "scaled_uv" in methods else methods[0]
-        try:
-            return replace(plan, start=(method, plan.full_fit(method)))
-        except DegenerateDataError:  # refused here: raised by result() in the methods' order, as in turn
-            return plan
+        refusals: dict[str, DegenerateDataError] = {}
+        for method in sorted(methods, key=lambda m: m != "scaled_uv"):  # scaled_uv first, then in order
+            try:
+                return replace(plan, start=(method, plan.full_fit(method)), start_refusals=refusals)
+            except DegenerateDataError as exc:  # that method's finding: the next one starts the chain
+                refusals[method] = exc
+        return replace(plan, start_refusals=refusals)
 
     def full_fit(self, method: str) -> ImageCalibration:
         """``method``'s fit on all samples (warns in the grey zone, as :func:`image_to_probe.fit`)."""
@@ -244,6 +258,8 @@ class SequentialPlan:
 
     def fit_method(self, method: str) -> MethodOutcome:
         """``method``'s all-sample fit and its leave-one-out figures (Table II), or its refusal."""
+        if method in self.start_refusals:
+            return self.start_refusals[method]
         try:
             full = self.start[1] if self.start is not None and self.start[0] == method else self.full_fit(method)
             with _data_of("samples.csv"):
@@ -258,7 +274,7 @@ class SequentialPlan:
                     self.T_Ptip_I_init,
                     full=full,
                 )
-        except DegenerateDataError as exc:  # raised by result() in the methods' order, as in turn
+        except DegenerateDataError as exc:  # this method's refusal: result() records it
             return exc
         return full, loo
 
@@ -267,7 +283,9 @@ class SequentialPlan:
         (:data:`METHOD_COST_MS`)."""
         calls: list[Callable[[], MethodOutcome]] = [partial(self.fit_method, m) for m in self.methods]
         costs = [
-            METHOD_COST_MS.get(m, DEFAULT_METHOD_COST_MS)
+            0.0
+            if m in self.start_refusals
+            else METHOD_COST_MS.get(m, DEFAULT_METHOD_COST_MS)
             + (ICP_FULL_COST_MS if m == "icp" and (self.start is None or self.start[0] != m) else 0.0)
             for m in self.methods
         ]
@@ -286,22 +304,30 @@ class SequentialPlan:
         return self._result({method: full}, {}, {})
 
     def result(self, outcomes: list[MethodOutcome]) -> CalibrationResult:
-        """The :class:`CalibrationResult` from :meth:`calls`' outcomes (methods' order).
+        """The :class:`CalibrationResult` from :meth:`calls`' outcomes (methods' order); a refused
+        method is recorded in :attr:`CalibrationResult.refused` and the others proceed.
 
         Raises:
-            DegenerateDataError: the first method's refusal, in the methods' order.
+            DegenerateDataError: every method refused: the first refusal, in the methods' order.
         """
-        image, residuals, loocv = {}, {}, {}
+        image, residuals, loocv, refused = {}, {}, {}, {}
         for method, outcome in zip(self.methods, outcomes, strict=True):
-            if isinstance(outcome, DegenerateDataError):  # the first method that fails, as in turn
-                raise outcome
+            if isinstance(outcome, DegenerateDataError):
+                refused[method] = outcome
+                continue
             image[method], loocv[method] = outcome
             p_cal = image_to_probe.predict_base(image[method], self.T_R_EL, self.probe.T_E_tool, self.session.uv_px)
             residuals[method] = ErrorStats.between(self.p_real, p_cal)
-        return self._result(image, residuals, loocv)
+        if refused and not image:  # nothing left to calibrate the image with
+            raise next(iter(refused.values()))
+        return self._result(image, residuals, loocv, {m: str(exc) for m, exc in refused.items()})
 
     def _result(
-        self, image: dict[str, ImageCalibration], residuals: dict[str, ErrorStats], loocv: dict[str, ErrorStats]
+        self,
+        image: dict[str, ImageCalibration],
+        residuals: dict[str, ErrorStats],
+        loocv: dict[str, ErrorStats],
+        refused: dict[str, str] | None = None,
     ) -> CalibrationResult:
         session = self.session
         return CalibrationResult(
@@ -315,6 +341,7 @@ class SequentialPlan:
             inputs=dict(session.inputs),
             reference_tips=self.reference_tips,
             image_size_px=(int(session.size_px[0]), int(session.size_px[1])),
+            refused=dict(refused or {}),
         )
 
 
@@ -333,8 +360,13 @@ def calibrate(
         methods: registration methods to fit and cross-validate (default: all).
         T_Ptip_I_init: ``(4, 4)`` ICP's prior; default: the model's ``us_image`` frame.
 
+    Returns:
+        the result; a method whose samples cannot determine it is in its ``refused`` (with the reason),
+        the others are fitted.
+
     Raises:
-        DegenerateDataError: a step's conditioning check failed; the message names the session file.
+        DegenerateDataError: a tool step's conditioning check failed, or every method refused; the
+            message names the session file.
     """
     plan = SequentialPlan.prepare(session, robot, methods, T_Ptip_I_init)
     # The methods are independent: they share the cores, each computed as alone.

@@ -67,8 +67,9 @@ def calibrate_folder(
 
     Raises:
         InputError: the session is malformed (naming file, row and column).
-        DegenerateDataError: the data cannot determine an estimate; names the session's file
-            inside ``folder``.
+        DegenerateDataError: the data cannot determine an estimate (a tool, every image-to-probe
+            method, or the chain; a single method's refusal is recorded in the result's ``refused``
+            instead); names the session's file inside ``folder``.
     """
     session = read_session(folder, robot)
     choice = None
@@ -107,19 +108,23 @@ def _sequential_and_model_choice(
     (:meth:`~brachycal.calibration.chain.ParameterLayout.start`), never from its leave-one-out
     figures: once those are fitted, the methods' leave-one-out and the model choice's refits are
     independent, and run as one set (:func:`~brachycal.calibration.parallel.parallel_calls`), each
-    computed as alone. Returns what the two calls give in turn (the choice None if that starting
-    fit was refused: the sequential result then raises the refusal).
+    computed as alone. Returns what the two calls give in turn; the choice is None when its start
+    is not the sequential result's (the method whose fit starts the chain refused its leave-one-out:
+    the chain then chooses again from the result it starts from), or every method's fit was refused
+    (the sequential result then raises the first refusal).
 
     Raises:
         DegenerateDataError: as :func:`~brachycal.calibration.sequential.calibrate`.
     """
     plan = SequentialPlan.prepare(session, robot, methods, fit_start=True)
     calls, costs = plan.calls()
-    if plan.start is None:  # the chain's starting fit was refused: the sequential method raises it
+    if plan.start is None:  # every method's all-sample fit was refused: the sequential method raises it
         return plan.result(parallel_calls(calls, costs)), None
     selection = ModelSelection(session, robot, plan.start_result(), MODELS)
     choice_calls, choice_costs = selection.calls()
     shared: list[Callable[[], Any]] = [*calls, *choice_calls]
     outcomes = parallel_calls(shared, [*costs, *choice_costs])
-    result = plan.result(outcomes[: len(calls)])  # raises the sequential method's refusal first, as in turn
+    result = plan.result(outcomes[: len(calls)])  # raises if every method refused
+    if plan.start[0] not in result.image:  # its leave-one-out refused: the chain starts from another fit
+        return result, None
     return result, selection.choose(outcomes[len(calls) :])

@@ -7,7 +7,14 @@ import gc
 from contextlib import nullcontext
 from pathlib import Path
 
-from brachycal.cli.common import add_robot_accuracy_options, add_robot_option, load_robot, progress_bar, robot_accuracy
+from brachycal.cli.common import (
+    add_robot_accuracy_options,
+    add_robot_option,
+    load_robot,
+    progress_bar,
+    robot_accuracy,
+    warn_refused,
+)
 from brachycal.errors import InputError
 from brachycal.validate import bounded_int, name_list
 
@@ -41,6 +48,11 @@ cannot identify and why, and the image error at held-out configurations with and
 The robot is the SDA10F unless --robot names another description (baxter, ur5_pair, or a TOML
 file: docs/robots.md); the session's joint columns must be that robot's. The result records it
 (its "robot" block), and 'locate' and 'export' refuse another robot.
+
+A registration method that the samples cannot determine (e.g. ICP on a symmetric pattern of
+needle positions that the URDF's nominal image frame cannot resolve) is refused alone: Table II
+says why, the result records it under "refused", a warning line names it, and the other methods
+and the chain go ahead. Only when every method asked for (--methods) refuses is the command refused.
 
 The result (brachycal-result/1, JSON, metres) and the report are written together, all or
 nothing, when everything succeeded; neither replaces an existing file without --force.
@@ -158,6 +170,7 @@ def _run(args: argparse.Namespace, collecting: bool) -> int:
                 identify_robot=args.identify_robot,
             )
         result, chain, session = calibrated.result, calibrated.chain, calibrated.session
+        warn_refused(result.refused)
         print(table_i(result))
         print()
         print(table_ii(result, chain.loocv if chain else None))

@@ -156,3 +156,19 @@ def add_method_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup,
         help=f"which image calibration of {of} (default: the result's best: chain+robot, then chain, else the "
         "lowest leave-one-out RMSE)",
     )
+
+
+def warn_refused(refused: dict[str, str]) -> None:
+    """One warning line per registration method that refused the samples (a result's ``refused``):
+    the calibration went ahead with the others, and Table II and the result file say why."""
+    import warnings
+
+    from brachycal.errors import BrachycalWarning
+
+    for method, reason in refused.items():
+        warnings.warn(
+            f"{method} refused these samples and was left out (the other methods went ahead; Table II and the "
+            f"result record why): {reason}",
+            BrachycalWarning,
+            stacklevel=2,
+        )

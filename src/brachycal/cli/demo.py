@@ -11,7 +11,7 @@ import argparse
 import time
 from pathlib import Path
 
-from brachycal.cli.common import add_robot_option
+from brachycal.cli.common import add_robot_option, warn_refused
 from brachycal.validate import MAX_TARGETS, bounded_int, seed
 
 HELP = "calibrate a simulated session (digital twin) and compare with the truth"
@@ -124,6 +124,7 @@ def run(args: argparse.Namespace) -> int:
         for name in DEMO_REPORT_FILES:
             outputs.claim(out / "report" / name, make_parents=True)
         demo = run_demo(robot, out, seed=args.seed, example=args.example, n_targets=args.targets, outputs=outputs)
+        warn_refused(demo.result.refused)
         write_demo_report(demo, out / "report", outputs=outputs)
         if args.recording:
             rec = record(robot, TwinConfig(seed=args.seed))

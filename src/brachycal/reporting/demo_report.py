@@ -21,7 +21,7 @@ from brachycal.files import OutputSet, atomic_open, output_set
 from brachycal.imaging.pixels import SCANNER_SOUND_SPEED_M_S
 from brachycal.reporting.figures import error_histogram, method_comparison, points_3d
 from brachycal.reporting.tables import table_i, table_ii, table_iii, targeting_table
-from brachycal.simulation.demo import FIGURE_METHOD, TRUTH_METHODS, DemoRun
+from brachycal.simulation.demo import TRUTH_METHODS, DemoRun
 
 #: The files :func:`write_demo_report` writes into its folder.
 DEMO_REPORT_FILES = ("fig10_points.png", "fig11_loo_histogram.png", "targeting_errors.png", "residuals.csv")
@@ -59,7 +59,7 @@ def demo_text(run: DemoRun) -> str:
         table_iii(
             {
                 "N-wire phantom + optical tracker (hand-eye)": run.tracker.stats,
-                **{METHOD_LABELS[m]: run.targeting[m].stats for m in TABLE_III_METHODS},
+                **{METHOD_LABELS[m]: run.targeting[m].stats for m in TABLE_III_METHODS if m in run.targeting},
             },
             run.n_targets,
         ),
@@ -78,7 +78,7 @@ def demo_text(run: DemoRun) -> str:
         "secondary, transforms against the truth (a calibration rightly absorbs part of the robot's own error):",
         f"  needle tip {_mm(needle)}, probe tip {_mm(probe)}",
     ]
-    for method in TRUTH_METHODS:
+    for method in (m for m in TRUTH_METHODS if m in result.image):
         spacing = result.image[method].spacing_m
         lines.append(
             f"  {method:9s} image centre on the probe flange {_mm(run.image_centre_error_m(method))}, "
@@ -93,14 +93,15 @@ def write_demo_report(
 ) -> list[Path]:
     """Write the demo's figures and residuals into ``folder`` (:data:`DEMO_REPORT_FILES`).
 
-    Fig. 10 (real and calibrated points, :data:`~brachycal.simulation.demo.FIGURE_METHOD`'s
-    leave-one-out), Fig. 11 (its error histogram), the targeting error per method, and
-    ``residuals.csv``: per sample its pixel, the needle tip's distance from the image plane (mm),
-    whether its annotation is a gross outlier, and each method's leave-one-out error (mm).
+    Fig. 10 (real and calibrated points, the run's ``figure_method``'s leave-one-out: normally
+    :data:`~brachycal.simulation.demo.FIGURE_METHOD`), Fig. 11 (its error histogram), the
+    targeting error per method, and ``residuals.csv``: per sample its pixel, the needle tip's
+    distance from the image plane (mm), whether its annotation is a gross outlier, and each
+    method's leave-one-out error (mm; a method that refused the session has no column).
     All or nothing, as :func:`~brachycal.files.output_set` says; returns the final paths.
     """
     folder = Path(folder)
-    label = METHOD_LABELS[FIGURE_METHOD]
+    label = METHOD_LABELS[run.figure_method]
     with output_set(outputs, force=force) as out:
         staged = {name: out.path(folder / name, make_parents=True) for name in DEMO_REPORT_FILES}
         points_3d(
@@ -120,9 +121,10 @@ def write_demo_report(
             f"End-to-end targeting error, {run.n_targets} targets",
         )
         session, twin, result = run.session, run.twin, run.result
+        methods = [m for m in METHODS if m in result.loocv]
         with atomic_open(staged["residuals.csv"]) as handle:
             writer = csv.writer(handle)
-            writer.writerow(["sample", "u_px", "v_px", "out_of_plane_mm", "outlier", *(f"loo_{m}_mm" for m in METHODS)])
+            writer.writerow(["sample", "u_px", "v_px", "out_of_plane_mm", "outlier", *(f"loo_{m}_mm" for m in methods)])
             for k, sample in enumerate(session.sample_ids):
                 writer.writerow(
                     [
@@ -131,7 +133,7 @@ def write_demo_report(
                         f"{session.uv_px[k, 1]:.3f}",
                         f"{twin.out_of_plane_m[k] * 1e3:.3f}",
                         int(twin.outlier[k]),
-                        *(f"{result.loocv[m].errors_m[k] * 1e3:.4f}" for m in METHODS),
+                        *(f"{result.loocv[m].errors_m[k] * 1e3:.4f}" for m in methods),
                     ]
                 )
     return [folder / name for name in DEMO_REPORT_FILES]

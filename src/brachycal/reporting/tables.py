@@ -46,7 +46,8 @@ def table_i(result: CalibrationResult) -> str:
 def table_ii(result: CalibrationResult, chain_loocv: ErrorStats | None = None) -> str:
     """TABLE II. The accuracy of US probe calibration (leave-one-out over the samples).
 
-    ``chain_loocv`` adds the whole-chain method's row (its own leave-one-out figures)."""
+    ``chain_loocv`` adds the whole-chain method's row (its own leave-one-out figures); a method
+    that refused the samples has a row saying why (:func:`refused_rows`)."""
     width = 26
     n = next(iter(result.loocv.values())).n if result.loocv else 0
     lines = [
@@ -60,9 +61,16 @@ def table_ii(result: CalibrationResult, chain_loocv: ErrorStats | None = None) -
             f"   spacing {spacing[0]:.4f} x {spacing[1]:.4f} mm/px" if method in ("similarity", "scaled_uv") else ""
         )
         lines.append(_row(label, stats, width) + suffix)
+    lines += refused_rows(result, width)
     if chain_loocv is not None:
         lines.append(_row("Whole chain", chain_loocv, width))
     return "\n".join(lines)
+
+
+def refused_rows(result: CalibrationResult, width: int) -> list[str]:
+    """One row per method that refused the samples (:attr:`CalibrationResult.refused`): its label
+    and the reason, in Table II's order."""
+    return [f"{METHOD_LABELS[m]:<{width}} refused: {result.refused[m]}" for m in METHOD_LABELS if m in result.refused]
 
 
 def chain_summary(report, sample_ids: list[str]) -> str:
@@ -180,6 +188,7 @@ def uncertainty_table(result: CalibrationResult) -> str:
         if np.any(u.spacing_sd_m > 0):
             row += f"   spacing SD {u.spacing_sd_m[0] * 1e3:.5f} x {u.spacing_sd_m[1] * 1e3:.5f} mm/px"
         lines.append(row)
+    lines += refused_rows(result, width)
     return "\n".join(lines)
 
 

@@ -58,7 +58,9 @@ class DemoRun:
         targeting: method → its end-to-end targeting error.
         tracking: the tracker route's settings.
         tracker: the tracker route's targeting error (Table III).
-        loo_real_m, loo_cal_m: ``(N, 3)`` :data:`FIGURE_METHOD`'s leave-one-out points.
+        loo_real_m, loo_cal_m: ``(N, 3)`` ``figure_method``'s leave-one-out points.
+        figure_method: the method the figures show: :data:`FIGURE_METHOD`, or the first method
+            calibrated if it refused the session (``result.refused``).
     """
 
     origin: str
@@ -71,6 +73,7 @@ class DemoRun:
     tracker: TargetingResult
     loo_real_m: FloatArray
     loo_cal_m: FloatArray
+    figure_method: str = FIGURE_METHOD
 
     def tip_errors_m(self) -> tuple[FloatArray, FloatArray]:
         """``(3,)`` needle tip and ``(3,)`` probe tip, calibrated minus true, on their flanges."""
@@ -164,14 +167,18 @@ def run_demo(
             session = read_session(written, robot)
         result = calibrate(session, robot)
         write_result(result, out.path(folder / "result.json", make_parents=True), force=force, robot=robot)
+    # A method that refused the session has no calibration to judge (Table II says why).
     targeting = {
-        m: targeting_error(twin, result.T_ER_Ntip, result.T_EL_Ptip, result.image[m], n_targets) for m in METHODS
+        m: targeting_error(twin, result.T_ER_Ntip, result.T_EL_Ptip, result.image[m], n_targets)
+        for m in METHODS
+        if m in result.image
     }
     tracking = NWireSimConfig(seed=twin.config.seed)
     route = tracker_route(twin, tracking)
     tracker = targeting_error(twin, result.T_ER_Ntip, route.T_EL_marker, route.image, n_targets)
-    p_real, p_cal = loo_points(session, robot, result, FIGURE_METHOD)
-    return DemoRun(origin, twin, session, result, n_targets, targeting, tracking, tracker, p_real, p_cal)
+    figure = FIGURE_METHOD if FIGURE_METHOD in result.image else next(iter(result.image))
+    p_real, p_cal = loo_points(session, robot, result, figure)
+    return DemoRun(origin, twin, session, result, n_targets, targeting, tracking, tracker, p_real, p_cal, figure)
 
 
 #: Table III's rows in order: label → the paper's figure beside it (MAE of the whole system, mm,
@@ -262,7 +269,11 @@ def table3_twin(
     def mae(T_ER_Ntip: FloatArray, T_EL_probe: FloatArray, image) -> float:
         return targeting_error(twin, T_ER_Ntip, T_EL_probe, image, n_targets).stats.mae_mm
 
-    row = {label: mae(result.T_ER_Ntip, result.T_EL_Ptip, result.image[m]) for m, label in _FUSION_ROWS.items()}
+    # A fusion method that refused this seed's session has no targeting error: NaN, left out of the means.
+    row = {
+        label: mae(result.T_ER_Ntip, result.T_EL_Ptip, result.image[m]) if m in result.image else float("nan")
+        for m, label in _FUSION_ROWS.items()
+    }
     model = None
     if chain:
         model = select_model(twin.session, robot, result).model
@@ -316,10 +327,16 @@ def table3_text(table: Table3) -> str:
     ]
     for label, maes in table.maes_mm.items():
         a = np.asarray(maes)
-        spread = f"{a.std(ddof=1):.3f}" if n > 1 else "-"
+        refused = int(np.sum(np.isnan(a)))  # seeds whose session this method refused
+        a = a[~np.isnan(a)]
+        if not len(a):
+            lines.append(f"  {label:<{width}}  refused on every seed{'':>20}" + TABLE3_PAPER[label])
+            continue
+        spread = f"{a.std(ddof=1):.3f}" if len(a) > 1 else "-"
         lines.append(
             f"  {label:<{width}}  {a.mean():6.3f} ± {spread:>5}       {a.min():.3f}–{a.max():.3f}    "
             + TABLE3_PAPER[label]
+            + (f"  (refused on {refused} of {n} seeds)" if refused else "")
         )
     if table.image_mm:
         parts = []

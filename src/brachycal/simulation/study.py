@@ -154,7 +154,8 @@ def load_study_robot(name: str) -> Robot:
 
 
 def run_one(params: RunParams) -> list[dict[str, object]]:
-    """Simulate, calibrate and judge one session; one row per method."""
+    """Simulate, calibrate and judge one session; one row per method (a method that refuses the
+    session is a row saying why, ``refused``, with NaN figures; every method refusing, all rows)."""
     robot = load_study_robot(params.robot)
     base = TwinConfig().with_robot_error(params.robot_error)
     config = replace(
@@ -168,13 +169,21 @@ def run_one(params: RunParams) -> list[dict[str, object]]:
     )
     twin = simulate(robot, config)
     sequential = tuple(m for m in params.methods if m in METHODS)
-    result = calibrate(twin.session, robot, sequential or ("scaled_uv",))
+    result: CalibrationResult | None = None
+    refusal = ""
+    try:
+        result = calibrate(twin.session, robot, sequential or ("scaled_uv",))
+    except DegenerateDataError as exc:  # every method (or a tool) refuses this session: each row says why
+        refusal = str(exc)
     rows = []
     for method in params.methods:
-        try:
-            figures = _judge(twin, robot, result, method, params.targets)
-        except DegenerateDataError as exc:  # the method refuses this session: a finding, not a crash
-            figures = {"refused": exc.problem}
+        if result is None or method in result.refused:  # a finding, not a crash
+            figures: dict[str, object] = {"refused": refusal if result is None else result.refused[method]}
+        else:
+            try:
+                figures = _judge(twin, robot, result, method, params.targets)
+            except DegenerateDataError as exc:  # the method refuses this session: a finding, not a crash
+                figures = {"refused": exc.problem}
         rows.append(
             {
                 **{k: v for k, v in asdict(params).items() if k != "methods"},
@@ -183,8 +192,8 @@ def run_one(params: RunParams) -> list[dict[str, object]]:
                 **{key: figures.get(key, np.nan) for key in FIGURES},
                 "chain_model": figures.get("chain_model", ""),
                 "refused": figures.get("refused", ""),
-                "table1_needle_mae_mm": result.needle.validation.mae_mm,
-                "table1_probe_mae_mm": result.probe.validation.mae_mm,
+                "table1_needle_mae_mm": result.needle.validation.mae_mm if result else np.nan,
+                "table1_probe_mae_mm": result.probe.validation.mae_mm if result else np.nan,
             }
         )
     return rows
