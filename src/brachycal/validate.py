@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 from collections.abc import Callable, Collection, Sequence
 from os import PathLike
 from typing import Any
@@ -62,6 +63,51 @@ SEED_LIMIT = 2**32
 #: determinant from 1 that a stored rigid transform may show. Transforms written with 9+ decimals
 #: (every file format brachycal reads) are within 1e-6; a scaled or sheared matrix is far off.
 RIGID_TOLERANCE = 1e-6
+
+
+#: The text of a number as CSV and text writers write it (Python's ``repr``, ``%.17g``, the csv
+#: module, ``numpy.savetxt``, C's ``printf``): ASCII digits, an optional sign, an optional decimal
+#: point and an optional exponent, and nothing else. Python's ``float`` accepts more (``0_1`` is 1,
+#: Arabic-Indic digits, surrounding blanks, ``infinity``), so a file's ``2_5`` would be read as 25.
+DECIMAL_TEXT = r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
+#: Non-finite numbers as those writers spell them (``nan``, ``inf``, ``-inf``; any case), which a
+#: reader then refuses wherever the value must be finite.
+NON_FINITE_TEXT = r"(?i:[+-]?(?:nan|inf))"
+_NUMBER = re.compile(rf"(?:{DECIMAL_TEXT}|{NON_FINITE_TEXT})")
+_WHOLE = re.compile(r"[+-]?[0-9]+")
+# Many fields at once: each followed by a line break (which a number never holds).
+_NUMBERS = re.compile(rf"(?:(?:{DECIMAL_TEXT}|{NON_FINITE_TEXT})\n)*")
+
+
+def number_from_text(text: str) -> float | None:
+    """The number written as ``text`` (:data:`DECIMAL_TEXT` or ``nan``/``inf``), or None for any other text.
+
+    No blanks around, no ``_`` digit separators, no hexadecimal, no non-ASCII digits, no ``infinity``.
+    """
+    return float(text) if _NUMBER.fullmatch(text) else None
+
+
+def whole_from_text(text: str) -> int | None:
+    """The whole number written as ``text`` (ASCII digits, an optional sign), or None for any other text."""
+    return int(text) if _WHOLE.fullmatch(text) else None
+
+
+def numbers_from_text(text: str) -> list[float] | None:
+    """The numbers of ``text`` separated by blanks (an XML attribute's ``"1 0 0 12.5"``), each as
+    :func:`number_from_text`; None if any item is not a number's text."""
+    values = [number_from_text(item) for item in text.split()]
+    return None if None in values else values  # type: ignore[return-value]
+
+
+def wholes_from_text(text: str) -> list[int] | None:
+    """The whole numbers of ``text`` separated by blanks, each as :func:`whole_from_text`; None if any is not."""
+    values = [whole_from_text(item) for item in text.split()]
+    return None if None in values else values  # type: ignore[return-value]
+
+
+def all_number_texts(texts: Sequence[str]) -> bool:
+    """Whether every text of ``texts`` is a number's (:func:`number_from_text`), checked in one regex pass."""
+    return _NUMBERS.fullmatch("\n".join(texts) + "\n" if texts else "") is not None
 
 
 def check_transform(
@@ -378,11 +424,10 @@ def parse_number_list(
         label = f"{name} value {k}".strip() if len(items) > 1 else name
         if not item:
             raise InputError(f"{_where(label)}is empty (in {text!r})")
-        try:
-            number = kind(item)
-        except ValueError:
+        number = (whole_from_text if kind is int else number_from_text)(item)
+        if number is None:
             what = "a whole number" if kind is int else "a number"
-            raise InputError(f"{_where(label)}must be {what}, got {item!r}") from None
+            raise InputError(f"{_where(label)}must be {what}, got {item!r}")
         if kind is int:
             values.append(check_int(number, label, low=low, high=high))  # type: ignore[arg-type]
         else:
@@ -428,10 +473,11 @@ class OptionType:
 
 
 def _number(text: str, kind: type) -> float:
-    try:
-        return kind(text.strip())
-    except ValueError:
-        raise InputError(f"must be {'a whole number' if kind is int else 'a number'}, got {text!r}") from None
+    """One option value: :func:`number_from_text` (or :func:`whole_from_text`) of ``text`` without blanks around."""
+    value = (whole_from_text if kind is int else number_from_text)(text.strip())
+    if value is None:
+        raise InputError(f"must be {'a whole number' if kind is int else 'a number'}, got {text!r}")
+    return value
 
 
 def finite_float(

@@ -44,7 +44,7 @@ from brachycal.data.joint_log import JointLog
 from brachycal.data.json_files import read_json
 from brachycal.errors import InputError
 from brachycal.se3 import FloatArray
-from brachycal.validate import check_range
+from brachycal.validate import check_range, number_from_text
 
 if TYPE_CHECKING:  # the message's fields, for the type checker; rosbags is imported where it is used
     from rosbags.typesys.stores.ros2_humble import std_msgs__msg__String as StringMsg
@@ -442,12 +442,12 @@ def read_images(
 
 
 def _uv_field(path: Path, header: list[str], row: int, fields: list[str]) -> FloatArray | None:
-    text = {c: fields[header.index(c)].strip() for c in ("u_px", "v_px")}
-    if not text["u_px"] and not text["v_px"]:
+    text = {c: fields[header.index(c)] for c in ("u_px", "v_px")}
+    if not text["u_px"].strip() and not text["v_px"].strip():
         return None
     uv = []
     for column, value in text.items():
-        if not value:
+        if not value.strip():
             other = "v_px" if column == "u_px" else "u_px"
             raise InputError(
                 f"empty while {other} is given (leave both empty for a frame not annotated)",
@@ -455,10 +455,9 @@ def _uv_field(path: Path, header: list[str], row: int, fields: list[str]) -> Flo
                 row=row,
                 column=column,
             )
-        try:
-            x = float(value)
-        except ValueError:
-            raise InputError(f"{value!r} is not a number", file=path, row=row, column=column) from None
+        x = number_from_text(value)
+        if x is None:
+            raise InputError(f"{value!r} is not a number", file=path, row=row, column=column)
         if not math.isfinite(x):
             raise InputError(f"must be a finite number, got {value!r}", file=path, row=row, column=column)
         uv.append(x)
