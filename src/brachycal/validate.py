@@ -59,6 +59,18 @@ MAX_SEEDS = 1000
 #: study's rows keep a seed as a 32-bit unsigned number.
 SEED_LIMIT = 2**32
 
+#: Largest coordinate (each axis) of any position brachycal reads, metres: optical and
+#: electromagnetic trackers measure within a few metres of their camera or field generator, the
+#: robot reaches 1.5 m from its base and a phantom is tens of centimetres across. A larger value is
+#: a typo or another unit, and a value near the float limit (1e308) would overflow in the fits.
+MAX_POSITION_M = 10.0
+
+#: Longest and shortest tool (tip from its marker's or flange's origin), metres: no hand-held or
+#: robot-held tool is longer than a few metres, and a tip within a few millimetres of its marker's
+#: origin is not a tool. A pivot in the wrong unit lands 1000 times off: 0.4 m read as millimetres
+#: is 0.4 mm, read as metres from millimetres 400 m.
+TOOL_LENGTH_M_RANGE = (0.003, 3.0)
+
 #: Largest deviation of a rotation block from orthonormality (‖RᵀR − I‖ max entry) and of its
 #: determinant from 1 that a stored rigid transform may show. Transforms written with 9+ decimals
 #: (every file format brachycal reads) are within 1e-6; a scaled or sheared matrix is far off.
@@ -240,6 +252,39 @@ def check_int(
     if not (above and below):
         raise InputError(f"{_where(name)}must be {_interval(low, high)}, got {n}", file=file, row=row)
     return n
+
+
+def check_positions(
+    values: ArrayLike,
+    name: str,
+    *,
+    limit: float,
+    unit: str,
+    file: str | PathLike[str] | None = None,
+    rows: Sequence[int] | None = None,
+    columns: Sequence[str] | None = None,
+) -> FloatArray:
+    """Coordinates ``(…, C)`` each finite and within ``±limit`` (``unit``), e.g. :data:`MAX_POSITION_M`.
+
+    ``rows`` (one per leading index of a ``(N, C)`` table) and ``columns`` (``C`` names) place the
+    first value refused; the refusal says the value is not a physical position (a typo or another unit).
+    """
+    A = np.asarray(values, dtype=float)
+    table = A.reshape(-1, A.shape[-1]) if A.ndim else A.reshape(1, 1)
+    bad = np.argwhere(~(np.abs(table) <= limit))
+    if bad.size:
+        k, c = (int(i) for i in bad[0])
+        x = table[k, c]
+        column = columns[c] if columns is not None else None
+        row = rows[k] if rows is not None else None
+        what = f"{_where(name)}{x:g} {unit}" if math.isfinite(x) else f"{_where(name)}{x}"
+        raise InputError(
+            f"{what} is beyond ±{limit:g} {unit}: not a physical position (a typo, or another unit?)",
+            file=file,
+            row=row,
+            column=column,
+        )
+    return A
 
 
 def check_probability(value: float, name: str, *, high: float = 1.0) -> float:
@@ -435,6 +480,26 @@ def parse_number_list(
                 check_range(number, label, low=low, high=high, low_open=low_open, high_open=high_open, unit=unit)
             )
     return values
+
+
+def check_token(
+    name: str,
+    what: str,
+    *,
+    file: str | PathLike[str] | None = None,
+    row: int | None = None,
+    column: str | None = None,
+) -> str:
+    """``name`` (a sample's, a point's) if it is a plain token: non-empty, printable, no blank, comma
+    or quote, so that it is written into a CSV field as it is and read back the same."""
+    if not name or not name.isprintable() or any(c.isspace() or c in ",\"'" for c in name):
+        raise InputError(
+            f"{what} name {name!r} is not a plain token (no blank, comma, quote or control character)",
+            file=file,
+            row=row,
+            column=column,
+        )
+    return name
 
 
 def parse_name_list(text: str, name: str, choices: Collection[str] | None = None) -> list[str]:

@@ -11,7 +11,8 @@ reference frame from poses of the tool rotating about its tip.
 
 POSES is a CSV pose list: a header, then one row-major 4x4 homogeneous matrix per row
 (m00,m01,...,m33), optionally after a first key column (e.g. timestamp_ns). Results are in the
-units of the poses (--units records which). Residuals are given per axis (RMS over all 3N
+units of the poses (--units records which); a tip found beyond 3 m or within 3 mm of the tool's
+origin is refused, as poses in the other unit. Residuals are given per axis (RMS over all 3N
 coordinates, as SciKit-Surgery reports) and in 3D (RMS of the N distances).
 
 methods: algebraic (linear least squares, Yaniv 2015) or robust (soft-L1 loss, flags outliers).

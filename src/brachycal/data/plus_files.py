@@ -23,7 +23,7 @@ import numpy as np
 
 from brachycal.errors import InputError
 from brachycal.se3 import FloatArray, inverse
-from brachycal.validate import check_transform, numbers_from_text, whole_from_text
+from brachycal.validate import MAX_POSITION_M, check_transform, numbers_from_text, whole_from_text
 
 MM = 1e-3
 
@@ -127,6 +127,11 @@ def parse_xml(path: str | os.PathLike[str]) -> Element:
     return _parse(Path(path))
 
 
+#: Largest magnitude of any number of a PLUS file: its lengths are millimetres (positions within
+#: :data:`~brachycal.validate.MAX_POSITION_M`), its other numbers pixels, rotations or spacings.
+_LARGEST = MAX_POSITION_M / MM
+
+
 def _numbers(text: str | None, count: int, fail: _Fail) -> FloatArray:
     numbers = f"{count} finite number{'s' if count > 1 else ''}"
     parsed = numbers_from_text(text or "")
@@ -135,6 +140,8 @@ def _numbers(text: str | None, count: int, fail: _Fail) -> FloatArray:
     values = np.array(parsed, dtype=float)
     if values.size != count or not np.all(np.isfinite(values)):
         raise fail(f"expected {numbers}, got {text!r}")
+    if not np.all(np.abs(values) <= _LARGEST):  # 1e308 as a wire's end would overflow in the fits
+        raise fail(f"expected {numbers} within ±{_LARGEST:g} (millimetres, pixels), got {text!r}")
     return values
 
 

@@ -44,7 +44,7 @@ from brachycal.data.joint_log import JointLog
 from brachycal.data.json_files import read_json
 from brachycal.errors import InputError
 from brachycal.se3 import FloatArray
-from brachycal.validate import check_range, number_from_text
+from brachycal.validate import check_range, check_token, number_from_text
 
 if TYPE_CHECKING:  # the message's fields, for the type checker; rosbags is imported where it is used
     from rosbags.typesys.stores.ros2_humble import std_msgs__msg__String as StringMsg
@@ -421,11 +421,21 @@ def read_images(
         )
     frames: list[Frame] = []
     seen: dict[str, int] = {}
+    times_seen: dict[float, int] = {}
     for k, (time, row, fields) in enumerate(zip(times, rows, records, strict=True)):
         if not math.isfinite(time):
             raise InputError(f"time must be a finite number, got {time}", file=path, row=row, column="time")
         sample = (fields[k_sample].strip() or None) if k_sample is not None else None
+        if time in times_seen:  # one image listed twice would become two samples of one pose
+            raise InputError(
+                f"the frame at {time:g} s is listed twice (also row {times_seen[time]})",
+                file=path,
+                row=row,
+                column="time",
+            )
+        times_seen[time] = row
         if sample is not None:
+            check_token(sample, "sample", file=path, row=row, column="sample")
             if sample in seen:
                 raise InputError(
                     f"sample {sample!r} appears twice (also row {seen[sample]})", file=path, row=row, column="sample"
