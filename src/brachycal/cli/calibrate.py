@@ -7,7 +7,14 @@ import gc
 from contextlib import nullcontext
 from pathlib import Path
 
-from brachycal.cli.common import add_robot_accuracy_options, add_robot_option, load_robot, progress_bar, robot_accuracy
+from brachycal.cli.common import (
+    add_robot_accuracy_options,
+    add_robot_option,
+    load_robot,
+    output_file,
+    progress_bar,
+    robot_accuracy,
+)
 from brachycal.errors import InputError
 from brachycal.validate import bounded_int, name_list
 
@@ -57,7 +64,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "calibrate", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("session", metavar="SESSION", help="session folder")
-    parser.add_argument("--out", required=True, metavar="JSON", help="result file to write")
+    parser.add_argument("--out", required=True, type=output_file, metavar="JSON", help="result file to write")
     parser.add_argument(
         "--methods",
         type=name_list(METHODS),

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from brachycal.cli.common import output_file
+
 HELP = "pivot calibration: tool tip and pivot point from poses rotating about a fixed tip"
 DESCRIPTION = """\
 Estimates the tip of a tool in its own (marker or flange) frame and the fixed pivot point in the
@@ -30,7 +32,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "pivot", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("poses", metavar="POSES", help="CSV pose list")
-    parser.add_argument("--out", required=True, metavar="JSON", help="result file to write")
+    parser.add_argument("--out", required=True, type=output_file, metavar="JSON", help="result file to write")
     parser.add_argument("--method", choices=tuple(PIVOT_METHODS), default="algebraic")
     parser.add_argument("--units", choices=UNITS, default="m", help="units of the poses' translations (default m)")
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")

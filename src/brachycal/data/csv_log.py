@@ -519,7 +519,13 @@ def read_configurations(path: str | os.PathLike[str], robot: Robot) -> tuple[lis
 
 
 def read_times(path: str | os.PathLike[str]) -> FloatArray:
-    """``(M,)`` the ``time`` column of a CSV file, seconds (e.g. the time stamps of ultrasound frames)."""
+    """``(M,)`` the ``time`` column of a CSV file, seconds (e.g. the time stamps of ultrasound frames).
+
+    Raises:
+        InputError: a file without rows (nothing to evaluate), a time that is not a finite number.
+    """
     path = Path(path)
     header, rows, records = read_table(path, ["time"])
+    if not records:
+        raise InputError("no times (only a header)", file=path)
     return to_float(path, header, rows, records, ["time"])[:, 0]
