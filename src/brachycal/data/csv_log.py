@@ -91,12 +91,18 @@ def _check_header(path: Path, header: list[str], required: list[str]) -> list[st
 
 
 def _scan_rows(
-    path: Path, reader: Iterator[list[str]], header: list[str], line_offset: int, limit: int | None = None
+    path: Path,
+    reader: Iterator[list[str]],
+    header: list[str],
+    line_offset: int,
+    limit: int | None = None,
+    lines: _Lines | None = None,
 ) -> tuple[list[int], list[list[str]]]:
-    """The row scan: up to ``limit`` records of ``reader`` (a :func:`csv.reader`) and their file rows.
+    """The row scan: up to ``limit`` records of ``reader`` (a :func:`csv.reader` of ``lines``) and their file rows.
 
     ``line_offset`` is the number of file lines before the reader's first line. Blank lines are
-    skipped; a row with another number of fields than the header is refused, naming its row.
+    skipped; a row with another number of fields than the header is refused, naming its row (as
+    :data:`TRUNCATED` when it is the file's last line and has no newline: a row cut short).
     """
     rows: list[int] = []
     records: list[list[str]] = []
@@ -106,6 +112,8 @@ def _scan_rows(
                 continue
             row = line_offset + reader.line_num  # type: ignore[attr-defined]
             if len(fields) != len(header):
+                if lines is not None and _unterminated(lines.last):
+                    raise InputError(TRUNCATED, file=path, row=row)
                 raise InputError(f"has {len(fields)} fields, the header has {len(header)}", file=path, row=row)
             rows.append(row)
             records.append(fields)
@@ -131,7 +139,7 @@ def read_table(path: Path, required: list[str]) -> tuple[list[str], list[int], l
         except (csv.Error, UnicodeDecodeError) as exc:
             raise InputError(f"not a readable CSV file ({exc})", file=path) from None
         header = _check_header(path, header, required)
-        rows, records = _scan_rows(path, reader, header, 0)
+        rows, records = _scan_rows(path, reader, header, 0, lines=lines)
         if _unterminated(lines.last):
             raise InputError(TRUNCATED, file=path, row=reader.line_num)
     return header, rows, records
@@ -317,7 +325,7 @@ class CsvLog:
         lines = _Lines(text)
         reader = csv.reader(lines)
         while True:
-            rows, records = _scan_rows(self.path, reader, self.header, line, limit=rows_per_block)
+            rows, records = _scan_rows(self.path, reader, self.header, line, limit=rows_per_block, lines=lines)
             if not records:
                 text.detach()
                 if _unterminated(lines.last):
