@@ -161,6 +161,7 @@ def test_a_table_of_written_numbers_reads_as_written(tmp_path):
         ("inf", r"row 3, column 'b': value is not a finite number, got 'inf'"),
         ("nan", r"row 3, column 'b': value is not a finite number, got 'nan'"),
         ("1e999", r"row 3, column 'b': value is not a finite number, got '1e999'"),
+        ('"1\n2"', r"row 4, column 'b': '1\\n2' is not a number"),  # a quoted line break, ending on line 4
     ],
 )
 def test_a_field_that_is_not_a_finite_number_is_named(tmp_path, field, message):

@@ -153,8 +153,11 @@ def to_float(
     index = [header.index(c) for c in columns]
     text = [[fields[k] for k in index] for fields in records]
     flat = [field for fields in text for field in fields]
-    if all_number_texts(flat):
-        values = np.array(flat, dtype=str).astype(float).reshape(len(records), len(columns))
+    if all_number_texts(flat):  # one regex pass; a field holding a line break passes it, but not the next line
+        try:
+            values = np.array(flat, dtype=str).astype(float).reshape(len(records), len(columns))
+        except ValueError:
+            values = np.full((len(records), len(columns)), np.nan)
         if np.isfinite(values).all():
             return values
     for row, fields in zip(rows, text, strict=True):
