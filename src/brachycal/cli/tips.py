@@ -52,7 +52,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("frames", metavar="FRAMES", help="MetaImage sequence (.mha) of 8-bit B-mode frames")
     parser.add_argument("--out", required=True, type=output_file, metavar="CSV", help="images.csv to write")
-    parser.add_argument("--sheet", type=output_file, metavar="PNG", help="also write a contact sheet of the frames and their tips")
+    parser.add_argument(
+        "--sheet", type=output_file, metavar="PNG", help="also write a contact sheet of the frames and their tips"
+    )
     confidence = finite_float(low=0.0, high=1.0)
     parser.add_argument(
         "--min-confidence",
