@@ -96,6 +96,13 @@ def scale_phantom_registration(root: ET.Element) -> None:
             element.set("Matrix", scale_rotation(element.get("Matrix"), 1.5))
 
 
+def set_wire_attribute(attribute: str, value: str):
+    def edit(root: ET.Element) -> None:
+        next(w for w in root.iter("Wire") if w.get("Name") == "8:L1_h1").set(attribute, value)
+
+    return edit
+
+
 def rename_configured_wire(root: ET.Element) -> None:
     for wire in root.iter("Wire"):
         if wire.get("Name") == "8:L1_h1":
@@ -537,6 +544,18 @@ CASES = [
         NWIRE,
         ("config.xml", "ApproximateSpacingMmPerPixel", "expected 1 finite number, got '0.078mm'"),
         plus_files(edit_config=set_spacing("0.078mm")),
+    ),
+    Case(
+        "nwire-wire-end-1e308",
+        NWIRE,
+        ("config.xml", "EndPointFront", "within ±10000", "'1e308 40.0 0.0'"),
+        plus_files(edit_config=set_wire_attribute("EndPointFront", "1e308 40.0 0.0")),
+    ),
+    Case(
+        "nwire-wire-end-digit-separator",
+        NWIRE,
+        ("config.xml", "EndPointFront", "expected 3 finite numbers", "'5_5.0 40.0 0.0'"),
+        plus_files(edit_config=set_wire_attribute("EndPointFront", "5_5.0 40.0 0.0")),
     ),
     Case(
         "nwire-spacing-negative",
