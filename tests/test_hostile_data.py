@@ -96,6 +96,13 @@ def scale_phantom_registration(root: ET.Element) -> None:
             element.set("Matrix", scale_rotation(element.get("Matrix"), 1.5))
 
 
+def set_wire_attribute(attribute: str, value: str):
+    def edit(root: ET.Element) -> None:
+        next(w for w in root.iter("Wire") if w.get("Name") == "8:L1_h1").set(attribute, value)
+
+    return edit
+
+
 def rename_configured_wire(root: ET.Element) -> None:
     for wire in root.iter("Wire"):
         if wire.get("Name") == "8:L1_h1":
@@ -209,7 +216,208 @@ def unchanged(header: list[str], rows: list[list[str]]) -> None:
     """The example log as it is: the case's refusal comes from its options."""
 
 
+def set_text(row: int, column: str, text: str):
+    """A log edit: file row ``row`` (header = 1), ``column`` set to ``text`` as written."""
+
+    def edit(header: list[str], rows: list[list[str]]) -> None:
+        rows[row - 2][header.index(column)] = text
+
+    return edit
+
+
+def cut_file(name: str, drop: int):
+    """``name`` (already in the folder) without its final newline and last ``drop`` characters: a
+    file cut mid-number (``1.608151017`` → ``1.60``) by a killed writer."""
+
+    def edit(tmp: Path) -> None:
+        path = tmp / name
+        path.write_text(path.read_text().rstrip("\n")[:-drop])
+
+    return edit
+
+
+def then(*setups: Callable[[Path], None]):
+    def setup(tmp: Path) -> None:
+        for step in setups:
+            step(tmp)
+
+    return setup
+
+
+def write_file(name: str, text: str):
+    def setup(tmp: Path) -> None:
+        (tmp / name).write_text(text)
+
+    return setup
+
+
+def pose_list(edit: Callable[[list[str]], list[str]] = lambda lines: lines, scale: float = 1.0):
+    """The bundled pivot example (millimetres) as ``poses.csv``: translations times ``scale``, then ``edit(lines)``."""
+
+    def setup(tmp: Path) -> None:
+        lines = (ROOT / "examples" / "pivot" / "pointer_pivot.csv").read_text().splitlines()
+        header = lines[0].split(",")
+        if scale != 1.0:
+            moved = [header.index(c) for c in ("m03", "m13", "m23")]
+            for k in range(1, len(lines)):
+                fields = lines[k].split(",")
+                for c in moved:
+                    fields[c] = repr(float(fields[c]) * scale)
+                lines[k] = ",".join(fields)
+        (tmp / "poses.csv").write_text("\n".join(edit(lines)) + "\n")
+
+    return setup
+
+
+def pose_field(row: int, column: str, text: str):
+    """A pose-list edit: file row ``row`` (header = 1), ``column`` set to ``text``."""
+
+    def edit(lines: list[str]) -> list[str]:
+        header = lines[0].split(",")
+        fields = lines[row - 1].split(",")
+        fields[header.index(column)] = text
+        lines[row - 1] = ",".join(fields)
+        return lines
+
+    return edit
+
+
+def session_text(file: str, change: Callable[[str], str]):
+    def setup(tmp: Path) -> None:
+        shutil.copytree(ROOT / "examples" / "session_exact", tmp / "session")
+        path = tmp / "session" / file
+        path.write_text(change(path.read_text()))
+
+    return setup
+
+
+PIVOT = ["pivot", "{tmp}/poses.csv", "--out", "{tmp}/pivot.json"]
+
+
 CASES = [
+    # Numbers that parse but are wrong: one grammar (what CSV writers write), a cut last line refused.
+    Case(
+        "fk-csv-digit-separator",
+        FK,
+        ("log.csv", "row 3", "arm_left_joint_2_l", "'0_1' is not a number"),
+        csv_log(set_text(3, "arm_left_joint_2_l", "0_1")),
+    ),
+    Case(
+        "fk-csv-hexadecimal",
+        FK,
+        ("log.csv", "row 4", "time", "'0x10' is not a number"),
+        csv_log(set_text(4, "time", "0x10")),
+    ),
+    Case(
+        "fk-csv-blank-before-a-number",
+        FK,
+        ("log.csv", "row 3", "arm_left_joint_2_l", "' 0.1' is not a number"),
+        csv_log(set_text(3, "arm_left_joint_2_l", " 0.1")),
+    ),
+    Case(
+        "fk-csv-arabic-indic-digit",
+        FK,
+        ("log.csv", "row 3", "arm_left_joint_2_l", "is not a number"),
+        csv_log(set_text(3, "arm_left_joint_2_l", "\u0660")),
+    ),
+    Case(
+        "fk-csv-infinity",
+        FK,
+        ("log.csv", "row 5", "time", "'infinity' is not a number"),
+        csv_log(set_text(5, "time", "infinity")),
+    ),
+    Case(
+        "fk-csv-number-beyond-float-range",
+        FK,
+        ("log.csv", "row 3", "arm_left_joint_2_l", "not a finite number", "1e999"),
+        csv_log(set_text(3, "arm_left_joint_2_l", "1e999")),
+    ),
+    Case(
+        "fk-csv-cut-mid-number",
+        FK,
+        ("log.csv", "row", "the last line has no newline", "truncated"),
+        then(csv_log(unchanged), cut_file("log.csv", 7)),
+    ),
+    Case(
+        "fk-times-header-only",
+        [*FK, "--times", "{tmp}/times.csv"],
+        ("times.csv", "no times"),
+        then(csv_log(unchanged), write_file("times.csv", "time\n")),
+    ),
+    Case(
+        "fk-times-cut",
+        [*FK, "--times", "{tmp}/times.csv"],
+        ("times.csv, row 3", "the last line has no newline"),
+        then(csv_log(unchanged), write_file("times.csv", "time\n0.5\n1.6")),
+    ),
+    Case(
+        "fk-out-trailing-slash",
+        [*FK[:-3], "--out", "{tmp}/poses/", "--quiet"],
+        ("--out", "names a folder"),
+        csv_log(unchanged),
+    ),
+    Case(
+        "fk-out-existing-folder",
+        [*FK[:-3], "--out", "{tmp}", "--quiet", "--force"],
+        ("is a folder",),
+        csv_log(unchanged),
+    ),
+    # Pose lists and pivot: absurd magnitudes, cut files, the wrong unit (a 396 m or a 0.4 mm tool at exit 0).
+    Case(
+        "pivot-millimetres-read-as-metres",
+        PIVOT,
+        ("poses.csv", "m from the tool's origin", "read with --units m", "--units mm"),
+        pose_list(),
+    ),
+    Case(
+        "pivot-metres-read-as-millimetres",
+        [*PIVOT, "--units", "mm"],
+        ("poses.csv", "mm from the tool's origin", "read with --units mm", "--units m"),
+        pose_list(scale=1e-3),
+    ),
+    Case(
+        "pivot-translation-1e308",
+        [*PIVOT, "--units", "mm"],
+        ("poses.csv", "row 4", "m13", "not a physical position"),
+        pose_list(pose_field(4, "m13", "1e308")),
+    ),
+    Case(
+        "pivot-digit-separator",
+        [*PIVOT, "--units", "mm"],
+        ("poses.csv", "row 2", "m03", "'-2_18.4' is not a number"),
+        pose_list(pose_field(2, "m03", "-2_18.4")),
+    ),
+    Case(
+        "pivot-pose-list-cut",
+        [*PIVOT, "--units", "mm"],
+        ("poses.csv", "the last line has no newline"),
+        then(pose_list(), cut_file("poses.csv", 2)),
+    ),
+    # Sessions: a tip, a trial beyond any physical value (LinAlgError, OverflowError before).
+    Case(
+        "calibrate-session-tip-1e308",
+        CALIBRATE,
+        ("session.toml", "tip_in_flange_mm", "not a physical position"),
+        session_text("session.toml", lambda t: t.replace("[0.0, 0.0, 150.0]", "[0.0, 1e308, 150.0]")),
+    ),
+    Case(
+        "calibrate-session-trial-infinite",
+        CALIBRATE,
+        ("touches.csv", "row 2", "trial", "not a finite number"),
+        session_text("touches.csv", lambda t: t.replace("top_model,rtip1,1,", "top_model,rtip1,inf,", 1)),
+    ),
+    Case(
+        "calibrate-session-trial-1e308",
+        CALIBRATE,
+        ("touches.csv", "row 2", "trial", "from 1 to 10000"),
+        session_text("touches.csv", lambda t: t.replace("top_model,rtip1,1,", "top_model,rtip1,1e308,", 1)),
+    ),
+    Case(
+        "calibrate-session-samples-cut",
+        CALIBRATE,
+        ("samples.csv", "the last line has no newline"),
+        session_text("samples.csv", lambda t: t.rstrip("\n")[:-3]),
+    ),
     # fk --lag-s: a finite number, and only with --times (the times it shifts)
     Case("fk-lag-without-times", [*FK, "--lag-s", "0.05"], ("--lag-s applies to --times",), csv_log(unchanged)),
     Case("fk-lag-not-a-number", [*FK, "--lag-s", "nan"], ("--lag-s", "nan"), csv_log(unchanged)),
@@ -336,6 +544,18 @@ CASES = [
         NWIRE,
         ("config.xml", "ApproximateSpacingMmPerPixel", "expected 1 finite number, got '0.078mm'"),
         plus_files(edit_config=set_spacing("0.078mm")),
+    ),
+    Case(
+        "nwire-wire-end-1e308",
+        NWIRE,
+        ("config.xml", "EndPointFront", "within ±10000", "'1e308 40.0 0.0'"),
+        plus_files(edit_config=set_wire_attribute("EndPointFront", "1e308 40.0 0.0")),
+    ),
+    Case(
+        "nwire-wire-end-digit-separator",
+        NWIRE,
+        ("config.xml", "EndPointFront", "expected 3 finite numbers", "'5_5.0 40.0 0.0'"),
+        plus_files(edit_config=set_wire_attribute("EndPointFront", "5_5.0 40.0 0.0")),
     ),
     Case(
         "nwire-spacing-negative",

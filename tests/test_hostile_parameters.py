@@ -71,6 +71,17 @@ CASES = [
     Case("demo-negative-seed", [*DEMO, "--seed=-1"], ("--seed", "[0, 2**32)")),
     Case("demo-no-targets", [*DEMO, "--targets", "0"], ("--targets", "in [1, 100000]")),
     Case("study-negative-workers", [*STUDY, "--workers=-1"], ("--workers", "in [1, 256]")),
+    # --- numbers that Python's float/int take but no writer writes ----------------------------------
+    Case("demo-seed-digit-separator", [*DEMO, "--seed", "4_2"], ("--seed", "a whole number", "'4_2'")),
+    Case("demo-seed-arabic-indic", [*DEMO, "--seed", "\u0664\u0662"], ("--seed", "a whole number")),
+    Case("demo-targets-hexadecimal", [*DEMO, "--targets", "0x10"], ("--targets", "a whole number", "'0x10'")),
+    Case(
+        "plan-margin-digit-separator",
+        [*PLAN, "--collision-margin-mm", "2_5"],
+        ("--collision-margin-mm", "a number", "'2_5'"),
+    ),
+    Case("plan-spacing-infinity", [*PLAN, "--spacing-mm", "0.19,infinity"], ("--spacing-mm", "'infinity'")),
+    Case("locate-uv-digit-separator", [*LOCATE, "--uv", "5_40,300"], ("--uv", "value 1", "'5_40'")),
     # --- demo ---------------------------------------------------------------------------------------
     *numeric(
         DEMO,

@@ -71,6 +71,20 @@ def set_field(column: int, value: str) -> Callable[[list[str]], list[str]]:
     return lambda fields: [*fields[:column], value, *fields[column + 1 :]]
 
 
+def millimetres(text: str) -> str:
+    """The observations with the tracker positions (``*_x``, ``*_y``, ``*_z``, metres) times 1000."""
+    lines = text.splitlines()
+    header = lines[0].split(",")
+    columns = [k for k, name in enumerate(header) if name.endswith(("_x", "_y", "_z"))]
+    out = [lines[0]]
+    for line in lines[1:]:
+        fields = line.split(",")
+        for k in columns:
+            fields[k] = repr(float(fields[k]) * 1e3)
+        out.append(",".join(fields))
+    return "\n".join(out) + "\n"
+
+
 ONE_WEDGE = """format = "brachycal-phantom/1"
 kind = "multi-wedge"
 [[wedge]]
@@ -129,6 +143,49 @@ CASES = [
         "text for a pixel", WIRE, ("row 4", "u_px", "not a number"), files(observations=row(2, set_field(16, "12.5x")))
     ),
     Case("NaN pixel", WIRE, ("row 2", "v_px", "finite"), files(observations=row(0, set_field(17, "nan")))),
+    # Numbers that parse but are wrong: digit separators, absurd magnitudes, another unit, a cut file.
+    Case(
+        "pixel with a digit separator",
+        WIRE,
+        ("row 2", "u_px", "'1_2.5' is not a number"),
+        files(observations=row(0, set_field(16, "1_2.5"))),
+    ),
+    Case(
+        "probe coordinate 1e308",
+        WIRE,
+        ("row 3", "probe_x", "1e+308 m", "not a physical position"),
+        files(observations=row(1, set_field(2, "1e308"))),
+    ),
+    Case(
+        "pixel 1e308",
+        WIRE,
+        ("row 2", "v_px", "1e+308 px", "not a physical position"),
+        files(observations=row(0, set_field(17, "1e308"))),
+    ),
+    Case(
+        "observations in millimetres",
+        WIRE,
+        ("row 2", "probe_x", "m is beyond ±10 m", "another unit"),
+        files(observations=lambda t: millimetres(t)),
+    ),
+    Case(
+        "observations cut mid-number",
+        WIRE,
+        ("obs.csv, row", "the last line has no newline"),
+        files(observations=lambda t: t.rstrip("\n")[:-3]),
+    ),
+    Case(
+        "wire end 1e308",
+        WIRE,
+        ("geometry.toml", "from_mm", "1e+308 mm", "not a physical position"),
+        files(geometry=lambda t: t.replace("from_mm = [-30.00, -30.0, -20.0]", "from_mm = [1e308, -30.0, -20.0]")),
+    ),
+    Case(
+        "registration translation 1e308",
+        WIRE,
+        ("geometry.toml", "T_reference_phantom_mm translation", "not a physical position"),
+        files(geometry=lambda t: t.replace("[1.0, 0.0, 0.0, 0.0], [0.0", "[1.0, 0.0, 0.0, 1e308], [0.0", 1)),
+    ),
     Case(
         "quaternion not a unit one",
         WIRE,

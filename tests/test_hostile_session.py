@@ -122,6 +122,27 @@ def every_tenth_reading(tmp: Path) -> None:
     (tmp / "joint_log.csv").write_text("\n".join([lines[0], *lines[1::10]]) + "\n")
 
 
+def with_samples(*names: str):
+    """A ``sample`` column in ``images.csv``: ``names`` (raw CSV text) for the first frames, then ``s<k>``."""
+
+    def change(lines: list[str]) -> list[str]:
+        given = [*names, *(f"s{k}" for k in range(len(names), len(lines) - 1))]
+        return [f"sample,{lines[0]}", *(f"{name},{line}" for name, line in zip(given, lines[1:], strict=True))]
+
+    return edit_csv("images.csv", change)
+
+
+def cut_last_line(name: str, keep: int = 4):
+    """``name`` cut inside its last number (the last ``keep`` characters of it dropped, no final newline):
+    what a logger killed mid-write leaves."""
+
+    def edit(tmp: Path) -> None:
+        path = tmp / name
+        path.write_text(path.read_text().rstrip("\n")[:-keep])
+
+    return edit
+
+
 MARKUPS = [*BUILD[:6], "{tmp}/images.csv", "--markups", "{tmp}/tips.mrk.json", *BUILD[7:]]
 
 CASES = [
@@ -240,7 +261,80 @@ CASES = [
         ("images.csv", "has u_px/v_px columns", "give them in one place"),
         with_copy(markups()),
     ),
+    Case(
+        "time-with-digit-separator",
+        BUILD,
+        ("marks.csv, row 5, column 'time'", "'1_700_000_020.5' is not a number"),
+        with_copy(set_field("marks.csv", 5, "time", "1_700_000_020.5")),
+    ),
+    Case(
+        "marks-cut-mid-number",
+        BUILD,
+        ("marks.csv, row", "the last line has no newline", "truncated"),
+        with_copy(cut_last_line("marks.csv", keep=12)),
+    ),
+    # --- frames -----------------------------------------------------------------------------------
+    Case(
+        "sample-name-with-comma",
+        BUILD,
+        ("images.csv, row 3, column 'sample'", "'s,1' is not a plain token"),
+        with_copy(with_samples("s0", '"s,1"')),
+    ),
+    Case(
+        "sample-name-with-quote",
+        BUILD,
+        ("images.csv, row 2, column 'sample'", "is not a plain token"),
+        with_copy(with_samples('s"0')),
+    ),
+    Case(
+        "sample-name-with-newline",
+        BUILD,
+        ("images.csv, row 3, column 'sample'", "is not a plain token"),  # the record's last line
+        with_copy(with_samples('"s\n0"')),
+    ),
+    Case(
+        "frame-listed-twice",
+        BUILD,
+        ("images.csv, row 3, column 'time'", "listed twice (also row 2)"),
+        with_copy(edit_csv("images.csv", lambda lines: [lines[0], lines[1], *lines[1:]])),
+    ),
+    Case(
+        "pixel-in-hex",
+        BUILD,
+        ("images.csv, row 2, column 'u_px'", "'0x1b2' is not a number"),
+        with_copy(set_field("images.csv", 2, "u_px", "0x1b2")),
+    ),
+    Case(
+        "pixel-in-arabic-indic-digits",
+        BUILD,
+        ("images.csv, row 2, column 'v_px'", "is not a number"),
+        with_copy(set_field("images.csv", 2, "v_px", "\u0661\u0661\u0660")),
+    ),
+    Case(
+        "images-cut-mid-number",
+        BUILD,
+        ("images.csv, row", "the last line has no newline"),
+        with_copy(cut_last_line("images.csv")),
+    ),
     # --- log and plan -----------------------------------------------------------------------------
+    Case(
+        "log-cut-mid-number",
+        BUILD,
+        ("joint_log.csv, row", "the last line has no newline", "truncated"),
+        with_copy(cut_last_line("joint_log.csv", keep=7)),
+    ),
+    Case(
+        "plan-point-with-comma",
+        BUILD,
+        ("plan.csv, row 2, column 'point'", "'g,000' is not a plain token"),
+        with_copy(edit_csv("plan.csv", lambda lines: [lines[0], lines[1].replace(",g000,", ',"g,000",'), *lines[2:]])),
+    ),
+    Case(
+        "plan-joint-with-digit-separator",
+        BUILD,
+        ("plan.csv, row 2, column 'arm_left_joint_2_l'", "'1_3' is not a number"),
+        with_copy(set_field("plan.csv", 2, "arm_left_joint_2_l", "1_3")),
+    ),
     Case("no-log", [*BUILD[:2], "{tmp}/missing.csv", *BUILD[3:]], ("missing.csv", "no such file"), with_copy()),
     Case(
         "sparse-log",

@@ -89,7 +89,7 @@ def test_missing_joint(tmp_path, robot, log_data):
 
 def test_nan_value(good_log, robot):
     assert refusal(edit(good_log, 7, "arm_right_joint_2_l", "nan"), robot).endswith(
-        "row 7, column 'arm_right_joint_2_l': value is not a finite number"
+        "row 7, column 'arm_right_joint_2_l': value is not a finite number, got 'nan'"
     )
 
 

@@ -140,7 +140,7 @@ def test_marks_in_time_order_with_their_rows(tmp_path):
         ("1.0,touch,needle,p1", r"column 'name': unknown reference tip 'p1'"),
         ("1.0,axes,needle,rtip1", r"column 'name': unknown axes point 'rtip1'"),
         ("x,touch,needle,rtip1", r"column 'time': 'x' is not a number"),
-        ("nan,touch,needle,rtip1", r"column 'time': time must be a finite number"),
+        ("nan,touch,needle,rtip1", r"row 2, column 'time': value is not a finite number, got 'nan'"),
     ],
 )
 def test_marks_refusals_name_row_and_column(tmp_path, row, message):

@@ -29,6 +29,7 @@ from brachycal.data import (
     read_session,
     session_settings,
     write_build,
+    write_session,
 )
 from brachycal.data.recording import MAX_SPEED_RAD_S
 from brachycal.simulation import RecordingConfig, TwinConfig, record, write_recording
@@ -365,3 +366,31 @@ def test_demo_recording_prints_a_build_command_that_works(tmp_path, capsys):
     command = next(line.strip() for line in out.splitlines() if line.strip().startswith("brachycal session build"))
     assert main(shlex.split(command)[1:]) == 0
     assert main(["calibrate", str(tmp_path / "demo" / "built_session"), "--out", str(tmp_path / "r.json")]) == 0
+
+
+def test_two_images_of_one_planned_pose_are_both_samples_and_said_so(rec, robot, parts):
+    """A pose imaged twice (two frames at different times, paired with one planned pose) gives two
+    samples, ``g…`` and ``g…-2``, with a warning naming the second image: never silently."""
+    log, settings = parts
+    plan = read_plan_from(rec)
+    frames = [replace(f, source="images.csv", row=k + 2) for k, f in enumerate(rec.frames)]
+    used = [k for k, f in enumerate(frames) if f.uv_px is not None]
+    first, second = used[0], used[1]
+    frames[second] = replace(frames[second], sample=None)
+    frames[first] = replace(frames[first], sample=None)
+    baseline = build_session(log, rec.marks, frames, robot=robot, settings=settings, plan=plan)
+    name = baseline.session.sample_ids[0]
+    frames[second] = replace(frames[second], sample=name)  # the second image named as the first's pose
+    said = rf"images\.csv, row {second + 2}: .* second image of {name}.* sample {name}-2"
+    with pytest.warns(UserWarning, match=said):
+        build = build_session(log, rec.marks, frames, robot=robot, settings=settings, plan=plan)
+    assert build.session.sample_ids[:2] == [name, f"{name}-2"]
+
+
+def test_a_sample_name_that_is_not_a_plain_token_is_never_written(rec, robot, parts, tmp_path):
+    log, settings = parts
+    build = build_session(log, rec.marks, rec.frames, robot=robot, settings=settings)
+    session = replace(build.session, sample_ids=['a,"b', *build.session.sample_ids[1:]])
+    with pytest.raises(InputError, match="not a plain token"):
+        write_session(session, tmp_path / "s")
+    assert not (tmp_path / "s").exists()

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 from collections.abc import Callable, Collection, Sequence
 from os import PathLike
 from typing import Any
@@ -58,10 +59,67 @@ MAX_SEEDS = 1000
 #: study's rows keep a seed as a 32-bit unsigned number.
 SEED_LIMIT = 2**32
 
+#: Largest coordinate (each axis) of any position brachycal reads, metres: optical and
+#: electromagnetic trackers measure within a few metres of their camera or field generator, the
+#: robot reaches 1.5 m from its base and a phantom is tens of centimetres across. A larger value is
+#: a typo or another unit, and a value near the float limit (1e308) would overflow in the fits.
+MAX_POSITION_M = 10.0
+
+#: Longest and shortest tool (tip from its marker's or flange's origin), metres: no hand-held or
+#: robot-held tool is longer than a few metres, and a tip within a few millimetres of its marker's
+#: origin is not a tool. A pivot in the wrong unit lands 1000 times off: 0.4 m read as millimetres
+#: is 0.4 mm, read as metres from millimetres 400 m.
+TOOL_LENGTH_M_RANGE = (0.003, 3.0)
+
 #: Largest deviation of a rotation block from orthonormality (‖RᵀR − I‖ max entry) and of its
 #: determinant from 1 that a stored rigid transform may show. Transforms written with 9+ decimals
 #: (every file format brachycal reads) are within 1e-6; a scaled or sheared matrix is far off.
 RIGID_TOLERANCE = 1e-6
+
+
+#: The text of a number as CSV and text writers write it (Python's ``repr``, ``%.17g``, the csv
+#: module, ``numpy.savetxt``, C's ``printf``): ASCII digits, an optional sign, an optional decimal
+#: point and an optional exponent, and nothing else. Python's ``float`` accepts more (``0_1`` is 1,
+#: Arabic-Indic digits, surrounding blanks, ``infinity``), so a file's ``2_5`` would be read as 25.
+DECIMAL_TEXT = r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
+#: Non-finite numbers as those writers spell them (``nan``, ``inf``, ``-inf``; any case), which a
+#: reader then refuses wherever the value must be finite.
+NON_FINITE_TEXT = r"(?i:[+-]?(?:nan|inf))"
+_NUMBER = re.compile(rf"(?:{DECIMAL_TEXT}|{NON_FINITE_TEXT})")
+_WHOLE = re.compile(r"[+-]?[0-9]+")
+# Many fields at once: each followed by a line break (which a number never holds).
+_NUMBERS = re.compile(rf"(?:(?:{DECIMAL_TEXT}|{NON_FINITE_TEXT})\n)*")
+
+
+def number_from_text(text: str) -> float | None:
+    """The number written as ``text`` (:data:`DECIMAL_TEXT` or ``nan``/``inf``), or None for any other text.
+
+    No blanks around, no ``_`` digit separators, no hexadecimal, no non-ASCII digits, no ``infinity``.
+    """
+    return float(text) if _NUMBER.fullmatch(text) else None
+
+
+def whole_from_text(text: str) -> int | None:
+    """The whole number written as ``text`` (ASCII digits, an optional sign), or None for any other text."""
+    return int(text) if _WHOLE.fullmatch(text) else None
+
+
+def numbers_from_text(text: str) -> list[float] | None:
+    """The numbers of ``text`` separated by blanks (an XML attribute's ``"1 0 0 12.5"``), each as
+    :func:`number_from_text`; None if any item is not a number's text."""
+    values = [number_from_text(item) for item in text.split()]
+    return None if None in values else values  # type: ignore[return-value]
+
+
+def wholes_from_text(text: str) -> list[int] | None:
+    """The whole numbers of ``text`` separated by blanks, each as :func:`whole_from_text`; None if any is not."""
+    values = [whole_from_text(item) for item in text.split()]
+    return None if None in values else values  # type: ignore[return-value]
+
+
+def all_number_texts(texts: Sequence[str]) -> bool:
+    """Whether every text of ``texts`` is a number's (:func:`number_from_text`), checked in one regex pass."""
+    return _NUMBERS.fullmatch("\n".join(texts) + "\n" if texts else "") is not None
 
 
 def check_transform(
@@ -194,6 +252,39 @@ def check_int(
     if not (above and below):
         raise InputError(f"{_where(name)}must be {_interval(low, high)}, got {n}", file=file, row=row)
     return n
+
+
+def check_positions(
+    values: ArrayLike,
+    name: str,
+    *,
+    limit: float,
+    unit: str,
+    file: str | PathLike[str] | None = None,
+    rows: Sequence[int] | None = None,
+    columns: Sequence[str] | None = None,
+) -> FloatArray:
+    """Coordinates ``(…, C)`` each finite and within ``±limit`` (``unit``), e.g. :data:`MAX_POSITION_M`.
+
+    ``rows`` (one per leading index of a ``(N, C)`` table) and ``columns`` (``C`` names) place the
+    first value refused; the refusal says the value is not a physical position (a typo or another unit).
+    """
+    A = np.asarray(values, dtype=float)
+    table = A.reshape(-1, A.shape[-1]) if A.ndim else A.reshape(1, 1)
+    bad = np.argwhere(~(np.abs(table) <= limit))
+    if bad.size:
+        k, c = (int(i) for i in bad[0])
+        x = table[k, c]
+        column = columns[c] if columns is not None else None
+        row = rows[k] if rows is not None else None
+        what = f"{_where(name)}{x:g} {unit}" if math.isfinite(x) else f"{_where(name)}{x}"
+        raise InputError(
+            f"{what} is beyond ±{limit:g} {unit}: not a physical position (a typo, or another unit?)",
+            file=file,
+            row=row,
+            column=column,
+        )
+    return A
 
 
 def check_probability(value: float, name: str, *, high: float = 1.0) -> float:
@@ -378,11 +469,10 @@ def parse_number_list(
         label = f"{name} value {k}".strip() if len(items) > 1 else name
         if not item:
             raise InputError(f"{_where(label)}is empty (in {text!r})")
-        try:
-            number = kind(item)
-        except ValueError:
+        number = (whole_from_text if kind is int else number_from_text)(item)
+        if number is None:
             what = "a whole number" if kind is int else "a number"
-            raise InputError(f"{_where(label)}must be {what}, got {item!r}") from None
+            raise InputError(f"{_where(label)}must be {what}, got {item!r}")
         if kind is int:
             values.append(check_int(number, label, low=low, high=high))  # type: ignore[arg-type]
         else:
@@ -390,6 +480,26 @@ def parse_number_list(
                 check_range(number, label, low=low, high=high, low_open=low_open, high_open=high_open, unit=unit)
             )
     return values
+
+
+def check_token(
+    name: str,
+    what: str,
+    *,
+    file: str | PathLike[str] | None = None,
+    row: int | None = None,
+    column: str | None = None,
+) -> str:
+    """``name`` (a sample's, a point's) if it is a plain token: non-empty, printable, no blank, comma
+    or quote, so that it is written into a CSV field as it is and read back the same."""
+    if not name or not name.isprintable() or any(c.isspace() or c in ",\"'" for c in name):
+        raise InputError(
+            f"{what} name {name!r} is not a plain token (no blank, comma, quote or control character)",
+            file=file,
+            row=row,
+            column=column,
+        )
+    return name
 
 
 def parse_name_list(text: str, name: str, choices: Collection[str] | None = None) -> list[str]:
@@ -428,10 +538,11 @@ class OptionType:
 
 
 def _number(text: str, kind: type) -> float:
-    try:
-        return kind(text.strip())
-    except ValueError:
-        raise InputError(f"must be {'a whole number' if kind is int else 'a number'}, got {text!r}") from None
+    """One option value: :func:`number_from_text` (or :func:`whole_from_text`) of ``text`` without blanks around."""
+    value = (whole_from_text if kind is int else number_from_text)(text.strip())
+    if value is None:
+        raise InputError(f"must be {'a whole number' if kind is int else 'a number'}, got {text!r}")
+    return value
 
 
 def finite_float(

@@ -49,7 +49,7 @@ import numpy as np
 from brachycal.data.csv_log import read_table, to_float
 from brachycal.errors import InputError
 from brachycal.se3 import FloatArray, inverse, make_transform
-from brachycal.validate import check_transform
+from brachycal.validate import MAX_IMAGE_PX, MAX_POSITION_M, check_positions, check_transform
 
 FORMAT = "brachycal-phantom/1"
 RESULT_FORMAT = "brachycal-phantom-result/1"
@@ -123,18 +123,22 @@ def load_toml(path: str | os.PathLike[str], kind: str) -> tuple[dict, PhantomGeo
         except (TypeError, ValueError):
             raise InputError("T_reference_phantom_mm must be a 4x4 matrix of numbers", file=path) from None
         T = check_transform(T, "T_reference_phantom_mm", file=path).copy()
+        check_positions(T[:3, 3], "T_reference_phantom_mm translation", limit=MAX_POSITION_M / MM, unit="mm", file=path)
         T[:3, 3] *= MM
     return data, PhantomGeometry(name, str(path), landmarks, T)
 
 
-def vector(value: object, name: str, path: Path | None) -> FloatArray:
-    """``(3,)`` finite numbers of a TOML value, refused in one line otherwise."""
+def vector(value: object, name: str, path: Path | None, limit: float | None = MAX_POSITION_M / MM) -> FloatArray:
+    """``(3,)`` finite numbers of a TOML value, each within ``±limit`` (default: a position in
+    millimetres, :data:`~brachycal.validate.MAX_POSITION_M`), refused in one line otherwise."""
     try:
         v = np.array(value, dtype=float)
     except (TypeError, ValueError):
         raise InputError(f"{name} must be three numbers, got {value!r}", file=path) from None
     if v.shape != (3,) or not np.all(np.isfinite(v)):
         raise InputError(f"{name} must be three finite numbers, got {value!r}", file=path)
+    if limit is not None:
+        check_positions(v, name, limit=limit, unit="mm", file=path)
     return v
 
 
@@ -231,6 +235,26 @@ def read_observations(path: str | os.PathLike[str], kind: str, features: list[st
     if bad.size:
         k, c = (int(i) for i in bad[0])
         raise InputError("is not a finite number", file=path, row=rows[k], column=numeric[c])
+    for body in ("probe", "reference"):  # metres: a reading in millimetres is far beyond any tracker's range
+        position = POSE_COLUMNS[body][:3]
+        check_positions(
+            numbers[:, [numeric.index(c) for c in position]],
+            f"the {body} position (metres)",
+            limit=MAX_POSITION_M,
+            unit="m",
+            file=path,
+            rows=rows,
+            columns=position,
+        )
+    check_positions(
+        numbers[:, [numeric.index(c) for c in pixel_columns]],
+        "",
+        limit=MAX_IMAGE_PX,
+        unit="px",
+        file=path,
+        rows=rows,
+        columns=pixel_columns,
+    )
     names = [fields[header.index("frame")].strip() for fields in records]
     feature = [fields[header.index("feature")].strip() for fields in records]
     known = set(features)

@@ -23,6 +23,7 @@ from brachycal.data.pose_list import read_pose_list
 from brachycal.errors import DegenerateDataError, InputError
 from brachycal.files import sha256_file, write_json
 from brachycal.se3 import FloatArray
+from brachycal.validate import TOOL_LENGTH_M_RANGE
 
 FORMAT = "brachycal-pivot/1"
 #: Estimators by name (``brachycal pivot --method``).
@@ -75,6 +76,24 @@ class PivotCalibration:
         }
 
 
+def check_tool_length(result: PivotResult, units: str, path: str | os.PathLike[str]) -> None:
+    """Refuse a tip farther from the tool's origin than a tool can be, or nearer
+    (:data:`~brachycal.validate.TOOL_LENGTH_M_RANGE`): poses in the other unit than ``units``."""
+    scale = 1.0 if units == "m" else 1e-3
+    length_m = float(np.linalg.norm(result.p_marker_tip)) * scale
+    low, high = TOOL_LENGTH_M_RANGE
+    if low <= length_m <= high:
+        return
+    other = "mm" if units == "m" else "m"
+    shown = length_m / scale
+    bound = f"longer than {high / scale:g}" if length_m > high else f"shorter than {low / scale:g}"
+    raise InputError(
+        f"the tip is {shown:.4g} {units} from the tool's origin, read with --units {units}: no tool is "
+        f"{bound} {units}; are the poses in {other}? (--units {other})",
+        file=path,
+    )
+
+
 def pivot_from_file(path: str | os.PathLike[str], method: str = "algebraic", units: str = "m") -> PivotCalibration:
     """Pivot calibration of the pose list at ``path`` with ``method`` (:data:`PIVOT_METHODS`).
 
@@ -96,6 +115,7 @@ def pivot_from_file(path: str | os.PathLike[str], method: str = "algebraic", uni
         result = PIVOT_METHODS[method](T)
     except DegenerateDataError as exc:  # name the file the poses came from
         raise DegenerateDataError(exc.problem, file=path) from None
+    check_tool_length(result, units, path)
     return PivotCalibration(result, names, units, {Path(path).name: sha256_file(path)})
 
 

@@ -128,7 +128,7 @@ def read_wedge_phantom(path: str | os.PathLike[str] | None = None) -> WedgePhant
         for face in entries(wedge, "face", where):
             name = unique_name(face, "face", seen_faces, where)
             point = vector(face.get("point_mm"), f"face {name!r} point_mm", where) * MM
-            normal = vector(face.get("normal"), f"face {name!r} normal", where)
+            normal = vector(face.get("normal"), f"face {name!r} normal", where, limit=None)
             length = np.linalg.norm(normal)
             if not length > 0:
                 raise InputError(f"face {name!r} has a zero normal", file=where)

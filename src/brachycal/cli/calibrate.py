@@ -11,6 +11,7 @@ from brachycal.cli.common import (
     add_robot_accuracy_options,
     add_robot_option,
     load_robot,
+    output_file,
     progress_bar,
     robot_accuracy,
     warn_refused,
@@ -69,7 +70,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "calibrate", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("session", metavar="SESSION", help="session folder")
-    parser.add_argument("--out", required=True, metavar="JSON", help="result file to write")
+    parser.add_argument("--out", required=True, type=output_file, metavar="JSON", help="result file to write")
     parser.add_argument(
         "--methods",
         type=name_list(METHODS),

@@ -7,6 +7,7 @@ so the robot model and the progress bar are imported where they are used.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from typing import TYPE_CHECKING
 
@@ -15,6 +16,14 @@ if TYPE_CHECKING:
 
     from brachycal.calibration.robot_accuracy import RobotAccuracy
     from brachycal.model import Robot
+
+
+def output_file(text: str) -> str:
+    """argparse type of an output that is one file (``--out poses.csv``): a path ending in a separator
+    names a folder, and ``Path`` would drop the separator and write a file of the folder's name."""
+    if not text or text.endswith(("/", os.sep)) or (os.altsep and text.endswith(os.altsep)):
+        raise argparse.ArgumentTypeError(f"{text!r} names a folder; give the file to write")
+    return text
 
 
 def add_urdf_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:

@@ -13,7 +13,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from brachycal.cli.common import add_robot_option, load_robot, progress_bar
+from brachycal.cli.common import add_robot_option, load_robot, output_file, progress_bar
 from brachycal.files import OutputSet
 from brachycal.validate import finite_float, name_list
 
@@ -57,7 +57,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="A,B,...",
         help="comma-separated frame names, each once, e.g. needle_tip,probe_tip",
     )
-    parser.add_argument("--out", required=True, metavar="CSV", help="pose table to write")
+    parser.add_argument("--out", required=True, type=output_file, metavar="CSV", help="pose table to write")
     parser.add_argument(
         "--times", metavar="CSV", help="evaluate at these times: a CSV file with a 'time' column (seconds)"
     )

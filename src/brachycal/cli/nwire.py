@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from brachycal.cli import nwire_segment
+from brachycal.cli.common import output_file
 
 #: The image models (:data:`brachycal.calibration.nwire_file.NWIRE_MODELS`, here so --help imports nothing heavy).
 MODELS = ("affine", "rigid", "3d-aniso", "3d-iso", "2d-aniso", "2d-iso")
@@ -37,7 +38,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "frames", metavar="FRAMES", nargs="?", help="PLUS segmented-frames XML (calibration + validation)"
     )
-    parser.add_argument("--out", required=True, metavar="JSON", help="result file to write")
+    parser.add_argument("--out", required=True, type=output_file, metavar="JSON", help="result file to write")
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     parser.add_argument(
         "--model",

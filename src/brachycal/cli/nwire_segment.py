@@ -9,6 +9,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from brachycal.cli.common import output_file
+
 NAME = "nwire-segment"
 HELP = "segment the N-wire phantom in tracked B-mode sequences (PLUS .mha) into a PLUS segmented-frames XML"
 DESCRIPTION = """\
@@ -46,7 +48,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--config", required=True, metavar="CONFIG", help="PLUS device set (PhantomDefinition and Segmentation)"
     )
-    parser.add_argument("--out", required=True, metavar="XML", help="segmented-frames file to write")
+    parser.add_argument("--out", required=True, type=output_file, metavar="XML", help="segmented-frames file to write")
     add_orientation_option(parser)
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")

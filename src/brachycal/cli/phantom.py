@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from brachycal.cli.common import output_file
+
 HELP = "tracked-probe phantom calibration: multi-wedge, arbitrary-wire or N-wire (Table III's image-based methods)"
 METHODS = ("wedge", "wire", "nwire")
 DESCRIPTION = """\
@@ -54,7 +56,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "observations", metavar="OBSERVATIONS", help="tracked observations (CSV; nwire: PLUS segmented frames XML)"
     )
-    parser.add_argument("--out", required=True, metavar="JSON", help="result file to write")
+    parser.add_argument("--out", required=True, type=output_file, metavar="JSON", help="result file to write")
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     parser.set_defaults(run=run)
 

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from brachycal.cli.common import output_file
+
 HELP = "pivot calibration: tool tip and pivot point from poses rotating about a fixed tip"
 DESCRIPTION = """\
 Estimates the tip of a tool in its own (marker or flange) frame and the fixed pivot point in the
@@ -11,7 +13,8 @@ reference frame from poses of the tool rotating about its tip.
 
 POSES is a CSV pose list: a header, then one row-major 4x4 homogeneous matrix per row
 (m00,m01,...,m33), optionally after a first key column (e.g. timestamp_ns). Results are in the
-units of the poses (--units records which). Residuals are given per axis (RMS over all 3N
+units of the poses (--units records which); a tip found beyond 3 m or within 3 mm of the tool's
+origin is refused, as poses in the other unit. Residuals are given per axis (RMS over all 3N
 coordinates, as SciKit-Surgery reports) and in 3D (RMS of the N distances).
 
 methods: algebraic (linear least squares, Yaniv 2015) or robust (soft-L1 loss, flags outliers).
@@ -29,7 +32,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "pivot", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("poses", metavar="POSES", help="CSV pose list")
-    parser.add_argument("--out", required=True, metavar="JSON", help="result file to write")
+    parser.add_argument("--out", required=True, type=output_file, metavar="JSON", help="result file to write")
     parser.add_argument("--method", choices=tuple(PIVOT_METHODS), default="algebraic")
     parser.add_argument("--units", choices=UNITS, default="m", help="units of the poses' translations (default m)")
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")

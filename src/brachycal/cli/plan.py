@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from brachycal.cli.common import add_method_option, add_robot_option, load_robot, progress_bar
+from brachycal.cli.common import add_method_option, add_robot_option, load_robot, output_file, progress_bar
 from brachycal.errors import InputError
 from brachycal.planning.spec import EDGE_RANGE_M, MAX_CENTRE_M, MAX_SECTOR_DEPTH_M, PlanSpec, RectFOV, SectorFOV
 from brachycal.validate import (
@@ -74,7 +74,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
         "plan", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--out", required=True, metavar="CSV", help="plan file to write")
+    parser.add_argument("--out", required=True, type=output_file, metavar="CSV", help="plan file to write")
     defaults = PlanSpec()  # the planner's defaults are the options' defaults (one home)
     _grid_options(parser.add_argument_group("grid"), defaults)
     _imaging_options(parser.add_argument_group("imaging"), defaults)

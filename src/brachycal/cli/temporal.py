@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING
 
-from brachycal.cli.common import add_robot_option, load_robot
+from brachycal.cli.common import add_robot_option, load_robot, output_file
 from brachycal.validate import finite_float
 
 if TYPE_CHECKING:
@@ -55,7 +55,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("video", metavar="VIDEO", help="B-mode sequence of the tank bottom (.mha, with Timestamp)")
     parser.add_argument("tracker", metavar="TRACKER", nargs="?", help="PLUS tracker sequence (.mha)")
-    parser.add_argument("--out", required=True, metavar="JSON", help="result file to write")
+    parser.add_argument("--out", required=True, type=output_file, metavar="JSON", help="result file to write")
     parser.add_argument("--config", metavar="XML", help="PLUS device set (clip rectangle, search range)")
     parser.add_argument("--probe", default="ProbeToTracker", help="probe transform name (default ProbeToTracker)")
     parser.add_argument(

@@ -6,6 +6,8 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from brachycal.cli.common import output_file
+
 if TYPE_CHECKING:
     import numpy as np
 
@@ -49,8 +51,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "tips", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("frames", metavar="FRAMES", help="MetaImage sequence (.mha) of 8-bit B-mode frames")
-    parser.add_argument("--out", required=True, metavar="CSV", help="images.csv to write")
-    parser.add_argument("--sheet", metavar="PNG", help="also write a contact sheet of the frames and their tips")
+    parser.add_argument("--out", required=True, type=output_file, metavar="CSV", help="images.csv to write")
+    parser.add_argument(
+        "--sheet", type=output_file, metavar="PNG", help="also write a contact sheet of the frames and their tips"
+    )
     confidence = finite_float(low=0.0, high=1.0)
     parser.add_argument(
         "--min-confidence",

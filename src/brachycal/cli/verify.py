@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from brachycal.cli.common import add_method_option, add_robot_option, load_robot
+from brachycal.cli.common import add_method_option, add_robot_option, load_robot, output_file
 from brachycal.errors import InputError
 from brachycal.validate import finite_float
 
@@ -75,7 +75,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "that pose's own null SD (its leave-one-out error, where the robot's left-over error shows); without it "
         "every pose has the average, and false alarms run above --false-alarm on real arms",
     )
-    parser.add_argument("--out", metavar="JSON", help="verification record to write")
+    parser.add_argument("--out", type=output_file, metavar="JSON", help="verification record to write")
     parser.add_argument(
         "--update",
         metavar="JSON",

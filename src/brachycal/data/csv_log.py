@@ -31,6 +31,7 @@ import numpy as np
 from brachycal.data.joint_log import JointLog, JointLogChecker, configurations_from_columns, joint_columns
 from brachycal.errors import InputError
 from brachycal.se3 import FloatArray
+from brachycal.validate import all_number_texts, number_from_text
 
 if TYPE_CHECKING:  # annotations only: reading a file needs no Pinocchio
     from brachycal.model.robot import Robot
@@ -50,6 +51,31 @@ def _open_binary(path: Path) -> BinaryIO:
         raise InputError(f"cannot read ({exc.strerror})", file=path) from None
 
 
+#: The refusal of a file whose last line has no line break: a writer cut off mid-line (a full disk, a
+#: killed logger, a truncated copy) leaves ``1.608151017`` as ``1.60``, a number that parses.
+TRUNCATED = "the last line has no newline: the file may be truncated"
+
+
+class _Lines:
+    """The lines of a text file for :func:`csv.reader`, remembering the last one (to see whether it ended)."""
+
+    def __init__(self, handle: Iterable[str]) -> None:
+        self.handle = handle
+        self.last = ""
+
+    def __iter__(self) -> Iterator[str]:
+        for line in self.handle:
+            self.last = line
+            yield line
+
+
+def _unterminated(last: str | bytes) -> bool:
+    """Whether ``last`` (a file's last line) holds something but no line break at its end."""
+    if isinstance(last, bytes):
+        last = last.decode("utf-8", "replace")
+    return bool(last.strip()) and not last.endswith(("\n", "\r"))
+
+
 def _check_header(path: Path, header: list[str], required: list[str]) -> list[str]:
     """``header`` with its names stripped; refuses an empty header, a repeated name, a missing ``required`` one."""
     header = [h.strip() for h in header]
@@ -65,12 +91,18 @@ def _check_header(path: Path, header: list[str], required: list[str]) -> list[st
 
 
 def _scan_rows(
-    path: Path, reader: Iterator[list[str]], header: list[str], line_offset: int, limit: int | None = None
+    path: Path,
+    reader: Iterator[list[str]],
+    header: list[str],
+    line_offset: int,
+    limit: int | None = None,
+    lines: _Lines | None = None,
 ) -> tuple[list[int], list[list[str]]]:
-    """The row scan: up to ``limit`` records of ``reader`` (a :func:`csv.reader`) and their file rows.
+    """The row scan: up to ``limit`` records of ``reader`` (a :func:`csv.reader` of ``lines``) and their file rows.
 
     ``line_offset`` is the number of file lines before the reader's first line. Blank lines are
-    skipped; a row with another number of fields than the header is refused, naming its row.
+    skipped; a row with another number of fields than the header is refused, naming its row (as
+    :data:`TRUNCATED` when it is the file's last line and has no newline: a row cut short).
     """
     rows: list[int] = []
     records: list[list[str]] = []
@@ -80,6 +112,8 @@ def _scan_rows(
                 continue
             row = line_offset + reader.line_num  # type: ignore[attr-defined]
             if len(fields) != len(header):
+                if lines is not None and _unterminated(lines.last):
+                    raise InputError(TRUNCATED, file=path, row=row)
                 raise InputError(f"has {len(fields)} fields, the header has {len(header)}", file=path, row=row)
             rows.append(row)
             records.append(fields)
@@ -98,32 +132,42 @@ def read_table(path: Path, required: list[str]) -> tuple[list[str], list[int], l
     that every row has as many fields as the header.
     """
     with _open(path) as handle:
-        reader = csv.reader(handle)
+        lines = _Lines(handle)
+        reader = csv.reader(lines)
         try:
             header = next(reader, [])
         except (csv.Error, UnicodeDecodeError) as exc:
             raise InputError(f"not a readable CSV file ({exc})", file=path) from None
         header = _check_header(path, header, required)
-        rows, records = _scan_rows(path, reader, header, 0)
+        rows, records = _scan_rows(path, reader, header, 0, lines=lines)
+        if _unterminated(lines.last):
+            raise InputError(TRUNCATED, file=path, row=reader.line_num)
     return header, rows, records
 
 
 def to_float(
     path: Path, header: list[str], rows: list[int], records: list[list[str]], columns: list[str]
 ) -> np.ndarray:
-    """``(N, len(columns))`` floats of the named columns; names the row and column of a bad field."""
+    """``(N, len(columns))`` floats of the named columns, each finite and written as a number
+    (:func:`~brachycal.validate.number_from_text`); names the row and column of the first bad field."""
     index = [header.index(c) for c in columns]
     text = [[fields[k] for k in index] for fields in records]
-    try:
-        return np.array(text, dtype=str).astype(float).reshape(len(records), len(columns))
-    except ValueError:
-        for row, fields in zip(rows, text, strict=True):
-            for column, field in zip(columns, fields, strict=True):
-                try:
-                    float(field)
-                except ValueError:
-                    raise InputError(f"{field!r} is not a number", file=path, row=row, column=column) from None
-        raise
+    flat = [field for fields in text for field in fields]
+    if all_number_texts(flat):  # one regex pass; a field holding a line break passes it, but not the next line
+        try:
+            values = np.array(flat, dtype=str).astype(float).reshape(len(records), len(columns))
+        except ValueError:
+            values = np.full((len(records), len(columns)), np.nan)
+        if np.isfinite(values).all():
+            return values
+    for row, fields in zip(rows, text, strict=True):
+        for column, field in zip(columns, fields, strict=True):
+            x = number_from_text(field)
+            if x is None:
+                raise InputError(f"{field!r} is not a number", file=path, row=row, column=column)
+            if not np.isfinite(x):
+                raise InputError(f"value is not a finite number, got {field!r}", file=path, row=row, column=column)
+    raise AssertionError("a field was refused in bulk but not alone")  # pragma: no cover
 
 
 def unique_names(path: Path, header: list[str], rows: list[int], records: list[list[str]], column: str) -> list[str]:
@@ -214,6 +258,10 @@ class CsvLog:
                 data, leftover = data[:cut], data[cut:]
             else:
                 leftover = b""
+                last = data[data.rfind(b"\n", 0, len(data) - 1) + 1 :]
+                if _unterminated(last):  # the last line, with no line break: a cut file
+                    lines = data.count(b"\n") + 1
+                    raise InputError(TRUNCATED, file=self.path, row=line + lines)
             if b'"' in data:  # a quoted field may hold a line break: the cut above may not be a row's end
                 yield from self._scan_from(done, line)
                 return
@@ -235,6 +283,8 @@ class CsvLog:
         import pyarrow.csv as pa_csv
 
         wanted = ["time", *self.joints]
+        if b" " in data or b"\t" in data:  # pyarrow takes ' 1' as 1; the row scan refuses it
+            return None
         try:
             table = pa_csv.read_csv(
                 pa.py_buffer(data),
@@ -257,6 +307,8 @@ class CsvLog:
             if column.null_count:
                 return None
             out[:, k] = column.to_numpy()
+        if not np.isfinite(out).all():  # nan, inf, infinity, 1e999: the row scan names it (or refuses it)
+            return None
         return out
 
     def _slow(self, data: bytes, line: int) -> tuple[np.ndarray, FloatArray]:
@@ -273,11 +325,14 @@ class CsvLog:
         """The row scan from byte ``offset`` (``line`` file lines before it) to the end, in blocks of rows."""
         self._handle.seek(offset)
         text = io.TextIOWrapper(self._handle, encoding="utf-8", newline="")
-        reader = csv.reader(text)
+        lines = _Lines(text)
+        reader = csv.reader(lines)
         while True:
-            rows, records = _scan_rows(self.path, reader, self.header, line, limit=rows_per_block)
+            rows, records = _scan_rows(self.path, reader, self.header, line, limit=rows_per_block, lines=lines)
             if not records:
                 text.detach()
+                if _unterminated(lines.last):
+                    raise InputError(TRUNCATED, file=self.path, row=line + reader.line_num)
                 return
             values = to_float(self.path, self.header, rows, records, ["time", *self.joints])
             yield LogBlock(values[:, 0], values[:, 1:], np.asarray(rows, dtype=np.int64), self.size)
@@ -365,6 +420,8 @@ def open_csv_log(path: str | os.PathLike[str], robot: Robot) -> CsvLog:
         except (csv.Error, UnicodeDecodeError) as exc:
             raise InputError(f"not a readable CSV file ({exc})", file=path) from None
         header = _check_header(path, header, ["time"])
+        if _unterminated(first):
+            raise InputError(TRUNCATED, file=path, row=1)
         size = os.fstat(handle.fileno()).st_size
     except BaseException:
         handle.close()
@@ -473,7 +530,13 @@ def read_configurations(path: str | os.PathLike[str], robot: Robot) -> tuple[lis
 
 
 def read_times(path: str | os.PathLike[str]) -> FloatArray:
-    """``(M,)`` the ``time`` column of a CSV file, seconds (e.g. the time stamps of ultrasound frames)."""
+    """``(M,)`` the ``time`` column of a CSV file, seconds (e.g. the time stamps of ultrasound frames).
+
+    Raises:
+        InputError: a file without rows (nothing to evaluate), a time that is not a finite number.
+    """
     path = Path(path)
     header, rows, records = read_table(path, ["time"])
+    if not records:
+        raise InputError("no times (only a header)", file=path)
     return to_float(path, header, rows, records, ["time"])[:, 0]

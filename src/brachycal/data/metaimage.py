@@ -27,6 +27,7 @@ from numpy.typing import ArrayLike
 
 from brachycal.errors import InputError
 from brachycal.se3 import FloatArray
+from brachycal.validate import number_from_text, numbers_from_text, wholes_from_text
 
 _Fail = Callable[[str], InputError]
 
@@ -57,10 +58,10 @@ def _at(path: Path, *, row: int | None = None, row_label: str = "row", column: s
 
 
 def _whole(text: str, fail: _Fail) -> list[int]:
-    try:
-        values = [int(v) for v in text.split()]
-    except ValueError:
-        raise fail(f"expected whole numbers, got {text!r}") from None
+    parsed = wholes_from_text(text)
+    if parsed is None:
+        raise fail(f"expected whole numbers, got {text!r}")
+    values = parsed
     if not values or min(values) < 0:
         raise fail(f"expected non-negative whole numbers, got {text!r}")
     return values
@@ -203,10 +204,10 @@ def _timestamps(frames: list[dict[str, str]], path: Path) -> FloatArray:
         text = fields.get("Timestamp")
         if text is None:
             continue
-        try:
-            times[k] = float(text)
-        except ValueError:
-            raise _at(path, row=k, row_label="frame", column="Timestamp")(f"not a number: {text!r}") from None
+        value = number_from_text(text.strip())
+        if value is None:
+            raise _at(path, row=k, row_label="frame", column="Timestamp")(f"not a number: {text!r}")
+        times[k] = value
         if not np.isfinite(times[k]):
             raise _at(path, row=k, row_label="frame", column="Timestamp")(f"not finite: {text!r}")
     return times
@@ -247,10 +248,10 @@ def read_image_sequence(path: str | os.PathLike[str]) -> ImageSequence:
         raise InputError(f"pixel data hold {len(data)} bytes, DimSize and ElementType announce {raw_size}", file=path)
     pixels = np.frombuffer(data, dtype=dtype).reshape(count, height, width)
     spacing_text = header.fields.get("ElementSpacing", "1 1 1").split()[:2]
-    try:
-        spacing = np.array([float(s) for s in spacing_text])
-    except ValueError:
-        raise InputError(f"not numbers: {spacing_text!r}", file=path, column="ElementSpacing") from None
+    parsed = numbers_from_text(" ".join(spacing_text))
+    if parsed is None:
+        raise InputError(f"not numbers: {spacing_text!r}", file=path, column="ElementSpacing")
+    spacing = np.array(parsed, dtype=float)
     frames = header.frames if header.frames else [{} for _ in range(count)]
     if len(frames) != count:
         raise InputError(f"{len(frames)} frames of fields for {count} frames of pixels", file=path)

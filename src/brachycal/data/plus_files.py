@@ -23,7 +23,7 @@ import numpy as np
 
 from brachycal.errors import InputError
 from brachycal.se3 import FloatArray, inverse
-from brachycal.validate import check_transform
+from brachycal.validate import MAX_POSITION_M, check_transform, numbers_from_text, whole_from_text
 
 MM = 1e-3
 
@@ -127,14 +127,21 @@ def parse_xml(path: str | os.PathLike[str]) -> Element:
     return _parse(Path(path))
 
 
+#: Largest magnitude of any number of a PLUS file: its lengths are millimetres (positions within
+#: :data:`~brachycal.validate.MAX_POSITION_M`), its other numbers pixels, rotations or spacings.
+_LARGEST = MAX_POSITION_M / MM
+
+
 def _numbers(text: str | None, count: int, fail: _Fail) -> FloatArray:
     numbers = f"{count} finite number{'s' if count > 1 else ''}"
-    try:
-        values = np.array([float(v) for v in (text or "").split()])
-    except ValueError:
-        raise fail(f"expected {numbers}, got {text!r}") from None
+    parsed = numbers_from_text(text or "")
+    if parsed is None:
+        raise fail(f"expected {numbers}, got {text!r}")
+    values = np.array(parsed, dtype=float)
     if values.size != count or not np.all(np.isfinite(values)):
         raise fail(f"expected {numbers}, got {text!r}")
+    if not np.all(np.abs(values) <= _LARGEST):  # 1e308 as a wire's end would overflow in the fits
+        raise fail(f"expected {numbers} within ±{_LARGEST:g} (millimetres, pixels), got {text!r}")
     return values
 
 
@@ -380,12 +387,11 @@ def _frames(parent: Element | None, path: Path, which: str, tolerance: float) ->
     seen: set[int] = set()
     for element in parent.findall("Frame"):
         text = element.get("Index", str(len(frames)))
-        try:
-            index = int(text)
-        except ValueError:
+        index = whole_from_text(text.strip())
+        if index is None:
             raise InputError(
                 f"Frame Index must be a whole number, got {text!r}", file=path, row=len(frames), row_label=label
-            ) from None
+            )
         fail = _at(path, row=index, row_label=label)
         if index in seen:
             raise fail("frame index appears twice")

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from brachycal.data.plus_files import find_section, parse_xml
 from brachycal.errors import InputError
-from brachycal.validate import check_range
+from brachycal.validate import check_range, numbers_from_text
 
 MM = 1e-3
 
@@ -103,10 +103,7 @@ def read_segmentation_parameters(path: str | os.PathLike[str]) -> NWireSegmentat
         text = element.get(name)
         if text is None:
             return None
-        try:
-            values = [float(v) for v in text.split()]
-        except ValueError:
-            values = []
+        values = numbers_from_text(text) or []
         if len(values) != count or not all(math.isfinite(v) for v in values):
             raise fail(name, f"expected {count} finite number{'s' if count > 1 else ''}, got {text!r}")
         return values

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from brachycal.data.plus_files import parse_xml
 from brachycal.errors import InputError
+from brachycal.validate import number_from_text, wholes_from_text
 
 
 @dataclass(frozen=True)
@@ -52,10 +53,7 @@ def read_plus_temporal_settings(path: str | os.PathLike[str]) -> PlusTemporalSet
         text = element.get(attribute)
         if text is None:
             return None
-        try:
-            values = [int(v) for v in text.split()]
-        except ValueError:
-            values = []
+        values = wholes_from_text(text) or []
         if len(values) != 2 or min(values) < 0:
             raise InputError(f"{where}/@{attribute}: expected two whole numbers, got {text!r}", file=path)
         return values[0], values[1]
@@ -66,10 +64,8 @@ def read_plus_temporal_settings(path: str | os.PathLike[str]) -> PlusTemporalSet
     max_lag = None
     text = element.get("MaximumMovingLagSec")
     if text is not None:
-        try:
-            max_lag = float(text)
-        except ValueError:
-            max_lag = float("nan")
+        parsed = number_from_text(text.strip())
+        max_lag = float("nan") if parsed is None else parsed
         if not (math.isfinite(max_lag) and max_lag > 0):
             raise InputError(f"{where}/@MaximumMovingLagSec: expected a positive number, got {text!r}", file=path)
     return PlusTemporalSettings(origin, size, max_lag)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from brachycal.data.csv_log import read_table, to_float
 from brachycal.se3 import FloatArray
-from brachycal.validate import check_transform
+from brachycal.validate import MAX_POSITION_M, check_positions, check_transform
 
 COLUMNS = [f"m{i}{j}" for i in range(4) for j in range(4)]
 #: Largest deviation from a rigid transform accepted in a pose list (``|RᵀR − I|`` entries,
@@ -30,6 +30,16 @@ def read_pose_list(path: str | os.PathLike[str]) -> tuple[list[str], FloatArray,
     header, rows, records = read_table(path, COLUMNS)
     values = to_float(path, header, rows, records, COLUMNS)
     T = values.reshape(-1, 4, 4)
+    # m or mm (the caller says which): beyond MAX_POSITION_M in millimetres is no pose in either.
+    check_positions(
+        T[:, :3, 3],
+        "",
+        limit=MAX_POSITION_M * 1e3,
+        unit="(m or mm)",
+        file=path,
+        rows=rows,
+        columns=["m03", "m13", "m23"],
+    )
     extra = [h for h in header if h not in COLUMNS]
     names = [fields[header.index(extra[0])] for fields in records] if extra else [str(r) for r in rows]
     for row, matrix in zip(rows, T, strict=True):

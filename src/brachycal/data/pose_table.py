@@ -31,6 +31,7 @@ from numpy.typing import ArrayLike
 from brachycal.data.csv_log import read_table, to_float
 from brachycal.files import atomic_open
 from brachycal.se3 import FloatArray, make_transform
+from brachycal.validate import MAX_POSITION_M, check_positions
 
 HEADER = ("time", "frame", "x", "y", "z", "qx", "qy", "qz", "qw")
 #: Decimals of each numeric column of the table: time and position 9 (1 ns, 1 nm), quaternion 12.
@@ -334,6 +335,7 @@ def read_pose_table(path: str | os.PathLike[str]) -> tuple[FloatArray, list[str]
     path = Path(path)
     header, rows, records = read_table(path, list(HEADER))
     numbers = to_float(path, header, rows, records, [h for h in HEADER if h != "frame"])
+    check_positions(numbers[:, 1:4], "", limit=MAX_POSITION_M, unit="m", file=path, rows=rows, columns=["x", "y", "z"])
     frames = [fields[header.index("frame")] for fields in records]
     R = Rotation.from_quat(numbers[:, 4:8]).as_matrix()
     return numbers[:, 0], frames, make_transform(R, numbers[:, 1:4])

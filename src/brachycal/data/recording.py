@@ -44,7 +44,7 @@ from brachycal.data.joint_log import JointLog
 from brachycal.data.json_files import read_json
 from brachycal.errors import InputError
 from brachycal.se3 import FloatArray
-from brachycal.validate import check_range
+from brachycal.validate import check_range, check_token, number_from_text
 
 if TYPE_CHECKING:  # the message's fields, for the type checker; rosbags is imported where it is used
     from rosbags.typesys.stores.ros2_humble import std_msgs__msg__String as StringMsg
@@ -421,11 +421,21 @@ def read_images(
         )
     frames: list[Frame] = []
     seen: dict[str, int] = {}
+    times_seen: dict[float, int] = {}
     for k, (time, row, fields) in enumerate(zip(times, rows, records, strict=True)):
         if not math.isfinite(time):
             raise InputError(f"time must be a finite number, got {time}", file=path, row=row, column="time")
         sample = (fields[k_sample].strip() or None) if k_sample is not None else None
+        if time in times_seen:  # one image listed twice would become two samples of one pose
+            raise InputError(
+                f"the frame at {time:g} s is listed twice (also row {times_seen[time]})",
+                file=path,
+                row=row,
+                column="time",
+            )
+        times_seen[time] = row
         if sample is not None:
+            check_token(sample, "sample", file=path, row=row, column="sample")
             if sample in seen:
                 raise InputError(
                     f"sample {sample!r} appears twice (also row {seen[sample]})", file=path, row=row, column="sample"
@@ -442,12 +452,12 @@ def read_images(
 
 
 def _uv_field(path: Path, header: list[str], row: int, fields: list[str]) -> FloatArray | None:
-    text = {c: fields[header.index(c)].strip() for c in ("u_px", "v_px")}
-    if not text["u_px"] and not text["v_px"]:
+    text = {c: fields[header.index(c)] for c in ("u_px", "v_px")}
+    if not text["u_px"].strip() and not text["v_px"].strip():
         return None
     uv = []
     for column, value in text.items():
-        if not value:
+        if not value.strip():
             other = "v_px" if column == "u_px" else "u_px"
             raise InputError(
                 f"empty while {other} is given (leave both empty for a frame not annotated)",
@@ -455,10 +465,9 @@ def _uv_field(path: Path, header: list[str], row: int, fields: list[str]) -> Flo
                 row=row,
                 column=column,
             )
-        try:
-            x = float(value)
-        except ValueError:
-            raise InputError(f"{value!r} is not a number", file=path, row=row, column=column) from None
+        x = number_from_text(value)
+        if x is None:
+            raise InputError(f"{value!r} is not a number", file=path, row=row, column=column)
         if not math.isfinite(x):
             raise InputError(f"must be a finite number, got {value!r}", file=path, row=row, column=column)
         uv.append(x)

@@ -28,7 +28,7 @@ from brachycal.data.csv_log import read_table, table_configurations, to_float, u
 from brachycal.errors import InputError
 from brachycal.files import OutputSet, atomic_open, output_set, sha256_file
 from brachycal.se3 import FloatArray
-from brachycal.validate import check_spacing_mm
+from brachycal.validate import TOOL_LENGTH_M_RANGE, check_positions, check_spacing_mm, check_token
 
 if TYPE_CHECKING:  # annotations only: reading a file needs no Pinocchio
     from brachycal.model.robot import Robot
@@ -78,6 +78,11 @@ class Session:
     inputs: dict[str, str] = field(default_factory=dict)
 
 
+#: Largest trial number of a touch: a tip touched ten thousand times is a typo (and a trial near
+#: the float limit would not fit a whole number).
+MAX_TRIAL = 10_000
+
+
 def _read_toml(path: Path) -> tuple[FloatArray, np.ndarray, FloatArray]:
     try:
         config = tomllib.loads(path.read_text())
@@ -106,7 +111,15 @@ def _read_toml(path: Path) -> tuple[FloatArray, np.ndarray, FloatArray]:
     size = numbers("image", "size_px", 2, True)
     if np.any(size != np.round(size)):
         raise InputError("image size must be whole pixels", file=path, column="image.size_px")
-    tip_m = numbers("top_model", "tip_in_flange_mm", 3, False) * 1e-3
+    tip_mm = numbers("top_model", "tip_in_flange_mm", 3, False)
+    tip_m = check_positions(
+        tip_mm * 1e-3,
+        "the tip",
+        limit=TOOL_LENGTH_M_RANGE[1],
+        unit="m",
+        file=path,
+        columns=["top_model.tip_in_flange_mm"] * 3,
+    )
     return spacing_m, size.astype(int), tip_m
 
 
@@ -186,8 +199,10 @@ def _read_touches(path: Path, robot: Robot) -> dict[tuple[str, str], Touches]:
     references = _labels(path, header, rows, records, "reference", REFERENCES)
     trials = to_float(path, header, rows, records, ["trial"])[:, 0]
     for row, trial in zip(rows, trials, strict=True):
-        if not (trial >= 1 and trial == round(trial)):
-            raise InputError(f"trial must be a whole number from 1, got {trial:g}", file=path, row=row, column="trial")
+        if not (1 <= trial <= MAX_TRIAL and trial == round(trial)):
+            raise InputError(
+                f"trial must be a whole number from 1 to {MAX_TRIAL}, got {trial:g}", file=path, row=row, column="trial"
+            )
     q = table_configurations(path, robot, header, rows, records)
     seen: dict[tuple[str, str, int], int] = {}
     for row, key in zip(rows, zip(tools, references, trials.astype(int), strict=True), strict=True):
@@ -306,6 +321,8 @@ def write_session(
     With ``outputs`` (a command's :class:`~brachycal.files.OutputSet`) the files join that set.
     """
     folder = Path(folder)
+    for sample in session.sample_ids:  # written as they are: a comma or a quote would break the row
+        check_token(sample, "sample")
     joints = ",".join(session.joint_names)
     su, sv = (float(v) for v in session.spacing_m * 1e3)
     tip = ", ".join(repr(float(v)) for v in session.p_ER_Mtip * 1e3)

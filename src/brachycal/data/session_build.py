@@ -62,7 +62,7 @@ from brachycal.data.session import Session, Touches, read_session_toml, write_se
 from brachycal.errors import BrachycalWarning, InputError
 from brachycal.files import OutputSet, output_set, sha256_file, write_csv, write_json
 from brachycal.se3 import FloatArray
-from brachycal.validate import MAX_IMAGE_PX, check_pixel, check_range, check_spacing_mm, check_vector
+from brachycal.validate import MAX_IMAGE_PX, check_pixel, check_range, check_spacing_mm, check_token, check_vector
 
 if TYPE_CHECKING:  # annotations only: reading a file needs no Pinocchio
     from brachycal.model.robot import Robot
@@ -228,6 +228,7 @@ def read_plan(path: str | os.PathLike[str], robot: Robot) -> PlannedSamples:
     for row, name in zip(rows, names, strict=True):
         if not name:
             raise InputError("empty point name", file=path, row=row, column="point")
+        check_token(name, "point", file=path, row=row, column="point")
         if name in seen:
             raise InputError(
                 f"point {name!r} appears twice (also row {seen[name]})", file=path, row=row, column="point"
@@ -558,9 +559,14 @@ def _frames(
         else:
             name = f"frame{index}"
         unique, n = name, 1
-        while unique in used_names:  # a pose captured twice: both images are samples
+        while unique in used_names:  # a pose captured twice: both images are samples, said so
             n += 1
             unique = f"{name}-{n}"
+        if unique != name:
+            warnings.warn(
+                f"{frame.source}, row {frame.row}: {label} is a second image of {name}; it becomes sample {unique}",
+                stacklevel=2,
+            )
         used_names.add(unique)
         names.append(unique)
         qs.append(window.q)
