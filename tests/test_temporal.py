@@ -10,12 +10,13 @@ import json
 
 import numpy as np
 import pytest
+from bands import assert_calibrated
 from conftest import reference
 from hostile import run_cli
 from tank_recording import write_tank_recording
 
 from brachycal.calibration import estimate_lag, lag_from_plus_files, principal_motion
-from brachycal.calibration.temporal import DEFAULT_RESOLUTION_S
+from brachycal.calibration.temporal import DEFAULT_RESOLUTION_S, LagEstimate
 from brachycal.data.metaimage import write_image_sequence
 from brachycal.errors import DegenerateDataError
 from brachycal.imaging import find_tank_line
@@ -104,6 +105,45 @@ def test_stated_sd_covers_the_truth_about_68_percent_of_the_time():
     assert 0.50 <= coverage <= 0.86, coverage
     # The stated SD and the errors' RMS agree within the RMS's own sampling error (±20 % at n = 50, ~2 SD).
     assert np.sqrt(np.mean(errors**2)) == pytest.approx(np.mean(sds), rel=0.2)
+
+
+def autocorrelated(rng: np.random.Generator, n: int, rho: float, sd: float) -> np.ndarray:
+    """``(n,)`` stationary AR(1) noise: lag-1 autocorrelation ``rho``, SD ``sd``."""
+    e = np.empty(n)
+    e[0] = rng.normal(scale=sd)
+    innovations = rng.normal(scale=sd * np.sqrt(1 - rho**2), size=n)
+    for i in range(1, n):
+        e[i] = rho * e[i - 1] + innovations[i]
+    return e
+
+
+def noisy_recording(seed: int, rho: float, lag: float = 0.065) -> LagEstimate:
+    """The lag of a recording whose line detection errs by AR(1) noise (10 px, lag-1 correlation ``rho``)."""
+    rng = np.random.default_rng(seed)
+    s_video = np.sort(rng.uniform(2.0, 18.0, 180))
+    s_pose = np.arange(0.0, 20.0, 0.025) + rng.uniform(0, 0.025)
+    x_a = 250.0 + 1e4 * sinusoids(s_video) + autocorrelated(rng, s_video.size, rho, 10.0)
+    return estimate_lag(s_video, x_a, s_pose + lag, sinusoids(s_pose))
+
+
+def test_stated_sd_accounts_for_autocorrelated_noise():
+    """Line-detection errors of neighbouring frames are correlated (lag-1 correlation 0.7: 5.7 times
+    fewer independent samples): the stated SD must grow with it, so that over many recordings the
+    95 % intervals cover the true lag 95 % of the time and the errors' variance matches the stated one
+    (bands of :mod:`bands`)."""
+    lag, z2 = 0.065, []
+    for seed in range(200):
+        estimate = noisy_recording(seed, 0.7, lag)
+        z2.append(((estimate.lag_s - lag) / estimate.sd_s) ** 2)
+    assert_calibrated(z2, 1)
+
+
+def test_negative_autocorrelation_does_not_shrink_the_sd():
+    """Alternating errors (lag-1 correlation −0.6) would shrink the SD by the same rule: not trusted,
+    the samples count as independent."""
+    for seed in range(5):
+        estimate = noisy_recording(seed, -0.6)
+        assert estimate.n_effective == estimate.n_samples
 
 
 def test_refusals_name_the_problem():
