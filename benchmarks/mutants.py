@@ -32,6 +32,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "src" / "brachycal"
+#: Bundled data the package reads from beside ``src/`` in a source tree.
+BUNDLED = ("urdf", "examples")
 #: Longest a mutant's tests may run, seconds (a mutant that loops forever counts as caught by it).
 TIMEOUT_S = 600.0
 
@@ -114,6 +116,22 @@ MUTANTS: tuple[Mutant, ...] = (
         "return float(sigma * np.sqrt(np.trace(J @ J.T) / 3))",
         (COND + "test_rotation_uncertainty_predicts_the_spread_of_the_estimates",),
         "the rotation's RMS angle per axis instead of in 3D",
+    ),
+    Mutant(
+        "rotation-shortest-move",
+        "calibration/tool_rotation.py",
+        "shortest = 2 * point_sd_m / MAX_DIRECTION_SD_RAD",
+        "shortest = point_sd_m / MAX_DIRECTION_SD_RAD",
+        (COND + "test_moves_too_short_for_a_direction_are_refused",),
+        "the shortest move from a direction SD of σ/L instead of 2σ/L",
+    ),
+    Mutant(
+        "rotation-direction-sd",
+        "calibration/tool_rotation.py",
+        "direction_sd_deg=np.degrees(2 * point_sd_m / moves),",
+        "direction_sd_deg=np.degrees(point_sd_m / moves),",
+        (COND + "test_exact_session_passes_every_check_and_predicts_no_uncertainty",),
+        "the reported direction SD of a move without the two noisy end points",
     ),
     # --- registration (eq. 9) ---------------------------------------------------------------------
     Mutant(
@@ -239,6 +257,14 @@ MUTANTS: tuple[Mutant, ...] = (
         (TEMP + "test_negative_autocorrelation_does_not_shrink_the_sd",),
         "a negative residual autocorrelation trusted to shrink the SD",
     ),
+    Mutant(
+        "temporal-effective-samples",
+        "calibration/temporal.py",
+        "return sd, float(np.sqrt(sigma2)), float(beta), n / inflation",
+        "return sd, float(np.sqrt(sigma2)), float(beta), n * inflation",
+        (TEMP + "test_stated_sd_accounts_for_autocorrelated_noise",),
+        "the effective sample count inflated instead of deflated by the autocorrelation",
+    ),
     # --- robot identification ---------------------------------------------------------------------
     Mutant(
         "identification-leverages",
@@ -247,6 +273,22 @@ MUTANTS: tuple[Mutant, ...] = (
         "return noise_levels(r, J, data.group_rows(int(self.keep.sum())), sigma, robust=False)",
         (ROBOT + "test_identified_noise_levels_count_the_priors_share_of_the_leverage",),
         "the MAP's noise levels with least-squares leverages (the prior's share ignored)",
+    ),
+    Mutant(
+        "identification-prior-sd",
+        "calibration/robot_identification.py",
+        "return np.sqrt(np.diag(accuracy.covariance(robot)))",
+        "return np.diag(accuracy.covariance(robot))",
+        (ROBOT + "test_stated_uncertainty_includes_the_identified_robot",),
+        "the prior's SDs given as variances (a prior 1e4 times too tight)",
+    ),
+    Mutant(
+        "identification-consider-noise",
+        "calibration/robot_identification.py",
+        "noise = C_tt - sensitivity @ C_cc @ sensitivity.T",
+        "noise = C_tt",
+        (ROBOT + "test_stated_uncertainty_includes_the_identified_robot",),
+        "the robot's remaining error counted twice (in the noise part and the robot part)",
     ),
     # --- chain: model choice, noise levels --------------------------------------------------------
     Mutant(
@@ -273,6 +315,30 @@ MUTANTS: tuple[Mutant, ...] = (
         (CHAIN + "test_noise_levels_are_unbiased_with_the_leverage_correction",),
         "the chain's noise levels without the leverages' degrees of freedom",
     ),
+    Mutant(
+        "chain-robot-term",
+        "calibration/chain/fit.py",
+        "covariance = noise_covariance + sensitivity @ robot_covariance @ sensitivity.T",
+        "covariance = noise_covariance",
+        (CHAIN + "test_stated_uncertainty_with_robot_error_is_calibrated",),
+        "the chain's covariance without the stated robot accuracy's term",
+    ),
+    Mutant(
+        "uncertainty-ellipsoid-dof",
+        "calibration/uncertainty.py",
+        "return d2 <= chi2.ppf(level, 3)",
+        "return d2 <= chi2.ppf(level, 2)",
+        (CHAIN + "test_ellipsoids_hold_their_level",),
+        "the 3D ellipsoid's quantile on 2 degrees of freedom",
+    ),
+    Mutant(
+        "check-part-dof",
+        "calibration/check.py",
+        "dof = len(r) - rank",
+        "dof = len(r)",
+        ("tests/test_verify.py::test_a_part_fit_recovers_the_change_that_made_the_residuals",),
+        "the check's remaining chi-square without the part's fitted parameters",
+    ),
 )
 
 
@@ -291,13 +357,15 @@ def run_tests(tests: tuple[str, ...] | list[str], mutant: Mutant | None) -> tupl
     with tempfile.TemporaryDirectory(prefix="brachycal-mutant-") as tmp:
         src = Path(tmp) / "src"
         shutil.copytree(ROOT / "src", src, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+        for data in BUNDLED:  # read beside src/ (brachycal.files.bundled)
+            (Path(tmp) / data).symlink_to(ROOT / data, target_is_directory=True)
         if mutant is not None:
             path = src / "brachycal" / mutant.file
             text = path.read_text()
             if text.count(mutant.original) != 1:
                 return 3, 0.0, f"snippet occurs {text.count(mutant.original)} times in {mutant.file}"
             path.write_text(text.replace(mutant.original, mutant.replacement))
-        env = dict(os.environ, PYTHONPATH=str(src), PYTHONDONTWRITEBYTECODE="1")
+        env = dict(os.environ, PYTHONPATH=str(src), PYTHONDONTWRITEBYTECODE="1", COLUMNS="250")
         where = subprocess.run(
             [sys.executable, "-c", "import brachycal; print(brachycal.__file__)"],
             env=env,
@@ -306,14 +374,15 @@ def run_tests(tests: tuple[str, ...] | list[str], mutant: Mutant | None) -> tupl
         ).stdout.strip()
         if not where.startswith(str(src)):  # an installed brachycal would shadow the copy: nothing tested
             return 4, 0.0, f"brachycal imported from {where or '?'}, not from the copy {src}"
-        command = [sys.executable, "-m", "pytest", *tests, "-x", "-q", "-p", "no:cacheprovider", "--no-header"]
+        command = [sys.executable, "-m", "pytest", *tests, "-x", "-q", "-rfE", "-p", "no:cacheprovider", "--no-header"]
         start = time.perf_counter()
         try:
             done = subprocess.run(command, cwd=ROOT, env=env, capture_output=True, text=True, timeout=TIMEOUT_S)
         except subprocess.TimeoutExpired:
             return 1, time.perf_counter() - start, f"timed out after {TIMEOUT_S:g} s"
-        lines = [line for line in done.stdout.splitlines() if line.strip()]
-        return done.returncode, time.perf_counter() - start, lines[-1] if lines else done.stderr.strip()[-200:]
+        lines = [line for line in done.stdout.splitlines() if line.startswith(("FAILED", "ERROR"))]
+        lines = lines or [line for line in done.stdout.splitlines() if line.strip()][-1:]
+        return done.returncode, time.perf_counter() - start, "; ".join(lines) or done.stderr.strip()[-200:]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -321,6 +390,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("names", nargs="*", help="mutants to run (default: all)")
     parser.add_argument("--jobs", type=int, default=1, help="mutants run at once (default 1)")
     parser.add_argument("--list", action="store_true", help="print the table and exit")
+    parser.add_argument("--details", action="store_true", help="also print the failure that caught each mutant")
     args = parser.parse_args(argv)
     mutants = by_name(args.names)
     if args.list:
@@ -342,7 +412,7 @@ def main(argv: list[str] | None = None) -> int:
         verdict = {0: "SURVIVED", 1: "caught"}.get(code, f"ERROR (pytest exit {code})")
         failed += code != 1
         print(f"{verdict:10s} {m.name:36s} {m.file:38s} {seconds:5.0f} s  {'; '.join(m.tests)}")
-        if code != 1:
+        if code != 1 or args.details:
             print(f"           {last}")
     caught = sum(code == 1 for code, _, _ in outcomes)
     print(f"{caught} of {len(mutants)} mutants caught in {time.perf_counter() - start:.0f} s")

@@ -11,7 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from bands import assert_calibrated, assert_unbiased_variance
+from bands import assert_calibrated, assert_unbiased_variance, coverage_band
 from scipy.optimize import approx_fprime
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
@@ -37,6 +37,7 @@ from brachycal.calibration.chain_report import WARN_LANDING_RMS_MM, calibrate_ch
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.uncertainty import (
     bootstrap,
+    inside_ellipsoid,
     interval,
     landing_covariance,
     landing_jacobian,
@@ -167,6 +168,19 @@ def test_noise_levels_are_unbiased_with_the_leverage_correction():
             ratios[g].append((levels[g].sd_m / sigma[g]) ** 2)
     for g, part in rows.items():
         assert_unbiased_variance(ratios[g], 16 - h[part].sum())
+
+
+def test_ellipsoids_hold_their_level():
+    # Errors drawn from their covariance (3D, anisotropic, correlated) fall inside the 95 % ellipsoid
+    # 95 % of the time (binomial band of the draws).
+    rng = np.random.default_rng(26)
+    draws = 2000
+    L = np.tril(rng.normal(size=(draws, 3, 3))) + 2 * np.eye(3)
+    C = L @ np.swapaxes(L, 1, 2) * 1e-8
+    errors = np.einsum("nij,nj->ni", L, rng.normal(size=(draws, 3))) * 1e-4
+    inside = inside_ellipsoid(errors, C)
+    low, high = coverage_band(draws, 0.95)
+    assert low <= inside.mean() <= high
 
 
 def _parameter_errors(fit, truth) -> tuple[np.ndarray, np.ndarray]:

@@ -148,6 +148,16 @@ def test_stated_uncertainty_includes_the_identified_robot(robot, worn):
     remaining = np.diag(fit.robot_covariance)
     assert np.all(remaining <= prior * (1 + 1e-9)) and np.mean(remaining / prior) < 0.9
     assert np.linalg.eigvalsh(fit.noise_covariance).min() > -1e-12 * np.abs(fit.noise_covariance).max()
+    # In prior units the remaining error is at most the prior, and exactly the prior along every direction
+    # the data cannot see (6 nq minus the structural rank of them).
+    sd = np.sqrt(prior)
+    shares = np.linalg.eigvalsh(fit.robot_covariance / np.outer(sd, sd))
+    assert shares.max() <= 1 + 1e-9
+    assert np.sum(shares > 1 - 1e-6) >= 6 * robot.nq - identified.identifiability.structural_rank
+    # The consider form the uncertainty module reads adds up to the posterior: noise part plus robot part.
+    S = fit.robot_sensitivity
+    whole = fit.noise_covariance + S @ fit.robot_covariance @ S.T
+    assert np.abs(whole - fit.covariance).max() < 1e-9 * np.abs(fit.covariance).max()
 
 
 def test_identified_noise_levels_count_the_priors_share_of_the_leverage(robot, worn):

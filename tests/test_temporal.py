@@ -131,11 +131,14 @@ def test_stated_sd_accounts_for_autocorrelated_noise():
     fewer independent samples): the stated SD must grow with it, so that over many recordings the
     95 % intervals cover the true lag 95 % of the time and the errors' variance matches the stated one
     (bands of :mod:`bands`)."""
-    lag, z2 = 0.065, []
+    lag, z2, effective = 0.065, [], []
     for seed in range(200):
         estimate = noisy_recording(seed, 0.7, lag)
         z2.append(((estimate.lag_s - lag) / estimate.sd_s) ** 2)
+        effective.append(estimate.n_effective / estimate.n_samples)
     assert_calibrated(z2, 1)
+    # The effective share of the samples, (1 − ρ)/(1 + ρ) = 0.18, up to the small-sample bias of ρ̂.
+    assert 0.15 < np.mean(effective) < 0.25
 
 
 def test_negative_autocorrelation_does_not_shrink_the_sd():
