@@ -166,6 +166,14 @@ MUTANTS: tuple[Mutant, ...] = (
         (COND + "test_registration_uncertainty_predicts_the_spread_of_the_estimates[similarity]",),
         "the similarity scale's Jacobian column not rotated into the target frame",
     ),
+    Mutant(
+        "registration-uv-column",
+        "calibration/registration.py",
+        "J[:, :, 7] = p_src[:, 1:2] * R[:, 1]",
+        "J[:, :, 7] = p_src[:, 1:2] * R[:, 0]",
+        (COND + "test_registration_uncertainty_predicts_the_spread_of_the_estimates[scaled_uv]",),
+        "the v spacing's Jacobian column along the image's u axis",
+    ),
     # --- image to probe (eq. 9 checks) ------------------------------------------------------------
     Mutant(
         "image-spacing-3sd",
@@ -232,6 +240,14 @@ MUTANTS: tuple[Mutant, ...] = (
         (COND + "test_pivot_uncertainty_predicts_the_spread_of_the_estimates[pivot_algebraic]",),
         "the covariance scaled by the SD instead of the variance",
     ),
+    Mutant(
+        "pivot-tip-sd",
+        "calibration/pivot.py",
+        "tip_sd=float(np.sqrt(np.trace(cov[:3, :3]))),",
+        "tip_sd=float(np.sqrt(np.max(np.diag(cov[:3, :3])))),",
+        (COND + "test_pivot_uncertainty_predicts_the_spread_of_the_estimates[pivot_algebraic]",),
+        "the tip's 3D SD from its worst axis alone",
+    ),
     # --- temporal ---------------------------------------------------------------------------------
     Mutant(
         "temporal-inflation",
@@ -267,6 +283,14 @@ MUTANTS: tuple[Mutant, ...] = (
         "return sd, float(np.sqrt(sigma2)), float(beta), n * inflation",
         (TEMP + "test_stated_sd_accounts_for_autocorrelated_noise",),
         "the effective sample count inflated instead of deflated by the autocorrelation",
+    ),
+    Mutant(
+        "temporal-dof",
+        "calibration/temporal.py",
+        "sigma2 = float(residual @ residual) / (n - 3)",
+        "sigma2 = float(residual @ residual) / n",
+        (TEMP + "test_residual_sd_is_unbiased_with_three_fitted_parameters",),
+        "the alignment residual's variance without the 3 fitted parameters",
     ),
     # --- robot identification ---------------------------------------------------------------------
     Mutant(

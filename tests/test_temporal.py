@@ -10,7 +10,7 @@ import json
 
 import numpy as np
 import pytest
-from bands import assert_calibrated
+from bands import assert_calibrated, assert_unbiased_variance
 from conftest import reference
 from hostile import run_cli
 from tank_recording import write_tank_recording
@@ -147,6 +147,20 @@ def test_stated_sd_accounts_for_autocorrelated_noise():
     assert_calibrated(z2, 1)
     # The effective share of the samples, (1 − ρ)/(1 + ρ) = 0.18, up to the small-sample bias of ρ̂.
     assert 0.15 < np.mean(effective) < 0.25
+
+
+def test_residual_sd_is_unbiased_with_three_fitted_parameters():
+    """A short recording (12 frames, 2 px of white noise): the residual's variance counts the offset,
+    scale and lag fitted, σ̂² = RSS/(n − 3), unbiased over many recordings."""
+    n, sigma, ratios = 12, 2.0, []
+    for seed in range(300):
+        rng = np.random.default_rng(seed)
+        s_video = 2.0 + np.arange(n) * 0.5 + rng.uniform(-0.01, 0.01, n)
+        s_pose = np.arange(0.0, 20.0, 0.025) + rng.uniform(0, 0.025)
+        x_a = 250.0 + 1e4 * sweep(s_video) + rng.normal(scale=sigma, size=n)
+        estimate = estimate_lag(s_video, x_a, s_pose + 0.065, sweep(s_pose))
+        ratios.append((estimate.residual_sd / sigma) ** 2)
+    assert_unbiased_variance(ratios, n - 3)
 
 
 def test_negative_autocorrelation_does_not_shrink_the_sd():
