@@ -7,7 +7,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint docs bench clean
+.PHONY: demo test lint docs bench mutants clean
 
 demo: $(STAMP)
 	$(BIN)/brachycal demo --force  # demo_output is make's own: a second run replaces it
@@ -38,6 +38,11 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/nwire_variants.py
 	$(BIN)/python benchmarks/needle_tip.py
 	$(BIN)/python benchmarks/verify_check.py
+
+# Each stated SD, dof count, inflation and threshold has a test that fails when it is wrong: every
+# mutant of benchmarks/mutants.py's table must be caught (a few minutes; non-zero exit if one survives).
+mutants: $(STAMP)
+	$(BIN)/python benchmarks/mutants.py
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)

@@ -11,6 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from bands import assert_calibrated, assert_unbiased_variance, coverage_band
 from scipy.optimize import approx_fprime
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
@@ -27,12 +28,16 @@ from brachycal.calibration.chain import (
     chain_residuals,
     fit_chain,
     identifiable_joint_offsets,
+    noise_levels,
     robot_jacobian,
     select_model,
 )
+from brachycal.calibration.chain.model_choice import ModelChoice
 from brachycal.calibration.chain_report import WARN_LANDING_RMS_MM, calibrate_chain
+from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.uncertainty import (
     bootstrap,
+    inside_ellipsoid,
     interval,
     landing_covariance,
     landing_jacobian,
@@ -129,6 +134,53 @@ def test_without_a_stretch_the_simplest_model_is_chosen(robot):
         evidence["rigid"]["cv_rmse_mm"]
         <= min(e["cv_rmse_mm"] for e in evidence.values()) + evidence["rigid"]["se_mm"] * 2
     )
+
+
+def test_cv_standard_error_covers_the_rmse_at_its_level():
+    # The evidence's standard error of an RMSE over n errors (delta method on the mean of e²) against
+    # the RMSE's spread over many sets: 3D errors of σ per axis, true RMSE √3 σ.
+    rng = np.random.default_rng(23)
+    sigma_mm, n, draws = 0.4, 64, 400
+    z2 = []
+    for _ in range(draws):
+        errors = ErrorStats(np.linalg.norm(rng.normal(scale=sigma_mm * 1e-3, size=(n, 3)), axis=1))
+        evidence = ModelChoice("rigid", {"rigid": errors}, "", n).evidence()["rigid"]
+        z2.append(((evidence["cv_rmse_mm"] - np.sqrt(3.0) * sigma_mm) / evidence["se_mm"]) ** 2)
+    assert_calibrated(z2, 1)
+
+
+def test_noise_levels_are_unbiased_with_the_leverage_correction():
+    # A linear weighted problem with three groups of 16 rows and 12 parameters: each group's residual
+    # sum of squares has expectation σ_g² (n_g − Σ_g h_ii), so σ̂_g² is unbiased. (Its spread is at most
+    # that of χ² with n_g − Σ_g h_ii degrees of freedom: the band is conservative.)
+    rng = np.random.default_rng(24)
+    J = rng.normal(size=(48, 12))
+    rows = {"touch": slice(0, 16), "axes": slice(16, 32), "image": slice(32, 48)}
+    sigma = {"touch": 5e-5, "axes": 1e-4, "image": 2e-4}
+    h = np.einsum("ij,jk,ik->i", J, np.linalg.inv(J.T @ J), J)
+    draws, ratios = 300, {g: [] for g in rows}
+    for _ in range(draws):
+        noise = rng.normal(size=48)
+        residual = noise - J @ np.linalg.lstsq(J, noise, rcond=None)[0]
+        levels = noise_levels(residual, J, rows, sigma, robust=False)
+        for g, part in rows.items():
+            assert levels[g].dof == pytest.approx(16 - h[part].sum(), rel=1e-9)
+            ratios[g].append((levels[g].sd_m / sigma[g]) ** 2)
+    for g, part in rows.items():
+        assert_unbiased_variance(ratios[g], 16 - h[part].sum())
+
+
+def test_ellipsoids_hold_their_level():
+    # Errors drawn from their covariance (3D, anisotropic, correlated) fall inside the 95 % ellipsoid
+    # 95 % of the time (binomial band of the draws).
+    rng = np.random.default_rng(26)
+    draws = 2000
+    L = np.tril(rng.normal(size=(draws, 3, 3))) + 2 * np.eye(3)
+    C = L @ np.swapaxes(L, 1, 2) * 1e-8
+    errors = np.einsum("nij,nj->ni", L, rng.normal(size=(draws, 3))) * 1e-4
+    inside = inside_ellipsoid(errors, C)
+    low, high = coverage_band(draws, 0.95)
+    assert low <= inside.mean() <= high
 
 
 def _parameter_errors(fit, truth) -> tuple[np.ndarray, np.ndarray]:

@@ -16,14 +16,18 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from bands import assert_calibrated, assert_unbiased_variance
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
+from scipy.stats import binom, chi2
 
 from brachycal.calibration import calibrate, image_to_probe, pivot_algebraic, pivot_robust, registration
 from brachycal.calibration.tool_rotation import tool_rotation
 from brachycal.calibration.tool_tips import (
+    MIN_SEPARATION_SIGMAS,
     TOUCH_SD_M,
+    TipEstimate,
     check_distinct_touches,
     check_separation,
     check_tip,
@@ -124,6 +128,39 @@ def test_tip_uncertainty_predicts_the_spread_of_the_estimates():
     assert LOW < ratio(np.array(tip_errors), np.array(tip_sd)) < HIGH
 
 
+def test_tip_noise_estimate_is_unbiased_with_its_degrees_of_freedom():
+    # Each trial's point is the tip plus isotropic noise σ per axis (the reference tip: the top-model's
+    # tip moved by the noise; the tool tip: the noise turned into the flange frame, the reference exact).
+    # Then Σ_t ‖x_t − x̄‖²/σ² ~ χ² with 3(T − 1) degrees of freedom: σ̂² is unbiased over many draws.
+    p_ref, p_Mtip, p_Ntip = np.array([0.75, -0.05, 0.85]), np.array([0.0, 0.0, 0.15]), np.array([0.03, 0.0, 0.28])
+    exact_reference = TipEstimate(p_ref, p_ref[None], 0.0, np.zeros((3, 3)))
+    rng = np.random.default_rng(21)
+    for trials in (2, 3, 5):
+        reference_ratio, tool_ratio = [], []
+        for _ in range(DRAWS):
+            reference = reference_tip_estimate(touch_poses(rng, p_ref, p_Mtip, trials, TOUCH_SD_M), p_Mtip)
+            tool = tool_tip_estimate(touch_poses(rng, p_ref, p_Ntip, trials, TOUCH_SD_M), exact_reference)
+            reference_ratio.append((reference.sigma_m / TOUCH_SD_M) ** 2)
+            tool_ratio.append((tool.sigma_m / TOUCH_SD_M) ** 2)
+        assert_unbiased_variance(reference_ratio, 3 * (trials - 1))
+        assert_unbiased_variance(tool_ratio, 3 * (trials - 1))
+
+
+def test_tool_tip_intervals_cover_the_truth_at_their_level():
+    # The tool tip's error is its own trials' noise plus the reference tip's error seen through the
+    # trials' mean orientation: the stated covariance must hold both (95 % ellipsoids cover the truth
+    # 95 % of the time). Many trials, so that σ̂ is nearly σ (F distribution with 3(T − 1) dof).
+    p_ref, p_Mtip, p_Ntip = np.array([0.75, -0.05, 0.85]), np.array([0.0, 0.0, 0.15]), np.array([0.03, 0.0, 0.28])
+    rng = np.random.default_rng(12)
+    trials, d2 = 20, []
+    for _ in range(DRAWS):
+        reference = reference_tip_estimate(touch_poses(rng, p_ref, p_Mtip, trials, TOUCH_SD_M), p_Mtip)
+        tip = tool_tip_estimate(touch_poses(rng, p_ref, p_Ntip, trials, TOUCH_SD_M), reference)
+        error = tip.p - p_Ntip
+        d2.append(error @ np.linalg.solve(tip.cov, error))
+    assert_calibrated(d2, 3, dof=3 * (trials - 1))
+
+
 def test_widely_spread_trials_warn():
     rng = np.random.default_rng(2)
     p_ref, p_Mtip = np.array([0.75, -0.05, 0.85]), np.array([0.0, 0.0, 0.15])
@@ -177,6 +214,23 @@ def test_separation_check_uses_the_positioning_noise_as_floor():
         check_separation(one, two)
     moved = reference_tip_estimate(touch_poses(rng, p_ref + np.array([0.0, 0.0, 1e-3]), p_Mtip, 3, 0.0), p_Mtip)
     assert abs(check_separation(one, moved) - 1e-3) < EXACT  # 1 mm > 0.71 mm: distinct points
+
+
+def test_separation_bound_is_ten_predicted_sds_of_the_difference():
+    # Exact touches (no spread: each trial SD floored at the positioning noise σ): the difference of
+    # two 3-trial means has predicted 3D SD sqrt(2 · 3σ²/3) = 0.0707 mm, so the bound is 0.707 mm.
+    rng = np.random.default_rng(5)
+    p_ref, p_Mtip = np.array([0.75, -0.05, 0.85]), np.array([0.0, 0.0, 0.15])
+    bound = MIN_SEPARATION_SIGMAS * np.sqrt(2 * 3 * TOUCH_SD_M**2 / 3)
+    one = reference_tip_estimate(touch_poses(rng, p_ref, p_Mtip, 3, 0.0), p_Mtip)
+    for factor, refused in ((0.9, True), (1.1, False)):
+        other = p_ref + np.array([factor * bound, 0.0, 0.0])
+        two = reference_tip_estimate(touch_poses(rng, other, p_Mtip, 3, 0.0), p_Mtip)
+        if refused:
+            with pytest.raises(DegenerateDataError, match=r"< 10 predicted SDs = 0\.71 mm"):
+                check_separation(one, two)
+        else:
+            assert check_separation(one, two) == pytest.approx(factor * bound, rel=1e-9)
 
 
 # --- tool rotation ----------------------------------------------------------------------------------
@@ -355,6 +409,24 @@ def test_implausible_spacings_warn_then_are_refused(scale, refused):
             image_to_probe.fit("similarity", uv, target, SPACING)
 
 
+def test_spacing_beyond_the_plausible_range_by_chance_is_not_refused():
+    # A fitted spacing beyond the plausible factor 1.5 is refused only when it lies more than 3 of its
+    # predicted SDs outside: noisy data (8 samples, 6 mm per coordinate) at a factor 1.55 come out
+    # 1.58 ± 0.055, 1.5 SD out: reported (with warnings), not refused; data at a factor 2 with 4 mm of
+    # noise, 14 SDs out, are refused.
+    uv = pixels(8, seed=2)
+    noisy = probe_points(uv, SPACING * 1.55) + np.random.default_rng(0).normal(scale=6e-3, size=(8, 3))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConditioningWarning)
+        calibration = image_to_probe.fit("similarity", uv, noisy, SPACING)
+    factor = calibration.spacing_m[0] / SPACING[0]
+    factor_sd = calibration.uncertainty.spacing_sd_m[0] / SPACING[0]
+    assert 0 < factor - 1.5 < 3 * factor_sd
+    precise = probe_points(uv, SPACING * 2.0) + np.random.default_rng(0).normal(scale=4e-3, size=(8, 3))
+    with pytest.raises(DegenerateDataError, match=r"more than a factor 1\.5 \(beyond 3 predicted SDs\)"):
+        image_to_probe.fit("similarity", uv, precise, SPACING)
+
+
 def test_leave_one_out_refuses_a_fold_that_loses_the_spread(robot):
     # Ten samples on a line (0.1 px across) and one 300 px off it: the full set fixes the plane,
     # the fold without that one sample does not; no Table II row may come from such a fold.
@@ -466,6 +538,32 @@ def test_pivot_uncertainty_predicts_the_spread_of_the_estimates(fit):
         pivot_sd.append(result.pivot_sd)
     assert LOW < ratio(np.array(tip_errors), np.array(tip_sd)) < HIGH
     assert LOW < ratio(np.array(pivot_errors), np.array(pivot_sd)) < HIGH
+
+
+def test_pivot_noise_estimate_is_unbiased_with_its_degrees_of_freedom():
+    # Noise σ on each pose's position enters the linear equations [R_i  −I] x = −t_i directly: the
+    # residual sum of squares is σ² χ² with 3N − 6 degrees of freedom (6 unknowns), for few poses too.
+    rng = np.random.default_rng(14)
+    sigma = 3e-4
+    for n in (4, 6, 10):
+        rotvecs = rng.normal(scale=0.4, size=(n, 3))
+        ratios = [(pivot_algebraic(pivot_poses(rotvecs, rng, sigma)).noise_sd / sigma) ** 2 for _ in range(DRAWS)]
+        assert_unbiased_variance(ratios, 3 * n - 6)
+
+
+def test_robust_pivot_flags_no_pose_of_clean_gaussian_noise():
+    # The robust variant flags poses whose 3D residual exceeds 3 robust SDs of the 3D residual:
+    # 3 × √3 × its per-axis scale, 1.4826 × median‖r‖/√3 (for Gaussian noise σ per axis, the median of
+    # ‖r‖ is σ·sqrt(median χ²_3)). On clean noise a pose is then flagged with probability
+    # P(χ²_3 > (3 √3 k)²), k = scale/σ: too small to flag any of many poses.
+    rng = np.random.default_rng(15)
+    sigma, n = 3e-4, 50_000
+    k = 1.4826 * np.sqrt(chi2.ppf(0.5, 3)) / np.sqrt(3.0)
+    p_false = chi2.sf((3.0 * np.sqrt(3.0) * k) ** 2, 3)
+    most = binom.isf(1e-4, n, p_false)  # the false flags of n poses, at the 1e-4 level
+    result = pivot_robust(pivot_poses(rng.normal(scale=0.3, size=(n, 3)), rng, sigma))
+    assert (~result.inliers).sum() <= most
+    assert result.noise_sd == pytest.approx(sigma, rel=0.01)
 
 
 @pytest.mark.parametrize(

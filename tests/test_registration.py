@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from bands import assert_unbiased_variance
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
@@ -106,6 +107,48 @@ def test_reflection_is_never_returned():
     dst = src * [1.0, 1.0, -1.0]
     for method in (registration.kabsch, registration.horn):
         assert np.isclose(np.linalg.det(method(src, dst)[:3, :3]), 1.0)
+
+
+def test_similarity_of_a_mirror_image_is_the_best_proper_fit():
+    # Mirror-image targets scaled by 1.1: the best similarity with a reflection would fit them exactly;
+    # the best proper one has Kabsch's rotation and, for it, the least-squares scale Σ bᵢ·R aᵢ / Σ |aᵢ|²
+    # (centred points a, b).
+    rng = np.random.default_rng(3)
+    src = rng.normal(size=(10, 3))
+    dst = 1.1 * src * [1.0, 1.0, -1.0] + rng.normal(scale=0.01, size=(10, 3))
+    T, scale = registration.similarity(src, dst)
+    R = T[:3, :3]
+    assert np.isclose(np.linalg.det(R), 1.0)
+    assert np.abs(R - registration.kabsch(src, dst)[:3, :3]).max() < 1e-12
+    a, b = src - src.mean(axis=0), dst - dst.mean(axis=0)
+    assert scale == pytest.approx(np.sum(b * (a @ R.T)) / np.sum(a**2), rel=1e-12)
+    assert np.abs(T[:3, 3] - (dst.mean(axis=0) - scale * R @ src.mean(axis=0))).max() < 1e-12
+
+
+@pytest.mark.parametrize(("model", "n"), [("rigid", 3), ("rigid", 5), ("similarity", 4), ("uv", 4), ("uv", 8)])
+def test_fit_noise_estimate_is_unbiased_with_its_degrees_of_freedom(model, n):
+    # Isotropic noise σ per coordinate on the targets: the residual sum of squares of the fit is σ² χ²
+    # with 3N − p degrees of freedom (p = 6 + the scale factors), to first order in σ (here 1e-7
+    # relative), so σ̂² = RSS / (3N − p) is unbiased even for a few points.
+    rng = np.random.default_rng(n)
+    T_true, sigma, draws = random_pose(rng), 1e-4, 300
+    src = point_set(rng, "general" if model != "uv" else "planar", n)
+    scale = 1.0 if model == "rigid" else 1.02
+    ratios = []
+    for _ in range(draws):
+        dst = transform_points(T_true, scale * src) + rng.normal(scale=sigma, size=src.shape)
+        if model == "rigid":
+            T, factors = registration.kabsch(src, dst), np.ones(3)
+        elif model == "similarity":
+            T, k = registration.similarity(src, dst)
+            factors = np.full(3, k)
+        else:
+            T, spacing = registration.scaled_uv(src[:, :2], dst, [1.0, 1.0])
+            factors = np.append(spacing, 1.0)
+        u = registration.fit_uncertainty(src, dst, T, model=model, scale=factors)
+        assert u.dof == 3 * n - 6 - registration.SCALE_MODELS[model]
+        ratios.append((u.noise_sd_m / sigma) ** 2)
+    assert_unbiased_variance(ratios, 3 * n - 6 - registration.SCALE_MODELS[model])
 
 
 @settings(max_examples=40, deadline=None)

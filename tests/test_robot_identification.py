@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from brachycal.calibration import calibrate
-from brachycal.calibration.chain import RobotAccuracy, fit_chain, joint_twists
+from brachycal.calibration.chain import ChainData, RobotAccuracy, fit_chain, joint_twists
 from brachycal.calibration.image_to_probe import ImageCalibration
 from brachycal.calibration.result_file import StoredCalibration
 from brachycal.calibration.robot_identification import (
@@ -148,6 +148,33 @@ def test_stated_uncertainty_includes_the_identified_robot(robot, worn):
     remaining = np.diag(fit.robot_covariance)
     assert np.all(remaining <= prior * (1 + 1e-9)) and np.mean(remaining / prior) < 0.9
     assert np.linalg.eigvalsh(fit.noise_covariance).min() > -1e-12 * np.abs(fit.noise_covariance).max()
+    # In prior units the remaining error is at most the prior, and exactly the prior along every direction
+    # the data cannot see (6 nq minus the structural rank of them).
+    sd = np.sqrt(prior)
+    shares = np.linalg.eigvalsh(fit.robot_covariance / np.outer(sd, sd))
+    assert shares.max() <= 1 + 1e-9
+    assert np.sum(shares > 1 - 1e-6) >= 6 * robot.nq - identified.identifiability.structural_rank
+    # The consider form the uncertainty module reads adds up to the posterior: noise part plus robot part.
+    S = fit.robot_sensitivity
+    whole = fit.noise_covariance + S @ fit.robot_covariance @ S.T
+    assert np.abs(whole - fit.covariance).max() < 1e-9 * np.abs(fit.covariance).max()
+
+
+def test_identified_noise_levels_count_the_priors_share_of_the_leverage(robot, worn):
+    """The groups' noise levels are their residual sums of squares over their residual degrees of
+    freedom, rows minus leverages of the regularised problem: over all groups, the data rows minus
+    the data's share of the hat matrix's trace ``P + 6 nq``, what the prior's rows do not take (their
+    leverages: the diagonal of the posterior's robot block, in prior units). Least-squares leverages
+    would give the robot corrections' whole share to the data and leave the touches too few degrees of
+    freedom to estimate their own level."""
+    twin, *_, identified = worn
+    fit = identified.fit
+    p = len(fit.x)
+    rows = ChainData.of(twin.session, robot).group_rows(int((~fit.outliers).sum()))
+    data_leverage = identified.posterior.shape[0] - np.trace(identified.posterior[p:, p:])
+    expected = sum(part.stop - part.start for part in rows.values()) - data_leverage
+    assert sum(level.dof for level in fit.noise.values()) == pytest.approx(expected, rel=0.01)
+    assert fit.noise["touch"].source == "residuals"
 
 
 def _stored(robot: Robot, corrected: Robot) -> StoredCalibration:
