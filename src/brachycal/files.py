@@ -7,6 +7,9 @@ are the one-file case of it):
   or absent (a directory, device, FIFO or socket is refused, even with ``force``), its folder must
   exist (or be created, where a command's contract says so), it is replaced only with ``force``,
   and two outputs of one command may not share a path.
+- **Never an input.** A destination that is one of the command's input files (the same file,
+  by inode: the command line records every input opened, :mod:`brachycal.inputs`) is refused,
+  even with ``force``: when claimed if the input was read already, else when committed.
 - **Claimed against other brachycal processes.** A hidden lock file next to each destination,
   ``.<name>.brachycal-lock``, held with ``flock``: a second writer of the same file is refused at
   once ("another brachycal process is writing it"); the kernel releases the lock when its holder
@@ -40,6 +43,7 @@ from types import TracebackType
 from typing import IO
 
 from brachycal.errors import OutputError
+from brachycal.inputs import hash_input, input_at
 
 __all__ = [
     "OutputSet",
@@ -134,6 +138,7 @@ class OutputSet:
                 file=destination,
             )
         _refuse_special(destination)
+        _refuse_input(destination)
         self._ensure_folder(destination.parent, make_parents)
         claim = _Claim(destination, destination.parent / f".{destination.name}{STAGE_MARK}{self._token}")
         claim.staging = claim.staging.with_name(claim.staging.name + destination.suffix)
@@ -221,6 +226,7 @@ class OutputSet:
     def _move_into_place(self, claim: _Claim) -> Path | None:
         destination = claim.destination
         _refuse_special(destination)  # in case one appeared while the command ran
+        _refuse_input(destination)  # the command read it after claiming it
         try:
             if not os.path.lexists(destination):
                 _link_new(claim.staging, destination, self.force)
@@ -322,6 +328,18 @@ def _refuse_special(destination: Path) -> None:
         else "not a regular file"
     )
     raise OutputError(f"is {kind}; an output must be a regular file (refused even with --force)", file=destination)
+
+
+def _refuse_input(destination: Path) -> None:
+    """An output is never one of the command's inputs (the same file, by inode), even with ``force``."""
+    source = input_at(destination)
+    if source is None:
+        return
+    same = "" if os.path.abspath(source) == os.path.abspath(destination) else f" ({source})"
+    raise OutputError(
+        f"is one of this command's inputs{same}; an output never replaces an input (refused even with --force)",
+        file=destination,
+    )
 
 
 @contextlib.contextmanager
@@ -547,12 +565,13 @@ def sha256_file(path: str | os.PathLike[str]) -> str:
     relative to the folder, a NUL byte and its bytes, in sorted order. The provenance results and
     reports record for each input."""
     path = Path(path)
-    if not path.is_dir():
-        return sha256_bytes(path.read_bytes())
     digest = hashlib.sha256()
+    if not path.is_dir():
+        hash_input(path, digest.update)
+        return digest.hexdigest()
     for item in sorted(p for p in path.rglob("*") if p.is_file()):
         digest.update(str(item.relative_to(path)).encode() + b"\0")
-        digest.update(item.read_bytes())
+        hash_input(item, digest.update)
     return digest.hexdigest()
 
 

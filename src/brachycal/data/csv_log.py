@@ -30,6 +30,7 @@ import numpy as np
 
 from brachycal.data.joint_log import JointLog, JointLogChecker, configurations_from_columns, joint_columns
 from brachycal.errors import InputError
+from brachycal.inputs import MAX_TABLE_BYTES, open_input
 from brachycal.se3 import FloatArray
 
 if TYPE_CHECKING:  # annotations only: reading a file needs no Pinocchio
@@ -37,17 +38,14 @@ if TYPE_CHECKING:  # annotations only: reading a file needs no Pinocchio
 
 
 def _open(path: Path) -> TextIO:
-    try:
-        return path.open(newline="")
-    except OSError as exc:
-        raise InputError(f"cannot read ({exc.strerror})", file=path) from None
+    """A CSV table read whole (at most :data:`~brachycal.inputs.MAX_TABLE_BYTES`), as text; a
+    UTF-8 byte-order mark at its start (a spreadsheet's export) is dropped."""
+    return open_input(path, "r", max_bytes=MAX_TABLE_BYTES, encoding="utf-8-sig")  # type: ignore[return-value]
 
 
 def _open_binary(path: Path) -> BinaryIO:
-    try:
-        return path.open("rb")
-    except OSError as exc:
-        raise InputError(f"cannot read ({exc.strerror})", file=path) from None
+    """A joint log, read in blocks (no cap on its size); :func:`open_csv_log` drops a byte-order mark."""
+    return open_input(path)  # type: ignore[return-value]
 
 
 def _check_header(path: Path, header: list[str], required: list[str]) -> list[str]:
@@ -361,7 +359,7 @@ def open_csv_log(path: str | os.PathLike[str], robot: Robot) -> CsvLog:
     try:
         first = handle.readline()
         try:
-            header = next(csv.reader([first.decode("utf-8")]), [])
+            header = next(csv.reader([first.decode("utf-8-sig")]), [])
         except (csv.Error, UnicodeDecodeError) as exc:
             raise InputError(f"not a readable CSV file ({exc})", file=path) from None
         header = _check_header(path, header, ["time"])

@@ -26,6 +26,7 @@ import numpy as np
 
 from brachycal.data.csv_log import read_table, table_configurations, to_float, unique_names
 from brachycal.errors import InputError
+from brachycal.inputs import MAX_DOCUMENT_BYTES, read_input_text
 from brachycal.files import OutputSet, atomic_open, output_set, sha256_file
 from brachycal.se3 import FloatArray
 from brachycal.validate import check_spacing_mm
@@ -80,7 +81,7 @@ class Session:
 
 def _read_toml(path: Path) -> tuple[FloatArray, np.ndarray, FloatArray]:
     try:
-        config = tomllib.loads(path.read_text())
+        config = tomllib.loads(read_input_text(path, max_bytes=MAX_DOCUMENT_BYTES))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"not valid TOML ({exc})", file=path) from None
     if config.get("format") != FORMAT:

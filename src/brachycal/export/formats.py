@@ -43,6 +43,7 @@ from numpy.typing import ArrayLike
 
 from brachycal.calibration.image_to_probe import ImageCalibration
 from brachycal.errors import InputError
+from brachycal.inputs import MAX_DOCUMENT_BYTES, read_input_text
 from brachycal.files import OutputSet, atomic_open, output_set
 from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
 from brachycal.model.robot import Robot
@@ -145,7 +146,7 @@ def read_itk_transform(path: str | os.PathLike[str]) -> FloatArray:
     """The "to parent" matrix (RAS, mm) Slicer shows for an ITK ``.tfm`` affine file."""
     path = Path(path)
     fields = {}
-    for line in path.read_text().splitlines():
+    for line in read_input_text(path, max_bytes=MAX_DOCUMENT_BYTES).splitlines():
         key, sep, value = line.partition(":")
         if sep and not line.startswith("#"):
             fields[key.strip()] = value.strip()

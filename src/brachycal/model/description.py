@@ -36,6 +36,7 @@ import numpy as np
 import pinocchio as pin
 
 from brachycal.errors import InputError
+from brachycal.inputs import MAX_DOCUMENT_BYTES, read_input_bytes, read_input_text
 from brachycal.files import bundled
 from brachycal.model import urdf_text
 from brachycal.model.robot import Robot
@@ -651,9 +652,11 @@ def _add_fixed_frame(root: ET.Element, name: str, parent: str, T_parent_frame: F
 
 def _read_urdf(path: Path, key: str, source: Path) -> ET.Element:
     try:
-        text = path.read_text()
-    except OSError as exc:
-        raise InputError(f"key {key!r}: cannot read {path} ({exc.strerror})", file=source) from None
+        text = read_input_text(path, max_bytes=MAX_DOCUMENT_BYTES)
+    except InputError as exc:
+        raise InputError(f"key {key!r}: cannot read {path} ({exc.problem})", file=source) from None
+    except UnicodeDecodeError as exc:
+        raise InputError(f"key {key!r}: cannot read {path} ({exc})", file=source) from None
     try:
         return urdf_text.parse(text, str(path))
     except InputError as exc:  # say which key named the file, and keep the one line
@@ -662,8 +665,10 @@ def _read_urdf(path: Path, key: str, source: Path) -> ET.Element:
 
 def _srdf_pairs(path: Path, prefix: str, key: str, source: Path) -> set[frozenset[str]]:
     try:
-        srdf = ET.parse(path).getroot()
-    except (ET.ParseError, OSError) as exc:
+        srdf = ET.fromstring(read_input_bytes(path, max_bytes=MAX_DOCUMENT_BYTES))
+    except InputError as exc:
+        raise InputError(f"key {key!r}: cannot read the SRDF {path} ({exc.problem})", file=source) from None
+    except ET.ParseError as exc:
         raise InputError(f"key {key!r}: cannot read the SRDF {path} ({exc})", file=source) from None
     pairs = set()
     for element in srdf.iter("disable_collisions"):
@@ -724,9 +729,7 @@ def load_description(name_or_path: str | os.PathLike[str] = DEFAULT_ROBOT) -> Ro
 def _load(path: Path) -> RobotDescription:
     r = _Reader(path)
     try:
-        data = tomllib.loads(path.read_text())
-    except OSError as exc:
-        raise InputError(f"cannot read robot description ({exc.strerror})", file=path) from None
+        data = tomllib.loads(read_input_text(path, max_bytes=MAX_DOCUMENT_BYTES))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"not valid TOML ({exc})", file=path) from None
     unknown = sorted(set(data) - _TOP_KEYS)
