@@ -99,6 +99,9 @@ class OutputSet:
 
     Args:
         force: replace existing regular files (never directories or special files).
+        inputs: the command's input files (a folder stands for the files in it), declared so
+            that an output naming one is refused when claimed, before any work; inputs read
+            under the command line are refused anyway, when the set is committed.
 
     Raises (from :meth:`claim` and :meth:`commit`):
         OutputError: naming the destination — exists without ``force``, not a regular file,
@@ -106,8 +109,9 @@ class OutputSet:
             share it, or an OS error (permission denied, read-only file system, disk full).
     """
 
-    def __init__(self, *, force: bool = False) -> None:
+    def __init__(self, *, force: bool = False, inputs: Sequence[str | os.PathLike[str] | None] = ()) -> None:
         self.force = force
+        self._inputs = _declared(inputs)
         self._claims: dict[str, _Claim] = {}  # key: the destination's resolved path
         self._created_dirs: list[Path] = []
         self._labels: dict[str, str] = {}
@@ -138,7 +142,7 @@ class OutputSet:
                 file=destination,
             )
         _refuse_special(destination)
-        _refuse_input(destination)
+        _refuse_input(destination, self._inputs)
         self._ensure_folder(destination.parent, make_parents)
         claim = _Claim(destination, destination.parent / f".{destination.name}{STAGE_MARK}{self._token}")
         claim.staging = claim.staging.with_name(claim.staging.name + destination.suffix)
@@ -226,7 +230,7 @@ class OutputSet:
     def _move_into_place(self, claim: _Claim) -> Path | None:
         destination = claim.destination
         _refuse_special(destination)  # in case one appeared while the command ran
-        _refuse_input(destination)  # the command read it after claiming it
+        _refuse_input(destination, self._inputs)  # the command read it after claiming it
         try:
             if not os.path.lexists(destination):
                 _link_new(claim.staging, destination, self.force)
@@ -330,9 +334,29 @@ def _refuse_special(destination: Path) -> None:
     raise OutputError(f"is {kind}; an output must be a regular file (refused even with --force)", file=destination)
 
 
-def _refuse_input(destination: Path) -> None:
+def _declared(inputs: Sequence[str | os.PathLike[str] | None]) -> dict[tuple[int, int], str]:
+    """``(st_dev, st_ino) → path`` of declared input files, and of the files in declared folders."""
+    found: dict[tuple[int, int], str] = {}
+    for item in inputs:
+        if item is None:
+            continue
+        paths = [Path(item)]
+        if paths[0].is_dir():
+            paths = [p for p in paths[0].iterdir() if p.is_file()]
+        for path in paths:
+            with contextlib.suppress(OSError):
+                st = os.stat(path)
+                found.setdefault((st.st_dev, st.st_ino), str(path))
+    return found
+
+
+def _refuse_input(destination: Path, declared: Mapping[tuple[int, int], str]) -> None:
     """An output is never one of the command's inputs (the same file, by inode), even with ``force``."""
     source = input_at(destination)
+    if source is None and declared:
+        with contextlib.suppress(OSError):
+            st = os.stat(destination)
+            source = declared.get((st.st_dev, st.st_ino))
     if source is None:
         return
     same = "" if os.path.abspath(source) == os.path.abspath(destination) else f" ({source})"

@@ -123,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
     for frame in frames:
         robot.frame_id(frame)
     out = Path(args.out)
-    with OutputSet(force=args.force) as outputs:
+    with OutputSet(force=args.force, inputs=[args.log, args.times]) as outputs:
         staged = outputs.claim(out, label="--out")
         if not Path(args.log).exists():  # here, not when the first block is asked for: before --times is read
             raise InputError("no such file or folder", file=args.log)

@@ -117,10 +117,7 @@ def read_session_toml(path: str | os.PathLike[str]) -> tuple[FloatArray, np.ndar
     Returns:
         ``spacing_m (2,)`` metres per pixel, ``size_px (2,)`` whole pixels, ``p_ER_Mtip (3,)`` metres.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("no such file", file=path)
-    return _read_toml(path)
+    return _read_toml(Path(path))
 
 
 def _labels(
@@ -275,7 +272,7 @@ def read_session(folder: str | os.PathLike[str], robot: Robot) -> Session:
     if not folder.is_dir():
         raise InputError("not a session folder (expected a folder with session.toml)", file=folder)
     for name in FILES:
-        if not (folder / name).is_file():
+        if not os.path.lexists(folder / name):  # anything else there is refused by its reader
             raise InputError("missing session file", file=folder / name)
     spacing_m, size_px, p_ER_Mtip = _read_toml(folder / "session.toml")
     touches = _read_touches(folder / "touches.csv", robot)

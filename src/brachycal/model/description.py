@@ -36,7 +36,7 @@ import numpy as np
 import pinocchio as pin
 
 from brachycal.errors import InputError
-from brachycal.inputs import MAX_DOCUMENT_BYTES, read_input_bytes, read_input_text
+from brachycal.inputs import MAX_DOCUMENT_BYTES, check_input_file, read_input_bytes, read_input_text
 from brachycal.files import bundled
 from brachycal.model import urdf_text
 from brachycal.model.robot import Robot
@@ -406,7 +406,7 @@ def _resolve(reference: str, folder: Path, key: str, source: Path) -> Path:
         path = example_robot_data_share() / reference.removeprefix("example-robot-data:")
     else:
         path = folder / os.path.expanduser(reference)
-    if not path.is_file():
+    if not os.path.lexists(path):  # anything else there is refused by its reader
         raise InputError(f"key {key!r}: file not found: {reference} ({path})", file=source)
     return path
 
@@ -721,8 +721,7 @@ def load_description(name_or_path: str | os.PathLike[str] = DEFAULT_ROBOT) -> Ro
         mtime = resolved.stat().st_mtime_ns
     except OSError as exc:
         raise InputError(f"cannot read robot description ({exc.strerror})", file=path) from None
-    if not resolved.is_file():
-        raise InputError("robot description is not a file", file=path)
+    check_input_file(path, max_bytes=MAX_DOCUMENT_BYTES)
     return _load_cached(resolved, mtime)
 
 
