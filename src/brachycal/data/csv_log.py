@@ -459,15 +459,47 @@ def read_configurations(path: str | os.PathLike[str], robot: Robot) -> tuple[lis
     """Configurations from a CSV file whose header names the joints, one per row (radians; a joint
     log works: its time column is ignored): ``(rows (N,) file rows, Q (N, nq) in the robot's order)``.
 
+    All of them in memory; :func:`configuration_blocks` streams them.
+
     Raises:
         InputError: the file has no rows, or a joint is missing, not a number or out of its limits
             (naming the row and column).
     """
+    blocks = list(configuration_blocks(path, robot))
+    return [row for rows, _ in blocks for row in rows], np.concatenate([Q for _, Q in blocks])
+
+
+#: Rows of a table of configurations read, checked and handed on at a time (a few MB of text).
+CONFIGURATION_BLOCK_ROWS = 16_384
+
+
+def configuration_blocks(
+    path: str | os.PathLike[str], robot: Robot, rows_per_block: int = CONFIGURATION_BLOCK_ROWS
+) -> Iterator[tuple[list[int], FloatArray]]:
+    """The configurations of :func:`read_configurations`, ``rows_per_block`` rows at a time:
+    ``(rows file rows, Q (n, nq) radians in the robot's order)``. Memory is one block, whatever
+    the length of the file (a joint log of millions of rows).
+
+    Raises:
+        InputError: as :func:`read_configurations`, when the block holding the problem is reached.
+    """
     path = Path(path)
-    header, rows, records = read_table(path, [])
-    if not records:
+    with open_input(path, "r", encoding="utf-8-sig") as handle:  # streamed: no cap on the size
+        reader = csv.reader(handle)
+        try:
+            header = next(reader, [])
+        except (csv.Error, UnicodeDecodeError) as exc:
+            raise InputError(f"not a readable CSV file ({exc})", file=path) from None
+        header = _check_header(path, header, [])
+        empty = True
+        while True:
+            rows, records = _scan_rows(path, reader, header, 0, limit=rows_per_block)
+            if not records:
+                break
+            empty = False
+            yield rows, table_configurations(path, robot, header, rows, records)
+    if empty:
         raise InputError("no configurations", file=path)
-    return rows, table_configurations(path, robot, header, rows, records)
 
 
 def read_times(path: str | os.PathLike[str]) -> FloatArray:
