@@ -86,6 +86,9 @@ def run(args: argparse.Namespace) -> int:
         sequence = read_image_sequence(args.frames)
         if len(sequence) == 0:
             raise InputError("holds no frames", file=args.frames)
+        if 0 in sequence.pixels.shape[1:]:
+            height, width = sequence.pixels.shape[1:]
+            raise InputError(f"its frames are {width}x{height} pixels: no image to find a tip in", file=args.frames)
         if sequence.pixels.dtype != np.uint8:
             raise InputError(
                 f"expected 8-bit B-mode frames (MET_UCHAR), got {sequence.pixels.dtype}",

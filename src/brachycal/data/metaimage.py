@@ -121,7 +121,7 @@ def _read_header(path: Path) -> _Header:
     ndims = _whole(header.get("NDims", str(len(dims))), _at(path, column="NDims"))
     if ndims != [len(dims)]:
         raise InputError(f"NDims {header.get('NDims')!r} does not match DimSize {header['DimSize']!r}", file=path)
-    if 0 in dims:
+    if 0 in dims[:2] and not frames:  # a PLUS tracker buffer (DimSize 0 0 N) has N frames of fields
         raise InputError(f"an image without pixels (DimSize {header['DimSize']!r})", file=path, column="DimSize")
     # The pixel data the header announces must be in the file (or, compressed, could inflate from
     # it) before anything is built per frame: DimSize = 8 8 10000000000 is refused here.
