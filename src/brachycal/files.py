@@ -33,6 +33,7 @@ import hashlib
 import json
 import math
 import os
+import re
 import secrets
 import stat
 from collections.abc import Iterator, Mapping, Sequence
@@ -149,7 +150,9 @@ class OutputSet:
         self._claims[key] = claim
         self._labels[key] = label
         with _signals_deferred():  # an interrupt between creating the lock file and recording it would leak it
-            claim.lock_path, claim.lock_fd = _lock(destination)
+            claim.lock_path, claim.lock_fd, exclusive = _lock(destination)
+        if exclusive:
+            _remove_stale_staging(destination)
         # Checked with the lock held: a brachycal writer that committed just before us is seen.
         if os.path.lexists(destination) and not self.force:
             raise OutputError("already exists; pass --force to replace it", file=destination)
@@ -257,7 +260,8 @@ class OutputSet:
         if self._closed:
             return
         for claim in self._claims.values():
-            _remove(claim.staging)
+            with contextlib.suppress(OSError):  # best effort: the error that ended the set is the one to report
+                _remove(claim.staging)
         self._close()
         for folder in reversed(self._created_dirs):
             with contextlib.suppress(OSError):  # not empty: someone else wrote there meanwhile
@@ -382,8 +386,11 @@ def _signals_deferred() -> Iterator[None]:
         signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
-def _lock(destination: Path) -> tuple[Path, int]:
-    """Hold ``.<name>.brachycal-lock`` next to ``destination``; refuse if another process holds it."""
+def _lock(destination: Path) -> tuple[Path, int, bool]:
+    """Hold ``.<name>.brachycal-lock`` next to ``destination``; refuse if another process holds it.
+
+    Returns the lock file, its descriptor, and whether the lock is the kernel's (``flock``), so
+    that no other brachycal process can be writing ``destination`` now."""
     lock_path = destination.with_name(f".{destination.name}{LOCK_SUFFIX}")
     for _ in range(100):
         try:
@@ -395,10 +402,14 @@ def _lock(destination: Path) -> tuple[Path, int]:
             raise OutputError(
                 f"another brachycal process is writing it (or remove {lock_path.name})", file=destination
             ) from None
+        except PermissionError as exc:
+            if fcntl is not None and os.path.lexists(lock_path) and _stale_lock_removed(lock_path, destination):
+                continue  # another user's stale lock file, removed: take it afresh
+            raise OutputError(f"cannot write here ({exc.strerror})", file=destination) from None
         except OSError as exc:
             raise OutputError(f"cannot write here ({exc.strerror})", file=destination) from None
         if fcntl is None:  # pragma: no cover
-            return lock_path, fd
+            return lock_path, fd, False
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -407,7 +418,7 @@ def _lock(destination: Path) -> tuple[Path, int]:
             who = f" (pid {holder})" if holder.isdigit() else ""
             raise OutputError(f"another brachycal process{who} is writing it", file=destination) from None
         except OSError:  # a file system without flock: the claim is this process's word only
-            return lock_path, fd
+            return lock_path, fd, False
         # The previous holder removes the file as it lets go; if it did so between our open and
         # our flock, we hold a lock on a removed file: start again with the file at the path.
         try:
@@ -417,9 +428,61 @@ def _lock(destination: Path) -> tuple[Path, int]:
         if same:
             os.ftruncate(fd, 0)
             os.write(fd, f"{os.getpid()}\n".encode())
-            return lock_path, fd
+            return lock_path, fd, True
         os.close(fd)
     raise OutputError("cannot take the lock (it keeps changing)", file=destination)  # pragma: no cover
+
+
+def _remove_stale_staging(destination: Path) -> None:
+    """Remove the staging files (``.<name>.brachycal-<token><suffix>``, ``…-old``) a killed writer
+    of ``destination`` left: with the destination's lock held, no live writer has any."""
+    prefix = f".{destination.name}{STAGE_MARK}"
+    folder = destination.parent if str(destination.parent) else Path(".")
+    try:
+        names = [entry.name for entry in os.scandir(folder) if entry.name.startswith(prefix)]
+    except OSError:
+        return
+    staging = re.compile(rf"[0-9a-f]{{8}}(?:-old|{re.escape(destination.suffix)})")
+    for name in names:
+        if not staging.fullmatch(name[len(prefix) :]):
+            continue
+        with contextlib.suppress(OSError):
+            (folder / name).unlink()
+
+
+def _stale_lock_removed(lock_path: Path, destination: Path) -> bool:
+    """A lock file this process may not open for writing (another user's): refuse naming its
+    holder if it is held, else remove it (stale: its holder died) and say whether that worked.
+
+    Raises:
+        OutputError: the lock is held (another brachycal process is writing the destination), or
+            it is stale and cannot be removed (naming the lock file to remove).
+    """
+    try:
+        fd = os.open(lock_path, os.O_RDONLY | getattr(os, "O_CLOEXEC", 0))
+    except OSError:
+        return False  # cannot even read it: the folder's permission error is the one to report
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.read(fd, 32).decode(errors="replace").strip()
+            who = f" (pid {holder})" if holder.isdigit() else ""
+            raise OutputError(f"another brachycal process{who} is writing it", file=destination) from None
+        except OSError:
+            return False
+    finally:
+        os.close(fd)
+    try:
+        lock_path.unlink()
+    except FileNotFoundError:
+        return True
+    except OSError:
+        raise OutputError(
+            f"a stale lock file of another user, {lock_path.name}, is in the way (its writer is gone): remove it",
+            file=destination,
+        ) from None
+    return True
 
 
 def _unlock(claim: _Claim) -> None:
@@ -465,8 +528,14 @@ def _keep_old(destination: Path, old: Path) -> None:
 
 
 def _remove(path: Path) -> None:
-    with contextlib.suppress(FileNotFoundError):
+    """Remove ``path`` if it is there (a read-only file system refuses even to unlink nothing)."""
+    try:
         path.unlink()
+    except FileNotFoundError:
+        pass
+    except OSError:
+        if os.path.lexists(path):
+            raise
 
 
 def output_set(outputs: OutputSet | None, *, force: bool = False) -> contextlib.AbstractContextManager[OutputSet]:

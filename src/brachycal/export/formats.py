@@ -42,8 +42,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from brachycal.calibration.image_to_probe import ImageCalibration
-from brachycal.errors import InputError
-from brachycal.inputs import MAX_DOCUMENT_BYTES, read_input_text
+from brachycal.errors import InputError, OutputError
+from brachycal.inputs import MAX_DOCUMENT_BYTES, MAX_MESH_BYTES, open_input, read_input_text
 from brachycal.files import OutputSet, atomic_open, output_set
 from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
 from brachycal.model.robot import Robot
@@ -315,9 +315,15 @@ def _write_urdf_folder(
         destination = mesh_folder / relative
         staged = out.path(destination, make_parents=True)
         try:
-            shutil.copyfile(source, staged)
-        except OSError as exc:
-            raise InputError(f"cannot copy mesh {source} ({exc.strerror or exc})", file=robot.source) from None
+            reader = open_input(source, max_bytes=MAX_MESH_BYTES)
+        except InputError as exc:
+            raise InputError(f"cannot copy mesh {source} ({exc.problem})", file=robot.source) from None
+        with reader:
+            try:
+                with open(staged, "wb") as writer:
+                    shutil.copyfileobj(reader, writer)
+            except OSError as exc:  # writing: reading a checked regular file does not fail this way
+                raise OutputError(f"cannot write ({exc.strerror or exc})", file=destination) from None
         written.append(destination)
     return written
 
