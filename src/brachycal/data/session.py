@@ -29,7 +29,7 @@ from brachycal.errors import InputError
 from brachycal.inputs import MAX_DOCUMENT_BYTES, read_input_text
 from brachycal.files import OutputSet, atomic_open, output_set, sha256_file
 from brachycal.se3 import FloatArray
-from brachycal.validate import check_spacing_mm
+from brachycal.validate import MAX_IMAGE_PX, check_spacing_mm
 
 if TYPE_CHECKING:  # annotations only: reading a file needs no Pinocchio
     from brachycal.model.robot import Robot
@@ -107,6 +107,10 @@ def _read_toml(path: Path) -> tuple[FloatArray, np.ndarray, FloatArray]:
     size = numbers("image", "size_px", 2, True)
     if np.any(size != np.round(size)):
         raise InputError("image size must be whole pixels", file=path, column="image.size_px")
+    if np.any(size > MAX_IMAGE_PX):
+        raise InputError(
+            f"image size {size.tolist()!r} px: at most {MAX_IMAGE_PX} px a side", file=path, column="image.size_px"
+        )
     tip_m = numbers("top_model", "tip_in_flange_mm", 3, False) * 1e-3
     return spacing_m, size.astype(int), tip_m
 

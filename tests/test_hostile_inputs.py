@@ -1,0 +1,148 @@
+"""Hostile input files: every command refuses, in one line naming the file, an input that is not a
+regular file — a device without end (``/dev/zero``), a FIFO (a named pipe: no writer, or one that
+never stops), a folder — at once, before reading a byte of it (exit code 2, nothing written).
+
+The table is every command × every input file it takes × the three kinds of file; the other
+inputs of each row are valid (a calibration result, a twin recording, a water-tank recording and
+the bundled examples), so that the row's input is the one refused. A FIFO row would hang forever
+if the FIFO were opened for reading: the refusal happens when it is checked.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+from conftest import ROOT
+from hostile import Case, check_refusal, run_cli
+from tank_recording import write_tank_recording
+
+from brachycal.model import Robot
+from brachycal.simulation import RecordingConfig, TwinConfig, record, write_recording
+
+EXAMPLES = ROOT / "examples"
+SESSION = EXAMPLES / "session_exact"
+
+#: The kinds of non-regular file: (id, path given on the command line, setup, words of the refusal).
+KINDS: list[tuple[str, str, Callable[[Path], None] | None, tuple[str, ...]]] = [
+    ("dev-zero", "/dev/zero", None, ("/dev/zero", "is a device", "regular file")),
+    ("fifo", "{tmp}/bad", lambda tmp: os.mkfifo(tmp / "bad"), ("bad", "FIFO", "regular file")),
+    ("folder", "{tmp}/bad", lambda tmp: (tmp / "bad").mkdir(), ("bad", "is a folder")),
+]
+
+BUILD = "session build {rec}/joint_log.csv --marks {rec}/marks.csv --images {rec}/images.csv --plan {rec}/plan.csv"
+
+#: Each command's input files: (id, the command with ``{bad}`` where the input goes).
+USES = [
+    ("locate-result", "locate {bad} {examples}/joints.csv --uv 10,10"),
+    ("locate-joints", "locate {result} {bad} --uv 10,10"),
+    ("export-result", "export {bad} --out {tmp}/x"),
+    ("verify-result", "verify {bad} {session} --out {tmp}/r.json"),
+    ("plan-result", "plan --result {bad} --out {tmp}/p.csv"),
+    ("plan-robot", "plan --robot {bad} --out {tmp}/p.csv"),
+    ("fk-log", "fk {bad} --frames needle_tip --out {tmp}/p.csv --quiet"),
+    ("fk-times", "fk {examples}/joint_log.csv --frames needle_tip --times {bad} --out {tmp}/p.csv --quiet"),
+    ("pivot-poses", "pivot {bad} --out {tmp}/p.json"),
+    ("phantom-geometry", "phantom --method wedge {bad} {examples}/phantom/wedge_observations.csv --out {tmp}/p.json"),
+    ("phantom-observations", "phantom --method wedge {examples}/phantom/multi_wedge.toml {bad} --out {tmp}/p.json"),
+    ("session-build-log", BUILD.replace("{rec}/joint_log.csv", "{bad}") + " --template {rec}/session.toml --out {tmp}/s"),
+    ("session-build-marks", BUILD.replace("{rec}/marks.csv", "{bad}") + " --template {rec}/session.toml --out {tmp}/s"),
+    ("session-build-images", BUILD.replace("{rec}/images.csv", "{bad}") + " --template {rec}/session.toml --out {tmp}/s"),
+    ("session-build-plan", BUILD.replace("{rec}/plan.csv", "{bad}") + " --template {rec}/session.toml --out {tmp}/s"),
+    ("session-build-template", BUILD + " --template {bad} --out {tmp}/s"),
+    ("session-build-markups", BUILD + " --markups {bad} --template {rec}/session.toml --out {tmp}/s"),
+    ("calibrate-robot", "calibrate {session} --robot {bad} --out {tmp}/r.json --quiet"),
+    ("calibrate-urdf", "calibrate {session} --urdf {bad} --out {tmp}/r.json --quiet"),
+    ("nwire-config", "nwire {bad} {examples}/nwire/twin_segmented_frames.xml --out {tmp}/n.json"),
+    ("nwire-frames", "nwire {examples}/nwire/PlusDeviceSet_twin_fCal2.xml {bad} --out {tmp}/n.json"),
+    ("nwire-segment-sequence", "nwire segment {bad} --config {examples}/nwire/PlusDeviceSet_twin_fCal2.xml --out {tmp}/f.xml"),
+    ("nwire-segment-config", "nwire segment {tank}/video.mha --config {bad} --out {tmp}/f.xml"),
+    ("tips-frames", "tips {bad} --out {tmp}/i.csv"),
+    ("tips-truth", "tips {tank}/video.mha --truth {bad} --out {tmp}/i.csv"),
+    ("temporal-video", "temporal {bad} {tank}/tracker.mha --out {tmp}/t.json"),
+    ("temporal-tracker", "temporal {tank}/video.mha {bad} --out {tmp}/t.json"),
+    ("temporal-config", "temporal {tank}/video.mha {tank}/tracker.mha --config {bad} --out {tmp}/t.json"),
+    ("temporal-joints", "temporal {tank}/video.mha --joints {bad} --out {tmp}/t.json"),
+    ("view-result", "view {bad} --session {session}"),
+    ("view-plan", "view --plan {bad}"),
+]
+
+CASES = [
+    Case(f"{use}-{kind}", command.replace("{bad}", bad).split(), words, setup)
+    for use, command in USES
+    for kind, bad, setup, words in KINDS
+]
+
+
+def session_file_is(name: str, make: Callable[[Path], None]) -> Callable[[Path], None]:
+    """A copy of the example session in ``{tmp}/s`` whose ``name`` is made by ``make(path)``."""
+
+    def setup(tmp: Path) -> None:
+        shutil.copytree(SESSION, tmp / "s")
+        (tmp / "s" / name).unlink()
+        make(tmp / "s" / name)
+
+    return setup
+
+
+# A session's own files (the folder is the input): refused naming the file, not "missing".
+for _name in ("samples.csv", "session.toml", "touches.csv"):
+    CASES += [
+        Case(
+            f"calibrate-session-{_name}-fifo",
+            ["calibrate", "{tmp}/s", "--out", "{tmp}/r.json", "--quiet"],
+            (_name, "FIFO"),
+            session_file_is(_name, os.mkfifo),
+        ),
+        Case(
+            f"calibrate-session-{_name}-folder",
+            ["calibrate", "{tmp}/s", "--out", "{tmp}/r.json", "--quiet"],
+            (_name, "is a folder"),
+            session_file_is(_name, Path.mkdir),
+        ),
+    ]
+CASES += [
+    Case(
+        "verify-check-session-samples-fifo",
+        ["verify", "{result}", "{tmp}/s", "--out", "{tmp}/r.json"],
+        ("samples.csv", "FIFO"),
+        session_file_is("samples.csv", os.mkfifo),
+    ),
+    Case(
+        "session-symlink-to-dev-zero",
+        ["calibrate", "{tmp}/s", "--out", "{tmp}/r.json", "--quiet"],
+        ("axes.csv", "is a device"),
+        session_file_is("axes.csv", lambda path: path.symlink_to("/dev/zero")),
+    ),
+]
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory) -> dict[str, Path]:
+    """Valid inputs, outside the cases' folders: a result, a twin recording, a water-tank recording."""
+    folder = tmp_path_factory.mktemp("inputs")
+    result = folder / "result.json"
+    assert run_cli(["calibrate", str(SESSION), "--out", str(result), "--quiet"]).code == 0
+    rec = record(Robot.load(), TwinConfig(seed=4), RecordingConfig(rate_hz=25.0, speed_scale=0.5, hold_s=1.6))
+    write_recording(rec, folder / "rec")
+    write_tank_recording(folder / "tank")
+    return {"result": result, "rec": folder / "rec", "tank": folder / "tank", "session": SESSION, "examples": EXAMPLES}
+
+
+@pytest.mark.parametrize("case", [pytest.param(c, id=c.id) for c in CASES])
+def test_a_non_regular_input_file_is_refused_at_once(case, tmp_path, inputs):
+    check_refusal(case, tmp_path, **inputs)
+
+
+def test_every_command_that_reads_a_file_is_in_the_table():
+    """A new command (or input option) gets its rows here: every command of ``brachycal --help``
+    that names an input file is used by some row."""
+    from brachycal.cli.main import COMMANDS
+
+    used = {command.split()[0] if not command.startswith("nwire segment") else "nwire-segment" for _, command in USES}
+    without_input_files = {"demo", "model", "study", "design", "examples"}
+    assert set(COMMANDS) - without_input_files - {"session"} <= used | {"session"}
+    assert "session" in {command.split()[0] for _, command in USES}
