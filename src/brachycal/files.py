@@ -338,9 +338,9 @@ def _refuse_special(destination: Path) -> None:
     raise OutputError(f"is {kind}; an output must be a regular file (refused even with --force)", file=destination)
 
 
-def _declared(inputs: Sequence[str | os.PathLike[str] | None]) -> dict[tuple[int, int], str]:
-    """``(st_dev, st_ino) → path`` of declared input files, and of the files in declared folders."""
-    found: dict[tuple[int, int], str] = {}
+def _declared(inputs: Sequence[str | os.PathLike[str] | None]) -> dict[tuple[int, int], list[str]]:
+    """``(st_dev, st_ino) → paths`` of declared input files, and of the files in declared folders."""
+    found: dict[tuple[int, int], list[str]] = {}
     for item in inputs:
         if item is None:
             continue
@@ -350,17 +350,20 @@ def _declared(inputs: Sequence[str | os.PathLike[str] | None]) -> dict[tuple[int
         for path in paths:
             with contextlib.suppress(OSError):
                 st = os.stat(path)
-                found.setdefault((st.st_dev, st.st_ino), str(path))
+                found.setdefault((st.st_dev, st.st_ino), []).append(str(path))
     return found
 
 
-def _refuse_input(destination: Path, declared: Mapping[tuple[int, int], str]) -> None:
+def _refuse_input(destination: Path, declared: Mapping[tuple[int, int], list[str]]) -> None:
     """An output is never one of the command's inputs (the same file, by inode), even with ``force``."""
     source = input_at(destination)
     if source is None and declared:
         with contextlib.suppress(OSError):
             st = os.stat(destination)
-            source = declared.get((st.st_dev, st.st_ino))
+            names = declared.get((st.st_dev, st.st_ino), [])
+            # another name of it if it has one (a hard link): the input the user knows
+            others = [n for n in names if os.path.abspath(n) != os.path.abspath(destination)]
+            source = (others or names or [None])[0]
     if source is None:
         return
     same = "" if os.path.abspath(source) == os.path.abspath(destination) else f" ({source})"
