@@ -146,3 +146,83 @@ def test_every_command_that_reads_a_file_is_in_the_table():
     without_input_files = {"demo", "model", "study", "design", "examples"}
     assert set(COMMANDS) - without_input_files - {"session"} <= used | {"session"}
     assert "session" in {command.split()[0] for _, command in USES}
+
+
+# --- messages that misled -------------------------------------------------------------------------
+def session_with(name: str, edit: Callable[[str], str]) -> Callable[[Path], None]:
+    def setup(tmp: Path) -> None:
+        shutil.copytree(SESSION, tmp / "s")
+        (tmp / "s" / name).write_text(edit((tmp / "s" / name).read_text()))
+
+    return setup
+
+
+def poses(count: int) -> Callable[[Path], None]:
+    def setup(tmp: Path) -> None:
+        lines = (EXAMPLES / "pivot" / "pointer_pivot.csv").read_text().splitlines()
+        (tmp / "p.csv").write_text("\n".join(lines[: 1 + count]) + "\n")
+
+    return setup
+
+
+MISLED = [
+    Case(
+        "session-size-px-1e30",  # was printed as 9223372036854775807
+        ["calibrate", "{tmp}/s", "--out", "{tmp}/r.json", "--quiet"],
+        ("session.toml", "image.size_px", "1e+30", "at most 10000 px"),
+        session_with("session.toml", lambda text: text.replace("[1080, 720]", "[1e30, 720]")),
+    ),
+    Case("pivot-no-poses", ["pivot", "{tmp}/p.csv", "--out", "{tmp}/o.json"], ("p.csv", "0 poses"), poses(0)),
+    Case("pivot-two-poses", ["pivot", "{tmp}/p.csv", "--out", "{tmp}/o.json"], ("p.csv", "2 poses"), poses(2)),
+    Case(
+        "template-dev-zero",  # was "no such file"
+        BUILD.replace("{rec}", "{tmp}").split() + ["--template", "/dev/zero", "--out", "{tmp}/s"],
+        ("/dev/zero", "is a device"),
+    ),
+]
+
+
+@pytest.mark.parametrize("case", [pytest.param(c, id=c.id) for c in MISLED])
+def test_a_refusal_says_what_is_wrong_and_names_the_file(case, tmp_path):
+    check_refusal(case, tmp_path)
+
+
+# --- a UTF-8 byte-order mark (a spreadsheet's CSV export) is accepted -------------------------------
+def with_bom(source: Path, target: Path) -> Path:
+    target.write_bytes(b"\xef\xbb\xbf" + source.read_bytes())
+    return target
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["fk", "{input}", "--frames", "needle_tip", "--out", "{out}/p.csv", "--quiet"],
+        ["locate", "{result}", "{input}", "--uv", "10,10"],
+    ],
+    ids=["fk", "locate"],
+)
+def test_a_joint_log_with_a_byte_order_mark_reads_as_without(argv, tmp_path, inputs):
+    """Was refused as having "no 'time' column" (the header's first name was '\\ufefftime')."""
+    outcomes = []
+    for name, log in (("plain", EXAMPLES / "joint_log.csv"), ("bom", with_bom(EXAMPLES / "joint_log.csv", tmp_path / "b.csv"))):
+        (tmp_path / name).mkdir()
+        words = [a.format(input=log, out=tmp_path / name, result=inputs["result"]) for a in argv]
+        outcome = run_cli(words)
+        assert outcome.code == 0, outcome.err
+        outcomes.append((outcome.out, *(p.read_bytes() for p in sorted((tmp_path / name).iterdir()))))
+    assert outcomes[0] == outcomes[1]
+
+
+def test_session_files_and_a_pose_list_with_a_byte_order_mark_read_as_without(tmp_path):
+    shutil.copytree(SESSION, tmp_path / "s")
+    for name in ("samples.csv", "touches.csv", "session.toml"):
+        with_bom(SESSION / name, tmp_path / "s" / name)
+    plain = run_cli(["calibrate", str(SESSION), "--out", str(tmp_path / "a.json"), "--quiet"])
+    bom = run_cli(["calibrate", str(tmp_path / "s"), "--out", str(tmp_path / "b.json"), "--quiet"])
+    assert plain.code == bom.code == 0, bom.err
+    assert plain.out.replace("a.json", "b.json") == bom.out
+    pivot = EXAMPLES / "pivot" / "pointer_pivot.csv"
+    plain = run_cli(["pivot", str(pivot), "--out", str(tmp_path / "p.json")])
+    bom = run_cli(["pivot", str(with_bom(pivot, tmp_path / "pointer_pivot.csv")), "--out", str(tmp_path / "q.json")])
+    assert plain.code == bom.code == 0, bom.err
+    assert plain.out.replace("p.json", "q.json") == bom.out

@@ -153,6 +153,8 @@ def open_input(
     try:
         fd = os.open(path, flags)
     except OSError as exc:
+        with contextlib.suppress(OSError):  # a socket cannot be opened: say what it is
+            _check_stat(path, os.stat(path), None, folder_ok=False)
         raise _os_error(path, exc) from None
     try:
         _check_stat(path, os.fstat(fd), max_bytes, folder_ok=False)
