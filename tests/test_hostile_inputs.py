@@ -48,9 +48,15 @@ USES = [
     ("pivot-poses", "pivot {bad} --out {tmp}/p.json"),
     ("phantom-geometry", "phantom --method wedge {bad} {examples}/phantom/wedge_observations.csv --out {tmp}/p.json"),
     ("phantom-observations", "phantom --method wedge {examples}/phantom/multi_wedge.toml {bad} --out {tmp}/p.json"),
-    ("session-build-log", BUILD.replace("{rec}/joint_log.csv", "{bad}") + " --template {rec}/session.toml --out {tmp}/s"),
+    (
+        "session-build-log",
+        BUILD.replace("{rec}/joint_log.csv", "{bad}") + " --template {rec}/session.toml --out {tmp}/s",
+    ),
     ("session-build-marks", BUILD.replace("{rec}/marks.csv", "{bad}") + " --template {rec}/session.toml --out {tmp}/s"),
-    ("session-build-images", BUILD.replace("{rec}/images.csv", "{bad}") + " --template {rec}/session.toml --out {tmp}/s"),
+    (
+        "session-build-images",
+        BUILD.replace("{rec}/images.csv", "{bad}") + " --template {rec}/session.toml --out {tmp}/s",
+    ),
     ("session-build-plan", BUILD.replace("{rec}/plan.csv", "{bad}") + " --template {rec}/session.toml --out {tmp}/s"),
     ("session-build-template", BUILD + " --template {bad} --out {tmp}/s"),
     ("session-build-markups", BUILD + " --markups {bad} --template {rec}/session.toml --out {tmp}/s"),
@@ -58,7 +64,10 @@ USES = [
     ("calibrate-urdf", "calibrate {session} --urdf {bad} --out {tmp}/r.json --quiet"),
     ("nwire-config", "nwire {bad} {examples}/nwire/twin_segmented_frames.xml --out {tmp}/n.json"),
     ("nwire-frames", "nwire {examples}/nwire/PlusDeviceSet_twin_fCal2.xml {bad} --out {tmp}/n.json"),
-    ("nwire-segment-sequence", "nwire segment {bad} --config {examples}/nwire/PlusDeviceSet_twin_fCal2.xml --out {tmp}/f.xml"),
+    (
+        "nwire-segment-sequence",
+        "nwire segment {bad} --config {examples}/nwire/PlusDeviceSet_twin_fCal2.xml --out {tmp}/f.xml",
+    ),
     ("nwire-segment-config", "nwire segment {tank}/video.mha --config {bad} --out {tmp}/f.xml"),
     ("tips-frames", "tips {bad} --out {tmp}/i.csv"),
     ("tips-truth", "tips {tank}/video.mha --truth {bad} --out {tmp}/i.csv"),
@@ -176,15 +185,15 @@ MISLED = [
     Case("pivot-two-poses", ["pivot", "{tmp}/p.csv", "--out", "{tmp}/o.json"], ("p.csv", "2 poses"), poses(2)),
     Case(
         "template-dev-zero",  # was "no such file"
-        BUILD.replace("{rec}", "{tmp}").split() + ["--template", "/dev/zero", "--out", "{tmp}/s"],
+        [*BUILD.split(), "--template", "/dev/zero", "--out", "{tmp}/s"],
         ("/dev/zero", "is a device"),
     ),
 ]
 
 
 @pytest.mark.parametrize("case", [pytest.param(c, id=c.id) for c in MISLED])
-def test_a_refusal_says_what_is_wrong_and_names_the_file(case, tmp_path):
-    check_refusal(case, tmp_path)
+def test_a_refusal_says_what_is_wrong_and_names_the_file(case, tmp_path, inputs):
+    check_refusal(case, tmp_path, **inputs)
 
 
 # --- a UTF-8 byte-order mark (a spreadsheet's CSV export) is accepted -------------------------------
@@ -204,7 +213,10 @@ def with_bom(source: Path, target: Path) -> Path:
 def test_a_joint_log_with_a_byte_order_mark_reads_as_without(argv, tmp_path, inputs):
     """Was refused as having "no 'time' column" (the header's first name was '\\ufefftime')."""
     outcomes = []
-    for name, log in (("plain", EXAMPLES / "joint_log.csv"), ("bom", with_bom(EXAMPLES / "joint_log.csv", tmp_path / "b.csv"))):
+    for name, log in (
+        ("plain", EXAMPLES / "joint_log.csv"),
+        ("bom", with_bom(EXAMPLES / "joint_log.csv", tmp_path / "b.csv")),
+    ):
         (tmp_path / name).mkdir()
         words = [a.format(input=log, out=tmp_path / name, result=inputs["result"]) for a in argv]
         outcome = run_cli(words)

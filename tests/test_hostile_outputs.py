@@ -8,6 +8,7 @@ SIGTERM, a file-size limit) or a failure injected after part of the outputs were
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import os
 import resource
@@ -18,7 +19,6 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable, Iterator
-import contextlib
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -549,7 +549,10 @@ def test_a_held_lock_of_another_user_names_the_writer(shared_folder):
         with unprivileged():
             outcome = run_cli(["fk", str(LOG), "--frames", "needle_tip", "--out", str(shared_folder / "p.csv")])
     assert outcome.code == 2
-    assert outcome.err == f"brachycal: error: {shared_folder / 'p.csv'}: another brachycal process (pid 12345) is writing it\n"
+    assert (
+        outcome.err
+        == f"brachycal: error: {shared_folder / 'p.csv'}: another brachycal process (pid 12345) is writing it\n"
+    )
     assert sorted(p.name for p in shared_folder.iterdir()) == [lock.name]
 
 

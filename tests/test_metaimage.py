@@ -154,7 +154,7 @@ def _header_only(tmp_path: Path, dims: str) -> Path:
 
 def test_an_image_without_pixels_or_fields_is_refused_without_building_its_frames(tmp_path: Path) -> None:
     """``DimSize = 0 0 N`` with no frame fields: N empty frames would be N objects; refused at once."""
-    with pytest.raises(InputError, match="DimSize.*an image without pixels"):
+    with pytest.raises(InputError, match=r"DimSize.*an image without pixels"):
         read_sequence_header(_header_only(tmp_path, "0 0 10000000000"))
 
 

@@ -363,7 +363,7 @@ def _refuse_input(destination: Path, declared: Mapping[tuple[int, int], list[str
             names = declared.get((st.st_dev, st.st_ino), [])
             # another name of it if it has one (a hard link): the input the user knows
             others = [n for n in names if os.path.abspath(n) != os.path.abspath(destination)]
-            source = (others or names or [None])[0]
+            source = next(iter(others or names), None)
     if source is None:
         return
     same = "" if os.path.abspath(source) == os.path.abspath(destination) else f" ({source})"

@@ -27,7 +27,6 @@ import os
 import stat
 import threading
 from collections.abc import Callable, Iterator
-from pathlib import Path
 from typing import IO, Literal, overload
 
 from brachycal.errors import InputError
@@ -261,4 +260,3 @@ def hash_input(path: str | os.PathLike[str], update: Callable[[bytes], object]) 
     with open_input(path) as handle:
         for chunk in _iter_chunks(handle):
             update(chunk)
-

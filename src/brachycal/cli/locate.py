@@ -57,6 +57,8 @@ def run(args: argparse.Namespace) -> int:
     header = "row,x,y,z\n"
     for rows, Q in configuration_blocks(args.joints, robot):
         P = locate(robot, Q, uv, stored.T_EL_Ptip, stored.image[method])
-        sys.stdout.write(header + "".join(f"{r},{p[0]:.9f},{p[1]:.9f},{p[2]:.9f}\n" for r, p in zip(rows, P.tolist(), strict=True)))
+        sys.stdout.write(
+            header + "".join(f"{r},{p[0]:.9f},{p[1]:.9f},{p[2]:.9f}\n" for r, p in zip(rows, P.tolist(), strict=True))
+        )
         header = ""
     return 0

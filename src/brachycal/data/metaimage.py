@@ -128,15 +128,15 @@ def _read_header(path: Path) -> _Header:
     sized = _Header(header, [], dims, data_offset, size)
     if header["ElementDataFile"] == "LOCAL":
         available = size - data_offset
-        raw = _raw_size(sized, path)
-        expected = _compressed_size(sized, path) if _compressed(sized) else raw
+        pixel_bytes = _raw_size(sized, path)
+        expected = _compressed_size(sized, path) if _compressed(sized) else pixel_bytes
         if available < expected:
             raise InputError(
                 f"pixel data cut short: {available} bytes after the header, which announces {expected}", file=path
             )
-        if _compressed(sized) and raw > _ZLIB_MAX_RATIO * expected + 1024:
+        if _compressed(sized) and pixel_bytes > _ZLIB_MAX_RATIO * expected + 1024:
             raise InputError(
-                f"DimSize and ElementType announce {raw} bytes of pixels, more than {expected} compressed "
+                f"DimSize and ElementType announce {pixel_bytes} bytes of pixels, more than {expected} compressed "
                 "bytes can hold",
                 file=path,
                 column="DimSize",
@@ -288,8 +288,10 @@ def _inflate(compressed: bytes, raw_size: int, path: Path) -> bytes:
     inflater = zlib.decompressobj()
     try:
         data = inflater.decompress(compressed, raw_size)
-        if len(data) == raw_size and (inflater.unconsumed_tail or not inflater.eof) and inflater.decompress(
-            inflater.unconsumed_tail, 1
+        if (
+            len(data) == raw_size
+            and (inflater.unconsumed_tail or not inflater.eof)
+            and inflater.decompress(inflater.unconsumed_tail, 1)
         ):
             raise InputError(
                 f"compressed pixel data hold more than the {raw_size} bytes DimSize and ElementType announce",

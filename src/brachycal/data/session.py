@@ -26,8 +26,8 @@ import numpy as np
 
 from brachycal.data.csv_log import read_table, table_configurations, to_float, unique_names
 from brachycal.errors import InputError
-from brachycal.inputs import MAX_DOCUMENT_BYTES, read_input_text
 from brachycal.files import OutputSet, atomic_open, output_set, sha256_file
+from brachycal.inputs import MAX_DOCUMENT_BYTES, read_input_text
 from brachycal.se3 import FloatArray
 from brachycal.validate import MAX_IMAGE_PX, check_spacing_mm
 

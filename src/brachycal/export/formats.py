@@ -43,8 +43,8 @@ from numpy.typing import ArrayLike
 
 from brachycal.calibration.image_to_probe import ImageCalibration
 from brachycal.errors import InputError, OutputError
-from brachycal.inputs import MAX_DOCUMENT_BYTES, MAX_MESH_BYTES, open_input, read_input_text
 from brachycal.files import OutputSet, atomic_open, output_set
+from brachycal.inputs import MAX_DOCUMENT_BYTES, MAX_MESH_BYTES, open_input, read_input_text
 from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, make_transform, to_position_quaternion
