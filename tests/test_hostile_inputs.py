@@ -10,6 +10,7 @@ if the FIFO were opened for reading: the refusal happens when it is checked.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 from collections.abc import Callable
@@ -238,3 +239,44 @@ def test_session_files_and_a_pose_list_with_a_byte_order_mark_read_as_without(tm
     bom = run_cli(["pivot", str(with_bom(pivot, tmp_path / "pointer_pivot.csv")), "--out", str(tmp_path / "q.json")])
     assert plain.code == bom.code == 0, bom.err
     assert plain.out.replace("p.json", "q.json") == bom.out
+
+
+def test_a_fifo_being_written_slowly_is_refused_at_once_not_read(tmp_path):
+    """A writer holds the FIFO open and feeds it a joint log line by line: read, it would never end
+    (and a read blocked in C would not see SIGTERM); ``fk`` refuses it before reading a byte."""
+    import subprocess
+    import sys
+    import threading
+    import time
+
+    fifo = tmp_path / "log.csv"
+    os.mkfifo(fifo)
+    stop = threading.Event()
+
+    def write_slowly() -> None:
+        # open blocks until a reader opens the FIFO (ours does, to check it); the reader's going
+        # away ends the writing with a broken pipe
+        with contextlib.suppress(BrokenPipeError), open(fifo, "w") as handle:
+            for line in (EXAMPLES / "joint_log.csv").read_text().splitlines(keepends=True):
+                if stop.is_set():
+                    return
+                handle.write(line)
+                handle.flush()
+                time.sleep(0.05)
+
+    writer = threading.Thread(target=write_slowly, daemon=True)
+    writer.start()
+    argv = [sys.executable, "-m", "brachycal.cli.main", "fk", str(fifo), "--frames", "needle_tip"]
+    try:
+        done = subprocess.run([*argv, "--out", str(tmp_path / "p.csv")], capture_output=True, text=True, timeout=120)
+    finally:
+        stop.set()
+        with contextlib.suppress(OSError):  # let the writer's open return if no reader ever came
+            os.close(os.open(fifo, os.O_RDONLY | os.O_NONBLOCK))
+        writer.join(timeout=10)
+    assert done.returncode == 2
+    assert (
+        done.stderr
+        == f"brachycal: error: {fifo}: is a FIFO (named pipe), not a regular file; an input must be a regular file\n"
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["log.csv"]
