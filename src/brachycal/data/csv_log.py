@@ -43,6 +43,10 @@ def _open(path: Path) -> TextIO:
     return open_input(path, "r", max_bytes=MAX_TABLE_BYTES, encoding="utf-8-sig")  # type: ignore[return-value]
 
 
+#: Longest header line of a joint log (bytes): a few hundred joints' names are a few KiB.
+MAX_HEADER_BYTES = 1 << 20
+
+
 def _open_binary(path: Path) -> BinaryIO:
     """A joint log, read in blocks (no cap on its size); :func:`open_csv_log` drops a byte-order mark."""
     return open_input(path)  # type: ignore[return-value]
@@ -357,7 +361,9 @@ def open_csv_log(path: str | os.PathLike[str], robot: Robot) -> CsvLog:
     path = Path(path)
     handle = _open_binary(path)
     try:
-        first = handle.readline()
+        first = handle.readline(MAX_HEADER_BYTES + 1)
+        if len(first) > MAX_HEADER_BYTES:  # a file without line breaks is not read whole for its header
+            raise InputError(f"header line longer than {MAX_HEADER_BYTES >> 10} KiB: not a CSV joint log", file=path)
         try:
             header = next(csv.reader([first.decode("utf-8-sig")]), [])
         except (csv.Error, UnicodeDecodeError) as exc:
