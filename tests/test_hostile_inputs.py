@@ -185,6 +185,18 @@ MISLED = [
     Case("pivot-no-poses", ["pivot", "{tmp}/p.csv", "--out", "{tmp}/o.json"], ("p.csv", "0 poses"), poses(0)),
     Case("pivot-two-poses", ["pivot", "{tmp}/p.csv", "--out", "{tmp}/o.json"], ("p.csv", "2 poses"), poses(2)),
     Case(
+        "result-nested-too-deeply",  # was a traceback (RecursionError)
+        ["locate", "{tmp}/r.json", "{examples}/joints.csv", "--uv", "10,10"],
+        ("r.json", "not valid JSON", "recursion"),
+        lambda tmp: (tmp / "r.json").write_text("[" * 100_000 + "]" * 100_000),
+    ),
+    Case(
+        "robot-description-nested-too-deeply",
+        ["calibrate", "{session}", "--robot", "{tmp}/r.toml", "--out", "{tmp}/o.json", "--quiet"],
+        ("r.toml", "not valid TOML", "recursion"),
+        lambda tmp: (tmp / "r.toml").write_text("a = " + "[" * 100_000 + "]" * 100_000),
+    ),
+    Case(
         "template-dev-zero",  # was "no such file"
         [*BUILD.split(), "--template", "/dev/zero", "--out", "{tmp}/s"],
         ("/dev/zero", "is a device"),

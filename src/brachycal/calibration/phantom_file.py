@@ -104,7 +104,7 @@ def load_toml(path: str | os.PathLike[str], kind: str) -> tuple[dict, PhantomGeo
     path = Path(path)
     try:
         data = tomllib.loads(read_input_text(path, max_bytes=MAX_DOCUMENT_BYTES))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError, RecursionError) as exc:
         raise InputError(f"not a readable TOML file ({exc})", file=path) from None
     if data.get("format") != FORMAT:
         raise InputError(f"format must be {FORMAT!r}, got {data.get('format')!r}", file=path)

@@ -209,6 +209,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         where = f"{exc.filename}: " if exc.filename else ""
         print(f"brachycal: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 2
+    except RecursionError:  # a reader that does not name its file: still one line, no traceback
+        print("brachycal: error: an input is nested too deeply to read", file=sys.stderr)
+        return 2
     except MemoryError:
         print("brachycal: error: out of memory (ask for less: fewer points, samples or targets)", file=sys.stderr)
         return 2

@@ -26,7 +26,7 @@ def read_json(path: str | os.PathLike[str]) -> Any:
         return json.loads(read_input_text(path, max_bytes=MAX_DOCUMENT_BYTES))
     except OSError as exc:
         raise InputError(f"cannot read ({exc.strerror})", file=path) from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
         raise InputError(f"not valid JSON ({exc})", file=path) from None
 
 

@@ -82,7 +82,7 @@ class Session:
 def _read_toml(path: Path) -> tuple[FloatArray, np.ndarray, FloatArray]:
     try:
         config = tomllib.loads(read_input_text(path, max_bytes=MAX_DOCUMENT_BYTES))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError, RecursionError) as exc:
         raise InputError(f"not valid TOML ({exc})", file=path) from None
     if config.get("format") != FORMAT:
         raise InputError(f"format is {config.get('format')!r}, expected {FORMAT!r}", file=path, column="format")

@@ -729,7 +729,7 @@ def _load(path: Path) -> RobotDescription:
     r = _Reader(path)
     try:
         data = tomllib.loads(read_input_text(path, max_bytes=MAX_DOCUMENT_BYTES))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError, RecursionError) as exc:
         raise InputError(f"not valid TOML ({exc})", file=path) from None
     unknown = sorted(set(data) - _TOP_KEYS)
     if unknown:
