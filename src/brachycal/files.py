@@ -21,7 +21,10 @@ are the one-file case of it):
   place; if a move fails, the ones already moved are undone (the old files are kept, as hard
   links, until the end). On any failure — an error, Ctrl-C, SIGTERM (the CLI turns it into an
   exception) — every staged file, lock and folder the set created is removed. Only a hard kill
-  (SIGKILL, power loss) can leave hidden staging or lock files; they are never mistaken for outputs.
+  (SIGKILL, power loss) can leave hidden staging or lock files; they are never mistaken for outputs,
+  and the next claim of the same destination removes them (a staging file is stale when the
+  destination's lock is not held: with the lock taken, no live writer has one). A lock file of
+  another user that this process may not open is taken over the same way if no one holds it.
 """
 
 from __future__ import annotations
