@@ -291,7 +291,32 @@ CASES = [
         ("report.html", "one of this command's inputs", "touches.csv"),
         copies({"s": SESSION}, hard_links={"s/report.html": "s/touches.csv"}),
     ),
-    # not declared by the command: refused when the set is committed (the input was read by then)
+    Case(
+        "plan-out-is-its-result-refused-before-planning",
+        ["plan", "--result", "{tmp}/r.json", "--out", "{tmp}/r.json", "--force", "--quiet"],
+        ("r.json", "one of this command's inputs"),
+        lambda tmp: (tmp / "r.json").write_text("{}\n"),  # never read: refused when claimed
+    ),
+    Case(
+        "session-build-out-holds-its-template",
+        [
+            "session",
+            "build",
+            "{log}",
+            "--marks",
+            "{tmp}/m.csv",
+            "--images",
+            "{tmp}/i.csv",
+            "--template",
+            "{tmp}/s/session.toml",
+            "--out",
+            "{tmp}/s",
+            "--force",
+        ],
+        ("session.toml", "one of this command's inputs"),
+        copies({"s": SESSION}),
+    ),
+    # the command reads the input after claiming its outputs: refused when the set is committed
     Case(
         "pivot-out-is-its-poses",
         ["pivot", "{tmp}/p.csv", "--out", "{tmp}/p.csv", "--force"],

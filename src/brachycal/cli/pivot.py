@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from brachycal.cli.common import command_inputs
+
 HELP = "pivot calibration: tool tip and pivot point from poses rotating about a fixed tip"
 DESCRIPTION = """\
 Estimates the tip of a tool in its own (marker or flange) frame and the fixed pivot point in the
@@ -40,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     from brachycal.calibration import pivot_from_file, write_pivot
     from brachycal.files import OutputSet
 
-    with OutputSet(force=args.force) as outputs:
+    with OutputSet(force=args.force, inputs=command_inputs(args, "poses")) as outputs:
         staged = outputs.claim(args.out, label="--out")
         calibration = pivot_from_file(args.poses, args.method, args.units)
         write_pivot(calibration, staged, force=args.force)

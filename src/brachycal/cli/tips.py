@@ -6,6 +6,8 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from brachycal.cli.common import command_inputs
+
 if TYPE_CHECKING:
     import numpy as np
 
@@ -80,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
     from brachycal.imaging.needle_tip import MIN_CONFIDENCE, detect_tip
 
     min_confidence = MIN_CONFIDENCE if args.min_confidence is None else args.min_confidence
-    with OutputSet(force=args.force) as outputs:
+    with OutputSet(force=args.force, inputs=command_inputs(args, "frames", "truth")) as outputs:
         out = outputs.claim(args.out, label="--out")
         sheet = outputs.claim(args.sheet, label="--sheet") if args.sheet else None
         sequence = read_image_sequence(args.frames)
