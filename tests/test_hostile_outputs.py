@@ -8,9 +8,11 @@ SIGTERM, a file-size limit) or a failure injected after part of the outputs were
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import os
 import resource
+import shutil
 import signal
 import subprocess
 import sys
@@ -40,6 +42,25 @@ def existing(*names: str) -> Callable[[Path], None]:
         for name in names:
             (tmp / name).parent.mkdir(parents=True, exist_ok=True)
             (tmp / name).write_text("keep me\n")
+
+    return setup
+
+
+def copies(
+    files: dict[str, Path], links: dict[str, str] | None = None, hard_links: dict[str, str] | None = None
+) -> Callable[[Path], None]:
+    """Copies of ``files`` (folders too) at the given names; symlinks and hard links ``name -> target``."""
+
+    def setup(tmp: Path) -> None:
+        for name, source in files.items():
+            if source.is_dir():
+                shutil.copytree(source, tmp / name)
+            else:
+                shutil.copyfile(source, tmp / name)
+        for name, target in (links or {}).items():
+            (tmp / name).symlink_to(target)
+        for name, target in (hard_links or {}).items():
+            (tmp / name).hardlink_to(tmp / target)
 
     return setup
 
@@ -238,6 +259,69 @@ CASES = [
         ["demo", "--out", "{tmp}/d", "--force"],
         ("fig10_points.png", "FIFO"),
         fifo("d/report/fig10_points.png"),
+    ),
+    # an output is never one of the command's inputs, --force or not (the same file, by any name)
+    Case(
+        "fk-out-is-its-log-even-with-force",
+        ["fk", "{tmp}/log.csv", "--frames", "needle_tip", "--out", "{tmp}/log.csv", "--force", "--quiet"],
+        ("log.csv", "one of this command's inputs", "--force"),
+        copies({"log.csv": LOG}),
+    ),
+    Case(
+        "fk-out-is-its-log-through-a-symlink",
+        ["fk", "{tmp}/link.csv", "--frames", "needle_tip", "--out", "{tmp}/log.csv", "--force", "--quiet"],
+        ("log.csv", "one of this command's inputs", "link.csv"),
+        copies({"log.csv": LOG}, links={"link.csv": "log.csv"}),
+    ),
+    Case(
+        "fk-out-is-its-times-file",
+        ["fk", "{log}", "--frames", "needle_tip", "--times", "{tmp}/t.csv", "--out", "{tmp}/t.csv", "--force"],
+        ("t.csv", "one of this command's inputs"),
+        copies({"t.csv": LOG}),
+    ),
+    Case(
+        "calibrate-out-is-its-samples-even-with-force",
+        ["calibrate", "{tmp}/s", "--out", "{tmp}/s/samples.csv", "--force", "--quiet"],
+        ("samples.csv", "one of this command's inputs"),
+        copies({"s": SESSION}),
+    ),
+    Case(
+        "calibrate-report-is-a-hard-link-to-its-touches",
+        ["calibrate", "{tmp}/s", "--out", "{tmp}/r.json", "--report", "{tmp}/s", "--force", "--quiet"],
+        ("report.html", "one of this command's inputs", "touches.csv"),
+        copies({"s": SESSION}, hard_links={"s/report.html": "s/touches.csv"}),
+    ),
+    Case(
+        "plan-out-is-its-result-refused-before-planning",
+        ["plan", "--result", "{tmp}/r.json", "--out", "{tmp}/r.json", "--force", "--quiet"],
+        ("r.json", "one of this command's inputs"),
+        lambda tmp: (tmp / "r.json").write_text("{}\n"),  # never read: refused when claimed
+    ),
+    Case(
+        "session-build-out-holds-its-template",
+        [
+            "session",
+            "build",
+            "{log}",
+            "--marks",
+            "{tmp}/m.csv",
+            "--images",
+            "{tmp}/i.csv",
+            "--template",
+            "{tmp}/s/session.toml",
+            "--out",
+            "{tmp}/s",
+            "--force",
+        ],
+        ("session.toml", "one of this command's inputs"),
+        copies({"s": SESSION}),
+    ),
+    # the command reads the input after claiming its outputs: refused when the set is committed
+    Case(
+        "pivot-out-is-its-poses",
+        ["pivot", "{tmp}/p.csv", "--out", "{tmp}/p.csv", "--force"],
+        ("p.csv", "one of this command's inputs"),
+        copies({"p.csv": ROOT / "examples" / "pivot" / "pointer_pivot.csv"}),
     ),
 ]
 
@@ -439,3 +523,104 @@ def test_an_unreadable_session_file_is_one_line_naming_it(shared_folder):
     assert lines[0].startswith("brachycal: error: ") and "session.toml" in lines[0]
     assert "permission denied" in lines[0].lower()
     assert list(out.iterdir()) == []
+
+
+# --- after a hard kill, and locks of other users ------------------------------------------------------
+def test_after_kill_9_the_next_run_removes_the_stale_staging_file(tmp_path):
+    long_log(tmp_path / "log.csv", 100)
+    argv = [*CONSOLE, "fk", "log.csv", "--frames", "needle_tip,probe_tip", "--out", "poses.csv", "--quiet"]
+    process = subprocess.Popen(argv, cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    wait_for(lambda: any(tmp_path.glob(".poses.csv.brachycal-*.csv")), process, "the staged pose table")
+    process.kill()
+    process.wait()
+    left = hidden(tmp_path)
+    assert any(name.endswith(".csv") for name in left) and ".poses.csv.brachycal-lock" in left, left
+    done = subprocess.run(argv, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert hidden(tmp_path) == [] and sorted(p.name for p in tmp_path.iterdir()) == ["log.csv", "poses.csv"]
+
+
+def test_a_stale_staging_file_of_another_output_is_left_alone(tmp_path):
+    """Only the claimed destination's own staging files are stale for its writer."""
+    others = [".q.csv.brachycal-0123abcd.csv", ".poses.csv.brachycal-0123abcd.csv.brachycal-89abcdef.csv"]
+    for name in [*others, ".poses.csv.brachycal-0123abcd.csv", ".poses.csv.brachycal-0123abcd-old"]:
+        (tmp_path / name).write_text("left by a killed writer\n")
+    outcome = run_cli(["fk", str(LOG), "--frames", "needle_tip", "--out", str(tmp_path / "poses.csv"), "--quiet"])
+    assert outcome.code == 0, outcome.err
+    assert hidden(tmp_path) == sorted(others)
+
+
+def test_a_stale_lock_of_another_user_is_taken_over(shared_folder):
+    """A lock file root left (its writer killed) in a folder both may write: not "Permission denied"."""
+    shared_folder.chmod(0o777)
+    lock = shared_folder / ".p.csv.brachycal-lock"
+    lock.write_text("12345\n")
+    lock.chmod(0o644)
+    with unprivileged():
+        outcome = run_cli(["fk", str(LOG), "--frames", "needle_tip", "--out", str(shared_folder / "p.csv"), "--quiet"])
+    assert outcome.code == 0, outcome.err
+    assert sorted(p.name for p in shared_folder.iterdir()) == ["p.csv"]
+
+
+def test_a_held_lock_of_another_user_names_the_writer(shared_folder):
+    import fcntl
+
+    shared_folder.chmod(0o777)
+    lock = shared_folder / ".p.csv.brachycal-lock"
+    lock.write_text("12345\n")
+    lock.chmod(0o644)
+    with lock.open("r") as held:
+        fcntl.flock(held, fcntl.LOCK_EX)
+        with unprivileged():
+            outcome = run_cli(["fk", str(LOG), "--frames", "needle_tip", "--out", str(shared_folder / "p.csv")])
+    assert outcome.code == 2
+    assert (
+        outcome.err
+        == f"brachycal: error: {shared_folder / 'p.csv'}: another brachycal process (pid 12345) is writing it\n"
+    )
+    assert sorted(p.name for p in shared_folder.iterdir()) == [lock.name]
+
+
+@contextmanager
+def small_disk(folder: Path, size: str) -> Iterator[bool]:
+    """A tmpfs of ``size`` at ``folder`` if this process may mount one (yields True), else nothing."""
+    folder.mkdir()
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(folder)], capture_output=True)
+    try:
+        yield mounted.returncode == 0
+    finally:
+        if mounted.returncode == 0:
+            subprocess.run(["umount", str(folder)], check=True)
+
+
+def test_a_full_disk_during_export_leaves_nothing_and_names_the_output(tmp_path, inputs, monkeypatch):
+    """The meshes fill the disk: no folder, no staging or lock file is left; the message names a
+    mesh output, not the robot description being copied from."""
+    disk = tmp_path / "disk"
+    with small_disk(disk, "300k") as real:
+        if not real:  # no tmpfs: the copy fails as a full disk makes it fail
+            import brachycal.export.formats as formats
+
+            def full(source, target, *args):
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+            monkeypatch.setattr(formats.shutil, "copyfileobj", full)
+        outcome = run_cli(["export", str(inputs["result"]), "--out", str(disk / "x")])
+        assert outcome.code == 2, outcome.err
+        assert outcome.err.startswith(f"brachycal: error: {disk / 'x' / 'meshes'}/"), outcome.err
+        assert outcome.err.endswith(": cannot write (No space left on device)\n"), outcome.err
+        assert list(disk.iterdir()) == []
+
+
+def test_a_read_only_file_system_is_named_at_the_output_not_its_staging_file(tmp_path):
+    disk = tmp_path / "ro"
+    with small_disk(disk, "100k") as real:
+        if real:
+            subprocess.run(["mount", "-o", "remount,ro", str(disk)], check=True)
+        else:
+            disk.chmod(0o555)
+        with unprivileged() if not real else contextlib.nullcontext():
+            outcome = run_cli(["fk", str(LOG), "--frames", "needle_tip", "--out", str(disk / "p.csv"), "--quiet"])
+        reason = "Read-only file system" if real else "Permission denied"
+        assert outcome.err == f"brachycal: error: {disk / 'p.csv'}: cannot write here ({reason})\n"
+        assert outcome.code == 2

@@ -104,7 +104,7 @@ PARALLEL = 'format = "brachycal-phantom/1"\nkind = "wire"\n' + "".join(
 
 CASES = [
     Case("unknown method", [*WIRE[:2], "cube", *WIRE[3:]], ("invalid choice", "cube"), files()),
-    Case("missing geometry", WIRE, ("geometry.toml", "cannot read"), lambda tmp: None),
+    Case("missing geometry", WIRE, ("geometry.toml", "no such file"), lambda tmp: None),
     Case("geometry not TOML", WIRE, ("geometry.toml", "TOML"), files(geometry=lambda t: t + "\n[[[")),
     Case(
         "geometry of another format", WIRE, ("format",), files(geometry=lambda t: t.replace("phantom/1", "phantom/9"))

@@ -29,6 +29,10 @@ def _empty(tmp: Path) -> None:
     write_image_sequence(tmp / "frames.mha", np.zeros((0, 30, 40), dtype=np.uint8), timestamps_s=[])
 
 
+def _zero_by_zero(tmp: Path) -> None:
+    write_image_sequence(tmp / "frames.mha", np.zeros((2, 0, 0), dtype=np.uint8), timestamps_s=[1.0, 2.0])
+
+
 def _sixteen_bit(tmp: Path) -> None:
     write_image_sequence(tmp / "frames.mha", np.zeros((1, 30, 40), dtype=np.uint16), timestamps_s=[1.0])
 
@@ -46,6 +50,7 @@ CASES = [
     Case("not-a-metaimage", FRAMES, ("frames.mha",), setup=_text),
     Case("colour-frames", FRAMES, ("single-channel",), setup=_colour),
     Case("empty-sequence", FRAMES, ("no frames",), setup=_empty),
+    Case("frames-of-0x0-pixels", FRAMES, ("frames.mha", "0x0 pixels"), setup=_zero_by_zero),
     Case("16-bit-frames", FRAMES, ("8-bit",), setup=_sixteen_bit),
     Case("frame-without-time", FRAMES, ("timestamp", "frame 0"), setup=_no_times),
     Case("confidence-above-1", [*FRAMES, "--min-confidence", "1.5"], ("--min-confidence",), setup=_good),

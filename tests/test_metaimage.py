@@ -123,6 +123,11 @@ def _valid(tmp_path: Path, **changes: str) -> Path:
         ({"Seq_Frame0001_Timestamp": "inf"}, "not finite"),
         ({"CompressedDataSize": "999999"}, "pixel data cut short"),
         ({"DimSize": "4 3 2 1", "NDims": "4"}, "expected a 2D image or a sequence of 2D frames"),
+        # sizes announced by the header are checked before anything is allocated for them
+        ({"DimSize": "8 8 1e10"}, "column 'DimSize': expected whole numbers"),
+        ({"DimSize": "8 8 10000000000"}, "announce 640000000000 bytes of pixels, more than"),
+        ({"DimSize": "8 8 10000000000", "CompressedData": "False"}, "pixel data cut short"),
+        ({"DimSize": "0 3 10000000000"}, "no fields for frame 2 of 10000000000"),
     ],
 )
 def test_bad_files_are_refused_naming_what_is_wrong(tmp_path: Path, changes: dict[str, str], words: str) -> None:
@@ -137,6 +142,45 @@ def test_the_valid_file_of_those_cases_reads(tmp_path: Path) -> None:
     sequence = read_image_sequence(_valid(tmp_path))
     assert sequence.pixels.shape == (2, 3, 4)
     np.testing.assert_array_equal(sequence.timestamps_s, [1.0, 2.0])
+
+
+def _header_only(tmp_path: Path, dims: str) -> Path:
+    """A MetaImage with no frame fields and no pixel data: only its DimSize."""
+    path = tmp_path / "empty.mha"
+    header = f"ObjectType = Image\nNDims = 3\nDimSize = {dims}\nElementType = MET_UCHAR\nElementDataFile = LOCAL\n"
+    path.write_text(header)
+    return path
+
+
+def test_an_image_without_pixels_or_fields_is_refused_without_building_its_frames(tmp_path: Path) -> None:
+    """``DimSize = 0 0 N`` with no frame fields: N empty frames would be N objects; refused at once."""
+    with pytest.raises(InputError, match=r"DimSize.*an image without pixels"):
+        read_sequence_header(_header_only(tmp_path, "0 0 10000000000"))
+
+
+def test_a_zlib_bomb_is_refused_holding_no_more_than_the_announced_pixels(tmp_path: Path) -> None:
+    """200 MB of zeros in ~200 kB of zlib, announced as 24 bytes of pixels: inflating stops at 24."""
+    import tracemalloc
+
+    bomb = zlib.compress(bytes(200 << 20), 9)
+    path = _valid(tmp_path, CompressedDataSize=str(len(bomb)))
+    path.write_bytes(path.read_bytes()[: -len(zlib.compress(_frames("uint8", (2, 3, 4)).tobytes()))] + bomb)
+    tracemalloc.start()
+    try:
+        with pytest.raises(InputError, match="compressed pixel data hold more than the 24 bytes"):
+            read_image_sequence(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 4 * len(bomb) + (1 << 20), peak  # the compressed bytes, not the 200 MB
+
+
+def test_pixels_larger_than_half_the_memory_are_refused_before_reading(tmp_path: Path, monkeypatch) -> None:
+    import brachycal.inputs
+
+    monkeypatch.setattr(brachycal.inputs, "memory_bytes", lambda: 40)  # a machine of 40 bytes
+    with pytest.raises(InputError, match=r"pixel data .* would take 24 bytes, more than half of this machine's"):
+        read_image_sequence(_valid(tmp_path))
 
 
 def test_writer_refuses_arrays_that_are_not_frames(tmp_path: Path) -> None:

@@ -272,6 +272,6 @@ def test_every_reader_on_every_plus_file_gives_a_result_or_one_line(reader):
 def test_readers_refuse_a_missing_file_and_a_folder(tmp_path):
     (tmp_path / "folder.xml").mkdir()
     for read in READERS.values():
-        for name in ("nope.xml", "folder.xml"):
-            with pytest.raises(InputError, match=rf"{name}: cannot read"):
+        for name, problem in (("nope.xml", "no such file"), ("folder.xml", "is a folder; expected a file")):
+            with pytest.raises(InputError, match=rf"{name}: {problem}"):
                 read(tmp_path / name)

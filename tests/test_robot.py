@@ -133,7 +133,7 @@ def test_malformed_urdf_is_refused(tmp_path):
     bad.write_text("<robot><link name='a'>")
     with pytest.raises(InputError, match=r"bad\.urdf: not valid XML"):
         Robot.load(bad)
-    with pytest.raises(InputError, match="cannot read URDF"):
+    with pytest.raises(InputError, match=r"missing\.urdf: no such file"):
         Robot.load(tmp_path / "missing.urdf")
 
 

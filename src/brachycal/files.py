@@ -7,6 +7,9 @@ are the one-file case of it):
   or absent (a directory, device, FIFO or socket is refused, even with ``force``), its folder must
   exist (or be created, where a command's contract says so), it is replaced only with ``force``,
   and two outputs of one command may not share a path.
+- **Never an input.** A destination that is one of the command's input files (the same file,
+  by inode: the command line records every input opened, :mod:`brachycal.inputs`) is refused,
+  even with ``force``: when claimed if the input was read already, else when committed.
 - **Claimed against other brachycal processes.** A hidden lock file next to each destination,
   ``.<name>.brachycal-lock``, held with ``flock``: a second writer of the same file is refused at
   once ("another brachycal process is writing it"); the kernel releases the lock when its holder
@@ -18,7 +21,10 @@ are the one-file case of it):
   place; if a move fails, the ones already moved are undone (the old files are kept, as hard
   links, until the end). On any failure — an error, Ctrl-C, SIGTERM (the CLI turns it into an
   exception) — every staged file, lock and folder the set created is removed. Only a hard kill
-  (SIGKILL, power loss) can leave hidden staging or lock files; they are never mistaken for outputs.
+  (SIGKILL, power loss) can leave hidden staging or lock files; they are never mistaken for outputs,
+  and the next claim of the same destination removes them (a staging file is stale when the
+  destination's lock is not held: with the lock taken, no live writer has one). A lock file of
+  another user that this process may not open is taken over the same way if no one holds it.
 """
 
 from __future__ import annotations
@@ -30,6 +36,7 @@ import hashlib
 import json
 import math
 import os
+import re
 import secrets
 import stat
 from collections.abc import Iterator, Mapping, Sequence
@@ -40,6 +47,7 @@ from types import TracebackType
 from typing import IO
 
 from brachycal.errors import OutputError
+from brachycal.inputs import hash_input, input_at
 
 __all__ = [
     "OutputSet",
@@ -95,6 +103,9 @@ class OutputSet:
 
     Args:
         force: replace existing regular files (never directories or special files).
+        inputs: the command's input files (a folder stands for the files in it), declared so
+            that an output naming one is refused when claimed, before any work; inputs read
+            under the command line are refused anyway, when the set is committed.
 
     Raises (from :meth:`claim` and :meth:`commit`):
         OutputError: naming the destination — exists without ``force``, not a regular file,
@@ -102,8 +113,9 @@ class OutputSet:
             share it, or an OS error (permission denied, read-only file system, disk full).
     """
 
-    def __init__(self, *, force: bool = False) -> None:
+    def __init__(self, *, force: bool = False, inputs: Sequence[str | os.PathLike[str] | None] = ()) -> None:
         self.force = force
+        self._inputs = _declared(inputs)
         self._claims: dict[str, _Claim] = {}  # key: the destination's resolved path
         self._created_dirs: list[Path] = []
         self._labels: dict[str, str] = {}
@@ -134,13 +146,16 @@ class OutputSet:
                 file=destination,
             )
         _refuse_special(destination)
+        _refuse_input(destination, self._inputs)
         self._ensure_folder(destination.parent, make_parents)
         claim = _Claim(destination, destination.parent / f".{destination.name}{STAGE_MARK}{self._token}")
         claim.staging = claim.staging.with_name(claim.staging.name + destination.suffix)
         self._claims[key] = claim
         self._labels[key] = label
         with _signals_deferred():  # an interrupt between creating the lock file and recording it would leak it
-            claim.lock_path, claim.lock_fd = _lock(destination)
+            claim.lock_path, claim.lock_fd, exclusive = _lock(destination)
+        if exclusive:
+            _remove_stale_staging(destination)
         # Checked with the lock held: a brachycal writer that committed just before us is seen.
         if os.path.lexists(destination) and not self.force:
             raise OutputError("already exists; pass --force to replace it", file=destination)
@@ -221,6 +236,7 @@ class OutputSet:
     def _move_into_place(self, claim: _Claim) -> Path | None:
         destination = claim.destination
         _refuse_special(destination)  # in case one appeared while the command ran
+        _refuse_input(destination, self._inputs)  # the command read it after claiming it
         try:
             if not os.path.lexists(destination):
                 _link_new(claim.staging, destination, self.force)
@@ -247,7 +263,8 @@ class OutputSet:
         if self._closed:
             return
         for claim in self._claims.values():
-            _remove(claim.staging)
+            with contextlib.suppress(OSError):  # best effort: the error that ended the set is the one to report
+                _remove(claim.staging)
         self._close()
         for folder in reversed(self._created_dirs):
             with contextlib.suppress(OSError):  # not empty: someone else wrote there meanwhile
@@ -324,6 +341,41 @@ def _refuse_special(destination: Path) -> None:
     raise OutputError(f"is {kind}; an output must be a regular file (refused even with --force)", file=destination)
 
 
+def _declared(inputs: Sequence[str | os.PathLike[str] | None]) -> dict[tuple[int, int], list[str]]:
+    """``(st_dev, st_ino) → paths`` of declared input files, and of the files in declared folders."""
+    found: dict[tuple[int, int], list[str]] = {}
+    for item in inputs:
+        if item is None:
+            continue
+        paths = [Path(item)]
+        if paths[0].is_dir():
+            paths = [p for p in paths[0].iterdir() if p.is_file()]
+        for path in paths:
+            with contextlib.suppress(OSError):
+                st = os.stat(path)
+                found.setdefault((st.st_dev, st.st_ino), []).append(str(path))
+    return found
+
+
+def _refuse_input(destination: Path, declared: Mapping[tuple[int, int], list[str]]) -> None:
+    """An output is never one of the command's inputs (the same file, by inode), even with ``force``."""
+    source = input_at(destination)
+    if source is None and declared:
+        with contextlib.suppress(OSError):
+            st = os.stat(destination)
+            names = declared.get((st.st_dev, st.st_ino), [])
+            # another name of it if it has one (a hard link): the input the user knows
+            others = [n for n in names if os.path.abspath(n) != os.path.abspath(destination)]
+            source = next(iter(others or names), None)
+    if source is None:
+        return
+    same = "" if os.path.abspath(source) == os.path.abspath(destination) else f" ({source})"
+    raise OutputError(
+        f"is one of this command's inputs{same}; an output never replaces an input (refused even with --force)",
+        file=destination,
+    )
+
+
 @contextlib.contextmanager
 def _signals_deferred() -> Iterator[None]:
     """Hold SIGINT and SIGTERM back for a few system calls (delivered on exit, the mask restored):
@@ -340,8 +392,11 @@ def _signals_deferred() -> Iterator[None]:
         signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
-def _lock(destination: Path) -> tuple[Path, int]:
-    """Hold ``.<name>.brachycal-lock`` next to ``destination``; refuse if another process holds it."""
+def _lock(destination: Path) -> tuple[Path, int, bool]:
+    """Hold ``.<name>.brachycal-lock`` next to ``destination``; refuse if another process holds it.
+
+    Returns the lock file, its descriptor, and whether the lock is the kernel's (``flock``), so
+    that no other brachycal process can be writing ``destination`` now."""
     lock_path = destination.with_name(f".{destination.name}{LOCK_SUFFIX}")
     for _ in range(100):
         try:
@@ -353,10 +408,14 @@ def _lock(destination: Path) -> tuple[Path, int]:
             raise OutputError(
                 f"another brachycal process is writing it (or remove {lock_path.name})", file=destination
             ) from None
+        except PermissionError as exc:
+            if fcntl is not None and os.path.lexists(lock_path) and _stale_lock_removed(lock_path, destination):
+                continue  # another user's stale lock file, removed: take it afresh
+            raise OutputError(f"cannot write here ({exc.strerror})", file=destination) from None
         except OSError as exc:
             raise OutputError(f"cannot write here ({exc.strerror})", file=destination) from None
         if fcntl is None:  # pragma: no cover
-            return lock_path, fd
+            return lock_path, fd, False
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -365,7 +424,7 @@ def _lock(destination: Path) -> tuple[Path, int]:
             who = f" (pid {holder})" if holder.isdigit() else ""
             raise OutputError(f"another brachycal process{who} is writing it", file=destination) from None
         except OSError:  # a file system without flock: the claim is this process's word only
-            return lock_path, fd
+            return lock_path, fd, False
         # The previous holder removes the file as it lets go; if it did so between our open and
         # our flock, we hold a lock on a removed file: start again with the file at the path.
         try:
@@ -375,9 +434,61 @@ def _lock(destination: Path) -> tuple[Path, int]:
         if same:
             os.ftruncate(fd, 0)
             os.write(fd, f"{os.getpid()}\n".encode())
-            return lock_path, fd
+            return lock_path, fd, True
         os.close(fd)
     raise OutputError("cannot take the lock (it keeps changing)", file=destination)  # pragma: no cover
+
+
+def _remove_stale_staging(destination: Path) -> None:
+    """Remove the staging files (``.<name>.brachycal-<token><suffix>``, ``…-old``) a killed writer
+    of ``destination`` left: with the destination's lock held, no live writer has any."""
+    prefix = f".{destination.name}{STAGE_MARK}"
+    folder = destination.parent if str(destination.parent) else Path(".")
+    try:
+        names = [entry.name for entry in os.scandir(folder) if entry.name.startswith(prefix)]
+    except OSError:
+        return
+    staging = re.compile(rf"[0-9a-f]{{8}}(?:-old|{re.escape(destination.suffix)})")
+    for name in names:
+        if not staging.fullmatch(name[len(prefix) :]):
+            continue
+        with contextlib.suppress(OSError):
+            (folder / name).unlink()
+
+
+def _stale_lock_removed(lock_path: Path, destination: Path) -> bool:
+    """A lock file this process may not open for writing (another user's): refuse naming its
+    holder if it is held, else remove it (stale: its holder died) and say whether that worked.
+
+    Raises:
+        OutputError: the lock is held (another brachycal process is writing the destination), or
+            it is stale and cannot be removed (naming the lock file to remove).
+    """
+    try:
+        fd = os.open(lock_path, os.O_RDONLY | getattr(os, "O_CLOEXEC", 0))
+    except OSError:
+        return False  # cannot even read it: the folder's permission error is the one to report
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.read(fd, 32).decode(errors="replace").strip()
+            who = f" (pid {holder})" if holder.isdigit() else ""
+            raise OutputError(f"another brachycal process{who} is writing it", file=destination) from None
+        except OSError:
+            return False
+    finally:
+        os.close(fd)
+    try:
+        lock_path.unlink()
+    except FileNotFoundError:
+        return True
+    except OSError:
+        raise OutputError(
+            f"a stale lock file of another user, {lock_path.name}, is in the way (its writer is gone): remove it",
+            file=destination,
+        ) from None
+    return True
 
 
 def _unlock(claim: _Claim) -> None:
@@ -423,8 +534,14 @@ def _keep_old(destination: Path, old: Path) -> None:
 
 
 def _remove(path: Path) -> None:
-    with contextlib.suppress(FileNotFoundError):
+    """Remove ``path`` if it is there (a read-only file system refuses even to unlink nothing)."""
+    try:
         path.unlink()
+    except FileNotFoundError:
+        pass
+    except OSError:
+        if os.path.lexists(path):
+            raise
 
 
 def output_set(outputs: OutputSet | None, *, force: bool = False) -> contextlib.AbstractContextManager[OutputSet]:
@@ -547,12 +664,13 @@ def sha256_file(path: str | os.PathLike[str]) -> str:
     relative to the folder, a NUL byte and its bytes, in sorted order. The provenance results and
     reports record for each input."""
     path = Path(path)
-    if not path.is_dir():
-        return sha256_bytes(path.read_bytes())
     digest = hashlib.sha256()
+    if not path.is_dir():
+        hash_input(path, digest.update)
+        return digest.hexdigest()
     for item in sorted(p for p in path.rglob("*") if p.is_file()):
         digest.update(str(item.relative_to(path)).encode() + b"\0")
-        digest.update(item.read_bytes())
+        hash_input(item, digest.update)
     return digest.hexdigest()
 
 

@@ -120,7 +120,7 @@ def read_check_session(folder: str | os.PathLike[str], robot: Robot) -> CheckSes
             "not a check session folder (expected a folder with session.toml and samples.csv)", file=folder
         )
     for name in ("session.toml", "samples.csv"):
-        if not (folder / name).is_file():
+        if not os.path.lexists(folder / name):  # anything else there is refused by its reader
             raise InputError("missing check session file", file=folder / name)
     spacing_m, size_px, _ = read_session_toml(folder / "session.toml")
     path = folder / "samples.csv"
@@ -133,7 +133,7 @@ def read_check_session(folder: str | os.PathLike[str], robot: Robot) -> CheckSes
     inputs = {name: sha256_file(folder / name) for name in ("session.toml", "samples.csv")}
     touches: list[tuple[str, str, int, FloatArray]] = []
     path = folder / "touches.csv"
-    if path.is_file():
+    if os.path.lexists(path):
         header, rows, records = read_table(path, ["tool", "reference", "trial"])
         check_robot_columns(path, header, robot)
         tools = labels(path, header, rows, records, "tool", ("top_model", *CHECK_TOOLS))

@@ -48,6 +48,7 @@ import numpy as np
 
 from brachycal.data.csv_log import read_table, to_float
 from brachycal.errors import InputError
+from brachycal.inputs import MAX_DOCUMENT_BYTES, read_input_text
 from brachycal.se3 import FloatArray, inverse, make_transform
 from brachycal.validate import MAX_IMAGE_PX, MAX_POSITION_M, check_positions, check_transform
 
@@ -102,10 +103,8 @@ def load_toml(path: str | os.PathLike[str], kind: str) -> tuple[dict, PhantomGeo
     """
     path = Path(path)
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise InputError(f"cannot read ({exc.strerror})", file=path) from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        data = tomllib.loads(read_input_text(path, max_bytes=MAX_DOCUMENT_BYTES))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError, RecursionError) as exc:
         raise InputError(f"not a readable TOML file ({exc})", file=path) from None
     if data.get("format") != FORMAT:
         raise InputError(f"format must be {FORMAT!r}, got {data.get('format')!r}", file=path)

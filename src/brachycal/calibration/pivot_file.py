@@ -113,8 +113,11 @@ def pivot_from_file(path: str | os.PathLike[str], method: str = "algebraic", uni
     names, T, _ = read_pose_list(path)
     try:
         result = PIVOT_METHODS[method](T)
-    except DegenerateDataError as exc:  # name the file the poses came from
-        raise DegenerateDataError(exc.problem, file=path) from None
+    except InputError as exc:  # too few poses, or poses that cannot determine the tip: name their file
+        if exc.file is not None:
+            raise
+        kind = DegenerateDataError if isinstance(exc, DegenerateDataError) else InputError
+        raise kind(exc.problem, file=path) from None
     check_tool_length(result, units, path)
     return PivotCalibration(result, names, units, {Path(path).name: sha256_file(path)})
 

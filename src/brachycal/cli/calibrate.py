@@ -144,7 +144,7 @@ def _run(args: argparse.Namespace, collecting: bool) -> int:
     if args.method != "chain" and (args.robot_accuracy_mm is not None or args.robot_accuracy_deg is not None):
         option = "--robot-accuracy-mm" if args.robot_accuracy_mm is not None else "--robot-accuracy-deg"
         raise InputError(f"{option} needs --method chain (the sequential method states no robot term)")
-    with OutputSet(force=args.force) as outputs:
+    with OutputSet(force=args.force, inputs=[args.session]) as outputs:
         staged_result = outputs.claim(args.out, label="--out")
         if args.report:
             # Here, not at the top: the report's figures load matplotlib (~0.5 s), for --report only.

@@ -50,6 +50,14 @@ def add_robot_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup) 
     add_urdf_option(parser)
 
 
+def command_inputs(args: argparse.Namespace, *names: str) -> list[str]:
+    """The input files (or folders) the options ``names`` of ``args`` give, with ``--robot`` and
+    ``--urdf``: declared to the command's :class:`~brachycal.files.OutputSet`, so that an output
+    naming one of them is refused before any work."""
+    values = [getattr(args, name, None) for name in (*names, "robot", "urdf")]
+    return [value for value in values if isinstance(value, str)]
+
+
 def load_robot(args: argparse.Namespace) -> Robot:
     """The robot of ``--robot`` (a description) or ``--urdf`` (an SDA10F URDF), default the bundled SDA10F.
 

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from brachycal.cli.common import add_method_option, add_robot_option, load_robot
+from brachycal.cli.common import add_method_option, add_robot_option, command_inputs, load_robot
 
 if TYPE_CHECKING:
     from brachycal.files import OutputSet
@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
         check_ros_package_name(args.ros_package)
     # The robot names the files (<robot>_calibrated.urdf, the flanges' .tfm): loaded before the claims.
     robot = load_robot(args)
-    with OutputSet(force=args.force) as outputs:
+    with OutputSet(force=args.force, inputs=command_inputs(args, "result")) as outputs:
         for name in export_files(robot.rig):
             outputs.claim(Path(args.out) / name, make_parents=True)
         if args.ros_package is not None:

@@ -83,6 +83,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser.set_defaults(run=run)
 
 
+def _check_log_folder(path: Path) -> None:
+    """A folder given as the joint log must be a ROS 2 bag (a CSV log is a file)."""
+    from brachycal.data.bags import is_bag
+    from brachycal.errors import InputError
+
+    if path.is_dir() and not is_bag(path):
+        raise InputError("is a folder without metadata.yaml: neither a CSV joint log nor a ROS 2 bag", file=path)
+
+
 def log_blocks(path: Path, robot: Robot, topic: str, quiet: bool) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """``(time (N,) s, q (N, nq) rad)`` blocks of a checked joint log (CSV or bag), with a progress bar
     over the bytes (CSV) or messages (bag) read."""
@@ -123,10 +132,11 @@ def run(args: argparse.Namespace) -> int:
     for frame in frames:
         robot.frame_id(frame)
     out = Path(args.out)
-    with OutputSet(force=args.force) as outputs:
+    with OutputSet(force=args.force, inputs=[args.log, args.times]) as outputs:
         staged = outputs.claim(out, label="--out")
         if not Path(args.log).exists():  # here, not when the first block is asked for: before --times is read
             raise InputError("no such file or folder", file=args.log)
+        _check_log_folder(Path(args.log))
         blocks = log_blocks(Path(args.log), robot, args.topic, args.quiet)
         times = read_times(args.times) if args.times else None
         with open(staged, "wb") as handle:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 from brachycal.cli.common import add_method_option, add_robot_option, load_robot
 from brachycal.validate import MAX_IMAGE_PX, check_pixel, number_list
@@ -44,16 +45,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from brachycal.calibration import locate, read_result
-    from brachycal.data import read_configurations
+    from brachycal.data.csv_log import configuration_blocks
 
     stored = read_result(args.result)
     # The result knows its images' size (older result files do not: then argparse's bound stands).
     uv = check_pixel(args.uv, "--uv", size_px=stored.image_size_px)[None]
     method = stored.method(args.method)
     robot = stored.software_robot(load_robot(args))
-    rows, Q = read_configurations(args.joints, robot)
-    print("row,x,y,z")
-    for row, q in zip(rows, Q, strict=True):
-        p = locate(robot, q, uv, stored.T_EL_Ptip, stored.image[method])[0]
-        print(f"{row},{p[0]:.9f},{p[1]:.9f},{p[2]:.9f}")
+    # Streamed: one block of rows read, located and printed at a time (a joint log may be long).
+    # The header is printed with the first block, so a file refused at once prints nothing.
+    header = "row,x,y,z\n"
+    for rows, Q in configuration_blocks(args.joints, robot):
+        P = locate(robot, Q, uv, stored.T_EL_Ptip, stored.image[method])
+        sys.stdout.write(
+            header + "".join(f"{r},{p[0]:.9f},{p[1]:.9f},{p[2]:.9f}\n" for r, p in zip(rows, P.tolist(), strict=True))
+        )
+        header = ""
     return 0

@@ -152,10 +152,13 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
 
 @contextmanager
 def _command_environment() -> Iterator[None]:
-    """What the command line (and only it) sets for the process: one-line warnings, SIGTERM."""
+    """What the command line (and only it) sets for the process: one-line warnings, SIGTERM, and
+    the record of the input files read (an output may never be one of them)."""
+    from brachycal.inputs import recording_inputs
+
     in_main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _raise_terminated) if in_main_thread else None
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(), recording_inputs():
         warnings.showwarning = _show_warning
         warnings.simplefilter("default")
         # Library chatter a user cannot act on (NumPy on a refused input, parser notices).
@@ -205,6 +208,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as exc:
         where = f"{exc.filename}: " if exc.filename else ""
         print(f"brachycal: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
+    except RecursionError:  # a reader that does not name its file: still one line, no traceback
+        print("brachycal: error: an input is nested too deeply to read", file=sys.stderr)
         return 2
     except MemoryError:
         print("brachycal: error: out of memory (ask for less: fewer points, samples or targets)", file=sys.stderr)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from brachycal.cli import nwire_segment
-from brachycal.cli.common import output_file
+from brachycal.cli.common import command_inputs, output_file
 
 #: The image models (:data:`brachycal.calibration.nwire_file.NWIRE_MODELS`, here so --help imports nothing heavy).
 MODELS = ("affine", "rigid", "3d-aniso", "3d-iso", "2d-aniso", "2d-iso")
@@ -56,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     from brachycal.calibration import nwire_from_files, write_nwire
     from brachycal.files import OutputSet
 
-    with OutputSet(force=args.force) as outputs:
+    with OutputSet(force=args.force, inputs=command_inputs(args, "config", "frames")) as outputs:
         staged = outputs.claim(args.out, label="--out")
         with nwire_segment.frames_file(args) as frames:
             run = nwire_from_files(args.config, frames, model=args.model)

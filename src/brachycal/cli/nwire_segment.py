@@ -9,7 +9,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from brachycal.cli.common import output_file
+from brachycal.cli.common import command_inputs, output_file
 
 NAME = "nwire-segment"
 HELP = "segment the N-wire phantom in tracked B-mode sequences (PLUS .mha) into a PLUS segmented-frames XML"
@@ -136,7 +136,12 @@ def segment_files(
 def run(args: argparse.Namespace) -> int:
     from brachycal.files import OutputSet
 
-    with OutputSet(force=args.force) as outputs:
+    with OutputSet(
+        force=args.force,
+        inputs=command_inputs(
+            args, "calibration", "validation", "config", "calibration_sequence", "validation_sequence"
+        ),
+    ) as outputs:
         staged = outputs.claim(args.out, label="--out")
         lines = segment_files(
             args.config, args.calibration, args.validation, staged, quiet=args.quiet, orientation=args.orientation

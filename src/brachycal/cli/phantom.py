@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from brachycal.cli.common import output_file
+from brachycal.cli.common import command_inputs, output_file
 
 HELP = "tracked-probe phantom calibration: multi-wedge, arbitrary-wire or N-wire (Table III's image-based methods)"
 METHODS = ("wedge", "wire", "nwire")
@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
     from brachycal.calibration.wedge_phantom import calibrate_wedge_files
     from brachycal.calibration.wire_phantom import calibrate_wire_files
 
-    with OutputSet(force=args.force) as outputs:
+    with OutputSet(force=args.force, inputs=command_inputs(args, "geometry", "observations")) as outputs:
         staged = outputs.claim(args.out, label="--out")
         calibrate_files = calibrate_wedge_files if args.method == "wedge" else calibrate_wire_files
         fit, phantom, _ = calibrate_files(args.geometry, args.observations)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from brachycal.cli.common import output_file
+from brachycal.cli.common import command_inputs, output_file
 
 HELP = "pivot calibration: tool tip and pivot point from poses rotating about a fixed tip"
 DESCRIPTION = """\
@@ -43,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
     from brachycal.calibration import pivot_from_file, write_pivot
     from brachycal.files import OutputSet
 
-    with OutputSet(force=args.force) as outputs:
+    with OutputSet(force=args.force, inputs=command_inputs(args, "poses")) as outputs:
         staged = outputs.claim(args.out, label="--out")
         calibration = pivot_from_file(args.poses, args.method, args.units)
         write_pivot(calibration, staged, force=args.force)

@@ -14,7 +14,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from brachycal.cli.common import add_method_option, add_robot_option, load_robot, output_file, progress_bar
+from brachycal.cli.common import (
+    add_method_option,
+    add_robot_option,
+    command_inputs,
+    load_robot,
+    output_file,
+    progress_bar,
+)
 from brachycal.errors import InputError
 from brachycal.planning.spec import EDGE_RANGE_M, MAX_CENTRE_M, MAX_SECTOR_DEPTH_M, PlanSpec, RectFOV, SectorFOV
 from brachycal.validate import (
@@ -222,7 +229,7 @@ def run(args: argparse.Namespace) -> int:
     check_excitation_options(args)
     if args.excitation is not None:
         return run_excitation(args)
-    with OutputSet(force=args.force) as outputs, _FigureProcess() as drawer:
+    with OutputSet(force=args.force, inputs=command_inputs(args, "result")) as outputs, _FigureProcess() as drawer:
         _run(args, outputs, drawer)
     print("wrote " + ", ".join(map(str, outputs.written)))
     return 0

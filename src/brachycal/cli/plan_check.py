@@ -10,6 +10,7 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from brachycal.cli.common import command_inputs
 from brachycal.errors import InputError
 from brachycal.validate import bounded_int
 
@@ -84,7 +85,7 @@ def run_check_plan(args: argparse.Namespace, planner: tuple[PlanSpec, IKSettings
     spec, settings, thresholds = planner
     count = args.verify_poses or DEFAULT_CHECK_POSES
     out = Path(args.out)
-    with OutputSet(force=args.force) as outputs:
+    with OutputSet(force=args.force, inputs=command_inputs(args, "result")) as outputs:
         staged = outputs.claim(out, label="--out")
         robot, spec = planning_robot(args, spec)
         with progress_bar(args.points**3, "planning", args.quiet) as bar:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from brachycal.cli.common import add_robot_accuracy_options, robot_accuracy
+from brachycal.cli.common import add_robot_accuracy_options, command_inputs, robot_accuracy
 from brachycal.errors import InputError
 from brachycal.validate import finite_float
 
@@ -85,7 +85,7 @@ def run_excitation(args: argparse.Namespace) -> int:
     )
     accuracy = robot_accuracy(args)
     out = Path(args.out)
-    with OutputSet(force=args.force) as outputs:
+    with OutputSet(force=args.force, inputs=command_inputs(args, "result")) as outputs:
         staged = outputs.claim(out, label="--out")
         robot = load_robot(args)
         rig = robot.rig

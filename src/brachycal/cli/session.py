@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from brachycal.cli.common import add_robot_option, load_robot
+from brachycal.cli.common import add_robot_option, command_inputs, load_robot
 from brachycal.errors import InputError
 from brachycal.validate import MAX_IMAGE_PX, finite_float, number_list, spacing_mm
 
@@ -159,7 +159,9 @@ def run_build(args: argparse.Namespace) -> int:
             "the speed is judged inside the window"
         )
     still = StillSettings(args.still_window_s, args.speed_span_s, args.max_speed_rad_s)
-    with OutputSet(force=args.force) as outputs:
+    with OutputSet(
+        force=args.force, inputs=command_inputs(args, "log", "marks", "images", "plan", "template", "markups")
+    ) as outputs:
         for name in (*SESSION_FILES, *REPORT_FILES):
             outputs.claim(out / name, make_parents=True, label="--out")
         settings = session_settings(

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING
 
-from brachycal.cli.common import add_robot_option, load_robot, output_file
+from brachycal.cli.common import add_robot_option, command_inputs, load_robot, output_file
 from brachycal.validate import finite_float
 
 if TYPE_CHECKING:
@@ -127,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("give either TRACKER (PLUS route) or --joints LOG (robot route), not both or neither")
     if args.joints is not None and args.config is not None:
         raise InputError("--config applies to the PLUS route (TRACKER), not to --joints")
-    with OutputSet(force=args.force) as outputs:
+    with OutputSet(force=args.force, inputs=command_inputs(args, "video", "tracker", "config", "joints")) as outputs:
         staged = outputs.claim(args.out, label="--out")
         if args.joints is None:
             result = lag_from_plus_files(

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from brachycal.cli.common import output_file
+from brachycal.cli.common import command_inputs, output_file
 
 if TYPE_CHECKING:
     import numpy as np
@@ -84,12 +84,15 @@ def run(args: argparse.Namespace) -> int:
     from brachycal.imaging.needle_tip import MIN_CONFIDENCE, detect_tip
 
     min_confidence = MIN_CONFIDENCE if args.min_confidence is None else args.min_confidence
-    with OutputSet(force=args.force) as outputs:
+    with OutputSet(force=args.force, inputs=command_inputs(args, "frames", "truth")) as outputs:
         out = outputs.claim(args.out, label="--out")
         sheet = outputs.claim(args.sheet, label="--sheet") if args.sheet else None
         sequence = read_image_sequence(args.frames)
         if len(sequence) == 0:
             raise InputError("holds no frames", file=args.frames)
+        if 0 in sequence.pixels.shape[1:]:
+            height, width = sequence.pixels.shape[1:]
+            raise InputError(f"its frames are {width}x{height} pixels: no image to find a tip in", file=args.frames)
         if sequence.pixels.dtype != np.uint8:
             raise InputError(
                 f"expected 8-bit B-mode frames (MET_UCHAR), got {sequence.pixels.dtype}",

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from brachycal.cli.common import add_method_option, add_robot_option, load_robot, output_file
+from brachycal.cli.common import add_method_option, add_robot_option, command_inputs, load_robot, output_file
 from brachycal.errors import InputError
 from brachycal.validate import finite_float
 
@@ -106,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
     from brachycal.files import OutputSet, write_json
 
     out = Path(args.out)
-    with OutputSet(force=args.force) as outputs:
+    with OutputSet(force=args.force, inputs=command_inputs(args, "result", "check", "calibration_session")) as outputs:
         staged = outputs.claim(out, label="--out")
         staged_report = outputs.claim(Path(args.report), label="--report") if args.report else None
         staged_update = outputs.claim(Path(args.update), label="--update") if args.update else None

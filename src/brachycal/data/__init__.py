@@ -83,6 +83,8 @@ def read_joint_log(path: str | os.PathLike[str], robot: Robot, topic: str | None
     path = Path(path)
     if not path.exists():
         raise InputError("no such file or folder", file=path)
+    if path.is_dir() and not is_bag(path):
+        raise InputError("is a folder without metadata.yaml: neither a CSV joint log nor a ROS 2 bag", file=path)
     if is_bag(path):
         return read_bag_log(path, robot, DEFAULT_TOPIC if topic is None else topic)
     return read_csv_log(path, robot)

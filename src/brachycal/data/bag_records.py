@@ -38,12 +38,14 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from brachycal.errors import InputError
+from brachycal.inputs import check_input_file
 
 #: Messages per batch when reading through rosbags' ``messages()``.
 BATCH_MESSAGES = 4_096
@@ -71,6 +73,17 @@ class TopicInfo(NamedTuple):
     deserialise: Callable[[bytes], object]
 
 
+def _check_bag_files(path: Path) -> None:
+    """A ROS 1 bag is a regular file; a ROS 2 bag folder holds regular files (no FIFO or device
+    that rosbags would read without end): refused in one line naming the file."""
+    if not path.is_dir():
+        check_input_file(path)
+        return
+    for item in sorted(path.iterdir()):
+        if not item.is_dir():
+            check_input_file(item)
+
+
 def raw_batches(path: Any, source: str, topic: str, msgtype: str) -> Iterator[tuple[TopicInfo, RawBatch]]:
     """The raw messages on ``topic`` of the bag ``path`` (what rosbags opens: a ROS 1 ``.bag`` or a
     ROS 2 bag folder) in batches, in the order of rosbags' ``AnyReader.messages``.
@@ -81,6 +94,7 @@ def raw_batches(path: Any, source: str, topic: str, msgtype: str) -> Iterator[tu
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
 
+    _check_bag_files(Path(path))
     try:
         reader = AnyReader([path])
         reader.open()

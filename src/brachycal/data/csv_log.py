@@ -30,6 +30,7 @@ import numpy as np
 
 from brachycal.data.joint_log import JointLog, JointLogChecker, configurations_from_columns, joint_columns
 from brachycal.errors import InputError
+from brachycal.inputs import MAX_TABLE_BYTES, open_input
 from brachycal.se3 import FloatArray
 from brachycal.validate import all_number_texts, number_from_text
 
@@ -38,17 +39,18 @@ if TYPE_CHECKING:  # annotations only: reading a file needs no Pinocchio
 
 
 def _open(path: Path) -> TextIO:
-    try:
-        return path.open(newline="")
-    except OSError as exc:
-        raise InputError(f"cannot read ({exc.strerror})", file=path) from None
+    """A CSV table read whole (at most :data:`~brachycal.inputs.MAX_TABLE_BYTES`), as text; a
+    UTF-8 byte-order mark at its start (a spreadsheet's export) is dropped."""
+    return open_input(path, "r", max_bytes=MAX_TABLE_BYTES, encoding="utf-8-sig")  # type: ignore[return-value]
+
+
+#: Longest header line of a joint log (bytes): a few hundred joints' names are a few KiB.
+MAX_HEADER_BYTES = 1 << 20
 
 
 def _open_binary(path: Path) -> BinaryIO:
-    try:
-        return path.open("rb")
-    except OSError as exc:
-        raise InputError(f"cannot read ({exc.strerror})", file=path) from None
+    """A joint log, read in blocks (no cap on its size); :func:`open_csv_log` drops a byte-order mark."""
+    return open_input(path)  # type: ignore[return-value]
 
 
 #: The refusal of a file whose last line has no line break: a writer cut off mid-line (a full disk, a
@@ -414,9 +416,11 @@ def open_csv_log(path: str | os.PathLike[str], robot: Robot) -> CsvLog:
     path = Path(path)
     handle = _open_binary(path)
     try:
-        first = handle.readline()
+        first = handle.readline(MAX_HEADER_BYTES + 1)
+        if len(first) > MAX_HEADER_BYTES:  # a file without line breaks is not read whole for its header
+            raise InputError(f"header line longer than {MAX_HEADER_BYTES >> 10} KiB: not a CSV joint log", file=path)
         try:
-            header = next(csv.reader([first.decode("utf-8")]), [])
+            header = next(csv.reader([first.decode("utf-8-sig")]), [])
         except (csv.Error, UnicodeDecodeError) as exc:
             raise InputError(f"not a readable CSV file ({exc})", file=path) from None
         header = _check_header(path, header, ["time"])
@@ -518,15 +522,47 @@ def read_configurations(path: str | os.PathLike[str], robot: Robot) -> tuple[lis
     """Configurations from a CSV file whose header names the joints, one per row (radians; a joint
     log works: its time column is ignored): ``(rows (N,) file rows, Q (N, nq) in the robot's order)``.
 
+    All of them in memory; :func:`configuration_blocks` streams them.
+
     Raises:
         InputError: the file has no rows, or a joint is missing, not a number or out of its limits
             (naming the row and column).
     """
+    blocks = list(configuration_blocks(path, robot))
+    return [row for rows, _ in blocks for row in rows], np.concatenate([Q for _, Q in blocks])
+
+
+#: Rows of a table of configurations read, checked and handed on at a time (a few MB of text).
+CONFIGURATION_BLOCK_ROWS = 16_384
+
+
+def configuration_blocks(
+    path: str | os.PathLike[str], robot: Robot, rows_per_block: int = CONFIGURATION_BLOCK_ROWS
+) -> Iterator[tuple[list[int], FloatArray]]:
+    """The configurations of :func:`read_configurations`, ``rows_per_block`` rows at a time:
+    ``(rows file rows, Q (n, nq) radians in the robot's order)``. Memory is one block, whatever
+    the length of the file (a joint log of millions of rows).
+
+    Raises:
+        InputError: as :func:`read_configurations`, when the block holding the problem is reached.
+    """
     path = Path(path)
-    header, rows, records = read_table(path, [])
-    if not records:
+    with open_input(path, "r", encoding="utf-8-sig") as handle:  # streamed: no cap on the size
+        reader = csv.reader(handle)
+        try:
+            header = next(reader, [])
+        except (csv.Error, UnicodeDecodeError) as exc:
+            raise InputError(f"not a readable CSV file ({exc})", file=path) from None
+        header = _check_header(path, header, [])
+        empty = True
+        while True:
+            rows, records = _scan_rows(path, reader, header, 0, limit=rows_per_block)
+            if not records:
+                break
+            empty = False
+            yield rows, table_configurations(path, robot, header, rows, records)
+    if empty:
         raise InputError("no configurations", file=path)
-    return rows, table_configurations(path, robot, header, rows, records)
 
 
 def read_times(path: str | os.PathLike[str]) -> FloatArray:

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from brachycal.errors import InputError
+from brachycal.inputs import MAX_DOCUMENT_BYTES, read_input_text
 
 
 def read_json(path: str | os.PathLike[str]) -> Any:
@@ -22,10 +23,10 @@ def read_json(path: str | os.PathLike[str]) -> Any:
         InputError: the file cannot be read or is not valid JSON (or not UTF-8), naming the file.
     """
     try:
-        return json.loads(Path(path).read_text())
+        return json.loads(read_input_text(path, max_bytes=MAX_DOCUMENT_BYTES))
     except OSError as exc:
         raise InputError(f"cannot read ({exc.strerror})", file=path) from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
         raise InputError(f"not valid JSON ({exc})", file=path) from None
 
 

@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from brachycal.errors import InputError
+from brachycal.inputs import MAX_DOCUMENT_BYTES, check_memory, open_input
 from brachycal.se3 import FloatArray
 from brachycal.validate import number_from_text, numbers_from_text, wholes_from_text
 
@@ -34,6 +35,8 @@ _Fail = Callable[[str], InputError]
 _FRAME_FIELD = re.compile(r"^Seq_Frame(\d+)_(\w+)\s*=\s*(.*)$")
 #: Longest header line read (bytes): a 4×4 matrix in text is ~200; more means pixel data or not MetaImage.
 _MAX_HEADER_LINE = 1 << 16
+#: Most bytes a zlib stream can inflate to per compressed byte (deflate's limit is 1032:1).
+_ZLIB_MAX_RATIO = 1032
 #: numpy element types of MetaImage element types (little-endian unless ``BinaryDataByteOrderMSB``).
 _ELEMENT_TYPES = {
     "MET_CHAR": np.int8,
@@ -82,12 +85,16 @@ def _read_header(path: Path) -> _Header:
     data_offset = None
     number = 0
     try:
-        with path.open("rb") as handle:
+        with open_input(path) as handle:
             while True:
                 raw = handle.readline(_MAX_HEADER_LINE + 1)
                 if not raw:
                     break
                 number += 1
+                if handle.tell() > MAX_DOCUMENT_BYTES:
+                    raise InputError(
+                        f"header longer than {MAX_DOCUMENT_BYTES >> 20} MB: not a MetaImage header", file=path
+                    )
                 if len(raw) > _MAX_HEADER_LINE:
                     raise InputError("header line longer than 64 KiB: not a MetaImage header", file=path, row=number)
                 line = raw.decode("latin-1").strip()
@@ -115,23 +122,38 @@ def _read_header(path: Path) -> _Header:
     ndims = _whole(header.get("NDims", str(len(dims))), _at(path, column="NDims"))
     if ndims != [len(dims)]:
         raise InputError(f"NDims {header.get('NDims')!r} does not match DimSize {header['DimSize']!r}", file=path)
-    n = dims[-1] if len(dims) == 3 else len(frames)
-    # a plain image (no Seq_Frame fields at all) is a sequence whose frames carry no fields
-    missing = [k for k in range(n) if k not in frames] if frames else []
-    if missing:
-        raise InputError(f"no fields for frame {missing[0]} of {n}", file=path)
-    extra = sorted(k for k in frames if k >= n)
-    if extra:
-        raise InputError(f"fields for frame {extra[0]}, but DimSize announces {n} frames", file=path)
-    parsed = _Header(header, [frames.get(k, {}) for k in range(n)], dims, data_offset, size)
+    if 0 in dims[:2] and not frames:  # a PLUS tracker buffer (DimSize 0 0 N) has N frames of fields
+        raise InputError(f"an image without pixels (DimSize {header['DimSize']!r})", file=path, column="DimSize")
+    # The pixel data the header announces must be in the file (or, compressed, could inflate from
+    # it) before anything is built per frame: DimSize = 8 8 10000000000 is refused here.
+    sized = _Header(header, [], dims, data_offset, size)
     if header["ElementDataFile"] == "LOCAL":
         available = size - data_offset
-        expected = _compressed_size(parsed, path) if _compressed(parsed) else _raw_size(parsed, path)
+        pixel_bytes = _raw_size(sized, path)
+        expected = _compressed_size(sized, path) if _compressed(sized) else pixel_bytes
         if available < expected:
             raise InputError(
                 f"pixel data cut short: {available} bytes after the header, which announces {expected}", file=path
             )
-    return parsed
+        if _compressed(sized) and pixel_bytes > _ZLIB_MAX_RATIO * expected + 1024:
+            raise InputError(
+                f"DimSize and ElementType announce {pixel_bytes} bytes of pixels, more than {expected} compressed "
+                "bytes can hold",
+                file=path,
+                column="DimSize",
+            )
+    n = dims[-1] if len(dims) == 3 else len(frames)
+    # a plain image (no Seq_Frame fields at all) is a sequence whose frames carry no fields
+    if frames:
+        missing = next((k for k in range(n) if k not in frames), None)
+        if missing is not None:
+            raise InputError(f"no fields for frame {missing} of {n}", file=path)
+        extra = sorted(k for k in frames if k >= n)
+        if extra:
+            raise InputError(f"fields for frame {extra[0]}, but DimSize announces {n} frames", file=path)
+    elif header["ElementDataFile"] != "LOCAL":
+        return _Header(header, [], dims, data_offset, size)  # refused by the pixel reader; no frames built
+    return _Header(header, [frames.get(k, {}) for k in range(n)], dims, data_offset, size)
 
 
 def _compressed(header: _Header) -> bool:
@@ -235,13 +257,11 @@ def read_image_sequence(path: str | os.PathLike[str]) -> ImageSequence:
     width, height = header.dims[0], header.dims[1]
     count = header.dims[2] if len(header.dims) == 3 else 1
     raw_size = width * height * count * dtype.itemsize
-    with path.open("rb") as handle:
+    check_memory(raw_size, "pixel data (DimSize and ElementType)", file=path)
+    with open_input(path) as handle:
         handle.seek(header.data_offset)
         if _compressed(header):
-            try:
-                data = zlib.decompress(handle.read(_compressed_size(header, path)))
-            except zlib.error as exc:
-                raise InputError(f"compressed pixel data are corrupt ({exc})", file=path) from None
+            data = _inflate(handle.read(_compressed_size(header, path)), raw_size, path)
         else:
             data = handle.read(raw_size)
     if len(data) != raw_size:
@@ -262,6 +282,25 @@ def read_image_sequence(path: str | os.PathLike[str]) -> ImageSequence:
         frame_fields=frames,
         fields=header.fields,
     )
+
+
+def _inflate(compressed: bytes, raw_size: int, path: Path) -> bytes:
+    """The zlib stream ``compressed`` inflated to at most ``raw_size`` bytes (a bomb stops there)."""
+    inflater = zlib.decompressobj()
+    try:
+        data = inflater.decompress(compressed, raw_size)
+        if (
+            len(data) == raw_size
+            and (inflater.unconsumed_tail or not inflater.eof)
+            and inflater.decompress(inflater.unconsumed_tail, 1)
+        ):
+            raise InputError(
+                f"compressed pixel data hold more than the {raw_size} bytes DimSize and ElementType announce",
+                file=path,
+            )
+    except zlib.error as exc:
+        raise InputError(f"compressed pixel data are corrupt ({exc})", file=path) from None
+    return data
 
 
 def write_image_sequence(

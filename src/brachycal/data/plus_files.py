@@ -22,6 +22,7 @@ import defusedxml.ElementTree as SafeET
 import numpy as np
 
 from brachycal.errors import InputError
+from brachycal.inputs import MAX_DOCUMENT_BYTES, read_input_bytes
 from brachycal.se3 import FloatArray, inverse
 from brachycal.validate import MAX_POSITION_M, check_transform, numbers_from_text, whole_from_text
 
@@ -99,9 +100,9 @@ class PlusConfig:
 
 def _parse(path: Path) -> Element:
     try:
-        return SafeET.parse(path).getroot()
-    except OSError as exc:
-        raise InputError(f"cannot read ({exc.strerror})", file=path) from None
+        return SafeET.fromstring(read_input_bytes(path, max_bytes=MAX_DOCUMENT_BYTES))
+    except InputError:
+        raise
     except SafeET.ParseError as exc:
         raise InputError(f"not valid XML ({exc})", file=path) from None
     except Exception as exc:  # defusedxml's refusals of entities and DTDs

@@ -27,8 +27,9 @@ import numpy as np
 from brachycal.data.csv_log import read_table, table_configurations, to_float, unique_names
 from brachycal.errors import InputError
 from brachycal.files import OutputSet, atomic_open, output_set, sha256_file
+from brachycal.inputs import MAX_DOCUMENT_BYTES, read_input_text
 from brachycal.se3 import FloatArray
-from brachycal.validate import TOOL_LENGTH_M_RANGE, check_positions, check_spacing_mm, check_token
+from brachycal.validate import MAX_IMAGE_PX, TOOL_LENGTH_M_RANGE, check_positions, check_spacing_mm, check_token
 
 if TYPE_CHECKING:  # annotations only: reading a file needs no Pinocchio
     from brachycal.model.robot import Robot
@@ -85,8 +86,8 @@ MAX_TRIAL = 10_000
 
 def _read_toml(path: Path) -> tuple[FloatArray, np.ndarray, FloatArray]:
     try:
-        config = tomllib.loads(path.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        config = tomllib.loads(read_input_text(path, max_bytes=MAX_DOCUMENT_BYTES))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError, RecursionError) as exc:
         raise InputError(f"not valid TOML ({exc})", file=path) from None
     if config.get("format") != FORMAT:
         raise InputError(f"format is {config.get('format')!r}, expected {FORMAT!r}", file=path, column="format")
@@ -111,6 +112,10 @@ def _read_toml(path: Path) -> tuple[FloatArray, np.ndarray, FloatArray]:
     size = numbers("image", "size_px", 2, True)
     if np.any(size != np.round(size)):
         raise InputError("image size must be whole pixels", file=path, column="image.size_px")
+    if np.any(size > MAX_IMAGE_PX):
+        raise InputError(
+            f"image size {size.tolist()!r} px: at most {MAX_IMAGE_PX} px a side", file=path, column="image.size_px"
+        )
     tip_mm = numbers("top_model", "tip_in_flange_mm", 3, False)
     tip_m = check_positions(
         tip_mm * 1e-3,
@@ -129,10 +134,7 @@ def read_session_toml(path: str | os.PathLike[str]) -> tuple[FloatArray, np.ndar
     Returns:
         ``spacing_m (2,)`` metres per pixel, ``size_px (2,)`` whole pixels, ``p_ER_Mtip (3,)`` metres.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("no such file", file=path)
-    return _read_toml(path)
+    return _read_toml(Path(path))
 
 
 def _labels(
@@ -289,7 +291,7 @@ def read_session(folder: str | os.PathLike[str], robot: Robot) -> Session:
     if not folder.is_dir():
         raise InputError("not a session folder (expected a folder with session.toml)", file=folder)
     for name in FILES:
-        if not (folder / name).is_file():
+        if not os.path.lexists(folder / name):  # anything else there is refused by its reader
             raise InputError("missing session file", file=folder / name)
     spacing_m, size_px, p_ER_Mtip = _read_toml(folder / "session.toml")
     touches = _read_touches(folder / "touches.csv", robot)

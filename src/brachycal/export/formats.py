@@ -42,8 +42,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from brachycal.calibration.image_to_probe import ImageCalibration
-from brachycal.errors import InputError
+from brachycal.errors import InputError, OutputError
 from brachycal.files import OutputSet, atomic_open, output_set
+from brachycal.inputs import MAX_DOCUMENT_BYTES, MAX_MESH_BYTES, open_input, read_input_text
 from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, make_transform, to_position_quaternion
@@ -145,7 +146,7 @@ def read_itk_transform(path: str | os.PathLike[str]) -> FloatArray:
     """The "to parent" matrix (RAS, mm) Slicer shows for an ITK ``.tfm`` affine file."""
     path = Path(path)
     fields = {}
-    for line in path.read_text().splitlines():
+    for line in read_input_text(path, max_bytes=MAX_DOCUMENT_BYTES).splitlines():
         key, sep, value = line.partition(":")
         if sep and not line.startswith("#"):
             fields[key.strip()] = value.strip()
@@ -314,9 +315,15 @@ def _write_urdf_folder(
         destination = mesh_folder / relative
         staged = out.path(destination, make_parents=True)
         try:
-            shutil.copyfile(source, staged)
-        except OSError as exc:
-            raise InputError(f"cannot copy mesh {source} ({exc.strerror or exc})", file=robot.source) from None
+            reader = open_input(source, max_bytes=MAX_MESH_BYTES)
+        except InputError as exc:
+            raise InputError(f"cannot copy mesh {source} ({exc.problem})", file=robot.source) from None
+        with reader:
+            try:
+                with open(staged, "wb") as writer:
+                    shutil.copyfileobj(reader, writer)
+            except OSError as exc:  # writing: reading a checked regular file does not fail this way
+                raise OutputError(f"cannot write ({exc.strerror or exc})", file=destination) from None
         written.append(destination)
     return written
 

@@ -20,6 +20,7 @@ from numpy.typing import ArrayLike
 
 from brachycal.errors import InputError
 from brachycal.files import bundled
+from brachycal.inputs import MAX_DOCUMENT_BYTES, read_input_bytes
 from brachycal.model.robot import Robot
 
 
@@ -31,7 +32,7 @@ def srdf_disabled_pairs(path: Path | None = None) -> set[frozenset[str]]:
     """
     source = path or bundled("urdf", "motoman_sda10f.srdf")
     pairs: set[frozenset[str]] = set()
-    for element in ET.parse(source).getroot().iter("disable_collisions"):
+    for element in ET.fromstring(read_input_bytes(source, max_bytes=MAX_DOCUMENT_BYTES)).iter("disable_collisions"):
         link1, link2 = element.get("link1"), element.get("link2")
         if not link1 or not link2:
             raise InputError("a <disable_collisions> needs both link1 and link2", file=source)

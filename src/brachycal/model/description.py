@@ -37,6 +37,7 @@ import pinocchio as pin
 
 from brachycal.errors import InputError
 from brachycal.files import bundled
+from brachycal.inputs import MAX_DOCUMENT_BYTES, check_input_file, read_input_bytes, read_input_text
 from brachycal.model import urdf_text
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, from_xyz_rpy, make_transform
@@ -405,7 +406,7 @@ def _resolve(reference: str, folder: Path, key: str, source: Path) -> Path:
         path = example_robot_data_share() / reference.removeprefix("example-robot-data:")
     else:
         path = folder / os.path.expanduser(reference)
-    if not path.is_file():
+    if not os.path.lexists(path):  # anything else there is refused by its reader
         raise InputError(f"key {key!r}: file not found: {reference} ({path})", file=source)
     return path
 
@@ -651,9 +652,11 @@ def _add_fixed_frame(root: ET.Element, name: str, parent: str, T_parent_frame: F
 
 def _read_urdf(path: Path, key: str, source: Path) -> ET.Element:
     try:
-        text = path.read_text()
-    except OSError as exc:
-        raise InputError(f"key {key!r}: cannot read {path} ({exc.strerror})", file=source) from None
+        text = read_input_text(path, max_bytes=MAX_DOCUMENT_BYTES)
+    except InputError as exc:
+        raise InputError(f"key {key!r}: cannot read {path} ({exc.problem})", file=source) from None
+    except UnicodeDecodeError as exc:
+        raise InputError(f"key {key!r}: cannot read {path} ({exc})", file=source) from None
     try:
         return urdf_text.parse(text, str(path))
     except InputError as exc:  # say which key named the file, and keep the one line
@@ -662,8 +665,10 @@ def _read_urdf(path: Path, key: str, source: Path) -> ET.Element:
 
 def _srdf_pairs(path: Path, prefix: str, key: str, source: Path) -> set[frozenset[str]]:
     try:
-        srdf = ET.parse(path).getroot()
-    except (ET.ParseError, OSError) as exc:
+        srdf = ET.fromstring(read_input_bytes(path, max_bytes=MAX_DOCUMENT_BYTES))
+    except InputError as exc:
+        raise InputError(f"key {key!r}: cannot read the SRDF {path} ({exc.problem})", file=source) from None
+    except ET.ParseError as exc:
         raise InputError(f"key {key!r}: cannot read the SRDF {path} ({exc})", file=source) from None
     pairs = set()
     for element in srdf.iter("disable_collisions"):
@@ -716,18 +721,15 @@ def load_description(name_or_path: str | os.PathLike[str] = DEFAULT_ROBOT) -> Ro
         mtime = resolved.stat().st_mtime_ns
     except OSError as exc:
         raise InputError(f"cannot read robot description ({exc.strerror})", file=path) from None
-    if not resolved.is_file():
-        raise InputError("robot description is not a file", file=path)
+    check_input_file(path, max_bytes=MAX_DOCUMENT_BYTES)
     return _load_cached(resolved, mtime)
 
 
 def _load(path: Path) -> RobotDescription:
     r = _Reader(path)
     try:
-        data = tomllib.loads(path.read_text())
-    except OSError as exc:
-        raise InputError(f"cannot read robot description ({exc.strerror})", file=path) from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        data = tomllib.loads(read_input_text(path, max_bytes=MAX_DOCUMENT_BYTES))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError, RecursionError) as exc:
         raise InputError(f"not valid TOML ({exc})", file=path) from None
     unknown = sorted(set(data) - _TOP_KEYS)
     if unknown:

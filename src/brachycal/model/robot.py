@@ -40,6 +40,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from brachycal.errors import InputError
 from brachycal.files import atomic_open, bundled
+from brachycal.inputs import MAX_DOCUMENT_BYTES, MAX_MESH_BYTES, check_input_file, read_input_bytes, read_input_text
 from brachycal.model import urdf_text
 from brachycal.model.batch_fk import BatchForwardKinematics
 from brachycal.model.joints import ONE_AXIS, Coordinates, UnsupportedJoint
@@ -132,9 +133,9 @@ class Robot:
         """
         file = Path(path) if path is not None else bundled_urdf_path()
         try:
-            text = file.read_text()
-        except OSError as exc:
-            raise InputError(f"cannot read URDF ({exc.strerror})", file=file) from None
+            text = read_input_text(file, max_bytes=MAX_DOCUMENT_BYTES)
+        except UnicodeDecodeError as exc:
+            raise InputError(f"not a UTF-8 URDF ({exc})", file=file) from None
         robot = cls(text, base_dir=file.parent, source=str(file))
         robot._sda10f_rig_on_demand = True
         return robot
@@ -442,8 +443,10 @@ def _mujoco_mesh(path: Path, k: int, source: str) -> tuple[str, bytes]:
     suffix = path.suffix.lower()
     try:
         if suffix in _MUJOCO_MESH_SUFFIXES:
-            return f"m{k}_{path.stem}{suffix}", path.read_bytes()
-        return f"m{k}_{path.stem}.stl", _stl_bytes(path, path.stat().st_mtime_ns)
+            return f"m{k}_{path.stem}{suffix}", read_input_bytes(path, max_bytes=MAX_MESH_BYTES)
+        return f"m{k}_{path.stem}.stl", _stl_bytes(path, check_input_file(path, max_bytes=MAX_MESH_BYTES).st_mtime_ns)
+    except InputError as exc:
+        raise InputError(f"cannot read collision mesh {path} ({exc.problem})", file=source) from None
     except OSError as exc:
         raise InputError(f"cannot read collision mesh {path} ({exc.strerror})", file=source) from None
     except Exception as exc:  # trimesh and pycollada refuse an undecodable file with assorted types
