@@ -247,8 +247,17 @@ def test_session_files_and_a_pose_list_with_a_byte_order_mark_read_as_without(tm
     assert plain.code == bom.code == 0, bom.err
     assert plain.out.replace("a.json", "b.json") == bom.out
     pivot = EXAMPLES / "pivot" / "pointer_pivot.csv"
-    plain = run_cli(["pivot", str(pivot), "--out", str(tmp_path / "p.json")])
-    bom = run_cli(["pivot", str(with_bom(pivot, tmp_path / "pointer_pivot.csv")), "--out", str(tmp_path / "q.json")])
+    plain = run_cli(["pivot", str(pivot), "--units", "mm", "--out", str(tmp_path / "p.json")])
+    bom = run_cli(
+        [
+            "pivot",
+            str(with_bom(pivot, tmp_path / "pointer_pivot.csv")),
+            "--units",
+            "mm",
+            "--out",
+            str(tmp_path / "q.json"),
+        ]
+    )
     assert plain.code == bom.code == 0, bom.err
     assert plain.out.replace("p.json", "q.json") == bom.out
 
