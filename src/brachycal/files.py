@@ -46,6 +46,7 @@ __all__ = [
     "atomic_open",
     "atomic_path",
     "bundled",
+    "file_kind",
     "json_text",
     "output_set",
     "sha256_bytes",
@@ -298,6 +299,22 @@ def _common_folder(paths: list[Path]) -> Path:
     return Path(os.path.commonpath([str(p.parent.absolute()) for p in paths]))
 
 
+def file_kind(mode: int) -> str:
+    """What a file that is not a regular one is, from its ``st_mode``: ``"a folder"``, ``"a device"``,
+    ``"a FIFO"``, ``"a socket"`` (``"a regular file"`` for one)."""
+    if stat.S_ISREG(mode):
+        return "a regular file"
+    if stat.S_ISDIR(mode):
+        return "a folder"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "not a regular file"
+
+
 def _refuse_special(destination: Path) -> None:
     """A destination must be a regular file (or absent); ``force`` never replaces anything else."""
     try:
@@ -310,17 +327,7 @@ def _refuse_special(destination: Path) -> None:
         raise OutputError(f"cannot check it ({exc.strerror})", file=destination) from None
     if stat.S_ISREG(mode):
         return
-    kind = (
-        "a folder"
-        if stat.S_ISDIR(mode)
-        else "a device"
-        if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
-        else "a FIFO"
-        if stat.S_ISFIFO(mode)
-        else "a socket"
-        if stat.S_ISSOCK(mode)
-        else "not a regular file"
-    )
+    kind = file_kind(mode)
     raise OutputError(f"is {kind}; an output must be a regular file (refused even with --force)", file=destination)
 
 

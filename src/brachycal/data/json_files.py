@@ -3,34 +3,149 @@
 Result files (``brachycal-result/1``, ``-pivot/1``, ``-nwire/1``) and the twin's truth
 (``brachycal-truth/1``) are JSON objects whose ``format`` key names their format and version;
 :func:`read_format_json` reads one and refuses anything else with one line naming the file.
+
+The reader bounds what it holds, so that no file can exhaust memory or time or hand a reader a
+value no check expects: it reads regular files only (not a folder, a FIFO or a device), at most
+:data:`MAX_JSON_BYTES`, nested at most :data:`MAX_JSON_DEPTH` deep, with integers of at most
+:data:`MAX_JSON_INT_DIGITS` digits and finite numbers only (``NaN``, ``Infinity`` and ``1e400``,
+which Python's ``json`` accepts, are refused naming their place: ``spacing_mm.kabsch[0]``).
 """
 
 from __future__ import annotations
 
 import json
+import math
 import os
+import stat
 from pathlib import Path
 from typing import Any
 
 from brachycal.errors import InputError
+from brachycal.files import file_kind
+
+#: Largest JSON file read, bytes: brachycal's largest (a whole-chain result with the robot
+#: identified and its per-pixel map) is under 1 MB; 64 MB leaves room for any session's size
+#: and stops a wrong file (an image, a log) before it fills memory.
+MAX_JSON_BYTES = 64 * 2**20
+
+#: Deepest nesting of objects and arrays: brachycal's files nest at most 7 deep; Python's
+#: ``json`` would recurse until the interpreter's limit (a ``RecursionError``) on deeper ones.
+MAX_JSON_DEPTH = 64
+
+#: Most digits of an integer: no count, size or seed in brachycal's files has more than 10;
+#: longer ones are typos or attacks (Python refuses to convert more than 4300 digits at all).
+MAX_JSON_INT_DIGITS = 20
+_INT_LIMIT = 10**MAX_JSON_INT_DIGITS
+
+
+class _Refused:
+    """A number the parser met that the reader refuses (``NaN``, ``Infinity``, ``1e400``, a huge
+    integer): kept in place so that the refusal can name where it is."""
+
+    def __init__(self, text: str, why: str) -> None:
+        self.text, self.why = text, why
+
+
+def _constant(text: str) -> _Refused:
+    return _Refused(text, "is not a finite number (JSON numbers must be finite)")
+
+
+def _float(text: str) -> float | _Refused:
+    value = float(text)
+    return value if math.isfinite(value) else _Refused(text, "is not a finite number (beyond floating point range)")
+
+
+def _int(text: str) -> int | _Refused:
+    digits = len(text.lstrip("-"))
+    if digits > MAX_JSON_INT_DIGITS:
+        return _Refused(f"{text[:12]}...", f"is an integer of {digits} digits (at most {MAX_JSON_INT_DIGITS})")
+    return int(text)
+
+
+def json_place(parent: str, key: str | int) -> str:
+    """The place of ``key`` inside ``parent`` as the refusals name it: ``a.b``, ``a.b[2]``."""
+    if isinstance(key, int):
+        return f"{parent}[{key}]"
+    return f"{parent}.{key}" if parent else str(key)
+
+
+def check_json_tree(value: Any, file: str | os.PathLike[str] | None = None, *, place: str = "") -> None:
+    """Refuse a JSON value nested deeper than :data:`MAX_JSON_DEPTH` or holding a non-finite
+    number, an integer of more than :data:`MAX_JSON_INT_DIGITS` digits, or a value that is not
+    JSON's (naming the first such place, e.g. ``column 'loocv.icp.errors_mm[3]'``).
+
+    Walks iteratively (no recursion, whatever the depth).
+    """
+    stack: list[tuple[Any, str, int]] = [(value, place, 0)]
+    while stack:
+        node, where, depth = stack.pop()
+        if depth > MAX_JSON_DEPTH:
+            shown = where if len(where) < 80 else f"{where[:60]}..."
+            raise InputError(f"nested more than {MAX_JSON_DEPTH} deep", file=file, column=shown or None)
+        if isinstance(node, dict):
+            for key, item in reversed(node.items()):
+                if not isinstance(key, str):
+                    raise InputError(f"key {key!r} is not a string", file=file, column=where or None)
+                stack.append((item, json_place(where, key), depth + 1))
+        elif isinstance(node, list):
+            stack.extend((item, json_place(where, k), depth + 1) for k, item in reversed(list(enumerate(node))))
+        elif isinstance(node, _Refused):
+            raise InputError(f"{node.text} {node.why}", file=file, column=where or None)
+        elif isinstance(node, float):
+            if not math.isfinite(node):
+                raise InputError(f"{node} is not a finite number", file=file, column=where or None)
+        elif isinstance(node, bool) or node is None or isinstance(node, str):
+            pass
+        elif isinstance(node, int):
+            if abs(node) >= _INT_LIMIT:
+                raise InputError(
+                    f"is an integer of more than {MAX_JSON_INT_DIGITS} digits", file=file, column=where or None
+                )
+        else:
+            raise InputError(f"{type(node).__name__} is not a JSON value", file=file, column=where or None)
 
 
 def read_json(path: str | os.PathLike[str]) -> Any:
-    """The JSON value in ``path``.
+    """The JSON value in ``path``, bounded (module docstring).
 
     Raises:
-        InputError: the file cannot be read or is not valid JSON (or not UTF-8), naming the file.
+        InputError: the file cannot be read, is not a regular file, is larger than
+            :data:`MAX_JSON_BYTES`, is not valid JSON (or not UTF-8), is nested too deeply, or
+            holds a non-finite number or a huge integer (naming the file, and the place in it).
     """
     try:
-        return json.loads(Path(path).read_text())
+        # Non-blocking: opening a FIFO must not wait for a writer (it is refused just below).
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
     except OSError as exc:
         raise InputError(f"cannot read ({exc.strerror})", file=path) from None
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            raise InputError(f"is {file_kind(mode)}, not a JSON file", file=path)
+        with os.fdopen(fd, "rb", closefd=False) as stream:
+            data = stream.read(MAX_JSON_BYTES + 1)
+    except OSError as exc:
+        raise InputError(f"cannot read ({exc.strerror})", file=path) from None
+    finally:
+        os.close(fd)
+    if len(data) > MAX_JSON_BYTES:
+        raise InputError(
+            f"is larger than {MAX_JSON_BYTES // 2**20} MB, more than any JSON file brachycal reads", file=path
+        )
+    try:
+        value = json.loads(data.decode("utf-8"), parse_constant=_constant, parse_float=_float, parse_int=_int)
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"not valid JSON ({exc})", file=path) from None
+    except RecursionError:
+        raise InputError(f"not valid JSON: nested more than {MAX_JSON_DEPTH} deep", file=path) from None
+    except ValueError as exc:  # any conversion the hooks above did not foresee
+        raise InputError(f"not valid JSON ({exc})", file=path) from None
+    check_json_tree(value, path)
+    return value
 
 
 def read_format_json(path: str | os.PathLike[str], expected_format: str) -> dict[str, Any]:
-    """The JSON object in ``path`` whose ``format`` is ``expected_format``.
+    """The JSON object in ``path`` whose ``format`` is ``expected_format`` (read by :func:`read_json`).
 
     Raises:
         InputError: the file cannot be read, is not valid JSON (or not UTF-8), is not a JSON
