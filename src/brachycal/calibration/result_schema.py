@@ -133,10 +133,11 @@ def text(*, nonempty: bool = False) -> Spec:
     """A JSON string (not empty with ``nonempty``)."""
 
     def check(value: Any, where: Where) -> None:
+        what = "a non-empty string" if nonempty else "a string"
         if not isinstance(value, str):
-            raise where.refuse(f"must be a string, got {_kind(value)}")
+            raise where.refuse(f"must be {what}, got {_kind(value)}")
         if nonempty and not value:
-            raise where.refuse("must not be empty")
+            raise where.refuse(f"must be {what}, got an empty one")
 
     return check
 
