@@ -17,8 +17,7 @@ import pytest
 from conftest import ROOT
 from hostile import run_cli
 
-from brachycal.calibration import read_result
-from brachycal.calibration.result_schema import validate_result_document
+from brachycal.calibration import read_result, validate_result_document
 from brachycal.data.json_files import MAX_JSON_DEPTH, check_json_tree, json_place, read_json
 from brachycal.errors import InputError
 

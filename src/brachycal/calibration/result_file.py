@@ -32,7 +32,7 @@ import numpy as np
 from brachycal.calibration.image_to_probe import METHODS, ImageCalibration
 from brachycal.calibration.result_schema import FORMAT, validate_result_document
 from brachycal.calibration.sequential import CalibrationResult
-from brachycal.data.json_files import read_json
+from brachycal.data.json_files import parse_json, read_json_bytes
 from brachycal.errors import BrachycalWarning, InputError
 from brachycal.files import sha256_bytes, sha256_file, write_json
 from brachycal.model.robot import Robot
@@ -410,11 +410,12 @@ def read_result(path: str | os.PathLike[str]) -> StoredCalibration:
     types, shapes, finite numbers, physical ranges, proper rotations), before any of it is used.
 
     Raises:
-        InputError: the file cannot be read, is not bounded JSON (:func:`~brachycal.data.json_files.read_json`),
+        InputError: the file cannot be read, is not bounded JSON (:func:`~brachycal.data.json_files.parse_json`),
             or its first problem, naming the file and the key's place in the document.
     """
     path = Path(path)
-    raw = validate_result_document(read_json(path), path)
+    data = read_json_bytes(path)  # validated and hashed: the same bytes
+    raw = validate_result_document(parse_json(data, path), path)
     transforms = raw["transforms"]
     image = {
         method: ImageCalibration(method, _matrix(T), np.array(raw["spacing_mm"][method], dtype=float) * 1e-3)
@@ -435,7 +436,7 @@ def read_result(path: str | os.PathLike[str]) -> StoredCalibration:
         },
         source=str(path),
         robot=_robot_record(raw),
-        sha256=sha256_file(path),
+        sha256=sha256_bytes(data),
     )
 
 

@@ -88,6 +88,8 @@ def check_json_tree(value: Any, file: str | os.PathLike[str] | None = None, *, p
                     raise InputError(f"key {key!r} is not a string", file=file, column=where or None)
                 stack.append((item, json_place(where, key), depth + 1))
         elif isinstance(node, list):
+            if all(type(item) is float for item in node) and math.isfinite(sum(node)):
+                continue  # numbers only, all finite (a sum of finite floats that overflows is checked below)
             stack.extend((item, json_place(where, k), depth + 1) for k, item in reversed(list(enumerate(node))))
         elif isinstance(node, _Refused):
             raise InputError(f"{node.text} {node.why}", file=file, column=where or None)
@@ -105,13 +107,12 @@ def check_json_tree(value: Any, file: str | os.PathLike[str] | None = None, *, p
             raise InputError(f"{type(node).__name__} is not a JSON value", file=file, column=where or None)
 
 
-def read_json(path: str | os.PathLike[str]) -> Any:
-    """The JSON value in ``path``, bounded (module docstring).
+def read_json_bytes(path: str | os.PathLike[str]) -> bytes:
+    """The bytes of the JSON file ``path``: a regular file of at most :data:`MAX_JSON_BYTES`.
 
     Raises:
-        InputError: the file cannot be read, is not a regular file, is larger than
-            :data:`MAX_JSON_BYTES`, is not valid JSON (or not UTF-8), is nested too deeply, or
-            holds a non-finite number or a huge integer (naming the file, and the place in it).
+        InputError: the file cannot be read, is not a regular file (a folder, a FIFO, a device) or
+            is larger than :data:`MAX_JSON_BYTES`, naming the file.
     """
     try:
         # Non-blocking: opening a FIFO must not wait for a writer (it is refused just below).
@@ -129,9 +130,18 @@ def read_json(path: str | os.PathLike[str]) -> Any:
     finally:
         os.close(fd)
     if len(data) > MAX_JSON_BYTES:
-        raise InputError(
-            f"is larger than {MAX_JSON_BYTES // 2**20} MB, more than any JSON file brachycal reads", file=path
-        )
+        limit = MAX_JSON_BYTES // 2**20
+        raise InputError(f"is larger than {limit} MB, more than any JSON file brachycal reads", file=path)
+    return data
+
+
+def parse_json(data: bytes, path: str | os.PathLike[str]) -> Any:
+    """The JSON value in ``data`` (the bytes of the file ``path``), bounded (module docstring).
+
+    Raises:
+        InputError: not valid JSON (or not UTF-8), nested too deeply, or holding a non-finite number
+            or a huge integer (naming the file, and the place in it).
+    """
     try:
         value = json.loads(data.decode("utf-8"), parse_constant=_constant, parse_float=_float, parse_int=_int)
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
@@ -142,6 +152,17 @@ def read_json(path: str | os.PathLike[str]) -> Any:
         raise InputError(f"not valid JSON ({exc})", file=path) from None
     check_json_tree(value, path)
     return value
+
+
+def read_json(path: str | os.PathLike[str]) -> Any:
+    """The JSON value in ``path``: :func:`read_json_bytes` then :func:`parse_json`.
+
+    Raises:
+        InputError: the file cannot be read, is not a regular file, is larger than
+            :data:`MAX_JSON_BYTES`, is not valid JSON (or not UTF-8), is nested too deeply, or
+            holds a non-finite number or a huge integer (naming the file, and the place in it).
+    """
+    return parse_json(read_json_bytes(path), path)
 
 
 def read_format_json(path: str | os.PathLike[str], expected_format: str) -> dict[str, Any]:
