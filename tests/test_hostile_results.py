@@ -173,6 +173,7 @@ ROWS: list[tuple[str, Callable[[Path], None], tuple[str, ...]]] = [
     ("samples-not-names", edited(at("samples", 0, value={"id": 1})), ("samples[0]", "string")),
     ("refused-reason-not-text", edited(at("refused", value={"kabsch": 3})), ("refused.kabsch", "string")),
     ("sound-speed-of-light", edited(at("chain", "sound_speed_m_s", value=3e8)), ("chain.sound_speed_m_s", "m/s")),
+    ("key-of-100000-characters", edited(at("inputs", "k" * 100_000, value=5)), ("inputs.kkkk", "...", "string")),
     ("other-format", edited(at("format", value="brachycal-result/2")), ("'format'", "brachycal-result/2")),
     ("not-an-object", lambda tmp: (tmp / "result.json").write_text("[1, 2]"), ("'format'",)),
     ("not-json", lambda tmp: (tmp / "result.json").write_text('{"format": '), ("not valid json",)),

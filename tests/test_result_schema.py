@@ -225,3 +225,17 @@ def test_the_reader_accepts_the_largest_integers_it_allows(tmp_path):
     path = tmp_path / "x.json"
     path.write_text('{"a": -' + "9" * 20 + ', "b": 1.5e300}')
     assert read_json(path) == {"a": -(10**20 - 1), "b": 1.5e300}
+
+
+def test_a_refusal_stays_one_short_line_whatever_the_file_holds(results):
+    # A huge key, value or format is cut: the line names the place without carrying the data.
+    document = json.loads(results["sequential"].read_text())
+    for edit in (
+        {"inputs": {"k" * 100_000: 5}},
+        {"image": {"size_px": list(range(100_000))}},
+        {"format": "x" * 100_000},
+        {"loocv": {"m" * 100_000: {}}},
+    ):
+        with pytest.raises(InputError) as refused:
+            validate_result_document({**document, **edit}, "r.json")
+        assert len(str(refused.value)) < 300, str(refused.value)[:400]

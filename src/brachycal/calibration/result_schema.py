@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from brachycal.calibration.labels import METHODS
-from brachycal.data.json_files import check_json_tree, json_place
+from brachycal.data.json_files import check_json_tree, json_place, shown
 from brachycal.errors import InputError
 from brachycal.validate import MAX_IMAGE_PX, check_int, check_range, check_spacing_mm, check_transform
 
@@ -179,7 +179,7 @@ def mapping(value: Spec, *, keys: tuple[str, ...] | None = None, nonempty: bool 
         for key, entry in raw.items():
             if not key or (keys is not None and key not in keys):
                 known = f" (known: {', '.join(keys)})" if keys is not None else ""
-                raise where.refuse(f"unknown name {key!r}{known}")
+                raise where.refuse(f"unknown name {shown(key)}{known}")
             value(entry, where.at(key))
 
     return check
@@ -207,7 +207,9 @@ class Obj:
         if self.closed:
             extra = sorted(set(raw) - set(self.required) - set(self.optional))
             if extra:
-                raise where.refuse(f"unknown key {extra[0]!r} (it holds {', '.join([*self.required, *self.optional])})")
+                raise where.refuse(
+                    f"unknown key {shown(extra[0])} (it holds {', '.join([*self.required, *self.optional])})"
+                )
 
 
 def transform(value: Any, where: Where) -> None:
@@ -221,7 +223,8 @@ def transform(value: Any, where: Where) -> None:
     reach = float(np.max(np.abs(T[:3, 3])))
     if reach > MAX_TRANSLATION_M:
         raise where.refuse(
-            f"translation of {reach:g} m: beyond {MAX_TRANSLATION_M:g} m from its parent frame (a file in metres?)"
+            f"translation of {reach:g} m: beyond {MAX_TRANSLATION_M:g} m from its parent frame "
+            "(millimetres given as metres?)"
         )
 
 
@@ -237,7 +240,7 @@ def image_size(value: Any, where: Where) -> None:
         array(integer(1, MAX_IMAGE_PX), length=2)(value, where)
     except InputError:
         raise where.refuse(
-            f"must be two whole numbers of pixels in [1, {MAX_IMAGE_PX}] (width, height), got {value!r}"
+            f"must be two whole numbers of pixels in [1, {MAX_IMAGE_PX}] (width, height), got {shown(value)}"
         ) from None
 
 
@@ -419,7 +422,7 @@ def validate_result_document(doc: Any, path: str | os.PathLike[str] | None = Non
     top = Where(path, "")
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         found = doc.get("format") if isinstance(doc, dict) else None
-        raise top.at("format").refuse(f"format is {found!r}, expected {FORMAT!r}")
+        raise top.at("format").refuse(f"format is {shown(found)}, expected {FORMAT!r}")
     DOCUMENT(doc, top)
     images = doc["transforms"]["Ptip_T_I"]
     spacings = doc.get("spacing_mm", {})

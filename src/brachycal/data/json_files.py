@@ -63,10 +63,18 @@ def _int(text: str) -> int | _Refused:
 
 
 def json_place(parent: str, key: str | int) -> str:
-    """The place of ``key`` inside ``parent`` as the refusals name it: ``a.b``, ``a.b[2]``."""
+    """The place of ``key`` inside ``parent`` as the refusals name it: ``a.b``, ``a.b[2]`` (a key
+    longer than 40 characters cut, so that the refusal stays one readable line)."""
     if isinstance(key, int):
         return f"{parent}[{key}]"
-    return f"{parent}.{key}" if parent else str(key)
+    name = key if len(key) <= 40 else f"{key[:37]}..."
+    return f"{parent}.{name}" if parent else name
+
+
+def shown(value: Any) -> str:
+    """``repr(value)`` cut to 80 characters, for a refusal."""
+    text = repr(value)
+    return text if len(text) <= 80 else f"{text[:77]}..."
 
 
 def check_json_tree(value: Any, file: str | os.PathLike[str] | None = None, *, place: str = "") -> None:
@@ -85,7 +93,7 @@ def check_json_tree(value: Any, file: str | os.PathLike[str] | None = None, *, p
         if isinstance(node, dict):
             for key, item in reversed(node.items()):
                 if not isinstance(key, str):
-                    raise InputError(f"key {key!r} is not a string", file=file, column=where or None)
+                    raise InputError(f"key {shown(key)} is not a string", file=file, column=where or None)
                 stack.append((item, json_place(where, key), depth + 1))
         elif isinstance(node, list):
             if all(type(item) is float for item in node) and math.isfinite(sum(node)):
@@ -176,5 +184,5 @@ def read_format_json(path: str | os.PathLike[str], expected_format: str) -> dict
     raw = read_json(path)
     if not isinstance(raw, dict) or raw.get("format") != expected_format:
         found = raw.get("format") if isinstance(raw, dict) else None
-        raise InputError(f"format is {found!r}, expected {expected_format!r}", file=path, column="format")
+        raise InputError(f"format is {shown(found)}, expected {expected_format!r}", file=path, column="format")
     return raw
