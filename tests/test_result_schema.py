@@ -239,3 +239,16 @@ def test_a_refusal_stays_one_short_line_whatever_the_file_holds(results):
         with pytest.raises(InputError) as refused:
             validate_result_document({**document, **edit}, "r.json")
         assert len(str(refused.value)) < 300, str(refused.value)[:400]
+
+
+@pytest.mark.parametrize(
+    "value, words",
+    [
+        ({"a": {1: 2}}, "column 'a': key 1 is not a string"),
+        ({"a": (1, 2)}, "column 'a': tuple is not a JSON value"),
+        ({"a": [10**20]}, r"column 'a\[0\]': is an integer of more than 20 digits"),
+    ],
+)
+def test_a_document_built_in_memory_is_held_to_json(value, words):
+    with pytest.raises(InputError, match=words):
+        check_json_tree(value)

@@ -88,8 +88,8 @@ def check_json_tree(value: Any, file: str | os.PathLike[str] | None = None, *, p
     while stack:
         node, where, depth = stack.pop()
         if depth > MAX_JSON_DEPTH:
-            shown = where if len(where) < 80 else f"{where[:60]}..."
-            raise InputError(f"nested more than {MAX_JSON_DEPTH} deep", file=file, column=shown or None)
+            cut = where if len(where) < 80 else f"{where[:60]}..."
+            raise InputError(f"nested more than {MAX_JSON_DEPTH} deep", file=file, column=cut or None)
         if isinstance(node, dict):
             for key, item in reversed(node.items()):
                 if not isinstance(key, str):
