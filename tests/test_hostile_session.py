@@ -10,6 +10,7 @@ folder, with one defect.
 from __future__ import annotations
 
 import json
+import os
 import shutil
 from collections.abc import Callable
 from pathlib import Path
@@ -105,6 +106,17 @@ def markups(z_first: float = 0.0):
         points = [{"label": f"F-{k}", "position": [19.0, 19.0, z_first if k == 0 else 0.0]} for k in range(count)]
         payload = {"markups": [{"type": "Fiducial", "coordinateSystem": "LPS", "controlPoints": points}]}
         (tmp / "tips.mrk.json").write_text(json.dumps(payload))
+
+    return edit
+
+
+def replace_text(name: str, old: str, new: str):
+    """Replace the first ``old`` in ``name`` by ``new``."""
+
+    def edit(tmp: Path) -> None:
+        text = (tmp / name).read_text()
+        assert old in text, f"{old!r} not in {name}"
+        (tmp / name).write_text(text.replace(old, new, 1))
 
     return edit
 
@@ -254,6 +266,19 @@ CASES = [
         MARKUPS,
         ("tips.mrk.json, control point 1", "0.7 mm off the frame's plane"),
         with_copy(images_without_uv, markups(z_first=0.7)),
+    ),
+    # The markups file is read by the bounded JSON reader: no NaN, no special file.
+    Case(
+        "markup-position-nan",
+        MARKUPS,
+        ("tips.mrk.json", "markups[0].controlPoints[0].position[0]", "NaN is not a finite number"),
+        with_copy(images_without_uv, markups(), replace_text("tips.mrk.json", "[19.0, 19.0, 0.0]", "[NaN, 19.0, 0.0]")),
+    ),
+    Case(
+        "markups-a-fifo",
+        MARKUPS,
+        ("tips.mrk.json", "is a FIFO"),
+        with_copy(images_without_uv, lambda tmp: os.mkfifo(tmp / "tips.mrk.json")),
     ),
     Case(
         "markups-and-uv-columns",

@@ -47,7 +47,7 @@ from types import TracebackType
 from typing import IO
 
 from brachycal.errors import OutputError
-from brachycal.inputs import hash_input, input_at
+from brachycal.inputs import file_kind, hash_input, input_at
 
 __all__ = [
     "OutputSet",
@@ -327,17 +327,7 @@ def _refuse_special(destination: Path) -> None:
         raise OutputError(f"cannot check it ({exc.strerror})", file=destination) from None
     if stat.S_ISREG(mode):
         return
-    kind = (
-        "a folder"
-        if stat.S_ISDIR(mode)
-        else "a device"
-        if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
-        else "a FIFO"
-        if stat.S_ISFIFO(mode)
-        else "a socket"
-        if stat.S_ISSOCK(mode)
-        else "not a regular file"
-    )
+    kind = file_kind(mode)
     raise OutputError(f"is {kind}; an output must be a regular file (refused even with --force)", file=destination)
 
 

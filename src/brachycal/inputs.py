@@ -37,6 +37,7 @@ __all__ = [
     "MAX_TABLE_BYTES",
     "check_input_file",
     "check_memory",
+    "file_kind",
     "hash_input",
     "input_at",
     "open_input",
@@ -62,7 +63,11 @@ _lock = threading.Lock()
 _recordings: list[dict[tuple[int, int], str]] = []
 
 
-def _kind(mode: int) -> str:
+def file_kind(mode: int) -> str:
+    """What a file is, from its ``st_mode``: ``"a folder"``, ``"a device"``, ``"a FIFO (named pipe)"``,
+    ``"a socket"``, ``"a regular file"``."""
+    if stat.S_ISREG(mode):
+        return "a regular file"
     if stat.S_ISDIR(mode):
         return "a folder"
     if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
@@ -82,7 +87,7 @@ def _check_stat(path: str | os.PathLike[str], st: os.stat_result, max_bytes: int
     if stat.S_ISDIR(st.st_mode) and folder_ok:
         return
     if not stat.S_ISREG(st.st_mode):
-        kind = _kind(st.st_mode)
+        kind = file_kind(st.st_mode)
         if kind == "a folder":
             raise InputError("is a folder; expected a file", file=path)
         raise InputError(f"is {kind}, not a regular file; an input must be a regular file", file=path)

@@ -368,9 +368,11 @@ def _check_spacing(
     try:
         A = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
-        raise InputError(f"{_where(name)}must be two numbers (s_u, s_v), got {value!r}", file=file) from None
+        raise InputError(
+            f"{_where(name)}must be two numbers (s_u, s_v), got {value!r}", file=file, column=column
+        ) from None
     if A.shape != (2,):
-        raise InputError(f"{_where(name)}must be two numbers (s_u, s_v), got shape {A.shape}", file=file)
+        raise InputError(f"{_where(name)}must be two numbers (s_u, s_v), got shape {A.shape}", file=file, column=column)
     for axis, x in zip("uv", A, strict=True):
         problem = _spacing_problem(float(x), unit)
         if problem:

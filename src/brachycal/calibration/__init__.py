@@ -25,7 +25,8 @@ identified with the chain (:func:`identify_robot`, :class:`RobotIdentification`,
 identify it best (:func:`base_criterion`, :func:`observation_rows`: the A-optimal criterion on the
 landing error, :class:`Criterion`; an :class:`Observation` is a touch or an image sample). Result files:
 ``brachycal-result/1`` (:func:`write_result`, :func:`read_result`; :class:`RobotRecord` says which
-robot a result was calibrated with), ``brachycal-pivot/1``
+robot a result was calibrated with; :func:`validate_result_document` checks a whole document's
+types, shapes, finite numbers, ranges and proper rotations before it is used), ``brachycal-pivot/1``
 (:func:`write_pivot`, :func:`read_pivot`), ``brachycal-nwire/1`` (:func:`write_nwire`,
 :func:`read_nwire`). Temporal calibration: the lag between two time-stamped position signals
 (:func:`estimate_lag`, a :class:`LagEstimate`), from PLUS's water-tank recordings
@@ -59,6 +60,7 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
         write_pivot,
     )
     from brachycal.calibration.result_file import RobotRecord, StoredCalibration, read_result, write_result
+    from brachycal.calibration.result_schema import validate_result_document
     from brachycal.calibration.robot_identification import (
         RobotIdentification,
         corrected_robot,
@@ -162,6 +164,7 @@ __all__ = [
     "read_wedge_phantom",
     "read_wire_phantom",
     "select_model",
+    "validate_result_document",
     "wire_point_pairs",
     "write_nwire",
     "write_phantom_observations",

@@ -34,15 +34,13 @@ from pathlib import Path
 import numpy as np
 
 from brachycal.calibration.image_to_probe import METHODS, ImageCalibration
+from brachycal.calibration.result_schema import FORMAT, validate_result_document
 from brachycal.calibration.sequential import CalibrationResult
-from brachycal.data.json_files import read_format_json
+from brachycal.data.json_files import parse_json, read_json_bytes
 from brachycal.errors import BrachycalWarning, InputError
 from brachycal.files import sha256_bytes, sha256_file, write_json
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray
-from brachycal.validate import MAX_IMAGE_PX, check_int, check_spacing_mm, check_transform
-
-FORMAT = "brachycal-result/1"
 
 
 @dataclass(frozen=True)
@@ -416,49 +414,45 @@ def _same_origin(a: FloatArray, b: FloatArray) -> bool:
     return bool(np.max(np.abs(a - b)) <= ORIGIN_TOLERANCE)
 
 
-def _matrix(value: object, path: Path, key: str) -> FloatArray:
-    """The rigid ``(4, 4)`` at ``key`` (:func:`~brachycal.validate.check_transform`, its default
-    tolerance: results are written with full precision), refused naming the file and the key."""
-    try:
-        T = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise InputError("not a 4x4 matrix of numbers", file=path, column=key) from None
-    if T.shape != (4, 4):
-        raise InputError(f"not a 4x4 matrix (shape {T.shape})", file=path, column=key)
-    try:
-        return check_transform(T, "matrix")
-    except InputError as exc:  # restated with the file and the key it was read from
-        raise InputError(exc.problem, file=path, column=key) from None
+def _matrix(value: object) -> FloatArray:
+    """A ``(4, 4)`` transform of a validated document (:mod:`~brachycal.calibration.result_schema`)."""
+    return np.array(value, dtype=float)
 
 
 def read_result(path: str | os.PathLike[str]) -> StoredCalibration:
-    """Read a result file back; refuses anything that is not a valid ``brachycal-result/1``."""
+    """Read a result file back; refuses anything that is not a valid ``brachycal-result/1``.
+
+    The whole document is checked first (:func:`~brachycal.calibration.result_schema.validate_result_document`:
+    types, shapes, finite numbers, physical ranges, proper rotations), before any of it is used.
+
+    Raises:
+        InputError: the file cannot be read, is not bounded JSON (:func:`~brachycal.data.json_files.parse_json`),
+            or its first problem, naming the file and the key's place in the document.
+    """
     path = Path(path)
-    raw = read_format_json(path, FORMAT)
-    transforms = raw.get("transforms", {})
-    images = transforms.get("Ptip_T_I", {}) if isinstance(transforms, dict) else {}
-    if not isinstance(images, dict) or not images:
-        raise InputError("no image transforms", file=path, column="transforms.Ptip_T_I")
-    image = {}
-    for method, T in images.items():
-        if method not in (*METHODS, "chain"):
-            raise InputError(f"unknown method {method!r}", file=path, column="transforms.Ptip_T_I")
-        spacing_mm = raw.get("spacing_mm", {}).get(method)
-        if spacing_mm is None:
-            raise InputError("missing pixel spacing", file=path, column=f"spacing_mm.{method}")
-        spacing = check_spacing_mm(spacing_mm, "pixel spacing", file=path, column=f"spacing_mm.{method}") * 1e-3
-        image[method] = ImageCalibration(method, _matrix(T, path, f"transforms.Ptip_T_I.{method}"), spacing)
+    data = read_json_bytes(path)  # validated and hashed: the same bytes
+    raw = validate_result_document(parse_json(data, path), path)
+    transforms = raw["transforms"]
+    image = {
+        method: ImageCalibration(method, _matrix(T), np.array(raw["spacing_mm"][method], dtype=float) * 1e-3)
+        for method, T in transforms["Ptip_T_I"].items()
+    }
+    chain = raw.get("chain", {})
+    size = raw.get("image", {}).get("size_px")
     return StoredCalibration(
-        T_ER_Ntip=_matrix(transforms.get("ER_T_Ntip"), path, "transforms.ER_T_Ntip"),
-        T_EL_Ptip=_matrix(transforms.get("EL_T_Ptip"), path, "transforms.EL_T_Ptip"),
+        T_ER_Ntip=_matrix(transforms["ER_T_Ntip"]),
+        T_EL_Ptip=_matrix(transforms["EL_T_Ptip"]),
         image=image,
         raw=raw,
-        joint_offsets_rad={str(k): float(v) for k, v in raw.get("chain", {}).get("joint_offsets_rad", {}).items()},
-        image_size_px=_image_size(raw, path),
-        joint_origins=_joint_origins(raw, path),
+        joint_offsets_rad={k: float(v) for k, v in chain.get("joint_offsets_rad", {}).items()},
+        image_size_px=None if size is None else (int(size[0]), int(size[1])),
+        joint_origins={
+            name: (_matrix(pair["urdf"]), _matrix(pair["corrected"]))
+            for name, pair in chain.get("robot_joint_origins", {}).items()
+        },
         source=str(path),
-        robot=_robot_record(raw, path),
-        sha256=sha256_file(path),
+        robot=_robot_record(raw),
+        sha256=sha256_bytes(data),
         refused=_refused(raw, path, image),
     )
 
@@ -480,58 +474,16 @@ def _refused(raw: dict, path: Path, image: dict[str, ImageCalibration]) -> dict[
     return {str(m): str(r) for m, r in block.items()}
 
 
-def _robot_record(raw: dict, path: Path) -> RobotRecord | None:
-    """The ``robot`` block, or None if the file has none (written before robot descriptions)."""
+def _robot_record(raw: dict) -> RobotRecord | None:
+    """The ``robot`` block of a validated document, or None if the file has none (written before
+    robot descriptions)."""
     if "robot" not in raw:
         return None
     block = raw["robot"]
-    if not isinstance(block, dict):
-        raise InputError("must be an object (name, description, ...)", file=path, column="robot")
-    texts = {}
-    for key in ("name", "description", "description_sha256", "urdf_sha256"):
-        value = block.get(key)
-        if not isinstance(value, str) or (key == "name" and not value):
-            what = "a non-empty string" if key == "name" else "a string"
-            raise InputError(f"must be {what}", file=path, column=f"robot.{key}")
-        texts[key] = value
-    joints = block.get("joint_names")
-    if not isinstance(joints, list) or not joints or not all(isinstance(j, str) and j for j in joints):
-        raise InputError("must be a list of joint names", file=path, column="robot.joint_names")
-    return RobotRecord(joint_names=tuple(joints), **texts)
-
-
-def _joint_origins(raw: dict, path: Path) -> dict[str, tuple[FloatArray, FloatArray]]:
-    chain = raw.get("chain", {})
-    stored = chain.get("robot_joint_origins", {}) if isinstance(chain, dict) else {}
-    if not isinstance(stored, dict):
-        raise InputError("must map joint names to their origins", file=path, column="chain.robot_joint_origins")
-    out = {}
-    for name, pair in stored.items():
-        key = f"chain.robot_joint_origins.{name}"
-        if not isinstance(pair, dict) or set(pair) != {"urdf", "corrected"}:
-            raise InputError("must hold 'urdf' and 'corrected' 4x4 origins", file=path, column=key)
-        out[str(name)] = (
-            _matrix(pair["urdf"], path, f"{key}.urdf"),
-            _matrix(pair["corrected"], path, f"{key}.corrected"),
-        )
-    return out
-
-
-def _image_size(raw: dict, path: Path) -> tuple[int, int] | None:
-    """``image.size_px`` as (width, height), or None if the file does not say (older files)."""
-    image = raw.get("image")
-    if image is None:
-        return None
-    size = image.get("size_px") if isinstance(image, dict) else None
-    refusal = InputError(
-        f"must be two whole numbers of pixels in [1, {MAX_IMAGE_PX}] (width, height), got {size!r}",
-        file=path,
-        column="image.size_px",
+    return RobotRecord(
+        name=block["name"],
+        description=block["description"],
+        description_sha256=block["description_sha256"],
+        urdf_sha256=block["urdf_sha256"],
+        joint_names=tuple(block["joint_names"]),
     )
-    if not isinstance(size, list):  # JSON: anything else is not two numbers
-        raise refusal
-    try:
-        width, height = (check_int(n, "image size", low=1, high=MAX_IMAGE_PX) for n in size)
-    except (TypeError, ValueError):  # InputError is a ValueError: restate it with the place
-        raise refusal from None
-    return width, height
