@@ -90,7 +90,7 @@ def test_special_files_are_refused_even_with_force(tmp_path, kind):
         target.symlink_to(os.devnull)
     else:
         target = Path(os.devnull)
-    word = {"folder": "is a folder", "fifo": "is a FIFO"}.get(kind, "is a device")
+    word = {"folder": "is a folder", "fifo": r"is a FIFO \(named pipe\)"}.get(kind, "is a device")
     before = listing(tmp_path)
     with pytest.raises(OutputError, match=f"{word}; an output must be a regular file"), OutputSet(force=True) as out:
         out.claim(target)

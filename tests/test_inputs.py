@@ -61,9 +61,9 @@ def test_a_folder_is_accepted_where_one_may_be_given(tmp_path: Path) -> None:
 def test_a_file_larger_than_its_kind_may_be_is_refused_before_reading(tmp_path: Path) -> None:
     path = tmp_path / "big.json"
     path.write_bytes(b"x" * 2_000_001)
-    with pytest.raises(InputError, match=r"big.json: is 1.91 MB, more than the 1.91 MB a file of this kind may be"):
+    with pytest.raises(InputError, match=r"big.json: is larger than 1.91 MB \(2000001 bytes\), the most"):
         read_input_bytes(path, max_bytes=2_000_000)
-    with pytest.raises(InputError, match=r"is 11 bytes, more than the 10 bytes"):
+    with pytest.raises(InputError, match=r"is larger than 10 bytes \(11 bytes\)"):
         path.write_bytes(b"x" * 11)
         read_input_text(path, max_bytes=10)
 

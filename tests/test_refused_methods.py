@@ -253,13 +253,13 @@ CASES = [
     Case(
         "result-refused-not-an-object",
         LOCATE,
-        ("result.json", "'refused'", "must map refused methods"),
+        ("result.json", "'refused'", "must be an object"),
         _both(_result_with(_refused_is_a_list), _joints),
     ),
     Case(
         "result-refused-reason-not-a-string",
         LOCATE,
-        ("result.json", "refused.icp", "non-empty string"),
+        ("result.json", "refused.icp", "must be a string"),
         _both(_result_with(_refused_reason_not_a_string), _joints),
     ),
     Case(

@@ -93,7 +93,8 @@ def _check_stat(path: str | os.PathLike[str], st: os.stat_result, max_bytes: int
         raise InputError(f"is {kind}, not a regular file; an input must be a regular file", file=path)
     if max_bytes is not None and st.st_size > max_bytes:
         raise InputError(
-            f"is {_megabytes(st.st_size)}, more than the {_megabytes(max_bytes)} a file of this kind may be",
+            f"is larger than {_megabytes(max_bytes)} ({st.st_size} bytes), the most brachycal reads of a file "
+            "of this kind: is it the file meant?",
             file=path,
         )
     _record(path, st)
@@ -185,7 +186,11 @@ def read_input_bytes(path: str | os.PathLike[str], *, max_bytes: int) -> bytes:
     with open_input(path, max_bytes=max_bytes) as handle:
         data = handle.read(max_bytes + 1)
     if len(data) > max_bytes:
-        raise InputError(f"is more than the {_megabytes(max_bytes)} a file of this kind may be", file=path)
+        raise InputError(
+            f"is larger than {_megabytes(max_bytes)}, the most brachycal reads of a file of this kind "
+            "(it grew while read)",
+            file=path,
+        )
     return data
 
 
