@@ -10,6 +10,9 @@ process, from ``os.wait4``) are real. Figures (``benchmarks/timing.record``):
   loop writing the same table) on the same log; goal ≤ 0.2 × the peer.
 - ``fk 2M CSV``: wall time (goal ≤ 20 s) and peak memory (goal ≤ 500 MB).
 - ``fk 100k <bag kind>``: wall time beside ``fk 100k CSV``; goal ≤ 2 × the CSV path.
+- ``locate 2M CSV``: peak memory of ``brachycal locate`` (one needle-tip pixel for every row of
+  the 2,000,000-row log, with a result calibrated on the bundled exact session); goal ≤ 500 MB,
+  beside ``fk`` on the same log (the command streams its configurations as ``fk`` does).
 
 Also checks the results: brachycal's pose table equals the peer's number for number, to one unit
 of the last printed decimal (1e-9 m; both print 9 decimals of metres and 12 of quaternions, and a
@@ -152,6 +155,30 @@ def main() -> None:
             met=big_mb <= 500,
             peer="brachycal fk on 100k rows",
             peer_value=csv_mb,
+        )
+
+        result = tmp / "result.json"
+        session = HERE.parent / "examples" / "session_exact"
+        run([str(BIN / "brachycal"), "calibrate", str(session), "--out", str(result), "--quiet"], repeats=1)
+        locate = [str(BIN / "brachycal"), "locate", str(result), str(big), "--uv", "540,360"]
+        locate_s, locate_mb = run(locate, repeats=1)
+        record(
+            "locate 2M CSV peak memory",
+            locate_mb,
+            "MB",
+            goal="<= 500 MB, independent of the log's length",
+            met=locate_mb <= 500,
+            peer="brachycal fk on the same log",
+            peer_value=big_mb,
+        )
+        record(
+            "locate 2M CSV time",
+            locate_s,
+            "s",
+            goal="reported (no goal)",
+            met=True,
+            peer="brachycal fk on the same log",
+            peer_value=big_s,
         )
 
 
