@@ -20,7 +20,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -114,7 +114,7 @@ class TwinSettings:
     def config(self, seed: int, robot_error: str) -> TwinConfig:
         """The twin's configuration for ``seed`` at ``robot_error`` with these settings."""
         config = TwinConfig(seed=seed).with_robot_error(robot_error)
-        changes: dict[str, float] = {}
+        changes: dict[str, Any] = {}
         if self.annotation_px is not None:
             changes["annotation_sd_px"] = self.annotation_px
         if self.robot_translation_m is not None:
