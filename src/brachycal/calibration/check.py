@@ -1104,6 +1104,10 @@ def outcome_json(outcome: CheckOutcome, stored: StoredCalibration, session: Chec
                 },
                 **{f"touch_{t}": v * 1e3 for t, v in outcome.null.touch_sd_m.items()},
                 "touch_source": outcome.null.touch_source,
+                "sample_axis_scale": None
+                if outcome.null.axis_scale is None
+                else dict(zip(AXES, (float(v) for v in outcome.null.axis_scale), strict=True)),
+                "covariance": outcome.null.covariance_source or "none: the residuals are taken as independent",
             },
             "value": outcome.statistic,
             "dof": outcome.dof,
