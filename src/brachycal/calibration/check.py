@@ -24,7 +24,11 @@ top-model at ``rtip2``: jog, joint readings, robot error) over √3 or, if large
 result's touch noise SD (all touches' scatter, pooled over the tools; the larger is taken because
 either alone, three trials or pooled, failed single twin calibrations every time). Where the check
 is given the calibration session, a check pose that repeats a calibration pose takes its own SD
-(:func:`with_calibration_poses`). The test (:func:`union_test`) fails (RECALIBRATE) when the sum of
+(:func:`with_calibration_poses`). A whole-chain result's sample SD is spread over the image's
+lateral, depth and normal axes as its image noise is (:func:`image_axis_scale`: the annotation
+noise lies in the plane). With the calibration session and a stated robot accuracy, that accuracy
+is propagated to the check's own poses and touches (:func:`with_robot_accuracy`): the residuals'
+whole covariance, by which they are whitened, each variance at least the one above. The test (:func:`union_test`) fails (RECALIBRATE) when the sum of
 the squared normalised residuals (χ², ``m`` = 3 × (samples + touches) degrees of freedom) exceeds
 its ``1 − α/2`` quantile, or when the χ² that one part explains, fitted alone, exceeds its
 ``1 − α/(2P)`` quantile: at most ``α``, the stated false-alarm rate, in all.
