@@ -17,9 +17,9 @@ Residuals, per check observation, in millimetres:
 
 Null hypothesis (nothing moved): each residual coordinate is zero-mean with the SD the result
 itself measured for a *new* observation — for samples its leave-one-out RMSE over √3 (each fold
-fits without the sample and predicts it, so the figure holds the annotation noise, the needle
-tip's distance from the image plane, the joint readings' noise, the robot's error left over at
-those poses and the calibration's own error), for touches its Table I RMSE (the tool against the
+fits without the sample and predicts it, so the figure holds the annotation noise, the needle tip's
+distance from the image plane, the joint readings' noise, the robot's error left over at those
+poses and the calibration's own error), for touches its Table I RMSE (the tool against the
 top-model at ``rtip2``: jog, joint readings, robot error) over √3 or, if larger, a whole-chain
 result's touch noise SD (all touches' scatter, pooled over the tools; the larger is taken because
 either alone, three trials or pooled, failed single twin calibrations every time). Where the check
@@ -28,10 +28,11 @@ is given the calibration session, a check pose that repeats a calibration pose t
 lateral, depth and normal axes as its image noise is (:func:`image_axis_scale`: the annotation
 noise lies in the plane). With the calibration session and a stated robot accuracy, that accuracy
 is propagated to the check's own poses and touches (:func:`with_robot_accuracy`): the residuals'
-whole covariance, by which they are whitened, each variance at least the one above. The test (:func:`union_test`) fails (RECALIBRATE) when the sum of
-the squared normalised residuals (χ², ``m`` = 3 × (samples + touches) degrees of freedom) exceeds
-its ``1 − α/2`` quantile, or when the χ² that one part explains, fitted alone, exceeds its
-``1 − α/(2P)`` quantile: at most ``α``, the stated false-alarm rate, in all.
+whole covariance, by which they are whitened, each variance at least the one above. The test
+(:func:`union_test`) fails (RECALIBRATE) when the sum of the squared normalised residuals (χ²,
+``m`` = 3 × (samples + touches) degrees of freedom) exceeds its ``1 − α/2`` quantile, or when the
+χ² that one part explains, fitted alone, exceeds its ``1 − α/(2P)`` quantile: at most ``α``, the
+stated false-alarm rate, in all.
 
 Which part moved: each hypothesis ``h`` — needle tip (3 parameters), probe mount (6: the probe
 with its image rigidly moved on the flange), image transform (6: the image moved on the probe; the
@@ -422,7 +423,7 @@ def robot_rows(model: ChainModel, session: CheckSession) -> FloatArray:
     """``(3 (N + T), 6 nq)`` how the check residuals (metres: samples along the stored image's axes,
     touches in ``base_link``) move with every joint origin's small motion ``(v, ω)`` (the stated
     accuracy's parameters, :func:`~brachycal.calibration.chain.joint_twists`' order)."""
-    from brachycal.calibration.chain.robot_terms import _point_motion, _rows, joint_twists
+    from brachycal.calibration.chain.robot_terms import joint_twists, motion_rows, point_motion
 
     robot, rig = model.robot, model.robot.rig
     T_R_EL, T_R_ER = model._flanges(session, np.zeros(robot.nq))
@@ -431,7 +432,7 @@ def robot_rows(model: ChainModel, session: CheckSession) -> FloatArray:
     p_needle = (T_R_ER[:, :3, :3] @ model.T_ER_Ntip[:3, 3]) + T_R_ER[:, :3, 3]
     W_EL = joint_twists(robot, session.samples_q, rig.probe_flange)
     W_ER = joint_twists(robot, session.samples_q, rig.needle_flange)
-    base = _rows(_point_motion(p_image), W_EL) - _rows(_point_motion(p_needle), W_ER)
+    base = motion_rows(point_motion(p_image), W_EL) - motion_rows(point_motion(p_needle), W_ER)
     R_R_I = model._image_axes(session)
     samples = np.einsum("nji,njk->nik", R_R_I, base.reshape(len(p_I), 3, -1)).reshape(3 * len(p_I), -1)
     parts = [samples]
@@ -440,7 +441,7 @@ def robot_rows(model: ChainModel, session: CheckSession) -> FloatArray:
         flange = rig.needle_flange if needle else rig.probe_flange
         p_tool = (model.T_ER_Ntip if needle else model.T_EL_Ptip)[:3, 3]
         T = robot.fk(flange, q)
-        parts.append(_rows(_point_motion((T[:3, :3] @ p_tool + T[:3, 3])[None]), joint_twists(robot, q, flange)))
+        parts.append(motion_rows(point_motion((T[:3, :3] @ p_tool + T[:3, 3])[None]), joint_twists(robot, q, flange)))
     return np.vstack(parts)
 
 
