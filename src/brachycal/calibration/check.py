@@ -414,8 +414,8 @@ def stated_robot_accuracy(stored: StoredCalibration) -> RobotAccuracy | None:
         raise InputError(str(error), file=stored.source, column="chain.robot_accuracy") from None
 
 
-#: Smallest noise SD a residual is weighted with when propagating the robot accuracy (m): where the
-#: stated accuracy explains all of a group's scatter, its noise share is 0.
+#: Smallest noise SD a residual is weighted with when propagating the robot accuracy (m): a group
+#: whose residuals are below resolution would otherwise weigh without bound.
 _MIN_NOISE_SD_M = 1e-5
 
 
@@ -478,13 +478,15 @@ def with_robot_accuracy(
     calibration was stated with, propagated to the check's own poses and touches.
 
     The physical joints' origins are off by ``c ~ N(0, Σ_c)`` (the stated accuracy). The calibration
-    (linearised: its image samples and needle and probe touches, weighted by the noise alone — each
-    group's level times its share left once the stated accuracy is taken out, ``chain.noise`` and
-    ``chain.noise_share_after_robot``) absorbed ``S c`` into its estimate, ``S`` the weighted least
+    (linearised: its image samples and needle and probe touches, weighted as it was, by each
+    group's level ``chain.noise``) absorbed ``S c`` into its estimate, ``S`` the weighted least
     squares of the calibration's robot Jacobian ``G`` on its parameters' ``J`` (needle tip, probe
     mount, image transform, scale, reference tips). A check residual then holds its own noise, the
     calibration's noise ``J_k (Jᵀ W J)⁻¹ J_kᵀ`` and what the calibration could not absorb at the
-    check's configurations, ``(G_k − J_k S) Σ_c (G_k − J_k S)ᵀ``: correlated across the check's
+    check's configurations, ``(G_k − J_k S) Σ_c (G_k − J_k S)ᵀ`` (the check's own noise at the
+    groups' whole levels, which hold the robot's scatter at the calibration's configurations too:
+    counted twice rather than leaving out the touches' jog where a stated accuracy explains all
+    their scatter, which took the model's correlations as exact): correlated across the check's
     samples and touches (the same robot), and new at configurations the calibration never saw
     (touches turned by hand). Its diagonal is raised to at least ``null``'s variances (each pose's
     own leave-one-out error, the touches' measured scatter): the model adds the correlations and
@@ -510,15 +512,14 @@ def with_robot_accuracy(
         touches,
     )
     noise = chain.get("noise", {}) if isinstance(chain.get("noise"), dict) else {}
-    share = chain.get("noise_share_after_robot", {})
-    share = share if isinstance(share, dict) else {}
 
     def level(group: str) -> float:
+        # The group's whole level, the robot's share kept: the calibration was weighted with it, and
+        # where a stated accuracy over-explains the scatter (share 0) the jog and the readings'
+        # noise would otherwise be left out, and the model's correlations taken as exact.
         entry = noise.get(group)
         sd = _positive(entry.get("sd_mm")) if isinstance(entry, dict) else None
-        fraction = share.get(group, 1.0)
-        fraction = float(fraction) if isinstance(fraction, int | float) and np.isfinite(fraction) else 1.0
-        return max((sd or 0.0) * 1e-3 * np.sqrt(min(max(fraction, 0.0), 1.0)), _MIN_NOISE_SD_M)
+        return max((sd or 0.0) * 1e-3, _MIN_NOISE_SD_M)
 
     axes = image_axis_noise_m(stored)
     image_sd = np.full(3, level("image")) if axes is None else axes * level("image") / np.sqrt(np.mean(axes**2))
