@@ -445,9 +445,10 @@ def robot_rows(model: ChainModel, session: CheckSession) -> FloatArray:
     return np.vstack(parts)
 
 
-def _part_columns(model: ChainModel, session: CheckSession, scale: bool) -> FloatArray:
-    """``(3 (N + T), 15 (+2) + 6)`` the check residuals' Jacobian (metres) with respect to what the
-    calibration estimated: needle tip, probe mount, image transform, (scale,) and the reference tips."""
+def _part_columns(model: ChainModel, session: CheckSession, scaled: tuple[int, ...]) -> FloatArray:
+    """``(3 (N + T), 15 + len(scaled) + 6)`` the check residuals' Jacobian (metres) with respect to
+    what the calibration estimated: needle tip, probe mount, image transform, the spacing of the
+    image axes ``scaled`` (0: u, 1: v) and the reference tips."""
     unit = replace(
         model.null,
         sample_sd_m=1.0,
@@ -456,7 +457,7 @@ def _part_columns(model: ChainModel, session: CheckSession, scale: bool) -> Floa
         covariance_m2=None,
         touch_sd_m=dict.fromkeys(CHECK_TOOLS, 1.0),
     )
-    J = replace(model, null=unit, _axes_cache={}).jacobian(session)[:, : 17 if scale else 15]
+    J = replace(model, null=unit, _axes_cache={}).jacobian(session)[:, [*range(15), *(15 + a for a in scaled)]]
     tips = np.zeros((len(J), 6))
     for k, (_, reference, _, _) in enumerate(session.touches):
         row = 3 * (len(session.uv_px) + k)
@@ -528,8 +529,13 @@ def with_robot_accuracy(
     def noise_sds(s: CheckSession) -> FloatArray:
         return np.concatenate([np.tile(image_sd, len(s.uv_px)), np.full(3 * len(s.touches), level("touch"))])
 
-    scale = chain.get("model", "rigid") != "rigid"
-    J_cal, J_check = _part_columns(model, session, scale), _part_columns(model, check, scale)
+    from brachycal.calibration.chain.image_models import image_model
+
+    try:  # the image axes whose spacing the calibration estimated
+        scaled = tuple(sorted({a for axes in image_model(str(chain.get("model"))).scaled_axes for a in axes}))
+    except InputError:
+        scaled = (0, 1)
+    J_cal, J_check = _part_columns(model, session, scaled), _part_columns(model, check, scaled)
     G_cal, G_check = robot_rows(model, session), robot_rows(model, check)
     w = 1.0 / noise_sds(session)
     A = J_cal * w[:, None]
