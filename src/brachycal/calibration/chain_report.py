@@ -243,6 +243,9 @@ def chain_json(report: ChainReport, sample_ids: list[str]) -> dict:
         "sound_speed_m_s": fit.sound_speed_m_s,
         "noise_sd_mm": {k: v * 1e3 for k, v in fit.sigma_m.items()},
         "noise": {g: {"sd_mm": n.sd_m * 1e3, "residual_dof": n.dof, "source": n.source} for g, n in fit.noise.items()},
+        "image_noise_along_axes": {
+            a: {"sd_mm": n.sd_m * 1e3, "residual_dof": n.dof} for a, n in fit.image_axes_noise.items()
+        },
         "outliers": [s for s, flagged in zip(sample_ids, fit.outliers, strict=True) if flagged],
         "outlier_rule": f"3D image residual above {OUTLIER_THRESHOLD} x sqrt(3) x the image noise SD; "
         "flagged samples are left out of the final fit",

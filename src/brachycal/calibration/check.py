@@ -17,17 +17,22 @@ Residuals, per check observation, in millimetres:
 
 Null hypothesis (nothing moved): each residual coordinate is zero-mean with the SD the result
 itself measured for a *new* observation — for samples its leave-one-out RMSE over √3 (each fold
-fits without the sample and predicts it, so the figure holds the annotation noise, the needle
-tip's distance from the image plane, the joint readings' noise, the robot's error left over at
-those poses and the calibration's own error), for touches its Table I RMSE (the tool against the
+fits without the sample and predicts it, so the figure holds the annotation noise, the needle tip's
+distance from the image plane, the joint readings' noise, the robot's error left over at those
+poses and the calibration's own error), for touches its Table I RMSE (the tool against the
 top-model at ``rtip2``: jog, joint readings, robot error) over √3 or, if larger, a whole-chain
 result's touch noise SD (all touches' scatter, pooled over the tools; the larger is taken because
 either alone, three trials or pooled, failed single twin calibrations every time). Where the check
 is given the calibration session, a check pose that repeats a calibration pose takes its own SD
-(:func:`with_calibration_poses`). The test (:func:`union_test`) fails (RECALIBRATE) when the sum of
-the squared normalised residuals (χ², ``m`` = 3 × (samples + touches) degrees of freedom) exceeds
-its ``1 − α/2`` quantile, or when the χ² that one part explains, fitted alone, exceeds its
-``1 − α/(2P)`` quantile: at most ``α``, the stated false-alarm rate, in all.
+(:func:`with_calibration_poses`). A whole-chain result's sample SD is spread over the image's
+lateral, depth and normal axes as its image noise is (:func:`image_axis_scale`: the annotation
+noise lies in the plane). With the calibration session and a stated robot accuracy, that accuracy
+is propagated to the check's own poses and touches (:func:`with_robot_accuracy`): the residuals'
+whole covariance, by which they are whitened, each variance at least the one above. The test
+(:func:`union_test`) fails (RECALIBRATE) when the sum of the squared normalised residuals (χ²,
+``m`` = 3 × (samples + touches) degrees of freedom) exceeds its ``1 − α/2`` quantile, or when the
+χ² that one part explains, fitted alone, exceeds its ``1 − α/(2P)`` quantile: at most ``α``, the
+stated false-alarm rate, in all.
 
 Which part moved: each hypothesis ``h`` — needle tip (3 parameters), probe mount (6: the probe
 with its image rigidly moved on the flange), image transform (6: the image moved on the probe; the
@@ -56,6 +61,7 @@ from brachycal.validate import check_range
 
 if TYPE_CHECKING:
     from brachycal.calibration.result_file import StoredCalibration
+    from brachycal.calibration.robot_accuracy import RobotAccuracy
     from brachycal.data.session import Session
     from brachycal.model.robot import Robot
 
@@ -163,6 +169,11 @@ class NullModel:
         pose_sd_m: ``(N,)`` per check sample, where the check's poses were matched to the calibration
             session's (:func:`with_calibration_poses`); ``pose_match`` the calibration sample each
             was matched to (None: no calibration sample there, the average SD is used).
+        axis_scale: ``(3,)`` the sample SD's factor along the image's lateral, depth and normal axes
+            (:func:`image_axis_scale`; None: the same on each).
+        covariance_m2: ``(3 (N + T), 3 (N + T))`` the residuals' whole null covariance where the
+            stated robot accuracy was propagated to the check (:func:`with_robot_accuracy`); its
+            diagonal is at least :meth:`variances`. ``covariance_source`` says how it was made.
     """
 
     sample_sd_m: float
@@ -172,6 +183,22 @@ class NullModel:
     touch_source: str = "mechanical.<tool>.rmse_mm / sqrt(3)"
     pose_sd_m: FloatArray | None = None
     pose_match: tuple[str | None, ...] = ()
+    axis_scale: FloatArray | None = None
+    covariance_m2: FloatArray | None = None
+    covariance_source: str = ""
+
+    def sample_axis_sds(self, n: int) -> FloatArray:
+        """``(n, 3)`` each check sample's SD along the image's axes (lateral, depth, normal), metres:
+        :meth:`sample_sds` times :attr:`axis_scale` (the image noise's share along each axis, mean
+        square 1: the annotation noise lies in the plane), or the same SD on every axis."""
+        sd = self.sample_sds(n)[:, None]
+        return sd * (np.ones(3) if self.axis_scale is None else self.axis_scale)
+
+    def variances(self, n: int, tools: list[str]) -> FloatArray:
+        """``(3 (n + T),)`` the null variance of each check residual coordinate (samples then the
+        touches of ``tools``), metres², without correlations."""
+        touch = np.array([self.touch_sd_m[t] for t in tools]).reshape(-1)
+        return np.concatenate([(self.sample_axis_sds(n) ** 2).ravel(), np.repeat(touch**2, 3)])
 
     def sample_sds(self, n: int) -> FloatArray:
         """``(n,)`` the SD per coordinate of each check sample's residual, metres: :attr:`pose_sd_m`
@@ -230,7 +257,51 @@ def null_model(stored: StoredCalibration, method: str) -> NullModel:
         if p.shape != (3,) or not np.all(np.isfinite(p)):
             raise InputError("must be 3 finite numbers (metres)", file=stored.source, column=f"reference_tips_m.{name}")
         reference[name] = p
-    return NullModel(sample_sd, f"loocv.{method}.rmse_mm / sqrt(3)", touch_sd, reference, touch_source)
+    return NullModel(
+        sample_sd,
+        f"loocv.{method}.rmse_mm / sqrt(3)",
+        touch_sd,
+        reference,
+        touch_source,
+        axis_scale=image_axis_scale(stored) if method == "chain" else None,
+    )
+
+
+def _chain_section(stored: StoredCalibration) -> dict:
+    chain = stored.raw.get("chain")
+    return chain if isinstance(chain, dict) else {}
+
+
+def _positive(value: object) -> float | None:
+    ok = isinstance(value, int | float) and not isinstance(value, bool) and np.isfinite(value) and value > 0
+    return float(value) if ok else None  # type: ignore[arg-type]
+
+
+def image_axis_noise_m(stored: StoredCalibration) -> FloatArray | None:
+    """``(3,)`` the whole chain's image noise along the image's lateral, depth and normal axes,
+    metres (``chain.image_noise_along_axes``), or None if the result does not state all three."""
+    levels = _chain_section(stored).get("image_noise_along_axes")
+    if not isinstance(levels, dict):
+        return None
+    values = [_positive(levels.get(a, {}).get("sd_mm")) if isinstance(levels.get(a), dict) else None for a in AXES]
+    if any(v is None for v in values):
+        return None
+    return np.array(values, dtype=float) * 1e-3
+
+
+def image_axis_scale(stored: StoredCalibration) -> FloatArray | None:
+    """``(3,)`` factors of a sample's null SD along the image's axes: the chain's image noise along
+    each (:func:`image_axis_noise_m`) over their root mean square (the per-coordinate SD keeps the
+    same total, spread as the noise is: the annotation noise lies in the plane, so a part that moves
+    the samples in the plane, e.g. the scale, is not tested against a level that pools the normal)."""
+    levels = image_axis_noise_m(stored)
+    if levels is None:
+        return None
+    return levels / np.sqrt(np.mean(levels**2))
+
+
+#: A sample residual's axes, in :meth:`ChainModel.residuals`' order.
+AXES = ("lateral", "depth", "normal")
 
 
 #: A check sample is at a calibration sample's pose when the needle tip lies within this of
@@ -323,6 +394,164 @@ def with_calibration_poses(
         f"loocv.{method}.errors_mm / sqrt(3) ({sum(m is not None for m in match)} of {len(match)} poses matched)"
     )
     return replace(null, pose_sd_m=sd, pose_match=tuple(match), sample_source=source)
+
+
+def stated_robot_accuracy(stored: StoredCalibration) -> RobotAccuracy | None:
+    """The robot accuracy the calibration was stated with (``chain.robot_accuracy``), or None."""
+    from brachycal.calibration.robot_accuracy import RobotAccuracy
+
+    stated = _chain_section(stored).get("robot_accuracy")
+    if not isinstance(stated, dict):
+        return None
+    mm, deg = _positive(stated.get("joint_translation_sd_mm")), _positive(stated.get("joint_rotation_sd_deg"))
+    if mm is None and deg is None:
+        return None
+    try:
+        return RobotAccuracy(
+            (mm or 0.0) * 1e-3, float(np.radians(deg or 0.0)), source=str(stated.get("source", "the result"))
+        )
+    except InputError as error:
+        raise InputError(str(error), file=stored.source, column="chain.robot_accuracy") from None
+
+
+#: Smallest noise SD a residual is weighted with when propagating the robot accuracy (m): a group
+#: whose residuals are below resolution would otherwise weigh without bound.
+_MIN_NOISE_SD_M = 1e-5
+
+
+def robot_rows(model: ChainModel, session: CheckSession) -> FloatArray:
+    """``(3 (N + T), 6 nq)`` how the check residuals (metres: samples along the stored image's axes,
+    touches in ``base_link``) move with every joint origin's small motion ``(v, ω)`` (the stated
+    accuracy's parameters, :func:`~brachycal.calibration.chain.joint_twists`' order)."""
+    from brachycal.calibration.chain.robot_terms import joint_twists, motion_rows, point_motion
+
+    robot, rig = model.robot, model.robot.rig
+    T_R_EL, T_R_ER = model._flanges(session, np.zeros(robot.nq))
+    p_I = np.column_stack([session.uv_px * model.spacing_m, np.zeros(len(session.uv_px)), np.ones(len(session.uv_px))])
+    p_image = np.einsum("nij,nj->ni", T_R_EL @ model.T_EL_Ptip @ model.T_Ptip_I, p_I)[:, :3]
+    p_needle = (T_R_ER[:, :3, :3] @ model.T_ER_Ntip[:3, 3]) + T_R_ER[:, :3, 3]
+    W_EL = joint_twists(robot, session.samples_q, rig.probe_flange)
+    W_ER = joint_twists(robot, session.samples_q, rig.needle_flange)
+    base = motion_rows(point_motion(p_image), W_EL) - motion_rows(point_motion(p_needle), W_ER)
+    R_R_I = model._image_axes(session)
+    samples = np.einsum("nji,njk->nik", R_R_I, base.reshape(len(p_I), 3, -1)).reshape(3 * len(p_I), -1)
+    parts = [samples]
+    for tool, _, _, q in session.touches:
+        needle = tool == "needle"
+        flange = rig.needle_flange if needle else rig.probe_flange
+        p_tool = (model.T_ER_Ntip if needle else model.T_EL_Ptip)[:3, 3]
+        T = robot.fk(flange, q)
+        parts.append(motion_rows(point_motion((T[:3, :3] @ p_tool + T[:3, 3])[None]), joint_twists(robot, q, flange)))
+    return np.vstack(parts)
+
+
+def _part_columns(model: ChainModel, session: CheckSession, scaled: tuple[int, ...]) -> FloatArray:
+    """``(3 (N + T), 15 + len(scaled) + 6)`` the check residuals' Jacobian (metres) with respect to
+    what the calibration estimated: needle tip, probe mount, image transform, the spacing of the
+    image axes ``scaled`` (0: u, 1: v) and the reference tips."""
+    unit = replace(
+        model.null,
+        sample_sd_m=1.0,
+        pose_sd_m=None,
+        axis_scale=None,
+        covariance_m2=None,
+        touch_sd_m=dict.fromkeys(CHECK_TOOLS, 1.0),
+    )
+    J = replace(model, null=unit, _axes_cache={}).jacobian(session)[:, [*range(15), *(15 + a for a in scaled)]]
+    tips = np.zeros((len(J), 6))
+    for k, (_, reference, _, _) in enumerate(session.touches):
+        row = 3 * (len(session.uv_px) + k)
+        col = 0 if reference == "rtip1" else 3
+        tips[row : row + 3, col : col + 3] = -np.eye(3)
+    return np.hstack([J, tips])
+
+
+def with_robot_accuracy(
+    null: NullModel,
+    stored: StoredCalibration,
+    method: str,
+    robot: Robot,
+    calibration: Session,
+    check: CheckSession,
+    accuracy: RobotAccuracy,
+) -> NullModel:
+    """``null`` with the whole covariance of the check's residuals under the robot accuracy the
+    calibration was stated with, propagated to the check's own poses and touches.
+
+    The physical joints' origins are off by ``c ~ N(0, Σ_c)`` (the stated accuracy). The calibration
+    (linearised: its image samples and needle and probe touches, weighted as it was, by each
+    group's level ``chain.noise``) absorbed ``S c`` into its estimate, ``S`` the weighted least
+    squares of the calibration's robot Jacobian ``G`` on its parameters' ``J`` (needle tip, probe
+    mount, image transform, scale, reference tips). A check residual then holds its own noise, the
+    calibration's noise ``J_k (Jᵀ W J)⁻¹ J_kᵀ`` and what the calibration could not absorb at the
+    check's configurations, ``(G_k − J_k S) Σ_c (G_k − J_k S)ᵀ`` (the check's own noise at the
+    groups' whole levels, which hold the robot's scatter at the calibration's configurations too:
+    counted twice rather than leaving out the touches' jog where a stated accuracy explains all
+    their scatter, which took the model's correlations as exact): correlated across the check's
+    samples and touches (the same robot), and new at configurations the calibration never saw
+    (touches turned by hand). Its diagonal is raised to at least ``null``'s variances (each pose's
+    own leave-one-out error, the touches' measured scatter): the model adds the correlations and
+    the new configurations' error, and never lowers what the calibration measured.
+    """
+    model = replace(chain_model(stored, method, robot), null=null, _axes_cache={})
+    chain = _chain_section(stored)
+    outliers = set(chain.get("outliers", [])) if isinstance(chain.get("outliers", []), list) else set()
+    keep = np.array([str(i) not in outliers for i in calibration.sample_ids], dtype=bool)
+    touches = [
+        (tool, reference, int(trial), np.asarray(q, dtype=float))
+        for (tool, reference), recorded in calibration.touches.items()
+        if tool in CHECK_TOOLS
+        for trial, q in zip(recorded.trials, recorded.q, strict=True)
+    ]
+    session = CheckSession(
+        "calibration",
+        calibration.spacing_m,
+        calibration.size_px,
+        [],
+        calibration.samples_q[keep],
+        calibration.uv_px[keep],
+        touches,
+    )
+    noise = chain.get("noise", {}) if isinstance(chain.get("noise"), dict) else {}
+
+    def level(group: str) -> float:
+        # The group's whole level, the robot's share kept: the calibration was weighted with it, and
+        # where a stated accuracy over-explains the scatter (share 0) the jog and the readings'
+        # noise would otherwise be left out, and the model's correlations taken as exact.
+        entry = noise.get(group)
+        sd = _positive(entry.get("sd_mm")) if isinstance(entry, dict) else None
+        return max((sd or 0.0) * 1e-3, _MIN_NOISE_SD_M)
+
+    axes = image_axis_noise_m(stored)
+    image_sd = np.full(3, level("image")) if axes is None else axes * level("image") / np.sqrt(np.mean(axes**2))
+    image_sd = np.maximum(image_sd, _MIN_NOISE_SD_M)
+
+    def noise_sds(s: CheckSession) -> FloatArray:
+        return np.concatenate([np.tile(image_sd, len(s.uv_px)), np.full(3 * len(s.touches), level("touch"))])
+
+    from brachycal.calibration.chain.image_models import image_model
+
+    try:  # the image axes whose spacing the calibration estimated
+        scaled = tuple(sorted({a for axes in image_model(str(chain.get("model"))).scaled_axes for a in axes}))
+    except InputError:
+        scaled = (0, 1)
+    J_cal, J_check = _part_columns(model, session, scaled), _part_columns(model, check, scaled)
+    G_cal, G_check = robot_rows(model, session), robot_rows(model, check)
+    w = 1.0 / noise_sds(session)
+    A = J_cal * w[:, None]
+    A_pinv = np.linalg.pinv(A, rcond=1e-10)
+    S = A_pinv @ (G_cal * w[:, None])
+    D = G_check - J_check @ S
+    C = np.diag(noise_sds(check) ** 2) + J_check @ (A_pinv @ A_pinv.T) @ J_check.T
+    C += D @ accuracy.covariance(robot) @ D.T
+    floor = null.variances(len(check.uv_px), [t[0] for t in check.touches])
+    C[np.diag_indices_from(C)] = np.maximum(np.diag(C), floor)
+    source = (
+        f"the stated robot accuracy ({accuracy.translation_sd_m * 1e3:g} mm / "
+        f"{np.degrees(accuracy.rotation_sd_rad):g} deg per joint) propagated to the check's poses and touches, "
+        "with the calibration's noise; each variance at least the per-pose null's"
+    )
+    return replace(null, covariance_m2=C, covariance_source=source)
 
 
 def chi2_sf(x: float, dof: int) -> float:
@@ -434,11 +663,28 @@ class ChainModel:
         return self._axes_cache["axes"]
 
     def normalised(self, x: FloatArray, session: CheckSession) -> FloatArray:
-        """All residuals divided by their null SD, flattened ``(3 (N + T),)``."""
+        """All residuals divided by their null SD, flattened ``(3 (N + T),)``; with a whole null
+        covariance ``Σ = L Lᵀ`` (:attr:`NullModel.covariance_m2`), whitened: ``L⁻¹ r``."""
         samples, touches = self.residuals(x, session)
-        sd = np.array([self.null.touch_sd_m[t[0]] for t in session.touches])
-        sample_sd = self.null.sample_sds(len(samples))
-        return np.concatenate([(samples / sample_sd[:, None]).ravel(), (touches / sd[:, None]).ravel()])
+        raw = np.concatenate([samples.ravel(), touches.ravel()])
+        L = self.null_factor(session)
+        if L is not None:
+            from scipy.linalg import solve_triangular
+
+            return solve_triangular(L, raw, lower=True)
+        return raw / np.sqrt(self.null.variances(len(samples), [t[0] for t in session.touches]))
+
+    def null_factor(self, session: CheckSession) -> FloatArray | None:
+        """The Cholesky factor ``L`` of the whole null covariance (None: the residuals are independent)."""
+        C = self.null.covariance_m2
+        if C is None:
+            return None
+        if len(C) != 3 * (len(session.uv_px) + len(session.touches)):
+            raise ValueError(f"a null covariance of {len(C)} rows for {len(session.uv_px)} samples")
+        key = ("cholesky", id(C))
+        if key not in self._axes_cache:
+            self._axes_cache[key] = np.linalg.cholesky(C)
+        return self._axes_cache[key]
 
     def jacobian(self, session: CheckSession) -> FloatArray:
         """``(3 (N + T), size)`` of :meth:`normalised` at ``x = 0`` by central differences."""
@@ -733,7 +979,10 @@ def check_calibration(
         null = with_calibration_poses(
             model.null, stored, method, robot, calibration, session, calibration_folder=calibration_folder
         )
-        model = replace(model, null=null)
+        accuracy = stated_robot_accuracy(stored)
+        if accuracy is not None and method == "chain":
+            null = with_robot_accuracy(null, stored, method, robot, calibration, session, accuracy)
+        model = replace(model, null=null, _axes_cache={})
     calibrated = calibrated_nominal_spacing(stored)
     if calibrated is not None and not np.allclose(session.spacing_m, calibrated, rtol=1e-6, atol=0.0):
         raise InputError(
@@ -753,7 +1002,11 @@ def check_calibration(
     for part, block in model.blocks.items():
         prior = prior_sd(part, robot.nq)
         fit, fitted_samples = fit_part(part, J[:, block], r, n, prior)
-        fitted_m = fitted_samples * model.null.sample_sds(n)[:, None]
+        L = model.null_factor(session)
+        if L is None:
+            fitted_m = fitted_samples * model.null.sample_axis_sds(n)
+        else:  # back from the whitened residuals to metres
+            fitted_m = (L @ -(J[:, block] @ fit.delta))[: 3 * n].reshape(n, 3)
         targeting = float(np.sqrt(np.mean(np.sum(fitted_m**2, axis=1)))) * 1e3
         multiples = float(np.max(np.abs(fit.delta) / prior)) if fit.delta.size else 0.0
         fits.append(replace(_with_targeting(fit, targeting), prior_multiples=multiples))
@@ -863,6 +1116,10 @@ def outcome_json(outcome: CheckOutcome, stored: StoredCalibration, session: Chec
                 },
                 **{f"touch_{t}": v * 1e3 for t, v in outcome.null.touch_sd_m.items()},
                 "touch_source": outcome.null.touch_source,
+                "sample_axis_scale": None
+                if outcome.null.axis_scale is None
+                else dict(zip(AXES, (float(v) for v in outcome.null.axis_scale), strict=True)),
+                "covariance": outcome.null.covariance_source or "none: the residuals are taken as independent",
             },
             "value": outcome.statistic,
             "dof": outcome.dof,

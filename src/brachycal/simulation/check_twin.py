@@ -18,9 +18,9 @@ missed before the change).
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -82,6 +82,74 @@ CHANGES: dict[str, Change] = {
 }
 
 
+@dataclass(frozen=True)
+class TwinSettings:
+    """Settings of a check twin other than the defaults the check was designed on (each None: the
+    twin's default, :class:`~brachycal.simulation.twin.TwinConfig`, at the named robot-error level).
+
+    Attributes:
+        annotation_px: annotation noise SD per image axis, pixels.
+        robot_translation_m / robot_rotation_rad: each joint origin's error as a 3-D norm (RMS):
+            per axis it is this over √3 (the zero offset's SD is the rotation's over √3 too).
+        touch_turn_rad: each check touch is re-done by hand at a new orientation, turned by up to
+            this (a uniform angle about a random axis) from the calibration's first approach.
+        cad_close: the tools and the image within 0.2 mm / 0.1° SD of the URDF's nominal frames
+            (a CAD-close URDF) instead of 2 mm / 1°.
+        stated: the robot accuracy stated at calibration is the twin's true per-axis level (else the
+            default statement, a well-built arm).
+        beam_thickness_m: the needle tip within half of this off the image plane (0: in it).
+        every_trial: the check's touches follow the calibration's protocol (every trial of each
+            touching tool on both reference tips) instead of one touch of ``rtip1``.
+    """
+
+    annotation_px: float | None = None
+    robot_translation_m: float | None = None
+    robot_rotation_rad: float | None = None
+    touch_turn_rad: float = 0.0
+    cad_close: bool = False
+    stated: bool = True
+    every_trial: bool = False
+    beam_thickness_m: float | None = None
+
+    def config(self, seed: int, robot_error: str) -> TwinConfig:
+        """The twin's configuration for ``seed`` at ``robot_error`` with these settings."""
+        config = TwinConfig(seed=seed).with_robot_error(robot_error)
+        changes: dict[str, Any] = {}
+        if self.annotation_px is not None:
+            changes["annotation_sd_px"] = self.annotation_px
+        if self.robot_translation_m is not None:
+            changes["link_offset_sd_m"] = self.robot_translation_m / np.sqrt(3.0)
+        if self.robot_rotation_rad is not None:
+            changes["link_tilt_sd_rad"] = self.robot_rotation_rad / np.sqrt(3.0)
+            changes["joint_offset_sd_rad"] = self.robot_rotation_rad / np.sqrt(3.0)
+        if self.beam_thickness_m is not None:
+            changes["beam_thickness_m"] = self.beam_thickness_m
+        if self.cad_close:
+            changes.update(tool_offset_sd_m=2e-4, tool_tilt_sd_rad=float(np.radians(0.1)))
+        return replace(config, **changes)
+
+    def label(self) -> str:
+        """The settings as a person reads them (the defaults left out)."""
+        words = []
+        if self.annotation_px is not None:
+            words.append(f"{self.annotation_px:g} px")
+        if self.robot_translation_m is not None or self.robot_rotation_rad is not None:
+            mm = (self.robot_translation_m or 0.0) * 1e3
+            deg = float(np.degrees(self.robot_rotation_rad or 0.0))
+            words.append(f"robot {mm:g} mm / {deg:g} deg")
+        if self.touch_turn_rad:
+            words.append(f"touches turned <= {np.degrees(self.touch_turn_rad):g} deg")
+        if self.cad_close:
+            words.append("CAD-close URDF")
+        if self.beam_thickness_m is not None:
+            words.append(f"beam {self.beam_thickness_m * 1e3:g} mm")
+        if not self.stated:
+            words.append("accuracy not stated")
+        if self.every_trial:
+            words.append("every touch trial")
+        return ", ".join(words) or "defaults"
+
+
 def _unit(rng: np.random.Generator, perpendicular_to: FloatArray | None = None) -> FloatArray:
     v = rng.normal(size=3)
     if perpendicular_to is not None:
@@ -136,11 +204,16 @@ def record_check(
     rng: np.random.Generator,
     *,
     touches: str = DEFAULT_TOUCHES,
+    touch_turn_rad: float = 0.0,
+    every_trial: bool = False,
 ) -> tuple[CheckSession, FloatArray]:
     """A check session recorded on ``setup`` at the planned poses ``(N, nq)`` / pixels ``(N, 2)``,
     with the twin's noise settings, and single touches of ``rtip1`` by the tools of ``touches``
-    (a :data:`~brachycal.planning.check_plan.TOUCH_CHOICES` key); also returns the true joints
-    ``(N, nq)`` of its samples."""
+    (a :data:`~brachycal.planning.check_plan.TOUCH_CHOICES` key), each turned by up to
+    ``touch_turn_rad`` from the calibration's first approach (:class:`TwinSettings`); with
+    ``every_trial``, the calibration's touch protocol instead (every trial on both reference tips,
+    each turned so); also returns
+    the true joints ``(N, nq)`` of its samples."""
     config, physical, rig = twin.config, setup.physical, twin.nominal.rig
 
     def read(q: FloatArray) -> FloatArray:
@@ -156,14 +229,32 @@ def record_check(
         UV = UV + rng.normal(scale=config.annotation_sd_px, size=UV.shape)
     touched = []
     tools = touch_choice(touches)
-    for tool, frame, arm in touch_tools(twin.nominal)[1:]:
-        if tool in tools:
-            jog = rng.normal(scale=config.jog_sd_m, size=3) if config.jog_error else np.zeros(3)
-            q = touch(physical, frame, arm, twin.truth.p_R_Rtip1 + jog, 0, config.trials, rig.ready, config.seed)
-            touched.append((tool, "rtip1", 1, read(q)))
+    tips = {"rtip1": twin.truth.p_R_Rtip1}
+    if every_trial:
+        tips["rtip2"] = twin.truth.p_R_Rtip2
+    for reference, p_R in tips.items():
+        for tool, frame, arm in touch_tools(twin.nominal)[1:]:
+            if tool not in tools:
+                continue
+            for k in range(config.trials if every_trial else 1):
+                jog = rng.normal(scale=config.jog_sd_m, size=3) if config.jog_error else np.zeros(3)
+                q = touch(physical, frame, arm, p_R + jog, k, config.trials, rig.ready, config.seed)
+                if touch_turn_rad:
+                    q = _turned_touch(physical, frame, arm, q, rng.uniform(-1.0, 1.0) * touch_turn_rad * _unit(rng))
+                touched.append((tool, reference, k + 1, read(q)))
     ids = [f"check{k + 1}" for k in range(len(Q))]
     session = CheckSession("twin check", twin.truth.nominal_spacing_m, twin.truth.size_px, ids, read(Q), UV, touched)
     return session, Q
+
+
+def _turned_touch(robot: Robot, frame: str, arm: list[int], q: FloatArray, rotvec: FloatArray) -> FloatArray:
+    """The touch at joints ``q`` re-done with the tool turned by ``rotvec`` (rad, in ``base_link``)
+    about its tip, which stays on the reference tip."""
+    from scipy.spatial.transform import Rotation
+
+    T = robot.fk(frame, q)
+    target = make_transform(Rotation.from_rotvec(rotvec).as_matrix() @ T[:3, :3], T[:3, 3])
+    return solve_ik(robot, frame, target, q, arm, margin=0.0, restarts=0)
 
 
 def noise_free_residuals_mm(
@@ -242,18 +333,26 @@ class CalibratedTwin:
         touches: str = DEFAULT_TOUCHES,
         result_path: str | os.PathLike[str] | None = None,
         pose_nulls: bool = True,
+        settings: TwinSettings = TwinSettings(),
     ) -> None:
         from brachycal.calibration import calibrate, read_result, write_result
         from brachycal.calibration.chain_report import calibrate_chain
+        from brachycal.calibration.robot_accuracy import DEFAULT_ROBOT_ACCURACY, RobotAccuracy
         from brachycal.planning import plan_poses
         from brachycal.planning.check_plan import plan_check
 
-        config = TwinConfig(seed=seed).with_robot_error(robot_error)
+        config = settings.config(seed, robot_error)
+        self.settings = settings
         self.twin = twin = simulate(robot, config)
         path = Path(result_path) if result_path else Path(folder) / f"result_{robot_error}_{seed}.json"
+        accuracy = DEFAULT_ROBOT_ACCURACY
+        if settings.stated:  # the lab states its arm's accuracy (per axis, as the twin draws it)
+            accuracy = RobotAccuracy(
+                config.link_offset_sd_m, config.link_tilt_sd_rad, config.encoder_sd_rad, source="the twin's level"
+            )
         if method == "chain":
             initial = calibrate(twin.session, robot, ("kabsch", "scaled_uv"))  # kabsch: the nominal spacing
-            report = calibrate_chain(twin.session, robot, initial)
+            report = calibrate_chain(twin.session, robot, initial, robot_accuracy=accuracy)
             write_result(initial, path, force=True, chain=report, robot=robot)
         else:
             write_result(calibrate(twin.session, robot), path, force=True, robot=robot)
@@ -298,7 +397,14 @@ class CalibratedTwin:
         unchanged = ChangedSetup(self.twin.physical, self.twin.truth.spacing_m)
         setup = changed_setup(self.twin, change, rng)
         session, _ = record_check(
-            self.twin, setup, self.q_planned, self.uv_planned, rng, touches=touches or self.touches
+            self.twin,
+            setup,
+            self.q_planned,
+            self.uv_planned,
+            rng,
+            touches=touches or self.touches,
+            touch_turn_rad=self.settings.touch_turn_rad,
+            every_trial=self.settings.every_trial,
         )
         calibration = self.twin.session if self.pose_nulls else None
         outcome = check_calibration(

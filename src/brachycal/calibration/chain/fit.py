@@ -23,7 +23,14 @@ from brachycal.calibration.chain.conditioning import Conditioning, check_conditi
 from brachycal.calibration.chain.identifiability import IDENTIFIABLE_TOLERANCE, identifiable_joint_offsets
 from brachycal.calibration.chain.image_models import image_model
 from brachycal.calibration.chain.layout import ParameterLayout
-from brachycal.calibration.chain.noise import GROUPS, INITIAL_SIGMA, NoiseLevel, noise_levels, noise_share
+from brachycal.calibration.chain.noise import (
+    GROUPS,
+    INITIAL_SIGMA,
+    NoiseLevel,
+    image_axis_levels,
+    noise_levels,
+    noise_share,
+)
 from brachycal.calibration.chain.problem import ChainProblem, Reweighted
 from brachycal.calibration.chain.result import ChainFit
 from brachycal.calibration.chain.robot_terms import DEFAULT_ROBOT_ACCURACY, RobotAccuracy, robot_jacobian_at
@@ -213,6 +220,10 @@ def assemble(
     T_ER_Ntip, T_EL_Ptip, T_Ptip_I, rtips, spacing = layout.unpack(x, problem.base, problem.data.spacing_m)
     names = problem.robot.joint_names
     offsets = x[layout.blocks()["joint_offsets"]]
+    # The image samples' noise along the image's axes, at each kept sample's pose.
+    R_R_I = problem.data_at(x).T_R_EL[final.keep, :3, :3] @ (T_EL_Ptip @ T_Ptip_I)[:3, :3]
+    image_rows = problem.data.group_rows(int(final.keep.sum()))["image"]
+    axes_noise = image_axis_levels(final.residuals, final.jacobian, image_rows, final.sigma["image"], R_R_I)
     return ChainFit(
         model=layout.model,
         T_ER_Ntip=T_ER_Ntip,
@@ -235,6 +246,7 @@ def assemble(
         robot_accuracy=robot_accuracy,
         noise_share=terms.share or {},
         robust_x=robust_x,
+        image_axes_noise=axes_noise,
     )
 
 

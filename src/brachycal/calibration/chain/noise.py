@@ -49,10 +49,10 @@ class NoiseLevel:
 CHOLESKY_RCOND = 1e-3
 
 
-def leverages(J: FloatArray) -> FloatArray:
-    """Diagonal of the hat matrix ``J (JᵀJ)⁺ Jᵀ`` (rows' leverages): from the Cholesky factor ``L`` of
-    ``JᵀJ`` (``h_i = |L⁻¹ j_i|²``) when ``J`` is well conditioned (:data:`CHOLESKY_RCOND`), else from an
-    SVD of ``J`` that leaves out the directions below :data:`RCOND_LIMIT`."""
+def hat_factor(J: FloatArray) -> FloatArray:
+    """``F (M, k)`` with ``F Fᵀ`` the hat matrix ``J (JᵀJ)⁺ Jᵀ``: ``(L⁻¹ Jᵀ)ᵀ`` from the Cholesky
+    factor ``L`` of ``JᵀJ`` when ``J`` is well conditioned (:data:`CHOLESKY_RCOND`), else the left
+    singular vectors of ``J`` above :data:`RCOND_LIMIT`."""
     norms = np.linalg.norm(J, axis=0)
     live = norms > 0  # the hat matrix does not depend on the columns' scales: equilibrate them
     A = J[:, live] / norms[live]
@@ -60,10 +60,48 @@ def leverages(J: FloatArray) -> FloatArray:
     eigenvalues = np.linalg.eigvalsh(H)
     if eigenvalues.size and eigenvalues[0] > CHOLESKY_RCOND**2 * eigenvalues[-1]:
         L = np.linalg.cholesky(H)
-        return np.sum(np.linalg.solve(L, A.T) ** 2, axis=0)
+        return np.linalg.solve(L, A.T).T
     U, s, _ = np.linalg.svd(A, full_matrices=False)
     rank = s > s[0] * RCOND_LIMIT if s.size and s[0] > 0 else np.zeros(s.size, dtype=bool)
-    return np.sum(U[:, rank] ** 2, axis=1)
+    return U[:, rank]
+
+
+def leverages(J: FloatArray) -> FloatArray:
+    """Diagonal of the hat matrix ``J (JᵀJ)⁺ Jᵀ`` (rows' leverages, ``h_i = |F_i|²``, :func:`hat_factor`)."""
+    return np.sum(hat_factor(J) ** 2, axis=1)
+
+
+#: The image's axes, in the order of a sample's residual expressed in the image frame.
+IMAGE_AXES = ("lateral", "depth", "normal")
+
+
+def image_axis_levels(
+    normalised: FloatArray, J: FloatArray, image_rows: slice, sigma_image: float, R_R_I: FloatArray
+) -> dict[str, NoiseLevel]:
+    """The image samples' noise level along each image axis (:data:`IMAGE_AXES`), metres.
+
+    The image group's level (:func:`noise_levels`) is per coordinate of ``base_link``: it pools the
+    annotation noise, which lies in the image plane (lateral and depth), with the needle tip's
+    distance from the plane and the robot's error, and so states √(2/3) of the annotation noise when
+    the rest is small. Here each sample's residual ``r_i`` (rows ``image_rows`` of ``normalised`` times
+    ``sigma_image``, 3 per sample in ``base_link``) is projected on the image's axis ``a_i`` at its
+    pose (``R_R_I (n, 3, 3)``, columns lateral, depth, normal) and
+    ``σ_a² = Σ_i (a_iᵀ r_i)² / (n − Σ_i a_iᵀ H_ii a_i)``, ``H_ii`` the sample's 3 × 3 block of the
+    weighted problem's hat matrix (the unbiased estimate for a linear model, as for the groups).
+    """
+    F = hat_factor(J)[image_rows].reshape(len(R_R_I), 3, -1)  # (n, 3, k)
+    raw = (normalised[image_rows] * sigma_image).reshape(-1, 3)
+    along = np.einsum("nja,nj->na", R_R_I, raw)  # (n, 3): residuals along each image axis
+    lever = np.einsum("nja,njk->nak", R_R_I, F)  # (n, 3, k): a_iᵀ F_i
+    h = np.sum(lever**2, axis=2)  # (n, 3): a_iᵀ H_ii a_i
+    out = {}
+    for k, axis in enumerate(IMAGE_AXES):
+        dof = float(len(raw) - h[:, k].sum())
+        if dof < MIN_NOISE_DOF:
+            continue
+        scale = max(float(np.sqrt(np.sum(along[:, k] ** 2) / dof)), RESOLUTION_M)
+        out[axis] = NoiseLevel(scale, dof, "residuals", f"{scale * 1e3:.3f} mm along the image's {axis} axis")
+    return out
 
 
 def noise_levels(

@@ -42,6 +42,9 @@ class ChainFit:
         noise_share: per group, the fraction of its residual variance left to the session's noise
             once the stated robot accuracy's expected part is taken out
             (:func:`~brachycal.calibration.chain.noise_share`).
+        image_axes_noise: the image samples' noise level along each image axis (lateral, depth,
+            normal; :func:`~brachycal.calibration.chain.image_axis_levels`): the annotation noise
+            lies in the plane, which the per-coordinate ``noise["image"]`` pools with the normal.
         robust_x: ``(P,)`` the robust stage's estimate (soft-L1): where a refit on nearly the same
             samples starts its own robust stage (cross-validation's folds; None if not kept).
     """
@@ -67,6 +70,7 @@ class ChainFit:
     robot_accuracy: RobotAccuracy | None = None
     noise_share: dict[str, float] = field(default_factory=dict)
     robust_x: FloatArray | None = field(default=None, repr=False)
+    image_axes_noise: dict[str, NoiseLevel] = field(default_factory=dict)
 
     def offsets(self, joint_names: tuple[str, ...]) -> FloatArray:
         """``(nq,)`` estimated joint zero offsets (zeros unless estimated), radians."""

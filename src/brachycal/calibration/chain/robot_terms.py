@@ -79,7 +79,7 @@ def joint_twists(robot: Robot, Q: FloatArray, flange: str) -> FloatArray:
     return out
 
 
-def _point_motion(p: FloatArray) -> FloatArray:
+def point_motion(p: FloatArray) -> FloatArray:
     """``(n, 3, 6)`` ``[I, −[p]×]``: how points ``p (n, 3)`` fixed to a body move with its world twist
     ``(v, ω)``: ``v + ω × p``."""
     out = np.zeros((len(p), 3, 6))
@@ -88,7 +88,7 @@ def _point_motion(p: FloatArray) -> FloatArray:
     return out
 
 
-def _rows(motion: FloatArray, W: FloatArray) -> FloatArray:
+def motion_rows(motion: FloatArray, W: FloatArray) -> FloatArray:
     """``(3 n, 6 nq)``: point motions ``(n, 3, 6)`` through the twists ``W (n, nq, 6, 6)``, rows
     point-major, columns joint-major."""
     n, nq = W.shape[:2]
@@ -136,7 +136,7 @@ def robot_jacobian_at(
     ):
         for ref, (_, T) in zip(refs, touches, strict=True):
             W = twists(session.touches[tool, ref].q, flange)
-            parts.append(_rows(_point_motion(T[:, :3, :3] @ p_tool + T[:, :3, 3]), W) / sigma["touch"])
+            parts.append(motion_rows(point_motion(T[:, :3, :3] @ p_tool + T[:, :3, 3]), W) / sigma["touch"])
     # Axes moves: r = a · (tip_i − tip_0), a = R_0 R_tool e_c turns with pose 0's ω_0, the tips move.
     for tool, flange, T_axes, T_tool in (
         ("needle", needle_flange, data.needle_axes, T_ER_Ntip),
@@ -144,7 +144,7 @@ def robot_jacobian_at(
     ):
         W = twists(np.array([session.axes[tool][p] for p in ("p1", "p2", "p3")]), flange)
         tips = T_axes[:, :3, :3] @ T_tool[:3, 3] + T_axes[:, :3, 3]
-        moves = np.einsum("nab,njbc->najc", _point_motion(tips), W)  # (3, 3, nq, 6) tip motions
+        moves = np.einsum("nab,njbc->najc", point_motion(tips), W)  # (3, 3, nq, 6) tip motions
         R_tool = T_axes[0, :3, :3] @ T_tool[:3, :3]
         for point, _, across in AXES_MOVES:
             delta = tips[point] - tips[0]
@@ -159,8 +159,8 @@ def robot_jacobian_at(
     T_EL_I = T_EL_Ptip @ T_Ptip_I
     p_EL = (data.uv_px[keep] * spacing) @ T_EL_I[:3, :2].T + T_EL_I[:3, 3]
     p_image = (data.T_R_EL[keep, :3, :3] @ p_EL[:, :, None])[:, :, 0] + data.T_R_EL[keep, :3, 3]
-    image = _rows(_point_motion(p_needle), twists(q, needle_flange)) - _rows(
-        _point_motion(p_image), twists(q, probe_flange)
+    image = motion_rows(point_motion(p_needle), twists(q, needle_flange)) - motion_rows(
+        point_motion(p_image), twists(q, probe_flange)
     )
     parts.append(image / sigma["image"])
     return np.vstack(parts)
