@@ -330,6 +330,7 @@ CHAIN = Obj(
         "sound_speed_m_s": nullable(number(*SOUND_SPEED_RANGE_M_S, "m/s")),
         "noise_sd_mm": rmse_by_name,
         "noise": mapping(Obj(optional={"sd_mm": length_mm, "residual_dof": number(0.0), "source": text()})),
+        "image_noise_along_axes": mapping(Obj(optional={"sd_mm": length_mm, "residual_dof": number(0.0)})),
         "outliers": array(text()),
         "outlier_rule": text(),
         "fitted_samples": integer(),
