@@ -384,7 +384,7 @@ def run_tests(tests: tuple[str, ...] | list[str], mutant: Mutant | None) -> tupl
     with tempfile.TemporaryDirectory(prefix="brachycal-mutant-") as tmp:
         src = Path(tmp) / "src"
         shutil.copytree(ROOT / "src", src, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
-        for data in BUNDLED:  # read beside src/ (brachycal.files.bundled)
+        for data in BUNDLED:  # read beside src/ (brachycal.io.bundled)
             (Path(tmp) / data).symlink_to(ROOT / data, target_is_directory=True)
         if mutant is not None:
             path = src / "brachycal" / mutant.file

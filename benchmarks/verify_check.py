@@ -12,9 +12,9 @@ over the check poses of the noise-free residuals, mm) before the change, ignorin
 updated result (means over the updated checks).
 
 Per robot-error level (:data:`brachycal.simulation.twin.ROBOT_ERROR_LEVELS`) and seed, the twin's
-session is calibrated with the whole chain (:class:`~brachycal.simulation.check_twin.CalibratedTwin`)
+session is calibrated with the whole chain (:class:`~brachycal.studies.check_twin.CalibratedTwin`)
 and the check's poses are chosen from the same grid (``plan --verify``'s criterion). Then each
-change of :data:`~brachycal.simulation.check_twin.CHANGES` is applied and a check session is
+change of :data:`~brachycal.studies.check_twin.CHANGES` is applied and a check session is
 recorded with fresh noise (the checks of one seed share its calibration: the rates are over
 seeds × checks, and the binomial 95 % interval printed assumes independent checks, which the
 shared calibrations make a little optimistic). Printed per change: how often the verdict is
@@ -36,8 +36,8 @@ from collections import defaultdict
 
 import numpy as np
 
-from brachycal.planning.check_plan import DEFAULT_CHECK_POSES as DEFAULT_POSES  # the figures recorded are for it
-from brachycal.planning.check_plan import DEFAULT_TOUCHES, TOUCH_CHOICES
+from brachycal.planning.check_poses import DEFAULT_CHECK_POSES as DEFAULT_POSES  # the figures recorded are for it
+from brachycal.planning.check_poses import DEFAULT_TOUCHES, TOUCH_CHOICES
 
 #: The seeds the README's table is measured on: 80 and up, seeds no choice of the check was made on.
 #: Seeds 0–19 were used to choose the touches' null SD, 20–39 to find the corner poses' excess (each
@@ -69,7 +69,7 @@ def main(argv: list[str]) -> None:
     from timing import record
 
     from brachycal.model import Robot
-    from brachycal.simulation.check_twin import CHANGES, CalibratedTwin
+    from brachycal.studies.check_twin import CHANGES, CalibratedTwin
 
     options = {"--poses": str(DEFAULT_POSES), "--touches": DEFAULT_TOUCHES, "--first-seed": str(FIRST_SEED)}
     words: list[str] = []

@@ -21,8 +21,8 @@ from rosbags.typesys import Stores, get_typestore
 
 from brachycal import InputError
 from brachycal.data import read_bag_log, write_bag_log
-from brachycal.data.bag_records import mcap_batches, raw_batches, ros1_batches
-from brachycal.data.bags import JOINT_STATE, bag_log_blocks
+from brachycal.data.formats.bag_records import mcap_batches, raw_batches, ros1_batches
+from brachycal.data.formats.bags import JOINT_STATE, bag_log_blocks
 
 TOPIC = "/joint_states"
 

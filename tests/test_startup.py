@@ -97,7 +97,7 @@ def test_a_lazily_exported_name_is_the_object_even_next_to_a_submodule_of_that_n
     # calibration.hand_eye is a function that lives in the module calibration/hand_eye.py; loading
     # the module first (as the chain does) must not turn the exported name into the module.
     kind = fresh(
-        "import json, brachycal.calibration.hand_eye, brachycal.calibration as c\n"
+        "import json, brachycal.calibration.phantom.hand_eye, brachycal.calibration as c\n"
         "print(json.dumps([callable(c.hand_eye), type(c.hand_eye).__name__]))"
     )
     assert kind == [True, "function"]

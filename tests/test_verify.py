@@ -1,7 +1,7 @@
 """The check before each procedure: ``brachycal plan --verify`` and ``brachycal verify``.
 
 A twin session (seed 0) is calibrated with the whole chain once; check sessions are recorded on
-it at the check poses, unchanged or after one part moved (:mod:`brachycal.simulation.check_twin`).
+it at the check poses, unchanged or after one part moved (:mod:`brachycal.studies.check_twin`).
 The false-alarm and detection rates over seeds are the benchmark's (``benchmarks/verify_check.py``);
 here each outcome is a specification on fixed noise draws.
 """
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from hostile import run_cli
 
-from brachycal.calibration.check import (
+from brachycal.calibration.verify.check import (
     DEFAULT_FALSE_ALARM,
     GROSS_PRIOR_MULTIPLES,
     PARTS,
@@ -28,9 +28,9 @@ from brachycal.calibration.check import (
     verdict_text,
 )
 from brachycal.model import Robot
-from brachycal.planning.check_plan import DEFAULT_CHECK_POSES, DEFAULT_TOUCHES, SECONDS_PER_TOUCH, TOUCH_CHOICES
+from brachycal.planning.check_poses import DEFAULT_CHECK_POSES, DEFAULT_TOUCHES, SECONDS_PER_TOUCH, TOUCH_CHOICES
 from brachycal.se3 import FloatArray
-from brachycal.simulation.check_twin import CHANGES, CalibratedTwin, changed_setup, record_check, write_check_session
+from brachycal.studies.check_twin import CHANGES, CalibratedTwin, changed_setup, record_check, write_check_session
 
 REMOUNT = "probe remounted 1 mm / 1 deg"
 #: Single touches in the default check (plan --verify).
@@ -193,7 +193,7 @@ def test_the_size_of_a_remount_is_measured(calibrated):
 
 
 def test_without_a_probe_touch_a_remount_and_an_image_change_are_named_together(calibrated):
-    from brachycal.calibration.check import verdict_text
+    from brachycal.calibration.verify.check import verdict_text
 
     _, outcome = check(calibrated, REMOUNT, touches="none")
     assert outcome.verdict == "RECALIBRATE"
@@ -221,7 +221,7 @@ def test_with_the_probe_touch_alone_a_remount_is_told_from_an_image_change(calib
 
 
 def test_the_default_check_takes_under_two_minutes_and_both_touches_more(calibrated):
-    from brachycal.planning.check_plan import SECONDS_PER_SAMPLE, plan_check
+    from brachycal.planning.check_poses import SECONDS_PER_SAMPLE, plan_check
 
     full = calibrated.check_plan.plan  # the default check's eight poses: the pick keeps them all
     image = calibrated.stored.image[calibrated.method]
@@ -379,7 +379,7 @@ def test_verify_touches_goes_with_verify(tmp_path):
 def test_each_check_pose_takes_its_own_calibration_samples_error(calibrated):
     """With the calibration session, each check pose (a grid pose the calibration visited) gets the
     larger of the average SD and the leave-one-out error the calibration measured at that pose."""
-    from brachycal.calibration.check import chain_model, with_calibration_poses
+    from brachycal.calibration.verify.check import chain_model, with_calibration_poses
 
     session, _ = check(calibrated, "unchanged")
     null = chain_model(calibrated.stored, calibrated.method, calibrated.robot).null
@@ -405,7 +405,7 @@ def test_each_check_pose_takes_its_own_calibration_samples_error(calibrated):
 
 
 def test_a_check_pose_the_calibration_did_not_visit_keeps_the_average(calibrated):
-    from brachycal.calibration.check import SAME_NEEDLE_TIP_M, chain_model, with_calibration_poses
+    from brachycal.calibration.verify.check import SAME_NEEDLE_TIP_M, chain_model, with_calibration_poses
 
     session, _ = check(calibrated, "unchanged")
     moved = session.samples_q.copy()

@@ -6,7 +6,7 @@ files), :mod:`brachycal.imaging` (pixels ↔ points of the image frame), :mod:`b
 (the estimators and result files), :mod:`brachycal.planning` (sample poses),
 :mod:`brachycal.simulation` (exact sessions, the digital twin), :mod:`brachycal.reporting` (tables,
 figures, reports), :mod:`brachycal.export` (URDF, Slicer, PLUS, ROS); foundations:
-:mod:`brachycal.se3` (rigid transforms), :mod:`brachycal.errors`, :mod:`brachycal.files` (the
+:mod:`brachycal.se3` (rigid transforms), :mod:`brachycal.errors`, :mod:`brachycal.io` (the
 output writer), :mod:`brachycal.validate`. Units are SI (metres, radians, seconds); ``T_a_b`` is
 the pose of frame b in frame a (``p_a = T_a_b @ p_b``); see ``docs/conventions.md``.
 """

@@ -310,8 +310,8 @@ def tracker_positions(
         InputError: naming the file and frame of a malformed transform or timestamp, or a file
             where no item has both tools.
     """
-    from brachycal.data.metaimage import read_sequence_header
-    from brachycal.data.plus_files import sequence_transform
+    from brachycal.data.formats.metaimage import read_sequence_header
+    from brachycal.data.formats.plus_files import sequence_transform
 
     _, frames = read_sequence_header(path)
     times, positions = [], []
@@ -458,8 +458,8 @@ def lag_from_plus_files(
     Returns:
         The :class:`TemporalCalibration`; ``estimate.lag_s`` is PLUS's ``TrackerLagSec``.
     """
-    from brachycal.data.metaimage import read_image_sequence
-    from brachycal.data.plus_temporal import PlusTemporalSettings, read_plus_temporal_settings
+    from brachycal.data.formats.metaimage import read_image_sequence
+    from brachycal.data.formats.plus_temporal import PlusTemporalSettings, read_plus_temporal_settings
     from brachycal.imaging.tank_line import find_tank_line
 
     settings = read_plus_temporal_settings(config) if config is not None else PlusTemporalSettings()

@@ -133,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace, collecting: bool) -> int:
     from brachycal.calibration import calibrate_folder, write_result
     from brachycal.calibration.parallel import forking_workers, frozen_heap
-    from brachycal.files import OutputSet
+    from brachycal.io import OutputSet
     from brachycal.reporting import chain_summary, table_i, table_ii, uncertainty_table
 
     if args.method != "chain" and (args.bootstrap or args.joint_offsets or args.identify_robot):

@@ -52,7 +52,7 @@ def add_robot_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup) 
 
 def command_inputs(args: argparse.Namespace, *names: str) -> list[str]:
     """The input files (or folders) the options ``names`` of ``args`` give, with ``--robot`` and
-    ``--urdf``: declared to the command's :class:`~brachycal.files.OutputSet`, so that an output
+    ``--urdf``: declared to the command's :class:`~brachycal.io.OutputSet`, so that an output
     naming one of them is refused before any work."""
     values = [getattr(args, name, None) for name in (*names, "robot", "urdf")]
     return [value for value in values if isinstance(value, str)]
@@ -164,7 +164,7 @@ def robot_accuracy(args: argparse.Namespace) -> RobotAccuracy:
 
 def add_method_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup, of: str) -> None:
     """``--method``: which image calibration of a result (:meth:`StoredCalibration.method
-    <brachycal.calibration.result_file.StoredCalibration.method>`; default the result's best)."""
+    <brachycal.calibration.session.result_file.StoredCalibration.method>`; default the result's best)."""
     from brachycal.calibration.labels import ALL_LABELS
 
     parser.add_argument(

@@ -40,7 +40,7 @@ replaced only with --force.
 Table III complete (--table3): every method of the paper's Table III on the twin, over --seeds
 seeds, with the spread and the paper's figure beside: the paper's fusion methods (ICP, Kabsch,
 landmark/Horn), brachycal's whole chain, and the three phantom routes with an optical tracker
-(N-wire, multi-wedge, arbitrary wire: src/brachycal/simulation/phantom_twin.py states each
+(N-wire, multi-wedge, arbitrary wire: src/brachycal/studies/phantom_twin.py states each
 figure of their practice). Prints the table and writes nothing.
 
 examples:
@@ -96,12 +96,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from brachycal.cli.common import load_robot
-    from brachycal.files import OutputSet
+    from brachycal.io import OutputSet
     from brachycal.reporting import DEMO_REPORT_FILES, demo_text, write_demo_report
-    from brachycal.simulation import TWIN_FILES, TwinConfig, record, run_demo, write_recording
+    from brachycal.simulation import TWIN_FILES, TwinConfig, record, write_recording
+    from brachycal.studies import run_demo
 
     start = time.perf_counter()
-    from brachycal.simulation.demo import check_example_robot
+    from brachycal.studies.demo import check_example_robot
 
     if args.images and not args.recording:
         from brachycal.errors import InputError
@@ -162,7 +163,7 @@ def _table3(args: argparse.Namespace, robot, start: float) -> int:
     from tqdm import tqdm
 
     from brachycal.errors import InputError
-    from brachycal.simulation.demo import table3, table3_text
+    from brachycal.studies.demo import table3, table3_text
 
     for option in ("example", "recording", "force"):
         if getattr(args, option):

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from brachycal.cli.common import add_robot_option, load_robot, progress_bar
-from brachycal.cli.plan_excitation import add_excitation_minutes_option
+from brachycal.cli.plan.excitation import add_excitation_minutes_option
 from brachycal.validate import MAX_SEEDS, bounded_int, name_list
 
 HELP = "compare sample designs (4x4x4, 3x3x3, random, optimal) by predicted targeting error per robot minute"
@@ -61,9 +61,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from brachycal.files import OutputSet, write_csv
+    from brachycal.io import OutputSet, write_csv
     from brachycal.reporting import design_table
-    from brachycal.simulation import compare_designs
+    from brachycal.studies import compare_designs
 
     out = Path(args.out)
     if args.robot_error is not None:
@@ -101,9 +101,9 @@ def _run_excitation(args: argparse.Namespace, out: Path) -> int:
     import numpy as np
 
     from brachycal.errors import InputError
-    from brachycal.files import OutputSet, write_csv
-    from brachycal.simulation.design import compare_excitation
+    from brachycal.io import OutputSet, write_csv
     from brachycal.simulation.settings import DESIGNS
+    from brachycal.studies.design import compare_excitation
 
     if list(args.designs) != list(DESIGNS):
         raise InputError("--robot-error evaluates the 4x4x4 design with excitation poses: do not pass --designs")

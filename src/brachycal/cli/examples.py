@@ -37,7 +37,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def bundled_example_files() -> tuple[Path, list[Path]]:
     """``(the bundled examples folder, its files as paths relative to it, sorted)``."""
-    from brachycal.files import bundled
+    from brachycal.io import bundled
 
     source = bundled("examples")
     files = sorted(
@@ -54,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
     import shutil
 
     from brachycal.errors import BrachycalError, InputError
-    from brachycal.files import OutputSet
+    from brachycal.io import OutputSet
 
     source, files = bundled_example_files()
     if not files:

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 from brachycal.cli.common import add_method_option, add_robot_option, command_inputs, load_robot
 
 if TYPE_CHECKING:
-    from brachycal.files import OutputSet
+    from brachycal.io import OutputSet
     from brachycal.model import Robot
 
 HELP = "export a result: calibrated URDF, 3D Slicer/ITK transforms, PLUS CoordinateDefinitions, ROS static TFs"
@@ -59,7 +59,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from brachycal.export import check_ros_package_name, export_files, ros_package_files
-    from brachycal.files import OutputSet
+    from brachycal.io import OutputSet
 
     if args.ros_package is not None:
         check_ros_package_name(args.ros_package)

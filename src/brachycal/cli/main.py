@@ -26,11 +26,8 @@ from brachycal.cli import (
     fk,
     locate,
     model,
-    nwire,
-    nwire_segment,
     phantom,
     pivot,
-    plan,
     session,
     study,
     temporal,
@@ -38,6 +35,9 @@ from brachycal.cli import (
     verify,
     view,
 )
+from brachycal.cli.nwire import calibrate as nwire
+from brachycal.cli.nwire import segment as nwire_segment
+from brachycal.cli.plan import grid as plan
 from brachycal.errors import BrachycalError
 
 DESCRIPTION = """\

@@ -41,7 +41,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from brachycal.calibration import pivot_from_file, write_pivot
-    from brachycal.files import OutputSet
+    from brachycal.io import OutputSet
 
     with OutputSet(force=args.force, inputs=command_inputs(args, "poses")) as outputs:
         staged = outputs.claim(args.out, label="--out")

@@ -53,7 +53,7 @@ examples:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from brachycal.data.bags import DEFAULT_TOPIC
+    from brachycal.data.formats.bags import DEFAULT_TOPIC
     from brachycal.data.recording import MAX_SPEED_RAD_S, SPEED_SPAN_S, STILL_WINDOW_S
     from brachycal.data.session_build import MAX_STILL_SPEED_RAD_S, MAX_WINDOW_S
 
@@ -150,7 +150,7 @@ def run_build(args: argparse.Namespace) -> int:
         session_settings,
         write_build,
     )
-    from brachycal.files import OutputSet
+    from brachycal.io import OutputSet
 
     out = Path(args.out)
     if args.speed_span_s > args.still_window_s:

@@ -88,7 +88,7 @@ def _robot_route(args: argparse.Namespace) -> TemporalCalibration:
 
     from brachycal.calibration.temporal import DEFAULT_MAX_LAG_S, lag_from_signals
     from brachycal.data import read_joint_log
-    from brachycal.data.metaimage import read_image_sequence
+    from brachycal.data.formats.metaimage import read_image_sequence
     from brachycal.errors import InputError
     from brachycal.imaging.tank_line import find_tank_line
 
@@ -121,7 +121,7 @@ def _robot_route(args: argparse.Namespace) -> TemporalCalibration:
 def run(args: argparse.Namespace) -> int:
     from brachycal.calibration.temporal import lag_from_plus_files
     from brachycal.errors import InputError
-    from brachycal.files import OutputSet, sha256_file, write_json
+    from brachycal.io import OutputSet, sha256_file, write_json
 
     if (args.tracker is None) == (args.joints is None):
         raise InputError("give either TRACKER (PLUS route) or --joints LOG (robot route), not both or neither")

@@ -78,10 +78,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from brachycal.data.metaimage import read_image_sequence
+    from brachycal.data.formats.metaimage import read_image_sequence
     from brachycal.errors import InputError
-    from brachycal.files import OutputSet
     from brachycal.imaging.needle_tip import MIN_CONFIDENCE, detect_tip
+    from brachycal.io import OutputSet
 
     min_confidence = MIN_CONFIDENCE if args.min_confidence is None else args.min_confidence
     with OutputSet(force=args.force, inputs=command_inputs(args, "frames", "truth")) as outputs:
@@ -150,7 +150,7 @@ def _read_truth(path: str, times: np.ndarray) -> np.ndarray:
     """``(N, 2)`` true tips of the frames, paired by time (to the microsecond the truth file keeps)."""
     import numpy as np
 
-    from brachycal.data.csv_log import read_table, to_float
+    from brachycal.data.formats.csv_log import read_table, to_float
     from brachycal.errors import InputError
 
     file = Path(path)

@@ -102,8 +102,8 @@ def run(args: argparse.Namespace) -> int:
     if not args.out:
         raise InputError("--out is required: the verification record a lab files")
     from brachycal.calibration import read_result
-    from brachycal.calibration.check import check_calibration, outcome_json, read_check_session, verdict_text
-    from brachycal.files import OutputSet, write_json
+    from brachycal.calibration.verify.check import check_calibration, outcome_json, read_check_session, verdict_text
+    from brachycal.io import OutputSet, write_json
 
     out = Path(args.out)
     with OutputSet(force=args.force, inputs=command_inputs(args, "result", "check", "calibration_session")) as outputs:
@@ -136,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
             write_verification_page(staged_report, record, force=args.force)
         refusal = None
         if staged_update is not None:
-            from brachycal.calibration.check_update import update_refusal, updated_result
+            from brachycal.calibration.verify.update import update_refusal, updated_result
 
             refusal = update_refusal(outcome)
             if refusal is None:
@@ -173,8 +173,8 @@ def _demo(args: argparse.Namespace) -> int:
     import numpy as np
 
     from brachycal.data.session import write_session
-    from brachycal.files import OutputSet
-    from brachycal.simulation.check_twin import (
+    from brachycal.io import OutputSet
+    from brachycal.studies.check_twin import (
         CHANGES,
         CalibratedTwin,
         changed_setup,

@@ -41,10 +41,10 @@ from typing import TYPE_CHECKING, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
-from brachycal.calibration.image_to_probe import ImageCalibration
+from brachycal.calibration.sequential.image_to_probe import ImageCalibration
 from brachycal.errors import InputError, OutputError
-from brachycal.files import OutputSet, atomic_open, output_set
 from brachycal.inputs import MAX_DOCUMENT_BYTES, MAX_MESH_BYTES, open_input, read_input_text
+from brachycal.io import OutputSet, atomic_open, output_set
 from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, make_transform, to_position_quaternion
@@ -346,7 +346,7 @@ def write_exports(
     (:meth:`~brachycal.calibration.StoredCalibration.software_robot`); only its tool joints are
     replaced here. ``record``: the ``<brachycal_export>`` attributes the URDF carries
     (:meth:`~brachycal.calibration.StoredCalibration.export_record`). With ``outputs`` (a command's
-    :class:`~brachycal.files.OutputSet`) the files join that set and are committed with it; without,
+    :class:`~brachycal.io.OutputSet`) the files join that set and are committed with it; without,
     they are committed together on return. Returns the files' final paths (the meshes last).
     """
     folder = Path(folder)

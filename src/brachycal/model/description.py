@@ -36,8 +36,8 @@ import numpy as np
 import pinocchio as pin
 
 from brachycal.errors import InputError
-from brachycal.files import bundled
 from brachycal.inputs import MAX_DOCUMENT_BYTES, check_input_file, read_input_bytes, read_input_text
+from brachycal.io import bundled
 from brachycal.model import urdf_text
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, from_xyz_rpy, make_transform

@@ -39,8 +39,8 @@ import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
 from brachycal.errors import InputError
-from brachycal.files import atomic_open, bundled
 from brachycal.inputs import MAX_DOCUMENT_BYTES, MAX_MESH_BYTES, check_input_file, read_input_bytes, read_input_text
+from brachycal.io import atomic_open, bundled
 from brachycal.model import urdf_text
 from brachycal.model.batch_fk import BatchForwardKinematics
 from brachycal.model.joints import ONE_AXIS, Coordinates, UnsupportedJoint

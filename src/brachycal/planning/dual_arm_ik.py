@@ -49,7 +49,7 @@ class IKSettings:
             tools can reach their targets exactly.
 
     Every setting must be finite and in range: margins in [0, 0.15 m] and [0, 50 deg] (a little
-    above the largest :class:`~brachycal.planning.verify.Thresholds`, since the IK keeps more
+    above the largest :class:`~brachycal.planning.pose_checks.Thresholds`, since the IK keeps more
     than the check asks; the thresholds set the floors a plan must keep), ``dt`` in (0, 1] s,
     ``max_iterations`` in [1, 100000], tolerances in (0, 1 mm] and (0, 0.1 rad], ``posture_cost``
     in [0, 1], ``finish_radius_m`` in [0, 0.1 m].

@@ -13,8 +13,8 @@ from brachycal.errors import SolverError
 from brachycal.model.names import PROBE_TIP, US_IMAGE
 from brachycal.planning import order as ordering
 from brachycal.planning.dual_arm_ik import DualArmIK, IKSettings
+from brachycal.planning.pose_checks import PoseCheck, PoseVerifier, Thresholds
 from brachycal.planning.spec import PlanSpec
-from brachycal.planning.verify import PoseCheck, PoseVerifier, Thresholds
 from brachycal.se3 import FloatArray
 from brachycal.validate import check_range
 

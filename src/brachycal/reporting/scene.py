@@ -22,8 +22,8 @@ from matplotlib.figure import Figure
 from numpy.typing import ArrayLike
 from trimesh.visual import ColorVisuals, TextureVisuals
 
-from brachycal.files import atomic_path
 from brachycal.imaging.pixels import DEFAULT_IMAGE_SIZE_PX, DEFAULT_SPACING_M, image_points
+from brachycal.io import atomic_path
 from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.reporting.figures import save_figure

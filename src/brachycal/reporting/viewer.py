@@ -33,7 +33,7 @@ from brachycal.se3 import FloatArray, transform_points
 if TYPE_CHECKING:
     import viser
 
-    from brachycal.calibration.result_file import StoredCalibration
+    from brachycal.calibration.session.result_file import StoredCalibration
     from brachycal.data.session import Session
     from brachycal.simulation.twin import Twin
 
@@ -271,12 +271,12 @@ def calibration_content(
     (``calibrated``: ``T_R_EL(q) @ T_EL_Ptip @ T_Ptip_I @ p_I``, Fig. 10's pair) joined by their
     ``residual``; the sample cube, aligned with the image as the planner aligns it. With the twin
     the session was simulated by, also ``target`` and ``landed`` points (the end-to-end targeting
-    error, :func:`~brachycal.simulation.targeting_error`, with the model the software commands).
+    error, :func:`~brachycal.studies.targeting_error`, with the model the software commands).
 
     Raises:
         InputError: ``method`` is not in the result.
     """
-    from brachycal.calibration.sequential import locate
+    from brachycal.calibration.sequential.method import locate
     from brachycal.export.formats import calibrated_robot
 
     method = stored.method(method)
@@ -294,7 +294,7 @@ def calibration_content(
     extent = np.ptp((real - T_cube[:3, 3]) @ T_cube[:3, :3], axis=0)
     cube = (T_cube, float(max(extent.max(), 1e-3)))
     if twin is not None:
-        from brachycal.simulation.targeting import targeting_error
+        from brachycal.studies.targeting import targeting_error
 
         hit = targeting_error(twin, stored.T_ER_Ntip, stored.T_EL_Ptip, image, n_targets, software=software)
         points["target"], points["landed"] = hit.targets_m, hit.landed_m

@@ -75,7 +75,7 @@ from brachycal.se3 import FloatArray
 from brachycal.validate import check_range, check_seed
 
 if TYPE_CHECKING:
-    from brachycal.files import OutputSet
+    from brachycal.io import OutputSet
     from brachycal.simulation.recording import Recording
     from brachycal.simulation.twin import Twin
 
@@ -245,7 +245,7 @@ def render_frame(
         frame_index: which frame of ``settings.seed`` this is: the random effects draw from the
             streams of ``(seed, frame_index)``, so frames differ and each is reproducible.
         echoes: other reflectors (e.g. a phantom's faces,
-            :func:`~brachycal.simulation.phantom_images.render_wedge_frame`): called as
+            :func:`~brachycal.studies.phantom_images.render_wedge_frame`): called as
             ``echoes(envelope, origin_px, spacing_m, psf_sd_m)`` to add their linear echo to the
             envelope in place (``envelope[0, 0]`` is pixel ``origin_px`` ``(u, v)``; ``psf_sd_m``
             ``(lateral, axial)`` SDs), before the depth gains, noise and compression apply.
@@ -570,7 +570,7 @@ def write_recording_frames(
     truth_px = true_tip_px(rec.twin)
     elevation_mm = np.array([v.tip_I_m[2] * 1e3 for v in needle_views(rec.twin)])
     spacing_mm = tuple(float(x) * 1e3 for x in rec.session.spacing_m)
-    from brachycal.data.metaimage import write_image_sequence
+    from brachycal.data.formats.metaimage import write_image_sequence
 
     write_image_sequence(
         outputs.path(folder / "frames.mha", make_parents=True),

@@ -36,12 +36,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from brachycal.data.bags import DEFAULT_TOPIC, JOINT_STATE
+from brachycal.data.formats.bags import DEFAULT_TOPIC, JOINT_STATE
 from brachycal.data.joint_log import JointLog, joint_log_from_columns
 from brachycal.data.recording import AXES_POINTS, MARK_TYPE, REFERENCES, STILL_WINDOW_S, TOUCH_TOOLS, Frame, Mark
 from brachycal.data.session import Session, write_session
 from brachycal.errors import InputError
-from brachycal.files import OutputSet, atomic_open, output_set
+from brachycal.io import OutputSet, atomic_open, output_set
 from brachycal.model.robot import Robot
 from brachycal.planning import Plan, plan_poses
 from brachycal.planning.output import write_plan
@@ -332,7 +332,7 @@ def write_recording(
         images: also render the frames as B-mode images with these settings: ``frames.mha`` and
             ``frames_truth.csv`` (:func:`brachycal.simulation.bmode.write_recording_frames`).
         force: replace existing files.
-        outputs: a command's :class:`~brachycal.files.OutputSet` to join (all or nothing with it).
+        outputs: a command's :class:`~brachycal.io.OutputSet` to join (all or nothing with it).
 
     Raises:
         InputError: an unknown bag storage.

@@ -18,7 +18,7 @@ Image models (one table, :data:`IMAGE_MODELS`): ``rigid`` (the scanner's spacing
 spacing as the scanner says, depth spacing times c / 1540 m/s, with the speed of sound c estimated).
 The unknowns sit in the parameter vector by name (:class:`ParameterLayout`, ``ChainFit.block``).
 
-Two stages, both least-squares solves (:mod:`~brachycal.calibration.chain.solver`: SciPy's trust-region
+Two stages, both least-squares solves (:mod:`~brachycal.calibration.least_squares`: SciPy's trust-region
 objective and tolerances, without its per-call overhead) from the sequential result:
 
 1. **Robust stage** (finds gross errors): soft-L1 loss on the normalised residuals, each group's

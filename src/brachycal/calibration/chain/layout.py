@@ -16,7 +16,7 @@ import numpy as np
 
 from brachycal.calibration.chain.image_models import ImageModel, image_model
 from brachycal.calibration.chain.rotations import rotation
-from brachycal.calibration.sequential import CalibrationResult
+from brachycal.calibration.sequential.method import CalibrationResult
 from brachycal.se3 import FloatArray
 
 #: The fixed blocks of the parameter vector, in order: name → length.

@@ -10,7 +10,7 @@ from brachycal.calibration.chain.conditioning import Conditioning
 from brachycal.calibration.chain.layout import ParameterLayout
 from brachycal.calibration.chain.noise import NoiseLevel
 from brachycal.calibration.chain.robot_terms import RobotAccuracy
-from brachycal.calibration.image_to_probe import ImageCalibration
+from brachycal.calibration.sequential.image_to_probe import ImageCalibration
 from brachycal.se3 import FloatArray
 
 

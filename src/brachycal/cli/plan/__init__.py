@@ -1,0 +1,1 @@
+"""brachycal plan: the grid (default), plan check, plan excitation."""
