@@ -27,7 +27,7 @@ import numpy as np
 from timing import record
 
 from brachycal.calibration.phantom.wedge import calibrate_wedge
-from brachycal.calibration.sequential.image_to_probe import ImageCalibration
+from brachycal.calibration.result import ImageCalibration
 from brachycal.model import Robot
 from brachycal.se3 import inverse
 from brachycal.simulation.twin import TwinConfig, simulate

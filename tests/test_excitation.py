@@ -1,5 +1,5 @@
 """Excitation poses (issue 19): the A-optimal criterion on the landing error, its greedy choice under a
-robot-time budget, the candidates' reachability, their effect on a twin, and ``plan --excitation``."""
+robot-time budget, the candidates' reachability, their effect on a twin, and ``plan excitation``."""
 
 from __future__ import annotations
 
@@ -195,7 +195,7 @@ def test_excitation_lowers_the_landing_error_as_predicted(robot, worn):
 # --- the command -----------------------------------------------------------------------------------
 
 SESSION = ROOT / "examples" / "twin_session"
-EXCITE = ["plan", "--excitation", str(SESSION), "--out", "{tmp}/excitation.csv", "--quiet"]
+EXCITE = ["plan", "excitation", str(SESSION), "--out", "{tmp}/excitation.csv", "--quiet"]
 
 
 def test_command_writes_the_poses_or_says_the_session_is_enough(tmp_path):

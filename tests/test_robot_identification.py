@@ -11,13 +11,13 @@ import pytest
 
 from brachycal.calibration import calibrate
 from brachycal.calibration.chain import ChainData, RobotAccuracy, fit_chain, joint_twists
+from brachycal.calibration.result import ImageCalibration
 from brachycal.calibration.robot.identification import (
     COMPONENTS,
     corrected_robot,
     cross_validate_identification,
     identify_robot,
 )
-from brachycal.calibration.sequential.image_to_probe import ImageCalibration
 from brachycal.calibration.session.result_file import StoredCalibration
 from brachycal.errors import InputError
 from brachycal.model.names import LEFT_FLANGE, RIGHT_FLANGE

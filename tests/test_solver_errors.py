@@ -88,7 +88,7 @@ def _hand_eye(robot, twin):
 
 
 def _true_image(twin):
-    from brachycal.calibration.sequential.image_to_probe import ImageCalibration
+    from brachycal.calibration.result import ImageCalibration
 
     return ImageCalibration("truth", twin.truth.T_Ptip_I, twin.truth.spacing_m)
 

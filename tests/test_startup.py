@@ -45,6 +45,8 @@ COMMANDS = [
     "model",
     "fk",
     "plan",
+    "plan check",
+    "plan excitation",
     "session build",
     "calibrate",
     "locate",

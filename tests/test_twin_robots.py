@@ -18,7 +18,8 @@ from brachycal.calibration.chain import fit_chain
 from brachycal.calibration.chain.uncertainty import landing_covariance
 from brachycal.cli.main import main
 from brachycal.errors import InputError
-from brachycal.model.description import BUNDLED_ROBOTS, bundled_description_path, load_description
+from brachycal.model.description import BUNDLED_ROBOTS, load_description
+from brachycal.model.description_file import bundled_description_path
 from brachycal.planning import PlanSpec
 from brachycal.simulation import exact
 from brachycal.simulation.twin import TwinConfig, simulate, spec_for

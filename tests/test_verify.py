@@ -1,4 +1,4 @@
-"""The check before each procedure: ``brachycal plan --verify`` and ``brachycal verify``.
+"""The check before each procedure: ``brachycal plan check`` and ``brachycal verify``.
 
 A twin session (seed 0) is calibrated with the whole chain once; check sessions are recorded on
 it at the check poses, unchanged or after one part moved (:mod:`brachycal.studies.check_twin`).
@@ -33,7 +33,7 @@ from brachycal.se3 import FloatArray
 from brachycal.studies.check_twin import CHANGES, CalibratedTwin, changed_setup, record_check, write_check_session
 
 REMOUNT = "probe remounted 1 mm / 1 deg"
-#: Single touches in the default check (plan --verify).
+#: Single touches in the default check (plan check).
 DEFAULT_TOUCH_COUNT = len(TOUCH_CHOICES[DEFAULT_TOUCHES])
 
 
@@ -346,7 +346,7 @@ def test_verify_exits_1_on_recalibrate_naming_the_part(check_folders, tmp_path):
 
 def test_plan_verify_writes_a_plan_of_the_check_poses(tmp_path):
     out = tmp_path / "check_plan.csv"
-    outcome = run_cli(["plan", "--verify", "--out", str(out), "--quiet"])
+    outcome = run_cli(["plan", "check", "--out", str(out), "--quiet"])
     assert outcome.code == 0, outcome.err
     lines = out.read_text().splitlines()
     assert lines[0].startswith("order,point,i,j,k,x,y,z,u_px,v_px")
@@ -357,20 +357,28 @@ def test_plan_verify_writes_a_plan_of_the_check_poses(tmp_path):
 
 def test_plan_verify_states_the_robot_time_of_its_touches(tmp_path):
     out = tmp_path / "check_plan.csv"
-    outcome = run_cli(["plan", "--verify", "--out", str(out), "--quiet"])
+    outcome = run_cli(["plan", "check", "--out", str(out), "--quiet"])
     assert outcome.code == 0, outcome.err
     assert len(out.read_text().splitlines()) == 1 + DEFAULT_CHECK_POSES
     assert "1 touch x 30 s (probe on rtip1) = 1.9 min" in outcome.out
-    outcome = run_cli(["plan", "--verify", "--verify-touches", "both", "--out", str(out), "--quiet", "--force"])
+    outcome = run_cli(["plan", "check", "--touches", "both", "--out", str(out), "--quiet", "--force"])
     assert outcome.code == 0, outcome.err
     assert "2 touches x 30 s" in outcome.out and "= 2.4 min" in outcome.out
 
 
-def test_verify_touches_goes_with_verify(tmp_path):
-    outcome = run_cli(["plan", "--verify-touches", "probe", "--out", str(tmp_path / "plan.csv")])
+def test_the_check_options_belong_to_plan_check(tmp_path):
+    outcome = run_cli(["plan", "--touches", "probe", "--out", str(tmp_path / "plan.csv")])
     assert outcome.code == 2
-    assert "--verify-touches goes with --verify" in outcome.err
+    assert "--touches" in outcome.err and len(outcome.err.splitlines()) == 1
     assert not any(tmp_path.iterdir())
+
+
+def test_the_earlier_spelling_plan_verify_runs_plan_check_with_a_note(tmp_path):
+    out = tmp_path / "check_plan.csv"
+    outcome = run_cli(["plan", "--verify", "--verify-touches", "none", "--out", str(out), "--quiet"])
+    assert outcome.code == 0, outcome.err
+    assert outcome.err.splitlines()[0].startswith("brachycal: note: 'plan --verify' is now 'plan check'")
+    assert "0 touches" in outcome.out and len(out.read_text().splitlines()) == 1 + DEFAULT_CHECK_POSES
 
 
 # --- each check pose's own null SD, from the calibration session ----------------------------------
@@ -388,7 +396,7 @@ def test_each_check_pose_takes_its_own_calibration_samples_error(calibrated):
     )
     ids = calibrated.stored.raw["samples"]
     errors_m = np.array(calibrated.stored.raw["loocv"][calibrated.method]["errors_mm"]) * 1e-3
-    assert None not in posed.pose_match  # plan --verify picks grid poses: every one is matched
+    assert None not in posed.pose_match  # plan check picks grid poses: every one is matched
     # Independent of the matching (needle tip and probe flange positions): the matched calibration
     # sample showed the needle tip at the check's planned pixel (1 px annotation noise each; the
     # grid's pixels lie 70 px or more apart).

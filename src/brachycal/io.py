@@ -38,6 +38,8 @@ import math
 import os
 import re
 import secrets
+import shutil
+import signal
 import stat
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -370,8 +372,6 @@ def _refuse_input(destination: Path, declared: Mapping[tuple[int, int], list[str
 def _signals_deferred() -> Iterator[None]:
     """Hold SIGINT and SIGTERM back for a few system calls (delivered on exit, the mask restored):
     the lock file must be recorded by its claim before an interrupt can unwind the command."""
-    import signal
-
     if not hasattr(signal, "pthread_sigmask"):  # pragma: no cover - Windows
         yield
         return
@@ -518,7 +518,6 @@ def _keep_old(destination: Path, old: Path) -> None:
     except OSError as exc:
         if exc.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EXDEV, errno.EMLINK, errno.ENOSYS):
             raise
-        import shutil
 
         shutil.copy2(destination, old, follow_symlinks=False)
 

@@ -77,6 +77,7 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
         read_wedge_phantom,
     )
     from brachycal.calibration.phantom.wire import WirePhantom, calibrate_wire, calibrate_wire_files, read_wire_phantom
+    from brachycal.calibration.result import ImageCalibration, PredictedUncertainty
     from brachycal.calibration.robot.identification import (
         RobotIdentification,
         corrected_robot,
@@ -84,7 +85,6 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
         identify_robot,
     )
     from brachycal.calibration.robot.observability import Criterion, Observation, base_criterion, observation_rows
-    from brachycal.calibration.sequential.image_to_probe import ImageCalibration, PredictedUncertainty
     from brachycal.calibration.sequential.method import (
         CalibrationResult,
         ToolCalibration,

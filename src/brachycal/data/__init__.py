@@ -81,9 +81,10 @@ __getattr__, __dir__ = attach(__name__, __file__)
 def read_joint_log(path: str | os.PathLike[str], robot: Robot, topic: str | None = None) -> JointLog:
     """Read a joint log from a CSV file, a ROS 1 ``.bag`` or a ROS 2 bag folder (``topic``: the
     bag's JointState topic, default :data:`~brachycal.data.formats.bags.DEFAULT_TOPIC`)."""
+    # lazy: the package's names load on first use (the readers are imported by the reading only)
     from brachycal.data.formats.bags import DEFAULT_TOPIC, is_bag, read_bag_log
-    from brachycal.data.formats.csv_log import read_csv_log
-    from brachycal.errors import InputError
+    from brachycal.data.formats.csv_log import read_csv_log  # lazy: as above
+    from brachycal.errors import InputError  # lazy: as above
 
     path = Path(path)
     if not path.exists():

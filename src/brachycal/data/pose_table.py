@@ -330,7 +330,7 @@ def write_pose_table(
 
 def read_pose_table(path: str | os.PathLike[str]) -> tuple[FloatArray, list[str], FloatArray]:
     """Read a pose table back: ``(time (R,), frame (R,), T_base_frame (R, 4, 4))``, one per row."""
-    from scipy.spatial.transform import Rotation
+    from scipy.spatial.transform import Rotation  # lazy: start-up (scipy)
 
     path = Path(path)
     header, rows, records = read_table(path, list(HEADER))

@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike
 
+from brachycal.data import read_joint_log  # the package's reader dispatch (CSV or bag)
 from brachycal.data.formats.bags import DEFAULT_TOPIC, is_bag
 from brachycal.data.formats.csv_log import read_table, to_float
 from brachycal.data.joint_log import (
@@ -738,8 +739,6 @@ def build_session_from_files(
         InputError: marks given both ways or neither, a marks topic on a CSV log, or any refusal
             of the readers and of :func:`build_session`.
     """
-    from brachycal.data import read_joint_log  # the package's reader dispatch (CSV or bag)
-
     log_path = Path(log_path)
     if (marks is None) == (marks_topic is None):
         raise InputError("give the marks either as a file (--marks) or as a topic of the bag (--marks-topic)")

@@ -76,7 +76,7 @@ _MAX_LINES = 12
 
 def _candidates(frame: np.ndarray, dynamic_range_db: float) -> FloatArray:
     """``(M, 2)`` sub-pixel ``(u, v)`` of the columns' local maxima above the threshold."""
-    from scipy.ndimage import gaussian_filter
+    from scipy.ndimage import gaussian_filter  # lazy: start-up (scipy)
 
     grey = frame.astype(np.float32)
     inside = grey > 0  # the renderer's sector is black outside

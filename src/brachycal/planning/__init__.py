@@ -9,7 +9,7 @@ The robot's rig (``robot.rig``) gives the arms, the ready stance planning starts
 pairs, the controller order and the workspace (:meth:`PlanSpec.for_robot`); :data:`READY` is the
 SDA10F's ready stance (:data:`brachycal.model.READY`).
 
-Excitation poses (robot identification, ``plan --excitation``): :func:`plan_excitation` chooses
+Excitation poses (robot identification, ``plan excitation``): :func:`plan_excitation` chooses
 extra touches and samples for a session whose robot was identified (:class:`ExcitationPlan` of
 :class:`Candidate` poses), :func:`write_excitation` writes them.
 """

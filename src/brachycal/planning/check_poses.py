@@ -1,4 +1,4 @@
-"""The poses of a check before each procedure (``brachycal plan --verify``): a few of the grid's.
+"""The poses of a check before each procedure (``brachycal plan check``): a few of the grid's.
 
 Criterion: greedy Bayesian D-optimal design. Each candidate pose ``i`` of the full plan (the
 paper's 4 × 4 × 4 grid) has the sensitivity ``J_i`` (3 × 11) of its check residual — the needle tip
@@ -10,7 +10,8 @@ mm and per degree; an image-transform change has the same effect on samples) and
 identity is a prior of 1 mm / 1° / 1 % on every parameter, so the first poses already count). The
 picked poses are then ordered to shorten the robot's motion, as the full plan is.
 
-The check's robot time is stated at the paper's pace, :data:`SECONDS_PER_SAMPLE` per sample
+The check's robot time is stated at the paper's pace,
+:data:`~brachycal.planning.robot_time.SECONDS_PER_SAMPLE` per sample
 (image, annotation), plus the motion between poses at the given speed, plus
 :data:`SECONDS_PER_TOUCH` for each optional single touch of a tool on ``rtip1`` (:data:`TOUCH_CHOICES`:
 both the needle's and the probe's, the probe's alone, or none).
@@ -23,15 +24,16 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from brachycal.errors import InputError
 from brachycal.planning import order as ordering
+from brachycal.planning.robot_time import SECONDS_PER_SAMPLE
 from brachycal.se3 import FloatArray
+from brachycal.validate import check_int
 
 if TYPE_CHECKING:
     from brachycal.model.robot import Robot
     from brachycal.planning.plan import Plan
 
-#: Robot time per image sample, seconds: the paper's pace (§III.C, about 10 s per sample).
-SECONDS_PER_SAMPLE = 10.0
 #: Robot time per single touch of a tool on a reference tip, seconds: jogging a tip onto a tip by
 #: hand takes longer than an image (an assumption, stated; the paper gives no figure).
 SECONDS_PER_TOUCH = 30.0
@@ -89,6 +91,7 @@ def sensitivities(
 ) -> FloatArray:
     """``(N, 3, 11)``: each pose's check residual (metres) per unit change of needle tip (3, m),
     probe mount (3 m, 3 rad) and image scale (2, relative), by central differences."""
+    # lazy: start-up (calibration.verify.check is loaded on first use)
     from brachycal.calibration.verify.check import ChainModel, CheckSession, NullModel
 
     null = NullModel(1.0, "", {"needle": 1.0, "probe": 1.0}, {"rtip1": np.zeros(3), "rtip2": np.zeros(3)})
@@ -143,8 +146,6 @@ def plan_check(
     The tools (``T_…``) are a calibration's, or the robot's nominal ones: the choice depends on them
     only through the chain's geometry, which a few millimetres do not change.
     """
-    from brachycal.validate import check_int
-
     check_int(count, "check poses", low=CHECK_POSES_RANGE[0], high=CHECK_POSES_RANGE[1])
     tools = touch_choice(touches)
     q = np.array([p.q for p in full.poses])
@@ -167,8 +168,6 @@ def plan_check(
 
 def touch_choice(touches: str) -> tuple[str, ...]:
     """The tools (session names) that touch ``rtip1`` for a :data:`TOUCH_CHOICES` key."""
-    from brachycal.errors import InputError
-
     if touches not in TOUCH_CHOICES:
         raise InputError(f"touches must be one of {', '.join(TOUCH_CHOICES)}, not {touches!r}")
     return TOUCH_CHOICES[touches]

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from brachycal.errors import InputError, SolverError
+from brachycal.model.collision import collision_link_pairs
 from brachycal.model.names import NEEDLE_TIP, PROBE_TIP
 from brachycal.se3 import FloatArray
 from brachycal.validate import check_finite, check_int, check_range, check_transform
@@ -89,7 +90,7 @@ class IKOutcome:
 
 
 def _se3(T: FloatArray) -> mink.SE3:
-    import mink
+    import mink  # lazy: start-up (mink)
 
     return mink.SE3.from_matrix(np.asarray(T, dtype=float))
 
@@ -107,10 +108,8 @@ class DualArmIK:
     """
 
     def __init__(self, robot: Robot, settings: IKSettings = IKSettings()) -> None:
-        import mink
-        import mujoco
-
-        from brachycal.model.collision import collision_link_pairs
+        import mink  # lazy: start-up (mink)
+        import mujoco  # lazy: start-up (mujoco)
 
         self.robot = robot
         self.settings = settings
@@ -208,8 +207,8 @@ class DualArmIK:
 
     def _step(self, tasks: list, iteration: int, T_base_needle: FloatArray, T_base_probe: FloatArray) -> FloatArray:
         """One differential-IK velocity, ``(nv,)`` rad/s; a QP without solution becomes :class:`SolverError`."""
-        import mink
-        import qpsolvers
+        import mink  # lazy: start-up (mink)
+        import qpsolvers  # lazy: start-up (qpsolvers)
 
         try:
             velocity = mink.solve_ik(

@@ -14,11 +14,11 @@ clear of collisions (checked again here with :mod:`brachycal.planning.pose_check
   arms move together; the closed loop between them does not see the torso, so such a sample only
   repeats its source — the criterion scores it so).
 
-Costs (minutes): an image sample :data:`~brachycal.studies.design.SECONDS_PER_SAMPLE` (move,
+Costs (minutes): an image sample :data:`~brachycal.planning.robot_time.SECONDS_PER_SAMPLE` (move,
 image, annotate), a touch :data:`TOUCH_SECONDS` (jogging a tool tip onto a reference tip by hand:
 the paper's 5-minute mechanical part is 18 touches and 6 axes points, ~12 s each done in one flow;
 a touch on its own, with the approach to set up, is taken at 30 s), each plus the motion from its
-source pose and back at a quarter of the vendor's speed (:data:`~brachycal.studies.design.SPEED_SCALE`).
+source pose and back at a quarter of the vendor's speed (:data:`~brachycal.planning.robot_time.SPEED_SCALE`).
 The chosen poses' total is then the ordered tour's (:func:`tour_minutes`).
 """
 
@@ -34,15 +34,25 @@ from scipy.spatial.transform import Rotation
 
 from brachycal.calibration.chain import ChainFit
 from brachycal.calibration.robot.identification import RobotIdentification
-from brachycal.calibration.robot.observability import SAMPLE, TOUCH, Observation
+from brachycal.calibration.robot.observability import (
+    SAMPLE,
+    TOUCH,
+    Observation,
+    base_criterion,
+    greedy,
+    observation_rows,
+    resolution,
+)
 from brachycal.data.session import Session
 from brachycal.errors import SolverError
+from brachycal.io import atomic_open
+from brachycal.model.collision import ClearanceChecker, collision_link_pairs
 from brachycal.model.ik import solve_ik
 from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, TOP_MODEL_TIP, US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.planning import order as ordering
 from brachycal.planning.pose_checks import Thresholds
-from brachycal.planning.robot_time import DEFAULT_BUDGET_MINUTES, MAX_BUDGET_MINUTES
+from brachycal.planning.robot_time import DEFAULT_BUDGET_MINUTES, MAX_BUDGET_MINUTES, SECONDS_PER_SAMPLE, SPEED_SCALE
 from brachycal.se3 import FloatArray, make_transform
 from brachycal.validate import check_range
 
@@ -108,8 +118,6 @@ class _Checks:
     """Joint margins and clearances with the independent check's thresholds."""
 
     def __init__(self, robot: Robot, thresholds: Thresholds) -> None:
-        from brachycal.model.collision import ClearanceChecker, collision_link_pairs
-
         self.robot, self.thresholds = robot, thresholds
         self.checker = ClearanceChecker(robot, collision_link_pairs(robot))
 
@@ -178,8 +186,6 @@ def candidates(
         samples: which session samples to vary (default all).
         touches: also touches (:data:`TOUCHES_RECORDABLE`: a session cannot hold them yet).
     """
-    from brachycal.studies.design import SECONDS_PER_SAMPLE, SPEED_SCALE
-
     rig = robot.rig
     checks = _Checks(robot, thresholds)
     shared = rig.shared_indices
@@ -283,8 +289,6 @@ def tour(robot: Robot, chosen: Sequence[Candidate]) -> tuple[np.ndarray, FloatAr
     """The visiting order of ``chosen`` from the rig's ready stance (nearest neighbour + 2-opt at a
     quarter of the vendor's speed), each pose's move time from the previous one (s), and the minutes
     to record them all and return to the ready stance (dwells plus motion)."""
-    from brachycal.studies.design import SECONDS_PER_SAMPLE, SPEED_SCALE
-
     if not chosen:
         return np.zeros(0, dtype=int), np.zeros(0), 0.0
     ready = robot.rig.ready
@@ -371,8 +375,6 @@ def plan_excitation(
     Raises:
         InputError: a budget out of range.
     """
-    from brachycal.calibration.robot.observability import base_criterion, greedy, observation_rows, resolution
-
     check_range(budget_minutes, "excitation budget", low=0.0, high=MAX_BUDGET_MINUTES, low_open=True, unit="min")
     fit = identified.fit
     rtips = fit.layout(nominal.joint_names).unpack(fit.x, fit.base, session.spacing_m)[3]
@@ -431,8 +433,6 @@ def write_excitation(plan: ExcitationPlan, robot: Robot, path: str | os.PathLike
     ``joint_margin_deg``, then the joints in the controller's order in radians and in degrees.
     A touch's ``u_px,v_px`` are empty; a sample's ``tool,reference`` are empty.
     """
-    from brachycal.io import atomic_open
-
     controller = robot.rig.controller_joint_names
     columns = [robot.joint_names.index(name) for name in controller]
     visit, moves, _ = tour(robot, plan.chosen)

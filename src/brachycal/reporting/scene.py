@@ -107,7 +107,7 @@ def scene_figure(
         azimuth: view angle, degrees.
         zoom_to: ``(2, 3)`` low and high corners of the box to show, metres; default the whole scene.
     """
-    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # lazy: start-up (mpl_toolkits)
 
     fig = Figure(figsize=(7, 6), layout="tight")
     ax = fig.add_subplot(projection="3d")

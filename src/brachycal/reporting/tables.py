@@ -14,6 +14,7 @@ import numpy as np
 from brachycal.calibration.labels import ALL_LABELS, METHOD_LABELS
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.imaging.pixels import SCANNER_SOUND_SPEED_M_S
+from brachycal.planning.robot_time import MECHANICAL_MINUTES, SECONDS_PER_SAMPLE
 
 if TYPE_CHECKING:  # types only: `brachycal plan` prints plan_text without loading the calibration
     from brachycal.calibration.sequential.method import CalibrationResult
@@ -196,9 +197,6 @@ def design_table(rows: Sequence[Mapping[str, object]]) -> str:
     """Sample designs compared (rows of :func:`~brachycal.studies.design.compare_designs`): per
     design the mean over seeds of robot minutes, predicted and actual RMS landing error (mm), and
     information per minute."""
-    # Imported here: the simulation loads SciPy's statistics and mink, which plan_text's callers do not need.
-    from brachycal.studies.design import MECHANICAL_MINUTES, SECONDS_PER_SAMPLE
-
     lines = [
         f"time model: {MECHANICAL_MINUTES:g} min mechanical + {SECONDS_PER_SAMPLE:g} s per sample + motion",
         f"{'design':<12} {'samples':>7} {'minutes':>8} {'predicted RMS (mm)':>19} {'actual RMS (mm)':>16} "

@@ -18,19 +18,25 @@ missed before the change).
 from __future__ import annotations
 
 import os
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from brachycal.calibration.verify.check import CheckSession
+from brachycal.calibration import calibrate, read_result, write_result
+from brachycal.calibration.session.chain_report import calibrate_chain
+from brachycal.calibration.verify.check import CheckSession, chain_model, check_calibration
+from brachycal.calibration.verify.update import update_refusal, updated_result
+from brachycal.data.session import FORMAT
 from brachycal.imaging.pixels import SCANNER_SOUND_SPEED_M_S, image_points
-from brachycal.io import OutputSet
+from brachycal.io import OutputSet, atomic_open, output_set, write_json
 from brachycal.model.ik import solve_ik
 from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
 from brachycal.model.robot import Robot
-from brachycal.planning.check_poses import DEFAULT_CHECK_POSES, DEFAULT_TOUCHES, touch_choice
+from brachycal.planning import plan_poses
+from brachycal.planning.check_poses import DEFAULT_CHECK_POSES, DEFAULT_TOUCHES, plan_check, touch_choice
 from brachycal.se3 import FloatArray, make_transform
 from brachycal.simulation.exact import touch, touch_tools
 from brachycal.simulation.twin import Twin, TwinConfig, simulate
@@ -99,7 +105,7 @@ class ChangedSetup:
 
 def changed_setup(twin: Twin, change: Change, rng: np.random.Generator) -> ChangedSetup:
     """The twin's physical robot and spacing after ``change`` (random directions from ``rng``)."""
-    from scipy.spatial.transform import Rotation
+    from scipy.spatial.transform import Rotation  # lazy: start-up (scipy)
 
     truth = twin.truth
     T_ER_Ntip = truth.T_ER_Ntip.copy()
@@ -178,8 +184,6 @@ def noise_free_residuals_mm(
     """``(N, 3)`` check residuals of the stored calibration with no noise, mm: on ``setup`` the
     probe is adjusted until the needle tip lies in the image plane at its planned pixel (as when
     recording), and the joints are read exactly. Each is the targeting error at that pose."""
-    from brachycal.calibration.verify.check import chain_model
-
     q = np.array(
         [
             _adjust(setup, q0, uv, 0.0, twin.nominal.rig.probe_arm_indices)
@@ -243,11 +247,6 @@ class CalibratedTwin:
         result_path: str | os.PathLike[str] | None = None,
         pose_nulls: bool = True,
     ) -> None:
-        from brachycal.calibration import calibrate, read_result, write_result
-        from brachycal.calibration.session.chain_report import calibrate_chain
-        from brachycal.planning import plan_poses
-        from brachycal.planning.check_poses import plan_check
-
         config = TwinConfig(seed=seed).with_robot_error(robot_error)
         self.twin = twin = simulate(robot, config)
         path = Path(result_path) if result_path else Path(folder) / f"result_{robot_error}_{seed}.json"
@@ -292,8 +291,6 @@ class CalibratedTwin:
         (:func:`~brachycal.calibration.verify.update.update_refusal`) does, and the outcome has the
         targeting error of the updated result on the changed set-up (RMS of its noise-free check
         residuals, mm); else why not."""
-        from brachycal.calibration.verify.check import check_calibration
-
         rng = np.random.default_rng([self.twin.config.seed, check_seed, 7])
         unchanged = ChangedSetup(self.twin.physical, self.twin.truth.spacing_m)
         setup = changed_setup(self.twin, change, rng)
@@ -335,11 +332,6 @@ class CalibratedTwin:
 
     def _update(self, outcome, session: CheckSession, setup: ChangedSetup) -> tuple[str | None, float | None]:
         """``(why not, None)`` or ``(None, targeting error of the updated result in mm)``."""
-        import tempfile
-
-        from brachycal.calibration import read_result
-        from brachycal.calibration.verify.update import update_refusal, updated_result
-        from brachycal.io import write_json
 
         refusal = update_refusal(outcome)
         if refusal is not None:
@@ -378,9 +370,6 @@ def write_check_session(
 ) -> Path:
     """Write a check session folder: ``session.toml``, ``samples.csv`` and, if it has touches,
     ``touches.csv`` (all or nothing; with ``outputs`` they join that set)."""
-    from brachycal.data.session import FORMAT
-    from brachycal.io import atomic_open, output_set
-
     folder = Path(folder)
     joints = ",".join(robot.joint_names)
     su, sv = (float(v) for v in session.spacing_m * 1e3)

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from brachycal.calibration.chain import fit_chain, select_model
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.sequential.image_to_probe import METHODS
 from brachycal.calibration.sequential.method import CalibrationResult, calibrate, loo_points
@@ -37,6 +38,7 @@ from brachycal.se3 import FloatArray, inverse, transform_points
 from brachycal.simulation.twin import Twin, TwinConfig, simulate
 from brachycal.simulation.twin_files import read_twin, write_twin
 from brachycal.studies.nwire_twin import T_PTIP_MARKER, NWireSimConfig, tracker_route
+from brachycal.studies.phantom_twin import phantom_route
 from brachycal.studies.targeting import TargetingResult, targeting_error
 
 #: The method whose leave-one-out points the demo's figures show (Figs. 10 and 11).
@@ -260,9 +262,6 @@ def table3_twin(
     so they differ only in their phantom. The tracker settings are
     :class:`~brachycal.studies.nwire_twin.NWireSimConfig`'s defaults with the twin's seed.
     """
-    from brachycal.calibration.chain import fit_chain, select_model
-    from brachycal.studies.phantom_twin import phantom_route
-
     seed = twin.config.seed
     result = calibrate(twin.session, robot, ("icp", "kabsch", "horn"))
 

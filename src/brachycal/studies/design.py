@@ -27,15 +27,18 @@ from brachycal.calibration.chain.uncertainty import landing_covariance, landing_
 from brachycal.errors import InputError
 from brachycal.model.robot import Robot
 from brachycal.planning import plan_poses
-from brachycal.planning.robot_time import DEFAULT_BUDGET_MINUTES, MAX_BUDGET_MINUTES
-from brachycal.simulation.settings import DESIGNS
+from brachycal.planning.robot_time import (
+    DEFAULT_BUDGET_MINUTES,
+    MAX_BUDGET_MINUTES,
+    MECHANICAL_MINUTES,
+    SECONDS_PER_SAMPLE,
+    SPEED_SCALE,
+)
+from brachycal.simulation.settings import DESIGNS, ROBOT_ERROR_LEVELS
 from brachycal.simulation.twin import TwinConfig, simulate, spec_for
+from brachycal.studies.excitation import evaluate_excitation
 from brachycal.studies.targeting import targeting_error
-from brachycal.validate import MAX_SEEDS, check_int
-
-MECHANICAL_MINUTES = 5.0
-SECONDS_PER_SAMPLE = 10.0
-SPEED_SCALE = 0.25
+from brachycal.validate import MAX_SEEDS, check_int, check_range
 
 
 def grid_offsets(points: int, edge_m: float) -> np.ndarray:
@@ -165,10 +168,6 @@ def compare_excitation(
         InputError: an unknown level, a seed count or budget out of range, a robot without a
             shared joint.
     """
-    from brachycal.simulation.settings import ROBOT_ERROR_LEVELS
-    from brachycal.studies.excitation import evaluate_excitation
-    from brachycal.validate import check_range
-
     check_int(seeds, "seeds", low=1, high=MAX_SEEDS)
     check_range(budget_minutes, "excitation budget", low=0.0, high=MAX_BUDGET_MINUTES, low_open=True, unit="min")
     if level not in ROBOT_ERROR_LEVELS:

@@ -32,7 +32,7 @@ from scipy.spatial.transform import Rotation
 from brachycal.calibration.phantom.phantom_file import write_observations
 from brachycal.data.formats.plus_files import PlusConfig, SegmentedFrame
 from brachycal.data.pose_list import COLUMNS
-from brachycal.io import OutputSet, bundled, json_text, output_set
+from brachycal.io import OutputSet, atomic_open, bundled, json_text, output_set
 from brachycal.se3 import FloatArray, inverse, make_transform
 from brachycal.studies.nwire_twin import FCAL2_LANDMARKS_MM, NWireSimConfig, simulate_nwire
 from brachycal.studies.phantom_twin import simulate_phantom
@@ -152,8 +152,6 @@ def write_pose_list(path: str | os.PathLike[str], names: Sequence[object], T: Fl
         T: ``(N, 4, 4)`` the poses, in the units the reader is told (``brachycal pivot --units``).
         key: the first column's name (``timestamp_ns``).
     """
-    from brachycal.io import atomic_open
-
     with atomic_open(path) as handle:
         writer = csv.writer(handle, lineterminator="\n")
         writer.writerow([key, *COLUMNS])
@@ -174,8 +172,6 @@ def _mm(T: FloatArray) -> FloatArray:
 
 
 def _write_xml(path: str | os.PathLike[str], root: ET.Element) -> None:
-    from brachycal.io import atomic_open
-
     ET.indent(root, space="  ")
     with atomic_open(path) as handle:
         handle.write(ET.tostring(root, encoding="unicode"))

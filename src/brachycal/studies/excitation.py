@@ -31,16 +31,21 @@ from dataclasses import replace
 
 import numpy as np
 
-from brachycal.calibration.robot.identification import RobotIdentification
+from brachycal.calibration import calibrate
+from brachycal.calibration.chain import RobotAccuracy
+from brachycal.calibration.robot.identification import RobotIdentification, choose_and_identify, identify_robot
 from brachycal.calibration.robot.observability import SAMPLE, Observation, extended_session
 from brachycal.data.session import Session
 from brachycal.imaging.pixels import image_points
 from brachycal.model.ik import solve_ik
 from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, TOP_MODEL_TIP, US_IMAGE
 from brachycal.model.robot import Robot
+from brachycal.planning.excitation import plan_excitation
 from brachycal.planning.robot_time import DEFAULT_BUDGET_MINUTES
 from brachycal.se3 import make_transform
-from brachycal.simulation.twin import Twin
+from brachycal.simulation.settings import HELD_OUT_TORSO_TURN_RAD
+from brachycal.simulation.twin import Twin, TwinConfig, simulate
+from brachycal.studies.targeting import targeting_error
 
 _FRAMES = {"needle": NEEDLE_TIP, "probe": PROBE_TIP, "top_model": TOP_MODEL_TIP}
 
@@ -99,14 +104,6 @@ def evaluate_excitation(
 ) -> dict[str, object]:
     """One twin session with robot error ``level``: identification with and without the excitation
     poses chosen for it (module docstring). One row: predicted and actual figures, minutes, counts."""
-    from brachycal.calibration import calibrate
-    from brachycal.calibration.chain import RobotAccuracy
-    from brachycal.calibration.robot.identification import choose_and_identify, identify_robot
-    from brachycal.planning.excitation import plan_excitation
-    from brachycal.simulation.settings import HELD_OUT_TORSO_TURN_RAD
-    from brachycal.simulation.twin import TwinConfig, simulate
-    from brachycal.studies.targeting import targeting_error
-
     config = TwinConfig(seed=seed).with_robot_error(level)
     twin = simulate(robot, config)
     accuracy = RobotAccuracy(config.link_offset_sd_m, config.link_tilt_sd_rad, config.encoder_sd_rad)

@@ -69,8 +69,8 @@ from scipy.spatial.transform import Rotation
 
 from brachycal.calibration.phantom.hand_eye import hand_eye
 from brachycal.calibration.phantom.nwire import calibrate_nwire, wire_point_pairs
+from brachycal.calibration.result import ImageCalibration
 from brachycal.calibration.sequential import registration
-from brachycal.calibration.sequential.image_to_probe import ImageCalibration
 from brachycal.data.formats.plus_files import PlusConfig, SegmentedFrame, Wire
 from brachycal.errors import InputError, SolverError
 from brachycal.imaging.pixels import DEFAULT_SPACING_M, image_points, pixels

@@ -36,6 +36,7 @@ import numpy as np
 from brachycal.calibration.phantom.phantom_file import PhantomObservations
 from brachycal.calibration.phantom.wedge import Face, WedgePhantom
 from brachycal.errors import InputError
+from brachycal.imaging.wedge_lines import find_wedge_lines
 from brachycal.se3 import FloatArray, inverse
 from brachycal.simulation.bmode import BModeSettings, render_frame
 from brachycal.studies.phantom_twin import PhantomSession
@@ -251,8 +252,6 @@ def rendered_wedge_observations(
     Raises:
         DegenerateDataError: fewer than 3 frames have all their faces found (from the calibration).
     """
-    from brachycal.imaging.wedge_lines import find_wedge_lines
-
     settings = settings or BModeSettings()
     frames = render_wedge_session(session, spacing_m, size_px, settings)
     phantom = session.phantom

@@ -53,8 +53,8 @@ from brachycal.calibration.phantom.features import PhantomCalibration
 from brachycal.calibration.phantom.phantom_file import PhantomObservations
 from brachycal.calibration.phantom.wedge import Face, WedgePhantom, calibrate_wedge, read_wedge_phantom
 from brachycal.calibration.phantom.wire import WirePhantom, calibrate_wire, read_wire_phantom
+from brachycal.calibration.result import ImageCalibration
 from brachycal.calibration.sequential import registration
-from brachycal.calibration.sequential.image_to_probe import ImageCalibration
 from brachycal.data.formats.plus_files import Wire
 from brachycal.imaging.pixels import image_points, pixels
 from brachycal.planning.spec import SectorFOV

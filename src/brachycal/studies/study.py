@@ -25,9 +25,15 @@ import numpy as np
 
 from brachycal.calibration import calibrate
 from brachycal.calibration.chain import RobotAccuracy, cross_validate, fit_chain, select_model
+from brachycal.calibration.robot.identification import (
+    IDENTIFICATION_FOLDS,
+    choose_and_identify,
+    cross_validate_identification,
+)
 from brachycal.calibration.sequential.image_to_probe import METHODS
 from brachycal.calibration.sequential.method import CalibrationResult
 from brachycal.errors import DegenerateDataError, InputError
+from brachycal.model.description import load_description
 from brachycal.model.robot import Robot
 from brachycal.planning.spec import EDGE_RANGE_M
 from brachycal.simulation.settings import (
@@ -148,7 +154,6 @@ def load_study_robot(name: str) -> Robot:
     """The nominal robot of a run: the bundled SDA10F as :meth:`Robot.load` gives it, any other a description."""
     if name == "sda10f":
         return Robot.load()
-    from brachycal.model.description import load_description
 
     return load_description(name).robot
 
@@ -225,12 +230,6 @@ def _judge(twin: Twin, robot: Robot, result: CalibrationResult, method: str, tar
         fit = fit_chain(session, robot, result, chosen, robot_accuracy=None)
         loo = cross_validate(session, robot, result, chosen, folds=n)
     if method == "chain+robot":  # K-fold over configurations: every fold identifies the robot again
-        from brachycal.calibration.robot.identification import (
-            IDENTIFICATION_FOLDS,
-            choose_and_identify,
-            cross_validate_identification,
-        )
-
         config = twin.config
         accuracy = RobotAccuracy(config.link_offset_sd_m, config.link_tilt_sd_rad, config.encoder_sd_rad)
         choice, identified = choose_and_identify(session, robot, result, accuracy)
@@ -311,7 +310,7 @@ def run_study(
 
 def _dask_map(runs: Sequence[RunParams], scheduler: str, tick: Callable) -> list[list[dict[str, object]]]:
     try:
-        from distributed import Client, as_completed
+        from distributed import Client, as_completed  # lazy: start-up (distributed)
     except ImportError:
         raise InputError("--scheduler needs Dask: pip install 'brachycal[cluster]'") from None
     _check_reachable(scheduler)

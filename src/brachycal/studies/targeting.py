@@ -31,7 +31,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from brachycal.calibration.metrics import ErrorStats
-from brachycal.calibration.sequential.image_to_probe import ImageCalibration, predict_base
+from brachycal.calibration.result import ImageCalibration
+from brachycal.calibration.sequential.image_to_probe import predict_base
 from brachycal.errors import InputError, SolverError
 from brachycal.imaging.pixels import image_points, pixels
 from brachycal.model.ik import solve_ik

@@ -165,6 +165,7 @@ from brachycal.calibration.chain.residuals import (
 )
 from brachycal.calibration.chain.result import (
     ChainFit,
+    robot_jacobian,
 )
 from brachycal.calibration.chain.robot_terms import (
     DEFAULT_ROBOT_ACCURACY,
@@ -174,7 +175,6 @@ from brachycal.calibration.chain.robot_terms import (
     ROBOT_STEP,
     RobotAccuracy,
     joint_twists,
-    robot_jacobian,
     robot_jacobian_at,
 )
 

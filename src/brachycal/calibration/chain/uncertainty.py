@@ -173,6 +173,7 @@ def inside_ellipsoid(error_m: ArrayLike, covariance: FloatArray, level: float = 
     if C.ndim == 2:
         C = np.broadcast_to(C, (len(e), 3, 3))
     d2 = np.einsum("ni,nij,nj->n", e, np.linalg.inv(C), e)
+    # lazy: start-up (scipy)
     from scipy.stats import chi2  # here, not at the top: scipy.stats costs 0.5 s to import, only this needs it
 
     return d2 <= chi2.ppf(level, 3)
@@ -225,6 +226,7 @@ def bootstrap(
     h = leverages(J)[rows["touch"]]
     touch = (r0[rows["touch"]] / np.sqrt(np.clip(1.0 - h, 1e-6, None))).reshape(-1, 3) * fit.sigma_m["touch"]
     touch -= touch.mean(axis=0)
+    # lazy: start-up (scipy)
     from scipy.optimize import least_squares  # here, not at the top: only the bootstrap needs it (~0.1 s)
 
     out: dict[str, list] = {"spacing_m": [], "p_ER_Ntip": [], "p_EL_Ptip": [], "sound_speed_m_s": []}

@@ -39,7 +39,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
-from brachycal.calibration.sequential.image_to_probe import MAX_REACH_SD_M, REACH_M, WARN_REACH_SD_M, ImageCalibration
+from brachycal.calibration.result import ImageCalibration
+from brachycal.calibration.sequential.image_to_probe import MAX_REACH_SD_M, REACH_M, WARN_REACH_SD_M
 from brachycal.errors import ConditioningWarning, DegenerateDataError, SolverError
 from brachycal.se3 import FloatArray, make_transform, nearest_rotation
 

@@ -49,6 +49,7 @@ import numpy as np
 from brachycal.data.formats.csv_log import read_table, to_float
 from brachycal.errors import InputError
 from brachycal.inputs import MAX_DOCUMENT_BYTES, read_input_text
+from brachycal.io import atomic_open
 from brachycal.se3 import FloatArray, inverse, make_transform
 from brachycal.validate import MAX_IMAGE_PX, MAX_POSITION_M, check_positions, check_transform
 
@@ -209,7 +210,7 @@ def _check_quaternions(path: Path, quaternions: FloatArray, rows: list[int], bod
 
 def _poses(numbers: FloatArray) -> FloatArray:
     """``(K, 4, 4)`` from checked ``x, y, z, qx, qy, qz, qw`` rows ``(K, 7)``."""
-    from scipy.spatial.transform import Rotation
+    from scipy.spatial.transform import Rotation  # lazy: start-up (scipy)
 
     return make_transform(Rotation.from_quat(numbers[:, 3:]).as_matrix(), numbers[:, :3])
 
@@ -301,9 +302,7 @@ def write_observations(
     path: str | os.PathLike[str], kind: str, observations: PhantomObservations, *, force: bool = False
 ) -> Path:
     """Write observations in the CSV format above (positions 9 decimals, quaternions 12, pixels 6)."""
-    from scipy.spatial.transform import Rotation
-
-    from brachycal.io import atomic_open
+    from scipy.spatial.transform import Rotation  # lazy: start-up (scipy)
 
     def pose(T: FloatArray) -> list[str]:
         q = Rotation.from_matrix(T[:3, :3]).as_quat(canonical=True)

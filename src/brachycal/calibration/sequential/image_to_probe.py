@@ -45,7 +45,6 @@ nominal) is refused too.
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -56,6 +55,7 @@ from brachycal.calibration.labels import METHOD_LABELS as METHOD_LABELS
 from brachycal.calibration.labels import METHODS as METHODS
 from brachycal.calibration.labels import PAPER_METHODS as PAPER_METHODS
 from brachycal.calibration.metrics import ErrorStats
+from brachycal.calibration.result import ImageCalibration, PredictedUncertainty
 from brachycal.calibration.sequential import registration
 from brachycal.errors import ConditioningWarning, DegenerateDataError, InputError
 from brachycal.imaging.pixels import image_points
@@ -86,59 +86,6 @@ WARN_SPACING_CHANGE = 0.10
 #: degrees; the digital twin draws 2 mm / 1° SD).
 NOMINAL_ANGLE_DEG = 10.0
 NOMINAL_SHIFT_M = 0.010
-
-
-@dataclass(frozen=True)
-class PredictedUncertainty:
-    """Predicted uncertainty of an image calibration from its residual and its design (SI units).
-
-    Attributes:
-        noise_sd_m: noise per coordinate estimated from the fit's residual (``σ̂``), metres.
-        rotation_sd_deg: RMS angle of the rotation's error, degrees.
-        origin_sd_m: 3D SD of the image origin (pixel (0, 0)) in the probe frame, metres.
-        spacing_sd_m: ``(2,)`` SD of the fitted spacings ``(s_u, s_v)``, metres (0 for rigid methods).
-        samples_sd_m: RMS over the samples of the predicted 3D SD of their mapped points, metres.
-        reach_sd_m: largest predicted 3D SD at :data:`REACH_M` from the samples' centroid, metres.
-    """
-
-    noise_sd_m: float
-    rotation_sd_deg: float
-    origin_sd_m: float
-    spacing_sd_m: FloatArray
-    samples_sd_m: float
-    reach_sd_m: float
-
-    def as_dict(self) -> dict[str, object]:
-        """JSON-ready figures in millimetres and degrees."""
-        return {
-            "noise_sd_mm": self.noise_sd_m * 1e3,
-            "rotation_sd_deg": self.rotation_sd_deg,
-            "origin_sd_mm": self.origin_sd_m * 1e3,
-            "spacing_sd_mm": (np.asarray(self.spacing_sd_m) * 1e3).tolist(),
-            "samples_sd_mm": self.samples_sd_m * 1e3,
-            "reach_sd_mm": self.reach_sd_m * 1e3,
-        }
-
-
-@dataclass(frozen=True)
-class ImageCalibration:
-    """``T_Ptip_I (4, 4)`` (rigid) and the pixel spacing ``(s_u, s_v)`` in metres it goes with.
-
-    ``uncertainty`` is set by :func:`fit` (``None`` for calibrations read back from a file).
-    """
-
-    method: str
-    T_Ptip_I: FloatArray
-    spacing_m: FloatArray
-    uncertainty: PredictedUncertainty | None = None
-
-    def image_points(self, uv_px: ArrayLike) -> FloatArray:
-        """``p_I (N, 3)``: pixels ``(N, 2)`` as points of the image frame, metres."""
-        return image_points(uv_px, self.spacing_m)
-
-    def probe_points(self, uv_px: ArrayLike) -> FloatArray:
-        """``p_Ptip (N, 3)`` of pixels ``(N, 2)``."""
-        return transform_points(self.T_Ptip_I, self.image_points(uv_px))
 
 
 def probe_points(T_R_ER: ArrayLike, T_R_EL: ArrayLike, p_ER_Ntip: ArrayLike, T_EL_Ptip: ArrayLike) -> FloatArray:

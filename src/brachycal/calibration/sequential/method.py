@@ -28,8 +28,9 @@ import numpy as np
 
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.parallel import parallel_calls
+from brachycal.calibration.result import ImageCalibration
 from brachycal.calibration.sequential import image_to_probe
-from brachycal.calibration.sequential.image_to_probe import METHODS, ImageCalibration
+from brachycal.calibration.sequential.image_to_probe import METHODS
 from brachycal.calibration.sequential.tool_rotation import ToolRotation, tool_rotation
 from brachycal.calibration.sequential.tool_tips import (
     TipEstimate,

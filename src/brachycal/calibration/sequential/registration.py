@@ -42,8 +42,9 @@ from numpy.typing import ArrayLike
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
+from brachycal.calibration.least_squares import solve_least_squares
 from brachycal.errors import DegenerateDataError, InputError
-from brachycal.se3 import FloatArray, make_transform, transform_points
+from brachycal.se3 import FloatArray, left_jacobian, make_transform, rotation, transform_points
 
 #: Smallest ratio of the second to the first singular value of a centred point set: below it
 #: the points are taken as collinear (rotation about their line is undetermined).
@@ -212,10 +213,6 @@ def scaled_uv(
     Raises:
         DegenerateDataError: the targets coincide, or a fitted spacing is not positive.
     """
-    # Here, not at the top: the chain package imports this module (through the sequential method).
-    from brachycal.calibration.chain.rotations import left_jacobian, rotation
-    from brachycal.calibration.least_squares import solve_least_squares
-
     uv = np.asarray(uv_px, dtype=float)
     dst = np.asarray(p_dst, dtype=float)
     s0 = np.asarray(spacing_m, dtype=float)

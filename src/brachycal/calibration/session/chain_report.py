@@ -22,7 +22,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
 from statistics import NormalDist
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -43,14 +43,17 @@ from brachycal.calibration.chain.model_choice import FoldRuns
 from brachycal.calibration.chain.uncertainty import Bootstrap, bootstrap, landing_covariance, predicted_rms_mm
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.parallel import parallel_calls
+from brachycal.calibration.robot.identification import (
+    IDENTIFICATION_FOLDS,
+    RobotIdentification,
+    choose_and_identify,
+    cross_validate_identification,
+)
 from brachycal.calibration.sequential.method import CalibrationResult
 from brachycal.data.session import Session
 from brachycal.errors import ConditioningWarning, InputError
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray
-
-if TYPE_CHECKING:  # imported where used: robot identification only with identify=True
-    from brachycal.calibration.robot.identification import RobotIdentification
 
 #: Predicted landing RMS (mm) above which a chain calibration warns: the paper's leave-one-out
 #: MAE of its rigid method (Table II, 0.65 mm). Sessions spanning the prostate cube predict
@@ -178,7 +181,6 @@ def calibrate_chain(
             raise InputError("robot identification replaces the joint offsets: ask for one or the other")
         if robot_accuracy is None:
             raise InputError("robot identification needs the robot's stated accuracy (its prior)")
-        from brachycal.calibration.robot.identification import choose_and_identify, cross_validate_identification
 
         choice, identification = choose_and_identify(session, robot, initial, robot_accuracy)
         identification_cv = cross_validate_identification(session, robot, initial, choice.model, robot_accuracy)
@@ -279,8 +281,6 @@ def chain_json(report: ChainReport, sample_ids: list[str]) -> dict:
 def _robot_json(report: ChainReport) -> dict[str, object]:
     out: dict[str, object] = {}
     if report.identification is not None:
-        from brachycal.calibration.robot.identification import IDENTIFICATION_FOLDS
-
         identified = report.identification.as_json()
         if report.identification_cv is not None:
             chain_alone, identified_cv = report.identification_cv

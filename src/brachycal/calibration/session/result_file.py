@@ -33,12 +33,16 @@ from pathlib import Path
 
 import numpy as np
 
-from brachycal.calibration.sequential.image_to_probe import METHODS, ImageCalibration
+from brachycal._version import __version__
+from brachycal.calibration.result import ImageCalibration
+from brachycal.calibration.sequential.image_to_probe import METHODS
 from brachycal.calibration.sequential.method import CalibrationResult
+from brachycal.calibration.session.chain_report import chain_json
 from brachycal.calibration.session.result_schema import FORMAT, validate_result_document
 from brachycal.data.json_files import parse_json, read_json_bytes
 from brachycal.errors import BrachycalWarning, InputError
 from brachycal.io import sha256_bytes, sha256_file, write_json
+from brachycal.model.description import BUNDLED_ROBOTS
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray
 
@@ -84,8 +88,6 @@ class RobotRecord:
     def option(self) -> str:
         """The ``--robot`` argument that loads it again: the bundled name (a description read from
         brachycal's ``robots/<name>.toml``, wherever brachycal was installed), else the description file."""
-        from brachycal.model.description import BUNDLED_ROBOTS
-
         bundled = self.name in BUNDLED_ROBOTS and Path(self.description).parts[-2:] == ("robots", f"{self.name}.toml")
         return self.name if bundled else self.description
 
@@ -109,9 +111,7 @@ def to_json(
     ``chain`` is added, and the sequential method's transforms and figures stay under
     ``sequential`` for comparison (they go with its own ``EL_T_Ptip``).
     """
-    import pinocchio
-
-    from brachycal import __version__
+    import pinocchio  # lazy: start-up (pinocchio)
 
     def tool(calibration) -> dict:
         out = calibration.validation.as_dict(with_errors=True)
@@ -152,7 +152,6 @@ def to_json(
     }
     if chain is None:
         return payload
-    from brachycal.calibration.session.chain_report import chain_json
 
     sequential = {
         k: payload.pop(k) for k in ("transforms", "spacing_mm", "loocv", "fit_residuals", "predicted_uncertainty")
@@ -275,8 +274,6 @@ class StoredCalibration:
         """The ``<brachycal_export>`` attributes of a URDF written from this result: the result file
         and its SHA-256, the image method, and what the URDF carries (``tool_frames`` always, and
         :meth:`corrections`)."""
-        from brachycal import __version__
-
         return {
             "result": Path(self.source).name,
             "result_sha256": self.sha256,

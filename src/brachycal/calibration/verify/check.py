@@ -43,6 +43,7 @@ over the check's poses (which span the prostate cube).
 
 from __future__ import annotations
 
+import datetime
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -50,7 +51,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from brachycal._version import __version__
+from brachycal.data.formats.csv_log import read_table, table_configurations, to_float
+from brachycal.data.session import FILES, REFERENCES, check_robot_columns, read_sample_table, read_session_toml
 from brachycal.errors import DegenerateDataError, InputError
+from brachycal.io import sha256_file
 from brachycal.se3 import FloatArray, make_transform, transform_points
 from brachycal.validate import check_range
 
@@ -98,9 +103,6 @@ class CheckSession:
 
 def read_check_session(folder: str | os.PathLike[str], robot: Robot) -> CheckSession:
     """Read a check session (module docstring); refuses with one line naming the file, row and column."""
-    from brachycal.data.formats.csv_log import read_table, table_configurations, to_float
-    from brachycal.data.session import REFERENCES, check_robot_columns, read_sample_table, read_session_toml
-    from brachycal.io import sha256_file
 
     def labels(path: Path, header: list[str], rows: list[int], records: list[list[str]], column: str, allowed):
         k = header.index(column)
@@ -268,8 +270,6 @@ def with_calibration_poses(
         InputError: ``calibration`` is not the session the result was calibrated from (other
             sample names, or its files' SHA-256 differ from the result's ``inputs``).
     """
-    from brachycal.data.session import FILES
-
     folder = Path(calibration_folder)
     ids = stored.raw.get("samples")
     loocv = stored.raw.get("loocv", {}).get(method) if isinstance(stored.raw.get("loocv"), dict) else None
@@ -327,14 +327,14 @@ def with_calibration_poses(
 
 def chi2_sf(x: float, dof: int) -> float:
     """``P(χ²_dof > x)`` (SciPy's special functions: ``scipy.stats`` takes seconds to import)."""
-    from scipy.special import gammaincc
+    from scipy.special import gammaincc  # lazy: start-up (scipy)
 
     return float(gammaincc(dof / 2.0, x / 2.0))
 
 
 def chi2_isf(alpha: float, dof: int) -> float:
     """The ``1 − alpha`` quantile of χ²_dof."""
-    from scipy.special import gammainccinv
+    from scipy.special import gammainccinv  # lazy: start-up (scipy)
 
     return float(2.0 * gammainccinv(dof / 2.0, alpha))
 
@@ -785,8 +785,6 @@ def check_calibration(
 
 
 def _with_targeting(fit: PartFit, targeting_mm: float) -> PartFit:
-    from dataclasses import replace
-
     return replace(fit, targeting_mm=targeting_mm)
 
 
@@ -826,10 +824,6 @@ def calibrated_nominal_spacing(stored: StoredCalibration) -> FloatArray | None:
 
 def outcome_json(outcome: CheckOutcome, stored: StoredCalibration, session: CheckSession, robot: Robot) -> dict:
     """The verification record (format ``brachycal-verification/1``): every number finite."""
-    import datetime
-
-    from brachycal import __version__
-
     part = outcome.part
     return {
         "format": "brachycal-verification/1",

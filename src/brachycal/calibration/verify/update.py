@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from brachycal._version import __version__
 from brachycal.calibration.verify.check import GROSS_PRIOR_MULTIPLES, calibrated_nominal_spacing, small_motion
 
 if TYPE_CHECKING:
@@ -111,8 +112,6 @@ def updated_result(stored: StoredCalibration, outcome: CheckOutcome, session: Ch
         else:
             transforms["Ptip_T_I"] = {method: image.T_Ptip_I.tolist()}
             raw["spacing_mm"] = {method: (image.spacing_m * (1.0 + d) * 1e3).tolist()}
-    from brachycal import __version__
-
     raw["update"] = {
         "from_result": {"file": stored.source, "sha256": stored.sha256},
         "check_session": {"folder": session.folder, "inputs": session.inputs},

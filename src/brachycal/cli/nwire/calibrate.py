@@ -52,10 +52,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import numpy as np
+    import numpy as np  # lazy: start-up (the command's run only)
 
-    from brachycal.calibration import nwire_from_files, write_nwire
-    from brachycal.io import OutputSet
+    from brachycal.calibration import nwire_from_files, write_nwire  # lazy: start-up (the command's run only)
+    from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
 
     with OutputSet(force=args.force, inputs=command_inputs(args, "config", "frames")) as outputs:
         staged = outputs.claim(args.out, label="--out")

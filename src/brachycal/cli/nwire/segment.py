@@ -84,12 +84,16 @@ def segment_files(
 
     Every input is read and checked before anything is written.
     """
-    from brachycal.cli.common import progress_bar
-    from brachycal.data.formats.metaimage import read_image_sequence
-    from brachycal.data.formats.plus_files import read_plus_config
+    from brachycal.cli.common import progress_bar  # lazy: start-up (the command's run only)
+    from brachycal.data.formats.metaimage import read_image_sequence  # lazy: start-up (the command's run only)
+    from brachycal.data.formats.plus_files import read_plus_config  # lazy: start-up (the command's run only)
+
+    # lazy: start-up (the command's run only)
     from brachycal.data.formats.plus_segmentation import read_segmentation_parameters
+
+    # lazy: start-up (the command's run only)
     from brachycal.data.formats.plus_segmented_xml import write_segmented_frames
-    from brachycal.imaging.nwire_segmentation import segment_sequence
+    from brachycal.imaging.nwire_segmentation import segment_sequence  # lazy: start-up (the command's run only)
 
     phantom = read_plus_config(config, require_registration=False)
     params = read_segmentation_parameters(config)
@@ -134,7 +138,7 @@ def segment_files(
 
 
 def run(args: argparse.Namespace) -> int:
-    from brachycal.io import OutputSet
+    from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
 
     with OutputSet(
         force=args.force,
@@ -168,7 +172,7 @@ def frames_file(args: argparse.Namespace) -> Iterator[str]:
     Raises:
         InputError: neither FRAMES nor both sequences given, or both.
     """
-    from brachycal.errors import InputError
+    from brachycal.errors import InputError  # lazy: start-up (the command's run only)
 
     # getattr: other commands hand `brachycal nwire`'s run a namespace of their own, without these options
     calibration = getattr(args, "calibration_sequence", None)

@@ -1,4 +1,5 @@
-"""``brachycal plan``: the calibration sample poses, solved with mink and checked with Pinocchio."""
+"""``brachycal plan``: the calibration sample poses, solved with mink and checked with Pinocchio
+(the default sub-command of ``brachycal plan``; ``plan check`` and ``plan excitation`` are beside it)."""
 
 from __future__ import annotations
 
@@ -8,36 +9,23 @@ import pickle
 import subprocess
 import sys
 from collections import Counter
-from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
-
-from brachycal.cli.common import (
-    add_method_option,
-    add_robot_option,
-    command_inputs,
-    load_robot,
-    output_file,
-    progress_bar,
+from brachycal.cli.common import command_inputs, output_file, progress_bar
+from brachycal.cli.plan.options import (
+    add_grid_options,
+    add_imaging_options,
+    add_tool_options,
+    planner_settings,
+    planning_robot,
 )
 from brachycal.errors import InputError
-from brachycal.planning.spec import EDGE_RANGE_M, MAX_CENTRE_M, MAX_SECTOR_DEPTH_M, PlanSpec, RectFOV, SectorFOV
-from brachycal.validate import (
-    MAX_GRID_POINTS,
-    MAX_IMAGE_PX,
-    bounded_int,
-    direction,
-    finite_float,
-    number_list,
-    spacing_mm,
-)
+from brachycal.planning.spec import PlanSpec
 
 if TYPE_CHECKING:
     from brachycal.io import OutputSet
-    from brachycal.model.robot import Robot
-    from brachycal.planning import IKSettings, Plan, Thresholds
+    from brachycal.planning import Plan
 
 HELP = "plan the calibration sample poses (a grid of needle-tip targets) with mink IK"
 DESCRIPTION = """\
@@ -66,15 +54,13 @@ example:
   brachycal plan --robot baxter --out baxter_plan.csv
   brachycal plan --result result.json --centre-mm 800,100,1050 --edge-mm 30 --out plan_30mm.csv
 """
-
-
-def _pair(values) -> str:
-    """Numbers as an option's text: ``540,221``."""
-    return ",".join(f"{float(v):g}" for v in values)
-
-
-def _mm_pair(values_m) -> str:
-    return _pair(float(v) * 1e3 for v in values_m)
+EPILOG = """\
+sub-commands (each with its own --help):
+  brachycal plan check --out check_plan.csv
+      the few poses of a check before each procedure ('brachycal verify')
+  brachycal plan excitation SESSION --out excitation.csv
+      extra poses that identify the robot where a recorded session does not
+"""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -83,182 +69,35 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--out", required=True, type=output_file, metavar="CSV", help="plan file to write")
     defaults = PlanSpec()  # the planner's defaults are the options' defaults (one home)
-    _grid_options(parser.add_argument_group("grid"), defaults)
-    _imaging_options(parser.add_argument_group("imaging"), defaults)
-    _tool_options(parser.add_argument_group("tools and safety"))
+    add_grid_options(parser.add_argument_group("grid"), defaults)
+    add_imaging_options(parser.add_argument_group("imaging"), defaults)
+    add_tool_options(parser.add_argument_group("tools and safety"))
     o = parser.add_argument_group("output")
     o.add_argument("--figure", metavar="PNG", help="figure path (default: --out with .png; never --out itself)")
     o.add_argument("--allow-partial", action="store_true", help="write the plan even if some points are infeasible")
     o.add_argument("--force", action="store_true", help="replace existing outputs")
     o.add_argument("--quiet", action="store_true", help="no progress bar")
-    from brachycal.cli.plan.excitation import EPILOG, add_excitation_options
-
-    add_excitation_options(parser.add_argument_group("excitation poses (robot identification)"))
-    from brachycal.cli.plan.check import EPILOG_CHECK, add_check_options
-
-    add_check_options(parser.add_argument_group("check before each procedure (brachycal verify)"))
-    parser.epilog = EPILOG + "\n" + EPILOG_CHECK
+    parser.epilog = EPILOG
     parser.set_defaults(run=run)
 
 
-def _grid_options(g: argparse._ArgumentGroup, d: PlanSpec) -> None:
-    centre = number_list(count=3, low=-MAX_CENTRE_M * 1e3, high=MAX_CENTRE_M * 1e3, unit="mm")
-    g.add_argument(
-        "--centre-mm",
-        type=centre,
-        metavar="X,Y,Z",
-        help=f"cube centre in the robot's base frame, {centre.rule} (default: the robot's workspace; "
-        f"sda10f {_mm_pair(d.cube_centre_m)})",
-    )
-    edge = finite_float(low=EDGE_RANGE_M[0] * 1e3, high=EDGE_RANGE_M[1] * 1e3, unit="mm")
-    edge_mm = f"{d.edge_m * 1e3:g}"
-    g.add_argument("--edge-mm", type=edge, default=edge_mm, help=f"cube edge, {edge.rule} (default {edge_mm})")
-    points = bounded_int(low=2, high=MAX_GRID_POINTS)
-    n = d.points_per_axis
-    g.add_argument(
-        "--points", type=points, default=n, help=f"grid points per axis, {points.rule} (default {n}: {n**3} poses)"
-    )
-    g.add_argument(
-        "--insertion",
-        type=direction,
-        metavar="DX,DY,DZ",
-        help="needle direction in the robot's base frame (default: the robot's workspace; sda10f: forward, "
-        "35 deg towards the left)",
-    )
-
-
-def _imaging_options(i: argparse._ArgumentGroup, d: PlanSpec) -> None:
-    sector_fov, rect_fov = SectorFOV(), RectFOV()
-    i.add_argument(
-        "--image-depth",
-        type=direction,
-        metavar="DX,DY,DZ",
-        help="image +v (depth) in the robot's base frame (default: the robot's workspace; "
-        f"sda10f {_pair(d.image_depth_dir)})",
-    )
-    i.add_argument(
-        "--image-lateral",
-        type=direction,
-        metavar="DX,DY,DZ",
-        help="image +u (lateral) in the robot's base frame, not parallel to --image-depth (default: the robot's "
-        f"workspace; sda10f {_pair(d.image_lateral_dir)})",
-    )
-    pixel = number_list(count=2, low=-0.5, high=MAX_IMAGE_PX, unit="px")
-    i.add_argument(
-        "--centre-px",
-        type=pixel,
-        default=_pair(d.centre_px),
-        metavar="U,V",
-        help=f"pixel where the cube centre shows, {pixel.rule} (default {_pair(d.centre_px)})",
-    )
-    i.add_argument(
-        "--spacing-mm",
-        type=spacing_mm,
-        metavar="SU,SV",
-        help=f"pixel spacing, {spacing_mm.rule} (default: the result's, else {_mm_pair(d.spacing_m)})",
-    )
-    i.add_argument("--fov", choices=("sector", "rect"), default="sector", help="field of view shape")
-    apex = number_list(count=2, low=-MAX_IMAGE_PX, high=MAX_IMAGE_PX, unit="px")
-    i.add_argument(
-        "--sector-apex-px",
-        type=apex,
-        default=_pair(sector_fov.apex_px),
-        metavar="U,V",
-        help=f"sector apex, {apex.rule} (default {_pair(sector_fov.apex_px)})",
-    )
-    depth = finite_float(low=0.0, high=MAX_SECTOR_DEPTH_M * 1e3, low_open=True, unit="mm")
-    depth_mm, angle_deg = sector_fov.radius_m * 1e3, float(np.degrees(sector_fov.angle_rad))
-    i.add_argument(
-        "--sector-depth-mm", type=depth, default=depth_mm, help=f"sector depth, {depth.rule} (default {depth_mm:g})"
-    )
-    angle = finite_float(low=0.0, high=180.0, low_open=True, unit="deg")
-    i.add_argument("--sector-angle-deg", type=angle, help=f"sector opening, {angle.rule} (default {angle_deg:g})")
-    rect = number_list(count=4, low=-0.5, high=MAX_IMAGE_PX, unit="px")
-    i.add_argument(
-        "--rect-px",
-        type=rect,
-        default=_pair((*rect_fov.u_range_px, *rect_fov.v_range_px)),
-        metavar="U0,U1,V0,V1",
-        help=f"rectangle (with --fov rect), U0 < U1 and V0 < V1, {rect.rule}",
-    )
-
-
-def _tool_options(t: argparse._ArgumentGroup) -> None:
-    from brachycal.planning.pose_checks import (
-        MAX_COLLISION_MARGIN_M,
-        MAX_JOINT_MARGIN_RAD,
-        MIN_COLLISION_MARGIN_M,
-        MIN_JOINT_MARGIN_RAD,
-    )
-
-    t.add_argument("--result", metavar="JSON", help="plan with a calibration result's tool frames")
-    add_method_option(t, "--result")
-    add_robot_option(t)
-    clearance = finite_float(low=MIN_COLLISION_MARGIN_M * 1e3, high=MAX_COLLISION_MARGIN_M * 1e3, unit="mm")
-    t.add_argument(
-        "--collision-margin-mm",
-        type=clearance,
-        default=10.0,
-        help=f"minimum link clearance, {clearance.rule} (default 10)",
-    )
-    joint = finite_float(low=np.degrees(MIN_JOINT_MARGIN_RAD), high=np.degrees(MAX_JOINT_MARGIN_RAD), unit="deg")
-    t.add_argument(
-        "--joint-margin-deg",
-        type=joint,
-        default=3.0,
-        help=f"minimum distance to joint limits, {joint.rule} (default 3; the floor keeps encoder noise from "
-        "reading a planned pose past a limit)",
-    )
-    speed = finite_float(low=0.0, high=1.0, low_open=True)
-    t.add_argument(
-        "--speed-scale",
-        type=speed,
-        default=1.0,
-        help=f"fraction of vendor speed for motion times, {speed.rule} (default 1)",
-    )
-
-
 def run(args: argparse.Namespace) -> int:
-    from brachycal.cli.plan.check import check_check_options, run_check_plan
-    from brachycal.cli.plan.excitation import check_excitation_options, run_excitation
-    from brachycal.io import OutputSet
+    from brachycal.io import OutputSet  # lazy: start-up (the output writer is loaded by the run only)
 
-    check_check_options(args)
-    if args.verify:
-        return run_check_plan(args, _settings(args))
-    check_excitation_options(args)
-    if args.excitation is not None:
-        return run_excitation(args)
     with OutputSet(force=args.force, inputs=command_inputs(args, "result")) as outputs, _FigureProcess() as drawer:
         _run(args, outputs, drawer)
     print("wrote " + ", ".join(map(str, outputs.written)))
     return 0
 
 
-def planning_robot(args: argparse.Namespace, spec: PlanSpec) -> tuple[Robot, PlanSpec]:
-    """The robot to plan with (``--robot``) and ``spec``: with ``--result``, the robot carries the
-    calibration's tool frames and corrections, and its image spacing unless ``--spacing-mm`` gave one."""
-    robot = load_robot(args)
-    if not args.result:
-        return robot, spec
-    from brachycal.calibration import read_result
-    from brachycal.export import calibrated_robot
-
-    stored = read_result(args.result)
-    image = stored.image[stored.method(args.method)]
-    robot = calibrated_robot(stored.software_robot(robot), stored.T_ER_Ntip, stored.T_EL_Ptip, image)
-    if args.spacing_mm is None:
-        spec = replace(spec, spacing_m=image.spacing_m)
-    return robot, spec
-
-
 def _run(args: argparse.Namespace, outputs: OutputSet, drawer: _FigureProcess) -> None:
     """Plan and write the plan, its figure (drawn by ``drawer``) and (with infeasible points) their
     list into ``outputs``."""
+    # lazy: start-up (the command's run only)
     from brachycal.planning import infeasible_path, plan_poses, write_infeasible, write_plan
-    from brachycal.reporting import plan_text
+    from brachycal.reporting import plan_text  # lazy: start-up (the command's run only)
 
-    spec, settings, thresholds = _settings(args)  # every option checked before any work
+    spec, settings, thresholds = planner_settings(args)  # every option checked before any work
     out = Path(args.out)
     figure = Path(args.figure) if args.figure else out.with_suffix(".png")
     staged_plan = outputs.claim(out, label="--out")
@@ -308,8 +147,8 @@ class _FigureProcess:
         return self
 
     def start(self) -> None:
-        import signal
-        import threading
+        import signal  # lazy: start-up (the command's run only)
+        import threading  # lazy: start-up (the command's run only)
 
         in_main_thread = threading.current_thread() is threading.main_thread()
         # Ctrl-C reaches both processes; the child inherits "ignore" from here, so only this one reacts.
@@ -346,9 +185,9 @@ class _FigureProcess:
             OSError: writing the figure failed (as drawing it here would).
             OutputError: drawing it failed otherwise.
         """
-        import warnings
+        import warnings  # lazy: start-up (the command's run only)
 
-        from brachycal.errors import OutputError
+        from brachycal.errors import OutputError  # lazy: start-up (the command's run only)
 
         assert self._job is not None, "draw() first"
         reply = b""
@@ -356,6 +195,7 @@ class _FigureProcess:
             with self._process.stdout as pipe:
                 reply = pipe.read()
         if not reply:  # no process, or it could not start brachycal or died: draw here, as before
+            # lazy: start-up (the command's run only)
             from brachycal.reporting import plot_plan  # (only then: matplotlib takes ~0.4 s to load)
 
             plot_plan(*self._job)
@@ -391,8 +231,8 @@ def _draw_in_child() -> None:
     SIGTERM (the command failed or was stopped) becomes SystemExit, so that a half-written figure
     file is removed on the way out.
     """
-    import signal
-    import warnings
+    import signal  # lazy: start-up (the command's run only)
+    import warnings  # lazy: start-up (the command's run only)
 
     inbox, outbox = sys.stdin.buffer, sys.stdout.buffer
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the command's: it ends this process
@@ -400,10 +240,10 @@ def _draw_in_child() -> None:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("default")
         try:
-            import select
+            import select  # lazy: start-up (the command's run only)
 
-            from brachycal.reporting import plot_plan
-            from brachycal.reporting.plan_plot import warm_up_plan_figure
+            from brachycal.reporting import plot_plan  # lazy: start-up (the command's run only)
+            from brachycal.reporting.plan_plot import warm_up_plan_figure  # lazy: start-up (the command's run only)
 
             try:
                 waiting = not select.select([inbox], [], [], 0)[0]
@@ -418,59 +258,3 @@ def _draw_in_child() -> None:
     with contextlib.suppress(OSError):  # the command is gone: nothing to tell
         pickle.dump((outcome, [" ".join(str(w.message).split()) for w in caught]), outbox)
         outbox.flush()
-
-
-def _settings(args: argparse.Namespace) -> tuple[PlanSpec, IKSettings, Thresholds]:
-    """The planner's inputs from the options (each already range-checked by argparse), with the
-    checks that involve two options; the spacing is --spacing-mm's or the scanner's nominal
-    (:data:`~brachycal.imaging.DEFAULT_SPACING_M`; a --result's replaces it once the result is read).
-
-    Raises:
-        InputError: naming the options that do not go together.
-    """
-    from brachycal.imaging import DEFAULT_SPACING_M
-    from brachycal.planning import IKSettings, Thresholds
-
-    # Unset geometry is the robot's workspace (the SDA10F's are PlanSpec's defaults).
-    if getattr(args, "robot", None) is None:
-        workspace = PlanSpec()
-    else:
-        from brachycal.model.description import load_description
-
-        workspace = PlanSpec.for_workspace(load_description(args.robot).workspace)
-    centre_m = workspace.cube_centre_m if args.centre_mm is None else args.centre_mm * 1e-3
-    insertion = workspace.insertion_dir if args.insertion is None else args.insertion
-    image_depth = workspace.image_depth_dir if args.image_depth is None else args.image_depth
-    image_lateral = workspace.image_lateral_dir if args.image_lateral is None else args.image_lateral
-    if np.linalg.norm(np.cross(image_depth, image_lateral)) < 1e-6:
-        raise InputError("--image-depth and --image-lateral are parallel; the image plane needs two directions")
-    if args.fov == "sector":
-        fov: SectorFOV | RectFOV = SectorFOV(
-            tuple(args.sector_apex_px),
-            args.sector_depth_mm * 1e-3,
-            # Unset: SectorFOV's own default, exactly (not a round trip through degrees).
-            SectorFOV().angle_rad if args.sector_angle_deg is None else np.radians(args.sector_angle_deg),
-        )
-    else:
-        u0, u1, v0, v1 = args.rect_px
-        if not (u0 < u1 and v0 < v1):
-            raise InputError(f"--rect-px must be U0,U1,V0,V1 with U0 < U1 and V0 < V1, got {u0:g},{u1:g},{v0:g},{v1:g}")
-        fov = RectFOV((u0, u1), (v0, v1))
-    spacing_m = np.array(DEFAULT_SPACING_M) if args.spacing_mm is None else args.spacing_mm * 1e-3
-    spec = PlanSpec(
-        cube_centre_m=centre_m,
-        edge_m=args.edge_mm * 1e-3,
-        points_per_axis=args.points,
-        insertion_dir=insertion,
-        image_depth_dir=image_depth,
-        image_lateral_dir=image_lateral,
-        centre_px=tuple(args.centre_px),
-        spacing_m=spacing_m,
-        fov=fov,
-    )
-    margin = args.collision_margin_mm * 1e-3
-    joint_margin = np.radians(args.joint_margin_deg)
-    # The IK keeps a little more than the check demands, so its poses pass the check.
-    settings = IKSettings(collision_margin_m=margin + 2e-3, joint_margin_rad=joint_margin + 0.01)
-    thresholds = Thresholds(collision_margin_m=margin, joint_margin_rad=joint_margin)
-    return spec, settings, thresholds

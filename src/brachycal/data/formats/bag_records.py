@@ -91,8 +91,8 @@ def raw_batches(path: Any, source: str, topic: str, msgtype: str) -> Iterator[tu
     Raises:
         InputError: unreadable bag or record, no such topic, or the topic carries another type.
     """
-    from rosbags.highlevel import AnyReader
-    from rosbags.typesys import Stores, get_typestore
+    from rosbags.highlevel import AnyReader  # lazy: start-up (rosbags)
+    from rosbags.typesys import Stores, get_typestore  # lazy: start-up (rosbags)
 
     _check_bag_files(Path(path))
     try:
@@ -311,7 +311,7 @@ def mcap_batches(reader: Any, connections: list[Any], source: str) -> Iterator[R
     None if ``reader`` is not one ROS 2 bag of one indexed MCAP file (without per-message
     compression) whose chunks rosbags merges in file order, with the attributes this reads."""
     try:
-        from rosbags.rosbag2 import storage_mcap
+        from rosbags.rosbag2 import storage_mcap  # lazy: start-up (rosbags)
     except ImportError:  # pragma: no cover - rosbags always has it today
         return None
     bags = getattr(reader, "readers", [])

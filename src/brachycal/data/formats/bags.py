@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
+from brachycal.data.formats.csv_log import LogBlock, joint_log_from_blocks, prefetched
 from brachycal.data.joint_log import JointLog, JointLogChecker
 from brachycal.errors import InputError
 from brachycal.se3 import FloatArray
@@ -37,8 +38,6 @@ if TYPE_CHECKING:  # annotations only: reading a file needs no Pinocchio
 
 if TYPE_CHECKING:  # the message's fields, for the type checker; rosbags is imported where it is used
     from rosbags.typesys.stores.ros2_humble import sensor_msgs__msg__JointState as JointStateMsg
-
-    from brachycal.data.formats.csv_log import LogBlock
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 DEFAULT_TOPIC = "/joint_states"
@@ -69,6 +68,7 @@ def bag_messages(path: str | os.PathLike[str], topic: str, msgtype: str) -> Iter
     Raises:
         InputError: unreadable bag, no such topic, or the topic carries another message type.
     """
+    # lazy: start-up (data.formats.bag_records is loaded on first use)
     from brachycal.data.formats.bag_records import raw_batches
 
     folder = bag_folder(path)
@@ -135,8 +135,6 @@ def bag_log_blocks(
     gathered in a background thread (:func:`~brachycal.data.formats.csv_log.prefetched`) while the caller
     works on this one; the checks run in the caller's thread.
     """
-    from brachycal.data.formats.csv_log import prefetched
-
     source = str(bag_folder(path))
     checker: JointLogChecker | None = None
     for names, block in prefetched(_bag_blocks(path, topic, block_messages or BLOCK_MESSAGES, total)):
@@ -162,8 +160,8 @@ def _bag_blocks(
     the others take the full path one by one, so the refusals and their message numbers are those
     of reading message by message.
     """
+    # lazy: start-up (data.formats.bag_records is loaded on first use)
     from brachycal.data.formats.bag_records import raw_batches
-    from brachycal.data.formats.csv_log import LogBlock
 
     folder = bag_folder(path)
     names: list[str] | None = None
@@ -292,8 +290,6 @@ def read_bag_log(path: str | os.PathLike[str], robot: Robot, topic: str = DEFAUL
         InputError: unreadable bag, missing topic, or any refusal of
             :func:`~brachycal.data.joint_log.joint_log_from_columns`.
     """
-    from brachycal.data.formats.csv_log import joint_log_from_blocks
-
     return joint_log_from_blocks(bag_log_blocks(path, robot, topic), robot, str(bag_folder(path)), "message")
 
 
@@ -316,9 +312,9 @@ def write_bag_log(
         joint_names: ``(J,)`` names.
         storage: a ROS 2 bag's storage, ``"sqlite3"`` (``.db3``) or ``"mcap"``.
     """
-    from rosbags.rosbag1 import Writer as Writer1
-    from rosbags.rosbag2 import Writer as Writer2
-    from rosbags.typesys import Stores, get_typestore
+    from rosbags.rosbag1 import Writer as Writer1  # lazy: start-up (rosbags)
+    from rosbags.rosbag2 import Writer as Writer2  # lazy: start-up (rosbags)
+    from rosbags.typesys import Stores, get_typestore  # lazy: start-up (rosbags)
 
     path = Path(path)
     typestore = get_typestore(Stores.ROS1_NOETIC if ros == 1 else Stores.ROS2_HUMBLE)
@@ -330,7 +326,7 @@ def write_bag_log(
     if ros == 1:
         writer: Writer1 | Writer2 = Writer1(path)
     else:
-        from rosbags.rosbag2 import StoragePlugin
+        from rosbags.rosbag2 import StoragePlugin  # lazy: start-up (rosbags)
 
         plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
         writer = Writer2(path, version=9, storage_plugin=plugin)

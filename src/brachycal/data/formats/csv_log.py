@@ -281,8 +281,8 @@ class CsvLog:
 
     def _fast(self, data: bytes, lines: int) -> FloatArray | None:
         """``(lines, 1 + J)`` time and joints of a block by pyarrow, or None if it is not that simple."""
-        import pyarrow as pa
-        import pyarrow.csv as pa_csv
+        import pyarrow as pa  # lazy: start-up (pyarrow)
+        import pyarrow.csv as pa_csv  # lazy: start-up (pyarrow)
 
         wanted = ["time", *self.joints]
         if b" " in data or b"\t" in data:  # pyarrow takes ' 1' as 1; the row scan refuses it
