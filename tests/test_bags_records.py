@@ -1,4 +1,4 @@
-"""Bags read a chunk at a time (``data/bag_records.py``): the same messages, in the same order, as
+"""Bags read a chunk at a time (``data/formats/bag_records.py``): the same messages, in the same order, as
 rosbags' public ``AnyReader.messages``, and the fast paths taken where they should be.
 
 The ROS 1 and MCAP fast paths read attributes of rosbags' readers that are not its documented API;
