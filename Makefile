@@ -14,12 +14,14 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks examples urdf docs
+	$(BIN)/lint-imports
 	$(BIN)/mypy
 	$(BIN)/python -m pytest
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks examples urdf docs
 	$(BIN)/ruff format --check src tests benchmarks examples urdf docs
+	$(BIN)/lint-imports
 	$(BIN)/mypy
 
 docs: $(STAMP)

@@ -59,7 +59,7 @@ def end_to_end(method: str, repeats: int = 3) -> float:
 #: sequential method and the chain, the tables): timed in a new process as the start-up part of the end-to-end figure.
 STARTUP_IMPORTS = (
     "import brachycal.cli.main, brachycal.cli.calibrate, brachycal.model, "
-    "brachycal.calibration.session_calibration, brachycal.reporting.tables"
+    "brachycal.calibration.session.calibrate, brachycal.reporting.tables"
 )
 
 

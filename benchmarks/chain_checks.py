@@ -35,11 +35,11 @@ from scipy.stats import binom, norm
 
 from brachycal.calibration import calibrate
 from brachycal.calibration.chain import DEFAULT_ROBOT_ACCURACY, RobotAccuracy, fit_chain, select_model
-from brachycal.calibration.chain_report import WARN_LANDING_RMS_MM
-from brachycal.calibration.uncertainty import bootstrap, inside_ellipsoid, interval, landing_covariance
+from brachycal.calibration.chain.uncertainty import bootstrap, inside_ellipsoid, interval, landing_covariance
+from brachycal.calibration.session.chain_report import WARN_LANDING_RMS_MM
 from brachycal.model import Robot
-from brachycal.simulation.targeting import targeting_error
 from brachycal.simulation.twin import TwinConfig, simulate
+from brachycal.studies.targeting import targeting_error
 
 LEVEL = 0.95
 TARGETS = 20

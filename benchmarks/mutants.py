@@ -70,7 +70,7 @@ MUTANTS: tuple[Mutant, ...] = (
     # --- tool tips (eqs. 4-6) ---------------------------------------------------------------------
     Mutant(
         "tips-dof",
-        "calibration/tool_tips.py",
+        "calibration/sequential/tool_tips.py",
         "/ (3 * (len(points) - 1))",
         "/ (3 * len(points))",
         (COND + "test_tip_noise_estimate_is_unbiased_with_its_degrees_of_freedom",),
@@ -78,7 +78,7 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "tips-reference-over-T",
-        "calibration/tool_tips.py",
+        "calibration/sequential/tool_tips.py",
         "return TipEstimate(points.mean(axis=0), points, sigma, sigma**2 * np.eye(3) / len(points))",
         "return TipEstimate(points.mean(axis=0), points, sigma, sigma**2 * np.eye(3))",
         (COND + "test_tip_uncertainty_predicts_the_spread_of_the_estimates",),
@@ -86,7 +86,7 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "tips-reference-term",
-        "calibration/tool_tips.py",
+        "calibration/sequential/tool_tips.py",
         "cov = sigma**2 * np.eye(3) / len(points) + M @ reference.cov @ M.T",
         "cov = sigma**2 * np.eye(3) / len(points)",
         (COND + "test_tool_tip_intervals_cover_the_truth_at_their_level",),
@@ -94,7 +94,7 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "tips-separation-3d",
-        "calibration/tool_tips.py",
+        "calibration/sequential/tool_tips.py",
         "variance = sum(3 * max(tip.sigma_m, TOUCH_SD_M) ** 2",
         "variance = sum(max(tip.sigma_m, TOUCH_SD_M) ** 2",
         (COND + "test_separation_bound_is_ten_predicted_sds_of_the_difference",),
@@ -103,7 +103,7 @@ MUTANTS: tuple[Mutant, ...] = (
     # --- tool rotation (eq. 7) --------------------------------------------------------------------
     Mutant(
         "rotation-angle-sd",
-        "calibration/tool_rotation.py",
+        "calibration/sequential/tool_rotation.py",
         "angle_sd = float(np.degrees(np.sqrt(2.0) * point_sd_m * np.sqrt(np.sum(1.0 / moves**2))))",
         "angle_sd = float(np.degrees(point_sd_m * np.sqrt(np.sum(1.0 / moves**2))))",
         (COND + "test_rotation_uncertainty_predicts_the_spread_of_the_estimates",),
@@ -111,7 +111,7 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "rotation-sd-sqrt",
-        "calibration/tool_rotation.py",
+        "calibration/sequential/tool_rotation.py",
         "return float(sigma * np.sqrt(np.trace(J @ J.T)))",
         "return float(sigma * np.sqrt(np.trace(J @ J.T) / 3))",
         (COND + "test_rotation_uncertainty_predicts_the_spread_of_the_estimates",),
@@ -119,7 +119,7 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "rotation-shortest-move",
-        "calibration/tool_rotation.py",
+        "calibration/sequential/tool_rotation.py",
         "shortest = 2 * point_sd_m / MAX_DIRECTION_SD_RAD",
         "shortest = point_sd_m / MAX_DIRECTION_SD_RAD",
         (COND + "test_moves_too_short_for_a_direction_are_refused",),
@@ -127,7 +127,7 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "rotation-direction-sd",
-        "calibration/tool_rotation.py",
+        "calibration/sequential/tool_rotation.py",
         "direction_sd_deg=np.degrees(2 * point_sd_m / moves),",
         "direction_sd_deg=np.degrees(point_sd_m / moves),",
         (COND + "test_exact_session_passes_every_check_and_predicts_no_uncertainty",),
@@ -136,7 +136,7 @@ MUTANTS: tuple[Mutant, ...] = (
     # --- registration (eq. 9) ---------------------------------------------------------------------
     Mutant(
         "registration-dof",
-        "calibration/registration.py",
+        "calibration/sequential/registration.py",
         "dof = 3 * len(src) - n_params",
         "dof = 3 * len(src)",
         (REG + "test_fit_noise_estimate_is_unbiased_with_its_degrees_of_freedom",),
@@ -144,7 +144,7 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "registration-similarity-reflection",
-        "calibration/registration.py",
+        "calibration/sequential/registration.py",
         "D = np.array([1.0, 1.0, d])",
         "D = np.array([1.0, 1.0, 1.0])",
         (REG + "test_similarity_of_a_mirror_image_is_the_best_proper_fit",),
@@ -152,7 +152,7 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "registration-similarity-scale",
-        "calibration/registration.py",
+        "calibration/sequential/registration.py",
         "scale = float(np.sum(sigma * D) / np.sum(a**2))",
         "scale = float(np.sum(sigma) / np.sum(a**2))",
         (REG + "test_similarity_of_a_mirror_image_is_the_best_proper_fit",),
@@ -160,7 +160,7 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "registration-scale-column",
-        "calibration/registration.py",
+        "calibration/sequential/registration.py",
         "J[:, :, 6] = p_src @ R.T",
         "J[:, :, 6] = p_src",
         (COND + "test_registration_uncertainty_predicts_the_spread_of_the_estimates[similarity]",),
@@ -168,7 +168,7 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "registration-uv-column",
-        "calibration/registration.py",
+        "calibration/sequential/registration.py",
         "J[:, :, 7] = p_src[:, 1:2] * R[:, 1]",
         "J[:, :, 7] = p_src[:, 1:2] * R[:, 0]",
         (COND + "test_registration_uncertainty_predicts_the_spread_of_the_estimates[scaled_uv]",),
@@ -177,7 +177,7 @@ MUTANTS: tuple[Mutant, ...] = (
     # --- image to probe (eq. 9 checks) ------------------------------------------------------------
     Mutant(
         "image-spacing-3sd",
-        "calibration/image_to_probe.py",
+        "calibration/sequential/image_to_probe.py",
         "np.any(outside > 3 * factor_sd)",
         "np.any(outside > 0)",
         (COND + "test_spacing_beyond_the_plausible_range_by_chance_is_not_refused",),
@@ -185,7 +185,7 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "image-spacing-sd-multiple",
-        "calibration/image_to_probe.py",
+        "calibration/sequential/image_to_probe.py",
         "np.any(outside > 3 * factor_sd)",
         "np.any(outside > 30 * factor_sd)",
         (COND + "test_spacing_beyond_the_plausible_range_by_chance_is_not_refused",),
@@ -193,7 +193,7 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "image-samples-sd",
-        "calibration/image_to_probe.py",
+        "calibration/sequential/image_to_probe.py",
         "samples_sd_m=fit_unc.noise_sd_m * float(np.sqrt(fit_unc.cov_unit.shape[0] / len(p_I))),",
         "samples_sd_m=fit_unc.noise_sd_m * float(np.sqrt(3 * fit_unc.cov_unit.shape[0] / len(p_I))),",
         (COND + "test_registration_uncertainty_predicts_the_spread_of_the_estimates[kabsch]",),
@@ -201,7 +201,7 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "image-spread-sqrt-n",
-        "calibration/image_to_probe.py",
+        "calibration/sequential/image_to_probe.py",
         "least = REACH_M * sigma_m / (np.sqrt(n) * MAX_REACH_SD_M)",
         "least = REACH_M * sigma_m / MAX_REACH_SD_M",
         (COND + "test_pixels_without_spread_across_are_refused",),
@@ -210,7 +210,7 @@ MUTANTS: tuple[Mutant, ...] = (
     # --- pivot ------------------------------------------------------------------------------------
     Mutant(
         "pivot-dof",
-        "calibration/pivot.py",
+        "calibration/phantom/pivot.py",
         "max(3 * n - 6, 1)",
         "max(3 * n, 1)",
         (COND + "test_pivot_noise_estimate_is_unbiased_with_its_degrees_of_freedom",),
@@ -218,7 +218,7 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "pivot-robust-threshold",
-        "calibration/pivot.py",
+        "calibration/phantom/pivot.py",
         "inliers = residuals <= outlier_threshold * np.sqrt(3.0) * scale",
         "inliers = residuals <= outlier_threshold * scale",
         (COND + "test_robust_pivot_flags_no_pose_of_clean_gaussian_noise",),
@@ -226,7 +226,7 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "pivot-robust-scale",
-        "calibration/pivot.py",
+        "calibration/phantom/pivot.py",
         "scale = max(1.4826 * float(np.median(start.residuals)) / np.sqrt(3.0), 1e-12)",
         "scale = max(float(np.median(start.residuals)) / np.sqrt(3.0), 1e-12)",
         (COND + "test_robust_pivot_flags_no_pose_of_clean_gaussian_noise",),
@@ -234,7 +234,7 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "pivot-covariance",
-        "calibration/pivot.py",
+        "calibration/phantom/pivot.py",
         "cov = noise**2 * np.linalg.inv(A_in.T @ A_in)",
         "cov = noise * np.linalg.inv(A_in.T @ A_in)",
         (COND + "test_pivot_uncertainty_predicts_the_spread_of_the_estimates[pivot_algebraic]",),
@@ -242,7 +242,7 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "pivot-tip-sd",
-        "calibration/pivot.py",
+        "calibration/phantom/pivot.py",
         "tip_sd=float(np.sqrt(np.trace(cov[:3, :3]))),",
         "tip_sd=float(np.sqrt(np.max(np.diag(cov[:3, :3])))),",
         (COND + "test_pivot_uncertainty_predicts_the_spread_of_the_estimates[pivot_algebraic]",),
@@ -295,7 +295,7 @@ MUTANTS: tuple[Mutant, ...] = (
     # --- robot identification ---------------------------------------------------------------------
     Mutant(
         "identification-leverages",
-        "calibration/robot_identification.py",
+        "calibration/robot/identification.py",
         "return noise_levels(r, J, data.group_rows(int(self.keep.sum())), sigma, robust=False, h=h)",
         "return noise_levels(r, J, data.group_rows(int(self.keep.sum())), sigma, robust=False)",
         (ROBOT + "test_identified_noise_levels_count_the_priors_share_of_the_leverage",),
@@ -303,7 +303,7 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "identification-prior-sd",
-        "calibration/robot_identification.py",
+        "calibration/robot/identification.py",
         "return np.sqrt(np.diag(accuracy.covariance(robot)))",
         "return np.diag(accuracy.covariance(robot))",
         (ROBOT + "test_stated_uncertainty_includes_the_identified_robot",),
@@ -311,7 +311,7 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "identification-consider-noise",
-        "calibration/robot_identification.py",
+        "calibration/robot/identification.py",
         "noise = C_tt - sensitivity @ C_cc @ sensitivity.T",
         "noise = C_tt",
         (ROBOT + "test_stated_uncertainty_includes_the_identified_robot",),
@@ -352,7 +352,7 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "uncertainty-ellipsoid-dof",
-        "calibration/uncertainty.py",
+        "calibration/chain/uncertainty.py",
         "return d2 <= chi2.ppf(level, 3)",
         "return d2 <= chi2.ppf(level, 2)",
         (CHAIN + "test_ellipsoids_hold_their_level",),
@@ -360,7 +360,7 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     Mutant(
         "check-part-dof",
-        "calibration/check.py",
+        "calibration/verify/check.py",
         "dof = len(r) - rank",
         "dof = len(r)",
         ("tests/test_verify.py::test_a_part_fit_recovers_the_change_that_made_the_residuals",),
@@ -384,7 +384,7 @@ def run_tests(tests: tuple[str, ...] | list[str], mutant: Mutant | None) -> tupl
     with tempfile.TemporaryDirectory(prefix="brachycal-mutant-") as tmp:
         src = Path(tmp) / "src"
         shutil.copytree(ROOT / "src", src, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
-        for data in BUNDLED:  # read beside src/ (brachycal.files.bundled)
+        for data in BUNDLED:  # read beside src/ (brachycal.io.bundled)
             (Path(tmp) / data).symlink_to(ROOT / data, target_is_directory=True)
         if mutant is not None:
             path = src / "brachycal" / mutant.file

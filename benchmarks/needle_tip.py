@@ -33,8 +33,8 @@ from brachycal.calibration import calibrate
 from brachycal.imaging.needle_tip import FALSE_ALARM_Z, MIN_CONFIDENCE, detect_tip
 from brachycal.model import Robot
 from brachycal.simulation.bmode import BModeSettings, NeedleView, needle_views, render_frame, true_tip_px
-from brachycal.simulation.targeting import targeting_error
 from brachycal.simulation.twin import Twin, TwinConfig, simulate
+from brachycal.studies.targeting import targeting_error
 
 #: A person's annotation: 1 px SD per axis (the twin's default); its radial 95th percentile.
 MANUAL_P95_PX = float(np.sqrt(-2.0 * np.log(0.05)))

@@ -25,11 +25,11 @@ from pathlib import Path
 import numpy as np
 from timing import record
 
-from brachycal.calibration.nwire_file import nwire_from_files
-from brachycal.data.metaimage import read_image_sequence
-from brachycal.data.plus_files import read_plus_config, read_segmented_frames
-from brachycal.data.plus_segmentation import read_segmentation_parameters
-from brachycal.data.plus_segmented_xml import write_segmented_frames
+from brachycal.calibration.phantom.nwire_file import nwire_from_files
+from brachycal.data.formats.metaimage import read_image_sequence
+from brachycal.data.formats.plus_files import read_plus_config, read_segmented_frames
+from brachycal.data.formats.plus_segmentation import read_segmentation_parameters
+from brachycal.data.formats.plus_segmented_xml import write_segmented_frames
 from brachycal.imaging.nwire_segmentation import segment_sequence
 
 DATA = Path(os.environ.get("BRACHYCAL_REFERENCE", Path(__file__).resolve().parents[2] / "shared" / "reference"))

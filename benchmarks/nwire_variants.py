@@ -26,9 +26,9 @@ from pathlib import Path
 
 from timing import record
 
-from brachycal.calibration.nwire_file import NWIRE_MODELS, nwire_from_files
-from brachycal.calibration.nwire_refine import PLUS_NAMES
-from brachycal.data.plus_files import parse_xml
+from brachycal.calibration.phantom.nwire_file import NWIRE_MODELS, nwire_from_files
+from brachycal.calibration.phantom.nwire_refine import PLUS_NAMES
+from brachycal.data.formats.plus_files import parse_xml
 
 REFERENCE = Path(__file__).resolve().parents[2] / "shared" / "reference"
 #: PLUS's digits: it writes 6 significant figures, so ~1.25 mm is known to 5e-6 mm.

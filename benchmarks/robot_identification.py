@@ -20,11 +20,11 @@ Issue 19's goal: end-to-end targeting ≤ 0.15 mm mean over seeds with identific
 ``--coverage N [LEVEL]``: how often the identified fit's stated 95 % regions contain the truth over
 N twin sessions (seeds 100…), the prior stated at the twin's own level: the needle and probe tips
 (3D ellipsoids) and the landing error at 20 targets per session (one ellipsoid per target, from
-:func:`~brachycal.calibration.uncertainty.landing_covariance` with the identified robot). A
+:func:`~brachycal.calibration.chain.uncertainty.landing_covariance` with the identified robot). A
 calibrated 95 % region covers 95 %; with 20 sessions, 16–20 of 20 is within binomial chance.
 
 ``--excitation [SEEDS] [LEVEL,...]``: the excitation poses (``brachycal plan --excitation``) on the
-twin (:func:`~brachycal.simulation.excitation_twin.evaluate_excitation`, 5-minute budget): per seed
+twin (:func:`~brachycal.studies.excitation.evaluate_excitation`, 5-minute budget): per seed
 and level, the predicted RMS landing error without and with them, the held-out and plain targeting
 MAE with identification on the session alone, on the session plus the chosen poses, and on the
 session plus as many plain repeats of their source poses (is it the new configurations?) and of
@@ -40,7 +40,7 @@ import time
 import numpy as np
 from timing import record
 
-from brachycal.simulation.study import run_study, sweep
+from brachycal.studies.study import run_study, sweep
 
 LEVELS = ("real-arm", "worn")
 METHODS = ("kabsch", "chain", "chain+robot")
@@ -86,11 +86,11 @@ def main(seeds: int = 6, levels: tuple[str, ...] = LEVELS) -> None:
 def coverage(sessions: int, level: str = "real-arm") -> None:
     from brachycal.calibration import calibrate
     from brachycal.calibration.chain import RobotAccuracy
-    from brachycal.calibration.robot_identification import identify_robot
-    from brachycal.calibration.uncertainty import inside_ellipsoid, landing_covariance
+    from brachycal.calibration.chain.uncertainty import inside_ellipsoid, landing_covariance
+    from brachycal.calibration.robot.identification import identify_robot
     from brachycal.model import Robot
-    from brachycal.simulation.targeting import targeting_error
     from brachycal.simulation.twin import TwinConfig, simulate
+    from brachycal.studies.targeting import targeting_error
 
     robot = Robot.load()
     tips = {"needle": 0, "probe": 0}
@@ -122,7 +122,7 @@ def coverage(sessions: int, level: str = "real-arm") -> None:
 
 def excitation(seeds: int = 6, levels: tuple[str, ...] = LEVELS) -> None:
     from brachycal.model import Robot
-    from brachycal.simulation.excitation_twin import evaluate_excitation
+    from brachycal.studies.excitation import evaluate_excitation
 
     robot = Robot.load()
     start = time.perf_counter()

@@ -5,14 +5,14 @@ Run: ``.venv/bin/python benchmarks/table3.py [--seeds N] [--targets M] [--no-cha
 with the variants). For each seed the twin session is simulated and calibrated by the paper's
 fusion methods (ICP, Kabsch, landmark/Horn) and brachycal's whole chain; the same simulated robot
 is calibrated by the tracker route with three phantoms: N-wire
-(:mod:`brachycal.simulation.nwire_twin`), multi-wedge and arbitrary wire
-(:mod:`brachycal.simulation.phantom_twin`), all with the N-wire twin's tracker practice (NDI
+(:mod:`brachycal.studies.nwire_twin`), multi-wedge and arbitrary wire
+(:mod:`brachycal.studies.phantom_twin`), all with the N-wire twin's tracker practice (NDI
 Polaris Spectra 0.25 mm RMS per marker, 20 frames averaged per static capture, phantom print
 tolerance, landmark registration, beam thickness) and one shared hand–eye calibration. Every
 method is judged by the whole-system targeting error (MAE over the targets, mm); the table gives
 the mean ± SD over seeds, the smallest and largest seed, the per-seed MAEs and the paper's figure.
 A second table changes one assumption of the N-wire route at a time, to show what each is worth.
-``brachycal demo --table3`` prints the first table (brachycal.simulation.demo.table3).
+``brachycal demo --table3`` prints the first table (brachycal.studies.demo.table3).
 """
 
 from __future__ import annotations
@@ -25,10 +25,10 @@ from dataclasses import replace
 import numpy as np
 
 from brachycal.model import Robot
-from brachycal.simulation.demo import Table3, table3_text, table3_twin
-from brachycal.simulation.nwire_twin import NWireSimConfig, tracker_route
-from brachycal.simulation.targeting import targeting_error
 from brachycal.simulation.twin import TwinConfig, simulate
+from brachycal.studies.demo import Table3, table3_text, table3_twin
+from brachycal.studies.nwire_twin import NWireSimConfig, tracker_route
+from brachycal.studies.targeting import targeting_error
 
 #: The tracker route under other assumptions: label → change from the defaults.
 VARIANTS: dict[str, Callable[[NWireSimConfig], NWireSimConfig]] = {

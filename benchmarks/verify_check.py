@@ -12,9 +12,9 @@ over the check poses of the noise-free residuals, mm) before the change, ignorin
 updated result (means over the updated checks).
 
 Per robot-error level (:data:`brachycal.simulation.twin.ROBOT_ERROR_LEVELS`) and seed, the twin's
-session is calibrated with the whole chain (:class:`~brachycal.simulation.check_twin.CalibratedTwin`)
+session is calibrated with the whole chain (:class:`~brachycal.studies.check_twin.CalibratedTwin`)
 and the check's poses are chosen from the same grid (``plan --verify``'s criterion). Then each
-change of :data:`~brachycal.simulation.check_twin.CHANGES` is applied and a check session is
+change of :data:`~brachycal.studies.check_twin.CHANGES` is applied and a check session is
 recorded with fresh noise (the checks of one seed share its calibration: the rates are over
 seeds × checks, and the binomial 95 % interval printed assumes independent checks, which the
 shared calibrations make a little optimistic). Printed per change: how often the verdict is
@@ -22,7 +22,7 @@ RECALIBRATE (the false-alarm rate for "unchanged", else the detection rate) with
 interval, how often the named part is the one that moved, and the true targeting change (RMS over
 the check poses of the change of the noise-free check residual: what ignoring it would cost).
 
-Settings other than the defaults the check was designed on (:class:`~brachycal.simulation.check_twin.TwinSettings`):
+Settings other than the defaults the check was designed on (:class:`~brachycal.studies.check_twin.TwinSettings`):
 ``--annotation-px PX``, ``--robot-mm MM --robot-deg DEG`` (each joint origin's error as a 3-D norm),
 ``--touch-turn-deg DEG`` (each check touch re-done by hand turned by up to this), ``--beam-mm MM``,
 ``--cad-close``, ``--every-trial`` (the check touches as the calibration does: every trial, both tips),
@@ -45,8 +45,8 @@ from collections import defaultdict
 
 import numpy as np
 
-from brachycal.planning.check_plan import DEFAULT_CHECK_POSES as DEFAULT_POSES  # the figures recorded are for it
-from brachycal.planning.check_plan import DEFAULT_TOUCHES, TOUCH_CHOICES
+from brachycal.planning.check_poses import DEFAULT_CHECK_POSES as DEFAULT_POSES  # the figures recorded are for it
+from brachycal.planning.check_poses import DEFAULT_TOUCHES, TOUCH_CHOICES
 
 #: The seeds the README's table is measured on: 80 and up, seeds no choice of the check was made on.
 #: Seeds 0–19 were used to choose the touches' null SD, 20–39 to find the corner poses' excess (each
@@ -72,7 +72,7 @@ EXPECTED_PART = {
 
 def _grid() -> dict[str, tuple[str, object]]:
     """The settings the false-alarm table is measured over: robot level and twin settings."""
-    from brachycal.simulation.check_twin import TwinSettings
+    from brachycal.studies.check_twin import TwinSettings
 
     r = np.radians
     issue = {"annotation_px": 1.2, "robot_translation_m": 1e-4, "robot_rotation_rad": r(0.01)}
@@ -105,7 +105,7 @@ def grid(seeds: int, checks: int, first: int) -> None:
 
     from brachycal.errors import BrachycalError
     from brachycal.model import Robot
-    from brachycal.simulation.check_twin import CHANGES, CalibratedTwin
+    from brachycal.studies.check_twin import CHANGES, CalibratedTwin
 
     robot = Robot.load(None)
     rows = []
@@ -148,7 +148,7 @@ def main(argv: list[str]) -> None:
     from timing import record
 
     from brachycal.model import Robot
-    from brachycal.simulation.check_twin import CHANGES, CalibratedTwin, TwinSettings
+    from brachycal.studies.check_twin import CHANGES, CalibratedTwin, TwinSettings
 
     options = {"--poses": str(DEFAULT_POSES), "--touches": DEFAULT_TOUCHES, "--first-seed": str(FIRST_SEED)}
     numbers = {"--annotation-px": None, "--robot-mm": None, "--robot-deg": None, "--touch-turn-deg": None}

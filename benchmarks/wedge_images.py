@@ -2,12 +2,12 @@
 
 Run: ``OMP_NUM_THREADS=1 .venv/bin/python benchmarks/wedge_images.py [--seeds N] [--frames F]``
 (default 3 seeds, 50 frames a session; ~1 min of CPU). Per seed: the twin (``TwinConfig(seed)``),
-the multi-wedge session of ``simulation.phantom_twin`` with the N-wire twin's default lab
+the multi-wedge session of ``studies.phantom_twin`` with the N-wire twin's default lab
 (tracker, registration, print tolerance, beam), calibrated two ways —
 
 - **simulated**: the session's own segmentations (each line end 0.5 px SD and the leading-edge
   bias of the 0.6 mm beam: ``phantom_twin``'s path, as ``brachycal demo --table3``);
-- **images**: every frame rendered (``simulation.phantom_images``: speckle, PSF, 1.5 mm Gaussian
+- **images**: every frame rendered (``studies.phantom_images``: speckle, PSF, 1.5 mm Gaussian
   beam, attenuation, TGC, noise, log compression) and its lines found by
   ``imaging.wedge_lines.find_wedge_lines`` (frames where not every face is found are skipped);
 
@@ -26,15 +26,15 @@ import time
 import numpy as np
 from timing import record
 
-from brachycal.calibration.image_to_probe import ImageCalibration
-from brachycal.calibration.wedge_phantom import calibrate_wedge
+from brachycal.calibration.phantom.wedge import calibrate_wedge
+from brachycal.calibration.result import ImageCalibration
 from brachycal.model import Robot
 from brachycal.se3 import inverse
-from brachycal.simulation.nwire_twin import T_PTIP_MARKER, NWireSimConfig
-from brachycal.simulation.phantom_images import rendered_wedge_observations
-from brachycal.simulation.phantom_twin import phantom_route, simulate_phantom
-from brachycal.simulation.targeting import targeting_error
 from brachycal.simulation.twin import TwinConfig, simulate
+from brachycal.studies.nwire_twin import T_PTIP_MARKER, NWireSimConfig
+from brachycal.studies.phantom_images import rendered_wedge_observations
+from brachycal.studies.phantom_twin import phantom_route, simulate_phantom
+from brachycal.studies.targeting import targeting_error
 
 
 def main() -> None:

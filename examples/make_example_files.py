@@ -6,13 +6,13 @@ Run from the repository root: ``python examples/make_example_files.py``. Determi
   first, middle and last samples as read (``examples/twin_session/samples.csv``), radians.
 - ``pivot/``: a tracked pointer pivoting about a fixed point, in the pose-list format of
   SciKit-Surgery's real recording (``timestamp_ns,m00,…,m33``, millimetres), and its truth
-  (:func:`brachycal.simulation.example_files.simulate_pivot_recording`).
+  (:func:`brachycal.studies.example_files.simulate_pivot_recording`).
 - ``nwire/``: a PLUS device-set configuration (fCal 2.0 phantom) and a segmented-frames file of a
   tracked probe over it, in PLUS's formats, and their truth (the twin's tracker route,
-  :func:`brachycal.simulation.nwire_twin.simulate_nwire`).
+  :func:`brachycal.studies.nwire_twin.simulate_nwire`).
 - ``phantom/``: a multi-wedge and an arbitrary-wire session of the same tracked probe (observations
   CSV and each phantom's geometry TOML with the session's landmark registration) and their truth
-  (:func:`brachycal.simulation.phantom_twin.simulate_phantom`), for ``brachycal phantom``.
+  (:func:`brachycal.studies.phantom_twin.simulate_phantom`), for ``brachycal phantom``.
 """
 
 from __future__ import annotations
@@ -20,9 +20,9 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
-from brachycal.files import OutputSet
+from brachycal.io import OutputSet
 from brachycal.model.names import JOINT_NAMES
-from brachycal.simulation.example_files import write_example_files
+from brachycal.studies.example_files import write_example_files
 
 HERE = Path(__file__).parent
 #: The twin session's samples (rows of samples.csv) copied into joints.csv: first, middle, last.

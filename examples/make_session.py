@@ -14,7 +14,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from brachycal.data.session import write_session
-from brachycal.files import write_json
+from brachycal.io import write_json
 from brachycal.model import Robot
 from brachycal.simulation import default_truth, exact_session
 

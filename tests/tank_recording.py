@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from brachycal.data.metaimage import write_image_sequence
+from brachycal.data.formats.metaimage import write_image_sequence
 
 WIDTH, HEIGHT = 160, 120
 PX_PER_MM = 2.0

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brachycal.data.bag_images import IMAGE, read_bag_images
+from brachycal.data.formats.bag_images import IMAGE, read_bag_images
 from brachycal.errors import InputError
 
 

@@ -1,4 +1,4 @@
-"""Bags read a chunk at a time (``data/bag_records.py``): the same messages, in the same order, as
+"""Bags read a chunk at a time (``data/formats/bag_records.py``): the same messages, in the same order, as
 rosbags' public ``AnyReader.messages``, and the fast paths taken where they should be.
 
 The ROS 1 and MCAP fast paths read attributes of rosbags' readers that are not its documented API;
@@ -21,8 +21,8 @@ from rosbags.typesys import Stores, get_typestore
 
 from brachycal import InputError
 from brachycal.data import read_bag_log, write_bag_log
-from brachycal.data.bag_records import mcap_batches, raw_batches, ros1_batches
-from brachycal.data.bags import JOINT_STATE, bag_log_blocks
+from brachycal.data.formats.bag_records import mcap_batches, raw_batches, ros1_batches
+from brachycal.data.formats.bags import JOINT_STATE, bag_log_blocks
 
 TOPIC = "/joint_states"
 

@@ -26,7 +26,7 @@ from hostile import Case, check_refusal, run_cli
 
 from brachycal.calibration import METHODS, RobotRecord, calibrate, identify_robot, read_result
 from brachycal.calibration.chain import DEFAULT_ROBOT_ACCURACY
-from brachycal.calibration.uncertainty import landing_robot_jacobians
+from brachycal.calibration.chain.uncertainty import landing_robot_jacobians
 from brachycal.data.session import Session, read_session, write_session
 from brachycal.errors import BrachycalWarning, InputError
 from brachycal.export import export_files, flange_labels, read_ros_static_transforms

@@ -33,9 +33,7 @@ from brachycal.calibration.chain import (
     select_model,
 )
 from brachycal.calibration.chain.model_choice import ModelChoice
-from brachycal.calibration.chain_report import WARN_LANDING_RMS_MM, calibrate_chain
-from brachycal.calibration.metrics import ErrorStats
-from brachycal.calibration.uncertainty import (
+from brachycal.calibration.chain.uncertainty import (
     bootstrap,
     inside_ellipsoid,
     interval,
@@ -43,12 +41,14 @@ from brachycal.calibration.uncertainty import (
     landing_jacobian,
     landing_robot_jacobians,
 )
+from brachycal.calibration.metrics import ErrorStats
+from brachycal.calibration.session.chain_report import WARN_LANDING_RMS_MM, calibrate_chain
 from brachycal.cli.main import main
 from brachycal.errors import DegenerateDataError, InputError
 from brachycal.se3 import make_transform
-from brachycal.simulation.design import grid_offsets, optimal_offsets
-from brachycal.simulation.targeting import targeting_error
 from brachycal.simulation.twin import TwinConfig, simulate
+from brachycal.studies.design import grid_offsets, optimal_offsets
+from brachycal.studies.targeting import targeting_error
 
 
 @pytest.fixture(scope="module")

@@ -135,7 +135,7 @@ def test_landing_jacobian_is_scipys_forward_difference_bit_for_bit(robot, twin):
     from scipy.optimize import approx_fprime
 
     from brachycal.calibration.chain import finite_difference_steps
-    from brachycal.calibration.uncertainty import _landing, landing_jacobian
+    from brachycal.calibration.chain.uncertainty import _landing, landing_jacobian
 
     session, result = twin
     fit = fit_chain(session, robot, result, "sound_speed")

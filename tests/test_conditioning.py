@@ -22,9 +22,10 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 from scipy.stats import binom, chi2
 
-from brachycal.calibration import calibrate, image_to_probe, pivot_algebraic, pivot_robust, registration
-from brachycal.calibration.tool_rotation import tool_rotation
-from brachycal.calibration.tool_tips import (
+from brachycal.calibration import calibrate, pivot_algebraic, pivot_robust
+from brachycal.calibration.sequential import image_to_probe, registration
+from brachycal.calibration.sequential.tool_rotation import tool_rotation
+from brachycal.calibration.sequential.tool_tips import (
     MIN_SEPARATION_SIGMAS,
     TOUCH_SD_M,
     TipEstimate,

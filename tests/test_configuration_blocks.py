@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
-from brachycal.data.csv_log import configuration_blocks, read_configurations
+from brachycal.data.formats.csv_log import configuration_blocks, read_configurations
 from brachycal.errors import InputError
 from brachycal.model import Robot
 

@@ -19,14 +19,10 @@ from conftest import random_configurations
 from brachycal.errors import InputError
 from brachycal.model import names
 from brachycal.model.collision import ClearanceChecker, collision_link_pairs, srdf_disabled_pairs
-from brachycal.model.description import (
-    BUNDLED_ROBOTS,
-    TOOL_FRAMES,
-    bundled_description_path,
-    example_robot_data_share,
-    load_description,
-)
+from brachycal.model.description import BUNDLED_ROBOTS, load_description
+from brachycal.model.description_file import bundled_description_path, example_robot_data_share
 from brachycal.model.ik import solve_ik
+from brachycal.model.rig import TOOL_FRAMES
 from brachycal.model.robot import Robot
 from brachycal.planning.spec import PlanSpec
 from brachycal.se3 import from_xyz_rpy, inverse

@@ -15,15 +15,15 @@ from conftest import ROOT, assert_same_files
 from hostile import Case, check_refusal
 
 from brachycal.calibration import nwire_from_files, pivot_from_file
-from brachycal.calibration.phantom_file import read_observations
-from brachycal.calibration.wedge_phantom import calibrate_wedge_files, read_wedge_phantom
-from brachycal.calibration.wire_phantom import calibrate_wire_files, read_wire_phantom
+from brachycal.calibration.phantom.phantom_file import read_observations
+from brachycal.calibration.phantom.wedge import calibrate_wedge_files, read_wedge_phantom
+from brachycal.calibration.phantom.wire import calibrate_wire_files, read_wire_phantom
 from brachycal.cli.examples import bundled_example_files
 from brachycal.cli.main import main
-from brachycal.data.plus_files import read_plus_config, read_segmented_frames
+from brachycal.data.formats.plus_files import read_plus_config, read_segmented_frames
 from brachycal.data.pose_list import read_pose_list
 from brachycal.se3 import inverse
-from brachycal.simulation.example_files import (
+from brachycal.studies.example_files import (
     NWIRE_CONFIG_NAME,
     NWIRE_FRAMES_NAME,
     PHANTOM_FILES,
@@ -33,7 +33,7 @@ from brachycal.simulation.example_files import (
     simulate_pivot_recording,
     write_example_files,
 )
-from brachycal.simulation.nwire_twin import FCAL2_LANDMARKS_MM, NWireSimConfig
+from brachycal.studies.nwire_twin import FCAL2_LANDMARKS_MM, NWireSimConfig
 
 EXAMPLES = ROOT / "examples"
 MADE = ["joints.csv", PIVOT_NAME, "pivot/truth.json", NWIRE_CONFIG_NAME, NWIRE_FRAMES_NAME, "nwire/truth.json"]

@@ -1,5 +1,5 @@
 """Excitation poses (issue 19): the A-optimal criterion on the landing error, its greedy choice under a
-robot-time budget, the candidates' reachability, their effect on a twin, and ``plan --excitation``."""
+robot-time budget, the candidates' reachability, their effect on a twin, and ``plan excitation``."""
 
 from __future__ import annotations
 
@@ -12,23 +12,23 @@ from hostile import run_cli
 
 from brachycal.calibration import calibrate
 from brachycal.calibration.chain import RobotAccuracy
-from brachycal.calibration.robot_identification import identify_robot
-from brachycal.calibration.robot_observability import (
+from brachycal.calibration.chain.uncertainty import landing_covariance
+from brachycal.calibration.robot.identification import identify_robot
+from brachycal.calibration.robot.observability import (
     SAMPLE,
     Criterion,
     base_criterion,
     greedy,
     observation_rows,
 )
-from brachycal.calibration.uncertainty import landing_covariance
 from brachycal.model.collision import ClearanceChecker, collision_link_pairs
 from brachycal.model.names import NEEDLE_TIP, US_IMAGE
 from brachycal.planning import Thresholds
 from brachycal.planning.excitation import candidates, plan_excitation, software_robot
 from brachycal.se3 import inverse, transform_points
-from brachycal.simulation.excitation_twin import extended_twin_session
-from brachycal.simulation.targeting import targeting_error
 from brachycal.simulation.twin import TwinConfig, simulate
+from brachycal.studies.excitation import extended_twin_session
+from brachycal.studies.targeting import targeting_error
 
 
 @pytest.fixture(scope="module")
@@ -195,7 +195,7 @@ def test_excitation_lowers_the_landing_error_as_predicted(robot, worn):
 # --- the command -----------------------------------------------------------------------------------
 
 SESSION = ROOT / "examples" / "twin_session"
-EXCITE = ["plan", "--excitation", str(SESSION), "--out", "{tmp}/excitation.csv", "--quiet"]
+EXCITE = ["plan", "excitation", str(SESSION), "--out", "{tmp}/excitation.csv", "--quiet"]
 
 
 def test_command_writes_the_poses_or_says_the_session_is_enough(tmp_path):

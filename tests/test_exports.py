@@ -10,7 +10,7 @@ from conftest import ROOT
 
 from brachycal.calibration import calibrate
 from brachycal.cli.main import main
-from brachycal.data.plus_files import read_coordinate_definitions
+from brachycal.data.formats.plus_files import read_coordinate_definitions
 from brachycal.data.session import read_session
 from brachycal.export import read_itk_transform, read_ros_static_transforms, write_exports, write_itk_transform
 from brachycal.export.formats import LPS, image_to_probe_mm

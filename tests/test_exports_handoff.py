@@ -25,7 +25,7 @@ from hostile import Case, check_refusal
 
 from brachycal.calibration import ImageCalibration, read_result
 from brachycal.cli.main import main
-from brachycal.data.plus_files import read_coordinate_definitions
+from brachycal.data.formats.plus_files import read_coordinate_definitions
 from brachycal.export import read_itk_transform, write_exports
 from brachycal.export.formats import image_to_probe_mm
 from brachycal.model import Robot

@@ -1,4 +1,4 @@
-"""The output writer (``brachycal.files``): all or nothing, never clobbered, claimed, no NaN in JSON."""
+"""The output writer (``brachycal.io``): all or nothing, never clobbered, claimed, no NaN in JSON."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from brachycal.errors import OutputError
-from brachycal.files import OutputSet, atomic_open, atomic_path, json_text, staged_destination, write_json
+from brachycal.io import OutputSet, atomic_open, atomic_path, json_text, staged_destination, write_json
 
 
 def listing(folder: Path) -> list[str]:

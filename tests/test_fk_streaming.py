@@ -14,11 +14,11 @@ import pytest
 from conftest import random_configurations
 from hostile import Case, check_refusal, run_cli
 
-from brachycal.data import bags as bags_module
-from brachycal.data import csv_log as csv_module
 from brachycal.data import read_csv_log, read_pose_table, write_bag_log
-from brachycal.data.bags import bag_log_blocks, read_bag_log
-from brachycal.data.csv_log import csv_log_blocks
+from brachycal.data.formats import bags as bags_module
+from brachycal.data.formats import csv_log as csv_module
+from brachycal.data.formats.bags import bag_log_blocks, read_bag_log
+from brachycal.data.formats.csv_log import csv_log_blocks
 from brachycal.data.pose_table import PoseTableWriter, continuous_signs, format_fixed
 from brachycal.se3 import make_transform
 

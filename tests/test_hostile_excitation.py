@@ -1,4 +1,4 @@
-"""Hostile input to the excitation poses: ``brachycal plan --excitation`` and ``brachycal design
+"""Hostile input to the excitation poses: ``brachycal plan excitation`` and ``brachycal design
 --robot-error`` refuse each with one line naming the option or file, exit code 2, nothing written."""
 
 from __future__ import annotations
@@ -8,11 +8,11 @@ from conftest import ROOT
 from hostile import Case, check_refusal
 
 SESSION = ROOT / "examples" / "twin_session"
-EXCITE = ["plan", "--excitation", str(SESSION), "--out", "{tmp}/excitation.csv", "--quiet"]
+EXCITE = ["plan", "excitation", str(SESSION), "--out", "{tmp}/excitation.csv", "--quiet"]
 DESIGN = ["design", "--out", "{tmp}/design", "--robot-error", "real-arm", "--quiet"]
 
 CASES = [
-    Case("missing-session", ["plan", "--excitation", "{tmp}/nowhere", "--out", "{tmp}/x.csv"], ("nowhere",)),
+    Case("missing-session", ["plan", "excitation", "{tmp}/nowhere", "--out", "{tmp}/x.csv"], ("nowhere",)),
     Case("zero-budget", [*EXCITE, "--excitation-minutes", "0"], ("--excitation-minutes",)),
     Case("negative-budget", [*EXCITE, "--excitation-minutes", "-5"], ("--excitation-minutes",)),
     Case("absurd-budget", [*EXCITE, "--excitation-minutes", "1e6"], ("--excitation-minutes",)),
@@ -25,7 +25,9 @@ CASES = [
     Case("design-unknown-level", [*DESIGN[:3], "--robot-error", "rusty"], ("--robot-error",)),
     Case("design-robot-without-torso", [*DESIGN, "--robot", "baxter"], ("baxter", "shared", "held-out")),
     Case(
-        "accuracy-without-excitation", ["plan", "--out", "{tmp}/p.csv", "--robot-accuracy-mm", "0.1"], ("--excitation",)
+        "accuracy-without-excitation",
+        ["plan", "--out", "{tmp}/p.csv", "--robot-accuracy-mm", "0.1"],
+        ("--robot-accuracy-mm",),
     ),
 ]
 

@@ -44,6 +44,7 @@ USES = [
     ("verify-result", "verify {bad} {session} --out {tmp}/r.json"),
     ("plan-result", "plan --result {bad} --out {tmp}/p.csv"),
     ("plan-robot", "plan --robot {bad} --out {tmp}/p.csv"),
+    ("plan-check-result", "plan check --result {bad} --out {tmp}/p.csv"),
     ("fk-log", "fk {bad} --frames needle_tip --out {tmp}/p.csv --quiet"),
     ("fk-times", "fk {examples}/joint_log.csv --frames needle_tip --times {bad} --out {tmp}/p.csv --quiet"),
     ("pivot-poses", "pivot {bad} --out {tmp}/p.json"),
@@ -150,10 +151,11 @@ def test_a_non_regular_input_file_is_refused_at_once(case, tmp_path, inputs):
 def test_every_command_that_reads_a_file_is_in_the_table():
     """A new command (or input option) gets its rows here: every command of ``brachycal --help``
     that names an input file is used by some row."""
-    from brachycal.cli.main import COMMANDS
+    from brachycal.cli.main import COMMANDS, TWO_WORD_COMMANDS
 
-    used = {command.split()[0] if not command.startswith("nwire segment") else "nwire-segment" for _, command in USES}
-    without_input_files = {"demo", "model", "study", "design", "examples"}
+    used = {TWO_WORD_COMMANDS.get(tuple(command.split()[:2]), command.split()[0]) for _, command in USES}
+    # plan excitation reads a session folder (its refusals: tests/test_hostile_excitation.py)
+    without_input_files = {"demo", "model", "study", "design", "examples", "plan-excitation"}
     assert set(COMMANDS) - without_input_files - {"session"} <= used | {"session"}
     assert "session" in {command.split()[0] for _, command in USES}
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from hostile import Case, check_refusal
 
-from brachycal.data.metaimage import write_image_sequence
+from brachycal.data.formats.metaimage import write_image_sequence
 
 IDENTITY = "1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1"
 WIRES = """

@@ -16,7 +16,7 @@ from test_wedge_phantom import exact_session as wedge_session
 from test_wire_phantom import exact_session as wire_session
 
 from brachycal.calibration import read_wedge_phantom, read_wire_phantom, write_phantom_observations
-from brachycal.files import bundled
+from brachycal.io import bundled
 
 WIRE = ["phantom", "--method", "wire", "{tmp}/geometry.toml", "{tmp}/obs.csv", "--out", "{tmp}/out.json"]
 WEDGE = ["phantom", "--method", "wedge", "{tmp}/geometry.toml", "{tmp}/obs.csv", "--out", "{tmp}/out.json"]

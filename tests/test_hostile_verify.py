@@ -1,4 +1,4 @@
-"""Hostile inputs to ``brachycal verify`` and ``brachycal plan --verify``: each refused as every
+"""Hostile inputs to ``brachycal verify`` and ``brachycal plan check``: each refused as every
 refusal must be (:func:`hostile.check_refusal`): exit code 2, one line naming the file, row,
 column or option, nothing written."""
 
@@ -159,16 +159,14 @@ CASES = [
         ("samples.csv", "SHA-256"),
         copy_result(recorded_inputs),
     ),
-    Case("verify-poses-without-verify", ["plan", "--out", "{tmp}/p.csv", "--verify-poses", "6"], ("--verify",)),
-    Case(
-        "verify-poses-too-few", ["plan", "--verify", "--out", "{tmp}/p.csv", "--verify-poses", "2"], ("--verify-poses",)
-    ),
+    Case("poses-without-check", ["plan", "--out", "{tmp}/p.csv", "--poses", "6"], ("--poses",)),
+    Case("check-poses-too-few", ["plan", "check", "--out", "{tmp}/p.csv", "--poses", "2"], ("--poses",)),
     Case(
         "verify-and-excitation",
-        ["plan", "--verify", "--excitation", "{check}", "--out", "{tmp}/p.csv"],
-        ("--verify", "--excitation"),
+        ["plan", "check", "--excitation", "{check}", "--out", "{tmp}/p.csv"],
+        ("--excitation",),
     ),
-    Case("verify-with-figure", ["plan", "--verify", "--figure", "{tmp}/f.png", "--out", "{tmp}/p.csv"], ("--figure",)),
+    Case("check-with-figure", ["plan", "check", "--figure", "{tmp}/f.png", "--out", "{tmp}/p.csv"], ("--figure",)),
 ]
 
 

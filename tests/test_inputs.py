@@ -109,10 +109,10 @@ RAW_READ = re.compile(
 NOT_INPUTS = {
     ("_lazy.py", "read_text"): "brachycal's own source",
     ("reporting/html_report.py", "read_bytes"): "a figure this command just staged",
-    ("simulation/example_files.py", "read_text"): "bundled data",
+    ("studies/example_files.py", "read_text"): "bundled data",
     ("model/robot.py", "trimesh.load("): "a mesh checked by check_input_file first",
     ("export/formats.py", 'with open(os.path.join(share, "urdf"'): "text of a generated launch file",
-    ("data/bag_records.py", "reader.open()"): "rosbags, after _check_bag_files",
+    ("data/formats/bag_records.py", "reader.open()"): "rosbags, after _check_bag_files",
 }
 
 

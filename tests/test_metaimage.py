@@ -10,8 +10,8 @@ import pytest
 from conftest import reference
 
 from brachycal import InputError
-from brachycal.data.metaimage import read_image_sequence, read_sequence_header, write_image_sequence
-from brachycal.data.plus_files import sequence_transform
+from brachycal.data.formats.metaimage import read_image_sequence, read_sequence_header, write_image_sequence
+from brachycal.data.formats.plus_files import sequence_transform
 
 
 def _frames(dtype: str, shape: tuple[int, int, int] = (3, 5, 7)) -> np.ndarray:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from brachycal.cli.main import main
-from brachycal.data.metaimage import write_image_sequence
+from brachycal.data.formats.metaimage import write_image_sequence
 from brachycal.data.recording import read_images
 from brachycal.errors import InputError
 from brachycal.imaging.needle_tip import MIN_CONFIDENCE, detect_tip
@@ -87,7 +87,7 @@ def test_brachycal_tips_writes_an_images_csv_the_session_build_reads(tmp_path, c
 
 
 def test_the_twins_recording_renders_its_frames_and_tips_proposes_their_annotations(tmp_path, capsys):
-    from brachycal.data.csv_log import read_table
+    from brachycal.data.formats.csv_log import read_table
     from brachycal.model import Robot
     from brachycal.planning import PlanSpec
     from brachycal.simulation.bmode import true_tip_px

@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 
 from brachycal.cli.common import output_file
 from brachycal.data import read_times
-from brachycal.data.csv_log import TRUNCATED, csv_log_blocks, read_table, to_float
+from brachycal.data.formats.csv_log import TRUNCATED, csv_log_blocks, read_table, to_float
 from brachycal.data.pose_list import read_pose_list
 from brachycal.errors import InputError
 from brachycal.validate import (

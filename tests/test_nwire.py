@@ -12,8 +12,8 @@ from conftest import reference
 from scipy.spatial.transform import Rotation
 
 from brachycal import InputError
-from brachycal.calibration.hand_eye import hand_eye
-from brachycal.calibration.nwire import (
+from brachycal.calibration.phantom.hand_eye import hand_eye
+from brachycal.calibration.phantom.nwire import (
     best_fraction,
     calibrate_nwire,
     fit_affine,
@@ -23,14 +23,14 @@ from brachycal.calibration.nwire import (
     wire_point_pairs,
 )
 from brachycal.cli.main import main
-from brachycal.data.metaimage import read_sequence_header
-from brachycal.data.plus_files import (
+from brachycal.data.formats.metaimage import read_sequence_header
+from brachycal.data.formats.plus_files import (
     read_plus_config,
     read_segmented_frames,
     sequence_transform,
 )
 from brachycal.se3 import inverse, make_transform
-from brachycal.simulation.nwire_twin import NWireSimConfig, simulate_nwire
+from brachycal.studies.nwire_twin import NWireSimConfig, simulate_nwire
 
 
 def plus(name: str) -> Path:

@@ -16,7 +16,7 @@ import pytest
 from conftest import reference
 
 from brachycal import InputError
-from brachycal.data.plus_files import PlusOptimization, read_coordinate_definitions, read_plus_config
+from brachycal.data.formats.plus_files import PlusOptimization, read_coordinate_definitions, read_plus_config
 from brachycal.se3 import inverse
 
 # fCal 1.2-like phantom: three N patterns (mm, phantom frame).

@@ -17,9 +17,9 @@ from conftest import reference
 from scipy.spatial.transform import Rotation
 
 from brachycal.calibration.metrics import ErrorStats
-from brachycal.calibration.nwire import best_fraction, calibrate_nwire, fit_affine, wire_point_pairs
-from brachycal.calibration.nwire_file import NWIRE_MODELS, nwire_from_files, read_nwire
-from brachycal.calibration.nwire_refine import (
+from brachycal.calibration.phantom.nwire import best_fraction, calibrate_nwire, fit_affine, wire_point_pairs
+from brachycal.calibration.phantom.nwire_file import NWIRE_MODELS, nwire_from_files, read_nwire
+from brachycal.calibration.phantom.nwire_refine import (
     PLUS_NAMES,
     REFINEMENTS,
     errors_2d,
@@ -30,10 +30,10 @@ from brachycal.calibration.nwire_refine import (
     refine_all,
 )
 from brachycal.cli.main import main
-from brachycal.data.plus_files import read_coordinate_definitions, read_plus_config, read_segmented_frames
+from brachycal.data.formats.plus_files import read_coordinate_definitions, read_plus_config, read_segmented_frames
 from brachycal.errors import DegenerateDataError
 from brachycal.se3 import make_transform
-from brachycal.simulation.nwire_twin import NWireSimConfig, simulate_nwire
+from brachycal.studies.nwire_twin import NWireSimConfig, simulate_nwire
 
 SPACING_M = np.array([0.19e-3, 0.183e-3])
 T_MARKER_IMAGE = make_transform(Rotation.from_euler("xyz", [80, -5, 3], degrees=True).as_matrix(), [0.02, -0.01, 0.03])

@@ -18,10 +18,10 @@ import pytest
 from conftest import reference
 
 from brachycal.cli.main import main
-from brachycal.data.metaimage import read_image_sequence, write_image_sequence
-from brachycal.data.plus_files import Wire, read_plus_config, read_segmented_frames
-from brachycal.data.plus_segmentation import read_segmentation_parameters
-from brachycal.data.plus_segmented_xml import write_segmented_frames
+from brachycal.data.formats.metaimage import read_image_sequence, write_image_sequence
+from brachycal.data.formats.plus_files import Wire, read_plus_config, read_segmented_frames
+from brachycal.data.formats.plus_segmentation import read_segmentation_parameters
+from brachycal.data.formats.plus_segmented_xml import write_segmented_frames
 from brachycal.errors import InputError
 from brachycal.imaging import (
     NWireSegmentationParameters,
@@ -256,7 +256,7 @@ def test_nwire_from_rendered_sequences_matches_nwire_from_their_points(tmp_path)
     orientation (the twin's image is PLUS's MF mirrored left to right: UF)."""
     from conftest import ROOT
 
-    from brachycal.calibration.nwire_file import read_nwire
+    from brachycal.calibration.phantom.nwire_file import read_nwire
 
     config = ROOT / "examples" / "nwire" / "PlusDeviceSet_twin_fCal2.xml"
     calibration, validation = read_segmented_frames(ROOT / "examples" / "nwire" / "twin_segmented_frames.xml")

@@ -13,9 +13,10 @@ from scipy.spatial.transform import Rotation
 from brachycal.imaging.pixels import image_points
 from brachycal.model import Robot
 from brachycal.se3 import make_transform, transform_points
-from brachycal.simulation import NWireSimConfig, TwinConfig, phantom_route, simulate, simulate_phantom, table3
-from brachycal.simulation.demo import TABLE3_IMAGE, TABLE3_PAPER, table3_text
-from brachycal.simulation.phantom_twin import calibrate_session
+from brachycal.simulation import TwinConfig, simulate
+from brachycal.studies import NWireSimConfig, phantom_route, simulate_phantom, table3
+from brachycal.studies.demo import TABLE3_IMAGE, TABLE3_PAPER, table3_text
+from brachycal.studies.phantom_twin import calibrate_session
 
 T_MARKER_IMAGE = make_transform(Rotation.from_euler("xyz", [30, -80, 10], degrees=True).as_matrix(), [0.02, 0.01, 0.12])
 SPACING_M = np.array([0.19e-3, 0.19e-3 * 1480 / 1540])
@@ -57,7 +58,7 @@ def test_each_error_source_moves_the_fit_and_the_prediction_covers_segmentation_
 
 
 def test_the_phantom_routes_on_the_twin_share_the_n_wire_hand_eye_and_land_near_the_truth():
-    from brachycal.simulation import tracker_route
+    from brachycal.studies import tracker_route
 
     t = twin()
     sim = NWireSimConfig(seed=0)

@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 
 from brachycal import InputError
 from brachycal.calibration import pivot_algebraic, pivot_robust
-from brachycal.calibration.pivot import WARN_GAIN
+from brachycal.calibration.phantom.pivot import WARN_GAIN
 from brachycal.cli.main import main
 from brachycal.data.pose_list import read_pose_list
 from brachycal.errors import ConditioningWarning

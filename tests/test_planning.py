@@ -159,7 +159,7 @@ def test_a_point_whose_qp_fails_is_listed_as_solver_and_the_plan_is_refused(tmp_
     # A start 1 rad past the left shoulder's limit makes every point's first QP infeasible (a real
     # daqp failure): each point is listed with the reason "solver" and the solver's one-line
     # message, the plan is refused with one line on stderr, and nothing is written.
-    from brachycal.model.description import Rig
+    from brachycal.model.rig import Rig
 
     k = robot.joint_names.index("arm_left_joint_1_s")
     start = robot.rig.ready  # planning starts from the rig's ready stance

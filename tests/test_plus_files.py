@@ -16,9 +16,9 @@ import pytest
 from conftest import REFERENCE, reference
 
 from brachycal import InputError
-from brachycal.calibration.nwire import best_fraction, calibrate_nwire, reprojection_errors, wire_point_pairs
-from brachycal.data.metaimage import read_sequence_header
-from brachycal.data.plus_files import (
+from brachycal.calibration.phantom.nwire import best_fraction, calibrate_nwire, reprojection_errors, wire_point_pairs
+from brachycal.data.formats.metaimage import read_sequence_header
+from brachycal.data.formats.plus_files import (
     NWIRE_RIGID_TOLERANCE,
     TRACKER_RIGID_TOLERANCE,
     read_coordinate_definitions,

@@ -2,7 +2,7 @@
 notebooks and the library itself reach only for it.
 
 Public means: ``brachycal``, its subpackages (``brachycal.calibration``, ...) and its foundation
-modules (``brachycal.se3``, ``.errors``, ``.files``, ``.validate``), and of those only the names in
+modules (``brachycal.se3``, ``.errors``, ``.io``, ``.validate``), and of those only the names in
 their ``__all__`` (or, where a module has none, names without a leading underscore). The modules
 inside the subpackages are implementation; ``brachycal.cli.main`` is the command's entry point.
 """
@@ -25,7 +25,7 @@ import brachycal
 ROOT = Path(__file__).parents[1]
 SOURCE = ROOT / "src" / "brachycal"
 SUBPACKAGES = sorted(info.name for info in pkgutil.iter_modules([str(SOURCE)]) if info.ispkg and info.name != "cli")
-FOUNDATIONS = ("errors", "files", "se3", "validate")
+FOUNDATIONS = ("errors", "io", "se3", "validate")
 #: Besides the public namespaces: the command's entry point (a notebook runs the command in-process).
 ENTRY_POINTS = {"brachycal.cli.main": {"main"}}
 
@@ -54,9 +54,17 @@ def test_every_exported_name_resolves_and_is_documented(package):
 
 
 def test_every_subpackage_has_an_explicit_public_api():
-    assert {"calibration", "data", "export", "imaging", "model", "planning", "reporting", "simulation"} <= set(
-        SUBPACKAGES
-    )
+    assert {
+        "calibration",
+        "data",
+        "export",
+        "imaging",
+        "model",
+        "planning",
+        "reporting",
+        "simulation",
+        "studies",
+    } <= set(SUBPACKAGES)
     for package in SUBPACKAGES:
         assert isinstance(importlib.import_module(f"brachycal.{package}").__all__, list)
     assert (SOURCE / "py.typed").is_file()  # type checkers read the hints of an installed brachycal

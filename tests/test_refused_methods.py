@@ -27,7 +27,7 @@ import pytest
 from hostile import Case, check_refusal, run_cli
 
 from brachycal.calibration import calibrate, read_result
-from brachycal.calibration.sequential import SequentialPlan
+from brachycal.calibration.sequential.method import SequentialPlan
 from brachycal.data.session import write_session
 from brachycal.errors import DegenerateDataError, InputError
 from brachycal.model import Robot
@@ -292,7 +292,7 @@ def test_locate_without_method_uses_a_method_that_was_not_refused(tmp_path):
 
 
 def test_a_study_run_records_icp_refused_and_judges_the_others(twin, monkeypatch):
-    from brachycal.simulation import study
+    from brachycal.studies import study
 
     monkeypatch.setattr(study, "simulate", lambda nominal, config: twin)
     params = study.sweep(1, [4], [50.0], [1.0], methods=("icp", "kabsch"), targets=5)[0]
@@ -305,7 +305,7 @@ def test_a_study_run_records_icp_refused_and_judges_the_others(twin, monkeypatch
 
 
 def test_a_study_run_whose_every_method_refuses_is_rows_saying_why(twin, monkeypatch):
-    from brachycal.simulation import study
+    from brachycal.studies import study
 
     monkeypatch.setattr(study, "simulate", lambda nominal, config: twin)
     params = study.sweep(1, [4], [50.0], [1.0], methods=("icp",), targets=5)[0]
@@ -316,7 +316,7 @@ def test_a_study_run_whose_every_method_refuses_is_rows_saying_why(twin, monkeyp
 
 def test_the_demo_leaves_a_refused_icp_out_of_its_targeting_and_figures(twin, monkeypatch, tmp_path):
     from brachycal.reporting import demo_text, write_demo_report
-    from brachycal.simulation import demo
+    from brachycal.studies import demo
 
     monkeypatch.setattr(demo, "simulate", lambda nominal, config: twin)
     run = demo.run_demo(_robot(), tmp_path / "demo", n_targets=5)

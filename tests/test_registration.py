@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from brachycal import InputError
-from brachycal.calibration import registration
+from brachycal.calibration.sequential import registration
 from brachycal.se3 import inverse, is_rigid, make_transform, transform_points
 
 seeds = st.integers(0, 2**32 - 1)

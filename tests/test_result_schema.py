@@ -1,4 +1,4 @@
-"""The ``brachycal-result/1`` schema (``calibration/result_schema.py``) and the bounded JSON reader.
+"""The ``brachycal-result/1`` schema (``calibration/session/result_schema.py``) and the bounded JSON reader.
 
 Every result the writer produces passes it and reads back to the numbers it holds; a single number
 anywhere made NaN, or made a string where the writer puts a number, is refused naming its place.

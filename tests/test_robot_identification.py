@@ -11,20 +11,20 @@ import pytest
 
 from brachycal.calibration import calibrate
 from brachycal.calibration.chain import ChainData, RobotAccuracy, fit_chain, joint_twists
-from brachycal.calibration.image_to_probe import ImageCalibration
-from brachycal.calibration.result_file import StoredCalibration
-from brachycal.calibration.robot_identification import (
+from brachycal.calibration.result import ImageCalibration
+from brachycal.calibration.robot.identification import (
     COMPONENTS,
     corrected_robot,
     cross_validate_identification,
     identify_robot,
 )
+from brachycal.calibration.session.result_file import StoredCalibration
 from brachycal.errors import InputError
 from brachycal.model.names import LEFT_FLANGE, RIGHT_FLANGE
 from brachycal.model.robot import Robot
 from brachycal.se3 import transform_points
-from brachycal.simulation.targeting import targeting_error
 from brachycal.simulation.twin import ROBOT_ERROR_LEVELS, TwinConfig, simulate
+from brachycal.studies.targeting import targeting_error
 
 
 @pytest.fixture(scope="module")

@@ -9,8 +9,8 @@ import pytest
 
 from brachycal.calibration import METHODS, calibrate, read_result, write_result
 from brachycal.calibration.metrics import ErrorStats
-from brachycal.calibration.sequential import locate
-from brachycal.calibration.tool_rotation import tool_rotation
+from brachycal.calibration.sequential.method import locate
+from brachycal.calibration.sequential.tool_rotation import tool_rotation
 from brachycal.errors import ConditioningWarning, InputError
 from brachycal.se3 import is_rigid, make_transform, transform_points
 from brachycal.simulation import default_truth, exact_session
@@ -158,7 +158,7 @@ def test_icp_folds_started_from_the_all_sample_fit_equal_a_fresh_global_start(ro
     # run the same computation, so they agree to rounding (1e-12 m, far below the 1e-9 m of results).
     from dataclasses import replace
 
-    from brachycal.calibration import image_to_probe
+    from brachycal.calibration.sequential import image_to_probe
     from brachycal.model.names import LEFT_FLANGE, RIGHT_FLANGE, US_IMAGE
 
     rng = np.random.default_rng(7)

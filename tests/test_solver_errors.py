@@ -17,10 +17,11 @@ from brachycal.model.ik import solve_ik
 from brachycal.model.names import NEEDLE_TIP, US_IMAGE
 from brachycal.planning import READY, DualArmIK, PlanSpec
 from brachycal.se3 import make_transform
-from brachycal.simulation import exact, nwire_twin, targeting
+from brachycal.simulation import exact
 from brachycal.simulation.exact import RIGHT
-from brachycal.simulation.nwire_twin import NWireSimConfig, tracker_route
 from brachycal.simulation.twin import TwinConfig, simulate
+from brachycal.studies import nwire_twin, targeting
+from brachycal.studies.nwire_twin import NWireSimConfig, tracker_route
 
 Q_HOME = np.zeros(15)
 
@@ -87,7 +88,7 @@ def _hand_eye(robot, twin):
 
 
 def _true_image(twin):
-    from brachycal.calibration.image_to_probe import ImageCalibration
+    from brachycal.calibration.result import ImageCalibration
 
     return ImageCalibration("truth", twin.truth.T_Ptip_I, twin.truth.spacing_m)
 

@@ -45,6 +45,8 @@ COMMANDS = [
     "model",
     "fk",
     "plan",
+    "plan check",
+    "plan excitation",
     "session build",
     "calibrate",
     "locate",
@@ -94,11 +96,11 @@ def test_the_full_parser_of_the_command_named_is_built_and_only_its():
 
 
 def test_a_lazily_exported_name_is_the_object_even_next_to_a_submodule_of_that_name():
-    # calibration.hand_eye is a function that lives in the module calibration/hand_eye.py; loading
-    # the module first (as the chain does) must not turn the exported name into the module.
+    # reporting.contact_sheet is a function that lives in the module reporting/contact_sheet.py;
+    # loading the module first must not turn the exported name into the module.
     kind = fresh(
-        "import json, brachycal.calibration.hand_eye, brachycal.calibration as c\n"
-        "print(json.dumps([callable(c.hand_eye), type(c.hand_eye).__name__]))"
+        "import json, brachycal.reporting.contact_sheet, brachycal.reporting as r\n"
+        "print(json.dumps([callable(r.contact_sheet), type(r.contact_sheet).__name__]))"
     )
     assert kind == [True, "function"]
 

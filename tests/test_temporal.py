@@ -17,7 +17,7 @@ from tank_recording import write_tank_recording
 
 from brachycal.calibration import estimate_lag, lag_from_plus_files, principal_motion
 from brachycal.calibration.temporal import DEFAULT_RESOLUTION_S, LagEstimate
-from brachycal.data.metaimage import write_image_sequence
+from brachycal.data.formats.metaimage import write_image_sequence
 from brachycal.errors import DegenerateDataError
 from brachycal.imaging import find_tank_line
 

@@ -13,10 +13,10 @@ from conftest import ROOT, assert_same_files, assert_same_numbers
 
 from brachycal.calibration import METHODS, calibrate
 from brachycal.cli.main import main
-from brachycal.simulation.study import run_study, sweep
-from brachycal.simulation.targeting import targeting_error
 from brachycal.simulation.twin import TwinConfig, simulate
 from brachycal.simulation.twin_files import read_twin, write_twin
+from brachycal.studies.study import run_study, sweep
+from brachycal.studies.targeting import targeting_error
 
 
 @pytest.fixture(scope="module")
@@ -188,7 +188,7 @@ TRACKER_ROUTE_MAE_MM = (0.486, 0.129)
 
 
 def test_tracker_route_is_exact_without_noise(robot):
-    from brachycal.simulation.nwire_twin import T_PTIP_MARKER, NWireSimConfig, tracker_route
+    from brachycal.studies.nwire_twin import T_PTIP_MARKER, NWireSimConfig, tracker_route
 
     twin = simulate(robot, TwinConfig(seed=0).without_noise())
     route = tracker_route(twin, NWireSimConfig().without_noise())
@@ -199,7 +199,7 @@ def test_tracker_route_is_exact_without_noise(robot):
 
 
 def test_each_tracker_route_error_source_has_its_own_switch_and_stream():
-    from brachycal.simulation.nwire_twin import T_PTIP_MARKER, NWireSimConfig, simulate_nwire
+    from brachycal.studies.nwire_twin import T_PTIP_MARKER, NWireSimConfig, simulate_nwire
 
     def frames(**changes):
         sim = replace(NWireSimConfig(seed=1, calibration_frames=10, validation_frames=0), **changes)
@@ -224,7 +224,7 @@ def test_each_tracker_route_error_source_has_its_own_switch_and_stream():
 def test_frame_averaging_divides_the_tracker_jitter_by_sqrt_frames_and_leaves_its_error_field(robot):
     from scipy.spatial.transform import Rotation
 
-    from brachycal.simulation.nwire_twin import T_PTIP_MARKER, NWireSimConfig, tracker_route
+    from brachycal.studies.nwire_twin import T_PTIP_MARKER, NWireSimConfig, tracker_route
 
     twin = simulate(robot, TwinConfig(seed=0).without_noise())
     true_marker = twin.truth.T_EL_Ptip @ T_PTIP_MARKER
@@ -247,7 +247,7 @@ def test_frame_averaging_divides_the_tracker_jitter_by_sqrt_frames_and_leaves_it
 
 
 def test_tracker_route_lands_where_the_benchmark_says_and_behind_the_scale_aware_fit(robot):
-    from brachycal.simulation.nwire_twin import NWireSimConfig, tracker_route
+    from brachycal.studies.nwire_twin import NWireSimConfig, tracker_route
 
     tracker, fused = [], []
     for seed in range(3):

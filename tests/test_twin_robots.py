@@ -15,16 +15,17 @@ from hostile import Case, check_refusal
 
 from brachycal.calibration import METHODS, calibrate
 from brachycal.calibration.chain import fit_chain
-from brachycal.calibration.uncertainty import landing_covariance
+from brachycal.calibration.chain.uncertainty import landing_covariance
 from brachycal.cli.main import main
 from brachycal.errors import InputError
-from brachycal.model.description import BUNDLED_ROBOTS, bundled_description_path, load_description
+from brachycal.model.description import BUNDLED_ROBOTS, load_description
+from brachycal.model.description_file import bundled_description_path
 from brachycal.planning import PlanSpec
 from brachycal.simulation import exact
-from brachycal.simulation.study import RunParams, run_one
-from brachycal.simulation.targeting import targeting_error
 from brachycal.simulation.twin import TwinConfig, simulate, spec_for
 from brachycal.simulation.twin_files import read_twin
+from brachycal.studies.study import RunParams, run_one
+from brachycal.studies.targeting import targeting_error
 
 #: A noise-free calibration returns the truth up to the twin's own IK tolerance (tools placed to
 #: 1e-12 m) amplified by the fits' conditioning: measured at most 3e-11 m / rad on the three robots.
@@ -35,7 +36,7 @@ EXACT_TOLERANCE = 1e-9
 EXACT_LANDING_MM = 1e-6
 #: The default twin's RMS landing error against the chain fit's own prediction (the landing
 #: covariance propagated from its parameter covariance, the robot's stated accuracy and the
-#: encoder noise: :func:`~brachycal.calibration.uncertainty.landing_covariance`). One session's
+#: encoder noise: :func:`~brachycal.calibration.chain.uncertainty.landing_covariance`). One session's
 #: targets share one draw of the robot's error, so the RMS over them behaves like the length of a
 #: single 3-D Gaussian draw: beyond 3 times its predicted RMS with probability below 0.3 % (all the
 #: variance along one axis, the worst case: P(χ²₁ > 9)). Measured ratios: 1.03 (SDA10F), 0.87

@@ -18,10 +18,10 @@ import pytest
 from brachycal.errors import InputError
 from brachycal.model.collision import ClearanceChecker, collision_link_pairs
 from brachycal.planning import IKSettings, PlanSpec, PoseVerifier, RectFOV, SectorFOV, Thresholds, plan_poses
-from brachycal.planning.verify import MIN_JOINT_MARGIN_RAD
-from brachycal.simulation.study import RunParams, run_study, sweep
-from brachycal.simulation.targeting import targeting_error
+from brachycal.planning.pose_checks import MIN_JOINT_MARGIN_RAD
 from brachycal.simulation.twin import TwinConfig
+from brachycal.studies.study import RunParams, run_study, sweep
+from brachycal.studies.targeting import targeting_error
 from brachycal.validate import (
     MAX_IMAGE_PX,
     SEED_LIMIT,

@@ -1,7 +1,7 @@
-"""The check before each procedure: ``brachycal plan --verify`` and ``brachycal verify``.
+"""The check before each procedure: ``brachycal plan check`` and ``brachycal verify``.
 
 A twin session (seed 0) is calibrated with the whole chain once; check sessions are recorded on
-it at the check poses, unchanged or after one part moved (:mod:`brachycal.simulation.check_twin`).
+it at the check poses, unchanged or after one part moved (:mod:`brachycal.studies.check_twin`).
 The false-alarm and detection rates over seeds are the benchmark's (``benchmarks/verify_check.py``);
 here each outcome is a specification on fixed noise draws.
 """
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from hostile import run_cli
 
-from brachycal.calibration.check import (
+from brachycal.calibration.verify.check import (
     DEFAULT_FALSE_ALARM,
     GROSS_PRIOR_MULTIPLES,
     PARTS,
@@ -28,12 +28,12 @@ from brachycal.calibration.check import (
     verdict_text,
 )
 from brachycal.model import Robot
-from brachycal.planning.check_plan import DEFAULT_CHECK_POSES, DEFAULT_TOUCHES, SECONDS_PER_TOUCH, TOUCH_CHOICES
+from brachycal.planning.check_poses import DEFAULT_CHECK_POSES, DEFAULT_TOUCHES, SECONDS_PER_TOUCH, TOUCH_CHOICES
 from brachycal.se3 import FloatArray
-from brachycal.simulation.check_twin import CHANGES, CalibratedTwin, changed_setup, record_check, write_check_session
+from brachycal.studies.check_twin import CHANGES, CalibratedTwin, changed_setup, record_check, write_check_session
 
 REMOUNT = "probe remounted 1 mm / 1 deg"
-#: Single touches in the default check (plan --verify).
+#: Single touches in the default check (plan check).
 DEFAULT_TOUCH_COUNT = len(TOUCH_CHOICES[DEFAULT_TOUCHES])
 
 
@@ -193,7 +193,7 @@ def test_the_size_of_a_remount_is_measured(calibrated):
 
 
 def test_without_a_probe_touch_a_remount_and_an_image_change_are_named_together(calibrated):
-    from brachycal.calibration.check import verdict_text
+    from brachycal.calibration.verify.check import verdict_text
 
     _, outcome = check(calibrated, REMOUNT, touches="none")
     assert outcome.verdict == "RECALIBRATE"
@@ -221,7 +221,7 @@ def test_with_the_probe_touch_alone_a_remount_is_told_from_an_image_change(calib
 
 
 def test_the_default_check_takes_under_two_minutes_and_both_touches_more(calibrated):
-    from brachycal.planning.check_plan import SECONDS_PER_SAMPLE, plan_check
+    from brachycal.planning.check_poses import SECONDS_PER_SAMPLE, plan_check
 
     full = calibrated.check_plan.plan  # the default check's eight poses: the pick keeps them all
     image = calibrated.stored.image[calibrated.method]
@@ -346,7 +346,7 @@ def test_verify_exits_1_on_recalibrate_naming_the_part(check_folders, tmp_path):
 
 def test_plan_verify_writes_a_plan_of_the_check_poses(tmp_path):
     out = tmp_path / "check_plan.csv"
-    outcome = run_cli(["plan", "--verify", "--out", str(out), "--quiet"])
+    outcome = run_cli(["plan", "check", "--out", str(out), "--quiet"])
     assert outcome.code == 0, outcome.err
     lines = out.read_text().splitlines()
     assert lines[0].startswith("order,point,i,j,k,x,y,z,u_px,v_px")
@@ -357,20 +357,28 @@ def test_plan_verify_writes_a_plan_of_the_check_poses(tmp_path):
 
 def test_plan_verify_states_the_robot_time_of_its_touches(tmp_path):
     out = tmp_path / "check_plan.csv"
-    outcome = run_cli(["plan", "--verify", "--out", str(out), "--quiet"])
+    outcome = run_cli(["plan", "check", "--out", str(out), "--quiet"])
     assert outcome.code == 0, outcome.err
     assert len(out.read_text().splitlines()) == 1 + DEFAULT_CHECK_POSES
     assert "1 touch x 30 s (probe on rtip1) = 1.9 min" in outcome.out
-    outcome = run_cli(["plan", "--verify", "--verify-touches", "both", "--out", str(out), "--quiet", "--force"])
+    outcome = run_cli(["plan", "check", "--touches", "both", "--out", str(out), "--quiet", "--force"])
     assert outcome.code == 0, outcome.err
     assert "2 touches x 30 s" in outcome.out and "= 2.4 min" in outcome.out
 
 
-def test_verify_touches_goes_with_verify(tmp_path):
-    outcome = run_cli(["plan", "--verify-touches", "probe", "--out", str(tmp_path / "plan.csv")])
+def test_the_check_options_belong_to_plan_check(tmp_path):
+    outcome = run_cli(["plan", "--touches", "probe", "--out", str(tmp_path / "plan.csv")])
     assert outcome.code == 2
-    assert "--verify-touches goes with --verify" in outcome.err
+    assert "--touches" in outcome.err and len(outcome.err.splitlines()) == 1
     assert not any(tmp_path.iterdir())
+
+
+def test_the_earlier_spelling_plan_verify_runs_plan_check_with_a_note(tmp_path):
+    out = tmp_path / "check_plan.csv"
+    outcome = run_cli(["plan", "--verify", "--verify-touches", "none", "--out", str(out), "--quiet"])
+    assert outcome.code == 0, outcome.err
+    assert outcome.err.splitlines()[0].startswith("brachycal: note: 'plan --verify' is now 'plan check'")
+    assert "0 touches" in outcome.out and len(out.read_text().splitlines()) == 1 + DEFAULT_CHECK_POSES
 
 
 # --- each check pose's own null SD, from the calibration session ----------------------------------
@@ -379,7 +387,7 @@ def test_verify_touches_goes_with_verify(tmp_path):
 def test_each_check_pose_takes_its_own_calibration_samples_error(calibrated):
     """With the calibration session, each check pose (a grid pose the calibration visited) gets the
     larger of the average SD and the leave-one-out error the calibration measured at that pose."""
-    from brachycal.calibration.check import chain_model, with_calibration_poses
+    from brachycal.calibration.verify.check import chain_model, with_calibration_poses
 
     session, _ = check(calibrated, "unchanged")
     null = chain_model(calibrated.stored, calibrated.method, calibrated.robot).null
@@ -388,7 +396,7 @@ def test_each_check_pose_takes_its_own_calibration_samples_error(calibrated):
     )
     ids = calibrated.stored.raw["samples"]
     errors_m = np.array(calibrated.stored.raw["loocv"][calibrated.method]["errors_mm"]) * 1e-3
-    assert None not in posed.pose_match  # plan --verify picks grid poses: every one is matched
+    assert None not in posed.pose_match  # plan check picks grid poses: every one is matched
     # Independent of the matching (needle tip and probe flange positions): the matched calibration
     # sample showed the needle tip at the check's planned pixel (1 px annotation noise each; the
     # grid's pixels lie 70 px or more apart).
@@ -405,7 +413,7 @@ def test_each_check_pose_takes_its_own_calibration_samples_error(calibrated):
 
 
 def test_a_check_pose_the_calibration_did_not_visit_keeps_the_average(calibrated):
-    from brachycal.calibration.check import SAME_NEEDLE_TIP_M, chain_model, with_calibration_poses
+    from brachycal.calibration.verify.check import SAME_NEEDLE_TIP_M, chain_model, with_calibration_poses
 
     session, _ = check(calibrated, "unchanged")
     moved = session.samples_q.copy()

@@ -9,7 +9,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from brachycal.calibration.check import (
+from brachycal.calibration.robot_accuracy import RobotAccuracy
+from brachycal.calibration.verify.check import (
     chain_model,
     check_calibration,
     image_axis_scale,
@@ -19,9 +20,8 @@ from brachycal.calibration.check import (
     with_calibration_poses,
     with_robot_accuracy,
 )
-from brachycal.calibration.robot_accuracy import RobotAccuracy
 from brachycal.model import Robot
-from brachycal.simulation.check_twin import CHANGES, CalibratedTwin, TwinSettings, changed_setup, record_check
+from brachycal.studies.check_twin import CHANGES, CalibratedTwin, TwinSettings, changed_setup, record_check
 
 
 @pytest.fixture(scope="module")

@@ -1,5 +1,5 @@
 """``brachycal verify --update``: where one part alone explains a failed check, refit it instead of
-recalibrating — and only then (``brachycal.calibration.check_update``)."""
+recalibrating — and only then (``brachycal.calibration.verify.update``)."""
 
 from __future__ import annotations
 
@@ -11,12 +11,12 @@ import pytest
 from hostile import run_cli
 
 from brachycal.calibration import read_result
-from brachycal.calibration.check import check_calibration
-from brachycal.calibration.check_update import MIN_BAYES_FACTOR, update_refusal, updated_result
-from brachycal.files import write_json
+from brachycal.calibration.verify.check import check_calibration
+from brachycal.calibration.verify.update import MIN_BAYES_FACTOR, update_refusal, updated_result
+from brachycal.io import write_json
 from brachycal.model import Robot
 from brachycal.model.names import PROBE_TIP
-from brachycal.simulation.check_twin import CHANGES, CalibratedTwin, changed_setup, record_check, write_check_session
+from brachycal.studies.check_twin import CHANGES, CalibratedTwin, changed_setup, record_check, write_check_session
 
 REMOUNT = "probe remounted 1 mm / 1 deg"
 
@@ -150,7 +150,7 @@ def test_an_image_update_keeps_the_nominal_spacing_the_next_check_is_held_to(tmp
     is held to; an image update keeps only the checked method (and may change its spacing), so the
     file records the nominal spacing: the confirming check is not refused, and a check at another
     scanner setting still is."""
-    from brachycal.calibration.check import calibrated_nominal_spacing
+    from brachycal.calibration.verify.check import calibrated_nominal_spacing
     from brachycal.errors import InputError
 
     twin = CalibratedTwin(0, Robot.load(None), tmp_path, method="sequential")

@@ -7,21 +7,21 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from brachycal.calibration.phantom_fit import SEGMENTATION_SD_PX
-from brachycal.calibration.wedge_phantom import calibrate_wedge
+from brachycal.calibration.phantom.features import SEGMENTATION_SD_PX
+from brachycal.calibration.phantom.wedge import calibrate_wedge
 from brachycal.errors import InputError
 from brachycal.imaging import find_lines, find_wedge_lines
 from brachycal.se3 import inverse
 from brachycal.simulation.bmode import BModeSettings
-from brachycal.simulation.example_files import NWIRE_SIZE_PX, NWIRE_SPACING_M, NWIRE_T_PROBE_IMAGE
-from brachycal.simulation.nwire_twin import NWireSimConfig
-from brachycal.simulation.phantom_images import (
+from brachycal.studies.example_files import NWIRE_SIZE_PX, NWIRE_SPACING_M, NWIRE_T_PROBE_IMAGE
+from brachycal.studies.nwire_twin import NWireSimConfig
+from brachycal.studies.phantom_images import (
     face_lines_px,
     nominal_face_order,
     render_wedge_frame,
     rendered_wedge_observations,
 )
-from brachycal.simulation.phantom_twin import simulate_phantom
+from brachycal.studies.phantom_twin import simulate_phantom
 
 #: The exact twin: every error source of the tracked session off (the images keep speckle, PSF, beam).
 EXACT = NWireSimConfig(

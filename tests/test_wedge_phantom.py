@@ -16,9 +16,9 @@ from brachycal.calibration import (
     read_wedge_phantom,
     write_phantom_observations,
 )
-from brachycal.calibration.phantom_file import PhantomObservations
-from brachycal.calibration.phantom_fit import SEGMENTATION_SD_PX
-from brachycal.calibration.wedge_phantom import lines_in_image
+from brachycal.calibration.phantom.features import SEGMENTATION_SD_PX
+from brachycal.calibration.phantom.phantom_file import PhantomObservations
+from brachycal.calibration.phantom.wedge import lines_in_image
 from brachycal.errors import DegenerateDataError, InputError
 from brachycal.imaging.pixels import image_points
 from brachycal.se3 import inverse, make_transform, transform_points

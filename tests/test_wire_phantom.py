@@ -9,8 +9,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from brachycal.calibration import calibrate_wire, calibrate_wire_files, read_wire_phantom, write_phantom_observations
-from brachycal.calibration.phantom_file import PhantomObservations
-from brachycal.calibration.phantom_fit import SEGMENTATION_SD_PX
+from brachycal.calibration.phantom.features import SEGMENTATION_SD_PX
+from brachycal.calibration.phantom.phantom_file import PhantomObservations
 from brachycal.errors import ConditioningWarning, DegenerateDataError
 from brachycal.imaging.pixels import image_points, pixels
 from brachycal.se3 import inverse, make_transform, transform_points

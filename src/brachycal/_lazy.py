@@ -33,7 +33,7 @@ def _typing_imports(init_file: str) -> dict[str, tuple[str, str]]:
 class _LazyPackage(ModuleType):
     """A package whose lazily exported names win over its submodules of the same name.
 
-    ``brachycal.calibration.hand_eye`` is a function, exported from the module of the same name.
+    ``brachycal.calibration.phantom.hand_eye`` is a function, exported from the module of the same name.
     An eager ``__init__`` bound the name after loading the submodule; lazily, loading the submodule
     later would bind the name to the module instead. This refuses that one binding.
     """

@@ -15,7 +15,7 @@ One way in for every reader of brachycal (:func:`open_input`, :func:`read_input_
   readers hold one block at a time.
 - **Recorded.** While the command line runs a command (:func:`recording_inputs`), every input
   file opened is recorded (device and inode), so that an output can never be one of the
-  command's inputs: :class:`~brachycal.files.OutputSet` refuses to claim or replace one
+  command's inputs: :class:`~brachycal.io.OutputSet` refuses to claim or replace one
   (:func:`input_at`), ``--force`` or not.
 """
 

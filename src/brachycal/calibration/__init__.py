@@ -39,19 +39,29 @@ from brachycal._lazy import attach
 
 if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need not load SciPy's optimisers
     from brachycal.calibration.chain import MODELS, ChainFit, fit_chain, select_model
-    from brachycal.calibration.chain_report import ChainReport, calibrate_chain
-    from brachycal.calibration.hand_eye import hand_eye
-    from brachycal.calibration.image_to_probe import ImageCalibration, PredictedUncertainty
+    from brachycal.calibration.chain.uncertainty import (
+        inside_ellipsoid,
+        landing_covariance,
+        landing_jacobian,
+        predicted_rms_mm,
+    )
     from brachycal.calibration.labels import ALL_LABELS, METHOD_LABELS, METHODS, PAPER_METHODS
     from brachycal.calibration.metrics import ErrorStats
-    from brachycal.calibration.nwire import NWireCalibration, calibrate_nwire, wire_point_pairs
-    from brachycal.calibration.nwire_file import NWireRun, StoredNWire, nwire_from_files, read_nwire, write_nwire
-    from brachycal.calibration.phantom_file import PhantomObservations
-    from brachycal.calibration.phantom_file import read_observations as read_phantom_observations
-    from brachycal.calibration.phantom_file import write_observations as write_phantom_observations
-    from brachycal.calibration.phantom_fit import PhantomCalibration
-    from brachycal.calibration.pivot import PivotResult, pivot_algebraic, pivot_robust
-    from brachycal.calibration.pivot_file import (
+    from brachycal.calibration.phantom.features import PhantomCalibration
+    from brachycal.calibration.phantom.hand_eye import hand_eye
+    from brachycal.calibration.phantom.nwire import NWireCalibration, calibrate_nwire, wire_point_pairs
+    from brachycal.calibration.phantom.nwire_file import (
+        NWireRun,
+        StoredNWire,
+        nwire_from_files,
+        read_nwire,
+        write_nwire,
+    )
+    from brachycal.calibration.phantom.phantom_file import PhantomObservations
+    from brachycal.calibration.phantom.phantom_file import read_observations as read_phantom_observations
+    from brachycal.calibration.phantom.phantom_file import write_observations as write_phantom_observations
+    from brachycal.calibration.phantom.pivot import PivotResult, pivot_algebraic, pivot_robust
+    from brachycal.calibration.phantom.pivot_file import (
         PIVOT_METHODS,
         PivotCalibration,
         StoredPivot,
@@ -59,17 +69,33 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
         read_pivot,
         write_pivot,
     )
-    from brachycal.calibration.result_file import RobotRecord, StoredCalibration, read_result, write_result
-    from brachycal.calibration.result_schema import validate_result_document
-    from brachycal.calibration.robot_identification import (
+    from brachycal.calibration.phantom.wedge import (
+        WedgePhantom,
+        calibrate_wedge,
+        calibrate_wedge_files,
+        image_pose_in_phantom,
+        read_wedge_phantom,
+    )
+    from brachycal.calibration.phantom.wire import WirePhantom, calibrate_wire, calibrate_wire_files, read_wire_phantom
+    from brachycal.calibration.result import ImageCalibration, PredictedUncertainty
+    from brachycal.calibration.robot.identification import (
         RobotIdentification,
         corrected_robot,
         cross_validate_identification,
         identify_robot,
     )
-    from brachycal.calibration.robot_observability import Criterion, Observation, base_criterion, observation_rows
-    from brachycal.calibration.sequential import CalibrationResult, ToolCalibration, calibrate, locate, loo_points
-    from brachycal.calibration.session_calibration import SessionCalibration, calibrate_folder
+    from brachycal.calibration.robot.observability import Criterion, Observation, base_criterion, observation_rows
+    from brachycal.calibration.sequential.method import (
+        CalibrationResult,
+        ToolCalibration,
+        calibrate,
+        locate,
+        loo_points,
+    )
+    from brachycal.calibration.session.calibrate import SessionCalibration, calibrate_folder
+    from brachycal.calibration.session.chain_report import ChainReport, calibrate_chain
+    from brachycal.calibration.session.result_file import RobotRecord, StoredCalibration, read_result, write_result
+    from brachycal.calibration.session.result_schema import validate_result_document
     from brachycal.calibration.temporal import (
         LagEstimate,
         TemporalCalibration,
@@ -78,20 +104,6 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
         lag_from_signals,
         principal_motion,
     )
-    from brachycal.calibration.uncertainty import (
-        inside_ellipsoid,
-        landing_covariance,
-        landing_jacobian,
-        predicted_rms_mm,
-    )
-    from brachycal.calibration.wedge_phantom import (
-        WedgePhantom,
-        calibrate_wedge,
-        calibrate_wedge_files,
-        image_pose_in_phantom,
-        read_wedge_phantom,
-    )
-    from brachycal.calibration.wire_phantom import WirePhantom, calibrate_wire, calibrate_wire_files, read_wire_phantom
 
 __getattr__, __dir__ = attach(__name__, __file__)
 

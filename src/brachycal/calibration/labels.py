@@ -1,6 +1,6 @@
 """Names of the image-to-probe calibration methods, with the paper's labels (no estimator loaded).
 
-The one home of these names: :mod:`brachycal.calibration.image_to_probe` fits them, the reports
+The one home of these names: :mod:`brachycal.calibration.sequential.image_to_probe` fits them, the reports
 label them, and the command line offers them as choices, which it does before (or without)
 loading SciPy's optimisers.
 """
@@ -22,7 +22,7 @@ METHODS: tuple[str, ...] = tuple(METHOD_LABELS)
 #: The paper's three rigid methods.
 PAPER_METHODS: tuple[str, ...] = ("icp", "kabsch", "horn")
 
-#: Pivot calibration methods (:mod:`brachycal.calibration.pivot_file`) and the units a pose list's
+#: Pivot calibration methods (:mod:`brachycal.calibration.phantom.pivot_file`) and the units a pose list's
 #: translations may be in: the command line's choices, without loading the estimators.
 PIVOT_METHODS: tuple[str, ...] = ("algebraic", "robust")
 POSE_UNITS: tuple[str, ...] = ("m", "mm")

@@ -56,7 +56,7 @@ def can_fork() -> bool:
         return False
     if threading.current_thread() is not threading.main_thread() or threading.active_count() > 1:
         return False
-    import multiprocessing
+    import multiprocessing  # lazy: start-up (multiprocessing)
 
     return multiprocessing.parent_process() is None
 

@@ -38,7 +38,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike
 
+from brachycal.data.formats.metaimage import read_image_sequence, read_sequence_header
+from brachycal.data.formats.plus_files import sequence_transform
+from brachycal.data.formats.plus_temporal import PlusTemporalSettings, read_plus_temporal_settings
 from brachycal.errors import DegenerateDataError, InputError
+from brachycal.imaging.tank_line import find_tank_line
 from brachycal.se3 import FloatArray
 
 if TYPE_CHECKING:
@@ -310,9 +314,6 @@ def tracker_positions(
         InputError: naming the file and frame of a malformed transform or timestamp, or a file
             where no item has both tools.
     """
-    from brachycal.data.metaimage import read_sequence_header
-    from brachycal.data.plus_files import sequence_transform
-
     _, frames = read_sequence_header(path)
     times, positions = [], []
     for k, fields in enumerate(frames):
@@ -458,10 +459,6 @@ def lag_from_plus_files(
     Returns:
         The :class:`TemporalCalibration`; ``estimate.lag_s`` is PLUS's ``TrackerLagSec``.
     """
-    from brachycal.data.metaimage import read_image_sequence
-    from brachycal.data.plus_temporal import PlusTemporalSettings, read_plus_temporal_settings
-    from brachycal.imaging.tank_line import find_tank_line
-
     settings = read_plus_temporal_settings(config) if config is not None else PlusTemporalSettings()
     if clip is not None:
         origin: tuple[int, int] | None = (clip[0], clip[1])

@@ -64,7 +64,7 @@ example:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from brachycal.calibration.labels import METHODS
+    from brachycal.calibration.labels import METHODS  # lazy: start-up (the command's run only)
 
     parser = sub.add_parser(
         "calibrate", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -131,9 +131,11 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace, collecting: bool) -> int:
-    from brachycal.calibration import calibrate_folder, write_result
-    from brachycal.calibration.parallel import forking_workers, frozen_heap
-    from brachycal.files import OutputSet
+    from brachycal.calibration import calibrate_folder, write_result  # lazy: start-up (the command's run only)
+    from brachycal.calibration.parallel import forking_workers, frozen_heap  # lazy: start-up (the command's run only)
+    from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
+
+    # lazy: start-up (the command's run only)
     from brachycal.reporting import chain_summary, table_i, table_ii, uncertainty_table
 
     if args.method != "chain" and (args.bootstrap or args.joint_offsets or args.identify_robot):
@@ -148,7 +150,7 @@ def _run(args: argparse.Namespace, collecting: bool) -> int:
         staged_result = outputs.claim(args.out, label="--out")
         if args.report:
             # Here, not at the top: the report's figures load matplotlib (~0.5 s), for --report only.
-            from brachycal.reporting import REPORT_FILES, write_report
+            from brachycal.reporting import REPORT_FILES, write_report  # lazy: start-up (the command's run only)
 
             for name in REPORT_FILES:
                 outputs.claim(Path(args.report) / name, make_parents=True, label=f"--report's {name}")

@@ -52,7 +52,7 @@ def add_robot_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup) 
 
 def command_inputs(args: argparse.Namespace, *names: str) -> list[str]:
     """The input files (or folders) the options ``names`` of ``args`` give, with ``--robot`` and
-    ``--urdf``: declared to the command's :class:`~brachycal.files.OutputSet`, so that an output
+    ``--urdf``: declared to the command's :class:`~brachycal.io.OutputSet`, so that an output
     naming one of them is refused before any work."""
     values = [getattr(args, name, None) for name in (*names, "robot", "urdf")]
     return [value for value in values if isinstance(value, str)]
@@ -64,15 +64,15 @@ def load_robot(args: argparse.Namespace) -> Robot:
     Raises:
         InputError: both given, or a description that does not load (one line naming file and key).
     """
-    from brachycal.errors import InputError
-    from brachycal.model import Robot
+    from brachycal.errors import InputError  # lazy: start-up (the command's run only)
+    from brachycal.model import Robot  # lazy: start-up (the command's run only)
 
     name = getattr(args, "robot", None)
     if name is None:
         return Robot.load(args.urdf)
     if args.urdf is not None:
         raise InputError("--robot and --urdf both name the robot: pass one")
-    from brachycal.model.description import load_description
+    from brachycal.model.description import load_description  # lazy: start-up (the command's run only)
 
     return load_description(name).robot
 
@@ -81,17 +81,17 @@ def tool_frame_parents(args: argparse.Namespace) -> dict[str, str]:
     """Each tool frame of the chosen robot with the link it is attached to."""
     name = getattr(args, "robot", None)
     if name is None:
-        from brachycal.model import TOOL_FRAME_PARENTS
+        from brachycal.model import TOOL_FRAME_PARENTS  # lazy: start-up (the command's run only)
 
         return dict(TOOL_FRAME_PARENTS)
-    from brachycal.model.description import load_description
+    from brachycal.model.description import load_description  # lazy: start-up (the command's run only)
 
     return load_description(name).tool_frame_parents
 
 
 def progress_bar(total: int, desc: str, quiet: bool) -> tqdm:
     """A progress bar on stderr; hidden with --quiet and when stderr is not a terminal."""
-    from tqdm import tqdm
+    from tqdm import tqdm  # lazy: start-up (the command's run only)
 
     return tqdm(
         total=total,
@@ -115,14 +115,14 @@ def add_robot_accuracy_options(
         zero: whether 0 (a perfect robot) is allowed; a prior of identification must be positive.
         note: what the accuracy is used for, appended to the millimetres' help.
     """
-    import numpy as np
+    import numpy as np  # lazy: start-up (the command's run only)
 
-    from brachycal.calibration.robot_accuracy import (
+    from brachycal.calibration.robot_accuracy import (  # lazy: start-up (the command's run only)
         DEFAULT_ROBOT_ACCURACY,
         MAX_ROBOT_ROTATION_SD_RAD,
         MAX_ROBOT_TRANSLATION_SD_M,
     )
-    from brachycal.validate import finite_float
+    from brachycal.validate import finite_float  # lazy: start-up (the command's run only)
 
     millimetres = finite_float(low=0.0, high=MAX_ROBOT_TRANSLATION_SD_M * 1e3, low_open=not zero, unit="mm")
     parser.add_argument(
@@ -145,8 +145,9 @@ def add_robot_accuracy_options(
 
 def robot_accuracy(args: argparse.Namespace) -> RobotAccuracy:
     """The stated robot accuracy: the options given, the defaults for the others."""
-    import numpy as np
+    import numpy as np  # lazy: start-up (the command's run only)
 
+    # lazy: start-up (the command's run only)
     from brachycal.calibration.robot_accuracy import DEFAULT_ROBOT_ACCURACY, RobotAccuracy
 
     if args.robot_accuracy_mm is None and args.robot_accuracy_deg is None:
@@ -164,8 +165,8 @@ def robot_accuracy(args: argparse.Namespace) -> RobotAccuracy:
 
 def add_method_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup, of: str) -> None:
     """``--method``: which image calibration of a result (:meth:`StoredCalibration.method
-    <brachycal.calibration.result_file.StoredCalibration.method>`; default the result's best)."""
-    from brachycal.calibration.labels import ALL_LABELS
+    <brachycal.calibration.session.result_file.StoredCalibration.method>`; default the result's best)."""
+    from brachycal.calibration.labels import ALL_LABELS  # lazy: start-up (the command's run only)
 
     parser.add_argument(
         "--method",
@@ -178,9 +179,9 @@ def add_method_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup,
 def warn_refused(refused: dict[str, str]) -> None:
     """One warning line per registration method that refused the samples (a result's ``refused``):
     the calibration went ahead with the others, and Table II and the result file say why."""
-    import warnings
+    import warnings  # lazy: start-up (the command's run only)
 
-    from brachycal.errors import BrachycalWarning
+    from brachycal.errors import BrachycalWarning  # lazy: start-up (the command's run only)
 
     for method, reason in refused.items():
         warnings.warn(

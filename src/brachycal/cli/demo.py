@@ -40,7 +40,7 @@ replaced only with --force.
 Table III complete (--table3): every method of the paper's Table III on the twin, over --seeds
 seeds, with the spread and the paper's figure beside: the paper's fusion methods (ICP, Kabsch,
 landmark/Horn), brachycal's whole chain, and the three phantom routes with an optical tracker
-(N-wire, multi-wedge, arbitrary wire: src/brachycal/simulation/phantom_twin.py states each
+(N-wire, multi-wedge, arbitrary wire: src/brachycal/studies/phantom_twin.py states each
 figure of their practice). Prints the table and writes nothing.
 
 examples:
@@ -95,23 +95,28 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from brachycal.cli.common import load_robot
-    from brachycal.files import OutputSet
+    from brachycal.cli.common import load_robot  # lazy: start-up (the command's run only)
+    from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
+
+    # lazy: start-up (the command's run only)
     from brachycal.reporting import DEMO_REPORT_FILES, demo_text, write_demo_report
-    from brachycal.simulation import TWIN_FILES, TwinConfig, record, run_demo, write_recording
+
+    # lazy: start-up (the command's run only)
+    from brachycal.simulation import TWIN_FILES, TwinConfig, record, write_recording
+    from brachycal.studies import run_demo  # lazy: start-up (the command's run only)
 
     start = time.perf_counter()
-    from brachycal.simulation.demo import check_example_robot
+    from brachycal.studies.demo import check_example_robot  # lazy: start-up (the command's run only)
 
     if args.images and not args.recording:
-        from brachycal.errors import InputError
+        from brachycal.errors import InputError  # lazy: start-up (the command's run only)
 
         raise InputError("--images renders the recording's frames: give --recording too")
     robot = load_robot(args)  # a bad description is refused before anything is claimed
     if args.table3:
         return _table3(args, robot, start)
     if args.seeds is not None:
-        from brachycal.errors import InputError
+        from brachycal.errors import InputError  # lazy: start-up (the command's run only)
 
         raise InputError("--seeds is the number of seeds of --table3: give --table3 too (or --seed for one session)")
     if args.example:
@@ -128,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
         write_demo_report(demo, out / "report", outputs=outputs)
         if args.recording:
             rec = record(robot, TwinConfig(seed=args.seed))
-            from brachycal.simulation.bmode import BModeSettings
+            from brachycal.simulation.bmode import BModeSettings  # lazy: start-up (the command's run only)
 
             images = BModeSettings(seed=args.seed) if args.images else None
             write_recording(rec, out / "recording", bag="sqlite3", images=images, force=args.force, outputs=outputs)
@@ -157,12 +162,12 @@ def run(args: argparse.Namespace) -> int:
 
 def _table3(args: argparse.Namespace, robot, start: float) -> int:
     """``--table3``: Table III over seeds 0..N-1, with a progress bar on stderr; no files."""
-    import sys
+    import sys  # lazy: start-up (the command's run only)
 
-    from tqdm import tqdm
+    from tqdm import tqdm  # lazy: start-up (the command's run only)
 
-    from brachycal.errors import InputError
-    from brachycal.simulation.demo import table3, table3_text
+    from brachycal.errors import InputError  # lazy: start-up (the command's run only)
+    from brachycal.studies.demo import table3, table3_text  # lazy: start-up (the command's run only)
 
     for option in ("example", "recording", "force"):
         if getattr(args, option):

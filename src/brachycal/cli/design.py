@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from brachycal.cli.common import add_robot_option, load_robot, progress_bar
-from brachycal.cli.plan_excitation import add_excitation_minutes_option
+from brachycal.cli.plan.excitation import add_excitation_minutes_option
 from brachycal.validate import MAX_SEEDS, bounded_int, name_list
 
 HELP = "compare sample designs (4x4x4, 3x3x3, random, optimal) by predicted targeting error per robot minute"
@@ -18,7 +18,7 @@ mechanical part + 10 s per image sample + planned motion at 25% speed). 'informa
 is 1 / (predicted RMS^2 x minutes): higher is a better use of the robot's time.
 
 With --robot-error LEVEL (real-arm, worn; the twin's robot off its URDF): instead, the 4x4x4
-design plus excitation poses (brachycal plan --excitation, --excitation-minutes of extra robot time)
+design plus excitation poses (brachycal plan excitation, --excitation-minutes of extra robot time)
 on twins at that level: per seed, the predicted RMS landing error and the targeting and held-out
 targeting MAE with the robot identified on the session alone, on the session plus the excitation
 poses, on the session plus as many plain repeats of their source poses (is it the new
@@ -32,7 +32,7 @@ example:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from brachycal.simulation.settings import DESIGNS, ROBOT_ERROR_LEVELS
+    from brachycal.simulation.settings import DESIGNS, ROBOT_ERROR_LEVELS  # lazy: start-up (the command's run only)
 
     parser = sub.add_parser(
         "design", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -61,9 +61,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from brachycal.files import OutputSet, write_csv
-    from brachycal.reporting import design_table
-    from brachycal.simulation import compare_designs
+    from brachycal.io import OutputSet, write_csv  # lazy: start-up (the command's run only)
+    from brachycal.reporting import design_table  # lazy: start-up (the command's run only)
+    from brachycal.studies import compare_designs  # lazy: start-up (the command's run only)
 
     out = Path(args.out)
     if args.robot_error is not None:
@@ -98,12 +98,12 @@ _EXCITATION_COLUMNS = (
 
 
 def _run_excitation(args: argparse.Namespace, out: Path) -> int:
-    import numpy as np
+    import numpy as np  # lazy: start-up (the command's run only)
 
-    from brachycal.errors import InputError
-    from brachycal.files import OutputSet, write_csv
-    from brachycal.simulation.design import compare_excitation
-    from brachycal.simulation.settings import DESIGNS
+    from brachycal.errors import InputError  # lazy: start-up (the command's run only)
+    from brachycal.io import OutputSet, write_csv  # lazy: start-up (the command's run only)
+    from brachycal.simulation.settings import DESIGNS  # lazy: start-up (the command's run only)
+    from brachycal.studies.design import compare_excitation  # lazy: start-up (the command's run only)
 
     if list(args.designs) != list(DESIGNS):
         raise InputError("--robot-error evaluates the 4x4x4 design with excitation poses: do not pass --designs")

@@ -37,7 +37,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def bundled_example_files() -> tuple[Path, list[Path]]:
     """``(the bundled examples folder, its files as paths relative to it, sorted)``."""
-    from brachycal.files import bundled
+    from brachycal.io import bundled  # lazy: start-up (the command's run only)
 
     source = bundled("examples")
     files = sorted(
@@ -51,10 +51,10 @@ def bundled_example_files() -> tuple[Path, list[Path]]:
 
 
 def run(args: argparse.Namespace) -> int:
-    import shutil
+    import shutil  # lazy: start-up (the command's run only)
 
-    from brachycal.errors import BrachycalError, InputError
-    from brachycal.files import OutputSet
+    from brachycal.errors import BrachycalError, InputError  # lazy: start-up (the command's run only)
+    from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
 
     source, files = bundled_example_files()
     if not files:

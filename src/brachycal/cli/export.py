@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 from brachycal.cli.common import add_method_option, add_robot_option, command_inputs, load_robot
 
 if TYPE_CHECKING:
-    from brachycal.files import OutputSet
+    from brachycal.io import OutputSet
     from brachycal.model import Robot
 
 HELP = "export a result: calibrated URDF, 3D Slicer/ITK transforms, PLUS CoordinateDefinitions, ROS static TFs"
@@ -58,8 +58,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # lazy: start-up (the command's run only)
     from brachycal.export import check_ros_package_name, export_files, ros_package_files
-    from brachycal.files import OutputSet
+    from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
 
     if args.ros_package is not None:
         check_ros_package_name(args.ros_package)
@@ -79,8 +80,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace, robot: Robot, outputs: OutputSet) -> None:
     """Write every export of the result into ``outputs`` (``robot``: the one of --robot/--urdf)."""
-    from brachycal.calibration import read_result
-    from brachycal.export import write_exports, write_ros_package
+    from brachycal.calibration import read_result  # lazy: start-up (the command's run only)
+    from brachycal.export import write_exports, write_ros_package  # lazy: start-up (the command's run only)
 
     stored = read_result(args.result)
     method = stored.method(args.method)

@@ -1,7 +1,7 @@
 """``brachycal fk``: poses of tool frames from a joint log, streamed block by block.
 
-The log is read, checked, computed and written in blocks (:data:`brachycal.data.csv_log.BLOCK_BYTES`
-of a CSV file, :data:`brachycal.data.bags.BLOCK_MESSAGES` messages of a bag), so memory does not
+The log is read, checked, computed and written in blocks (:data:`brachycal.data.formats.csv_log.BLOCK_BYTES`
+of a CSV file, :data:`brachycal.data.formats.bags.BLOCK_MESSAGES` messages of a bag), so memory does not
 grow with the log's length; with ``--times`` it grows with the number of requested times only.
 The pose table is staged and moved into place only when every block has been written.
 """
@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from brachycal.cli.common import add_robot_option, load_robot, output_file, progress_bar
-from brachycal.files import OutputSet
+from brachycal.io import OutputSet
 from brachycal.validate import finite_float, name_list
 
 if TYPE_CHECKING:
@@ -23,7 +23,9 @@ if TYPE_CHECKING:
     from brachycal.data.pose_table import BackgroundPoseWriter
     from brachycal.model import Robot
 
-DEFAULT_TOPIC = "/joint_states"  # = brachycal.data.bags.DEFAULT_TOPIC, here so that --help imports no data module
+DEFAULT_TOPIC = (
+    "/joint_states"  # = brachycal.data.formats.bags.DEFAULT_TOPIC, here so that --help imports no data module
+)
 
 HELP = "poses of tool frames in base_link for every sample of a joint log"
 DESCRIPTION = """\
@@ -85,8 +87,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def _check_log_folder(path: Path) -> None:
     """A folder given as the joint log must be a ROS 2 bag (a CSV log is a file)."""
-    from brachycal.data.bags import is_bag
-    from brachycal.errors import InputError
+    from brachycal.data.formats.bags import is_bag  # lazy: start-up (the command's run only)
+    from brachycal.errors import InputError  # lazy: start-up (the command's run only)
 
     if path.is_dir() and not is_bag(path):
         raise InputError("is a folder without metadata.yaml: neither a CSV joint log nor a ROS 2 bag", file=path)
@@ -95,8 +97,8 @@ def _check_log_folder(path: Path) -> None:
 def log_blocks(path: Path, robot: Robot, topic: str, quiet: bool) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """``(time (N,) s, q (N, nq) rad)`` blocks of a checked joint log (CSV or bag), with a progress bar
     over the bytes (CSV) or messages (bag) read."""
-    from brachycal.data.bags import bag_log_blocks, is_bag
-    from brachycal.data.csv_log import csv_log_blocks
+    from brachycal.data.formats.bags import bag_log_blocks, is_bag  # lazy: start-up (the command's run only)
+    from brachycal.data.formats.csv_log import csv_log_blocks  # lazy: start-up (the command's run only)
 
     if quiet:  # no bar: tqdm not even imported
         bag = is_bag(path)
@@ -121,9 +123,11 @@ def log_blocks(path: Path, robot: Robot, topic: str, quiet: bool) -> Iterator[tu
 
 
 def run(args: argparse.Namespace) -> int:
-    from brachycal.data import read_times
+    from brachycal.data import read_times  # lazy: start-up (the command's run only)
+
+    # lazy: start-up (the command's run only)
     from brachycal.data.pose_table import BackgroundPoseWriter, PoseTableWriter
-    from brachycal.errors import InputError
+    from brachycal.errors import InputError  # lazy: start-up (the command's run only)
 
     if args.lag_s != 0.0 and args.times is None:
         raise InputError("--lag-s applies to --times (the frames' times on another clock)")
@@ -161,7 +165,7 @@ def _compute(
 ) -> None:
     """Poses of ``frames`` for every sample of ``blocks`` (or at ``times`` ``(M,)`` s, interpolated at
     ``times + lag_s`` on the log's clock and written with ``times``), to ``writer``."""
-    from brachycal.data.joint_log import interpolate_blocks
+    from brachycal.data.joint_log import interpolate_blocks  # lazy: start-up (the command's run only)
 
     if times is None:
         for time, q in blocks:

@@ -44,8 +44,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from brachycal.calibration import locate, read_result
-    from brachycal.data.csv_log import configuration_blocks
+    from brachycal.calibration import locate, read_result  # lazy: start-up (the command's run only)
+    from brachycal.data.formats.csv_log import configuration_blocks  # lazy: start-up (the command's run only)
 
     stored = read_result(args.result)
     # The result knows its images' size (older result files do not: then argparse's bound stands).

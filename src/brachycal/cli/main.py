@@ -16,7 +16,7 @@ import warnings
 from collections.abc import Collection, Iterator, Sequence
 from contextlib import contextmanager
 
-from brachycal import __version__
+from brachycal._version import __version__
 from brachycal.cli import (
     calibrate,
     demo,
@@ -26,11 +26,8 @@ from brachycal.cli import (
     fk,
     locate,
     model,
-    nwire,
-    nwire_segment,
     phantom,
     pivot,
-    plan,
     session,
     study,
     temporal,
@@ -38,6 +35,12 @@ from brachycal.cli import (
     verify,
     view,
 )
+from brachycal.cli.nwire import calibrate as nwire
+from brachycal.cli.nwire import segment as nwire_segment
+from brachycal.cli.plan import SUBCOMMANDS, current_spelling
+from brachycal.cli.plan import check as plan_check
+from brachycal.cli.plan import excitation as plan_excitation
+from brachycal.cli.plan import grid as plan
 from brachycal.errors import BrachycalError
 
 DESCRIPTION = """\
@@ -93,6 +96,8 @@ COMMANDS = {
     "model": model,
     "fk": fk,
     "plan": plan,
+    plan_check.NAME: plan_check,
+    plan_excitation.NAME: plan_excitation,
     "session": session,
     "calibrate": calibrate,
     "locate": locate,
@@ -154,7 +159,7 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
 def _command_environment() -> Iterator[None]:
     """What the command line (and only it) sets for the process: one-line warnings, SIGTERM, and
     the record of the input files read (an output may never be one of them)."""
-    from brachycal.inputs import recording_inputs
+    from brachycal.inputs import recording_inputs  # lazy: start-up (the command's run only)
 
     in_main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _raise_terminated) if in_main_thread else None
@@ -173,12 +178,18 @@ def _command_environment() -> Iterator[None]:
                 signal.signal(signal.SIGTERM, previous)
 
 
-#: Two-word commands: ``brachycal nwire segment …`` is the command ``nwire-segment``.
-TWO_WORD_COMMANDS = {("nwire", "segment"): nwire_segment.NAME}
+#: Two-word commands: ``brachycal nwire segment …`` is the command ``nwire-segment``, ``brachycal plan check …``
+#: the command ``plan-check``.
+TWO_WORD_COMMANDS = {
+    ("nwire", "segment"): nwire_segment.NAME,
+    **{("plan", word): name for word, name in SUBCOMMANDS.items()},
+}
 
 
 def joined_command(arguments: list[str]) -> list[str]:
-    """``arguments`` with a two-word command (:data:`TWO_WORD_COMMANDS`) joined into its one name."""
+    """``arguments`` with a two-word command (:data:`TWO_WORD_COMMANDS`) joined into its one name (and an
+    earlier release's spelling of one made current)."""
+    arguments = current_spelling(arguments)
     words = [k for k, word in enumerate(arguments) if not word.startswith("-")][:2]
     if len(words) == 2 and words[1] == words[0] + 1:
         name = TWO_WORD_COMMANDS.get((arguments[words[0]], arguments[words[1]]))

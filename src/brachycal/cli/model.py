@@ -16,9 +16,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import numpy as np
+    import numpy as np  # lazy: start-up (the command's run only)
 
-    from brachycal.se3 import to_xyz_rpy
+    from brachycal.se3 import to_xyz_rpy  # lazy: start-up (the command's run only)
 
     robot = load_robot(args)
     print(f"model: {robot.source}")

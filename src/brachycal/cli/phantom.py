@@ -34,7 +34,7 @@ conditioning check: refused when the predicted SD 50 mm from the image centre ex
 Layouts that cannot fix the image plane in one image (one wedge, parallel or coplanar wires) are
 refused when the geometry is read. Writes JSON (brachycal-phantom-result/1, metres). The example
 files (brachycal examples DIR) hold a twin session of each phantom, each geometry with the
-session's landmark registration (the twin writes such sessions: brachycal.simulation.simulate_phantom
+session's landmark registration (the twin writes such sessions: brachycal.studies.simulate_phantom
 and brachycal.calibration.write_phantom_observations).
 
 example:
@@ -62,13 +62,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from brachycal.files import OutputSet, sha256_file, write_json
+    from brachycal.io import OutputSet, sha256_file, write_json  # lazy: start-up (the command's run only)
 
     if args.method == "nwire":
         return _nwire(args)
-    from brachycal.calibration.phantom_file import result_payload
-    from brachycal.calibration.wedge_phantom import calibrate_wedge_files
-    from brachycal.calibration.wire_phantom import calibrate_wire_files
+    from brachycal.calibration.phantom.phantom_file import result_payload  # lazy: start-up (the command's run only)
+    from brachycal.calibration.phantom.wedge import calibrate_wedge_files  # lazy: start-up (the command's run only)
+    from brachycal.calibration.phantom.wire import calibrate_wire_files  # lazy: start-up (the command's run only)
 
     with OutputSet(force=args.force, inputs=command_inputs(args, "geometry", "observations")) as outputs:
         staged = outputs.claim(args.out, label="--out")
@@ -93,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _nwire(args: argparse.Namespace) -> int:
     """``--method nwire``: ``brachycal nwire GEOMETRY OBSERVATIONS --out …`` with that command's own defaults."""
-    from brachycal.cli import nwire
+    from brachycal.cli.nwire import calibrate as nwire  # lazy: start-up (the command's run only)
 
     parser = argparse.ArgumentParser(prog="brachycal")
     nwire.add_parser(parser.add_subparsers())

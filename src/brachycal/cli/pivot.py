@@ -25,8 +25,8 @@ example:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from brachycal.calibration.labels import PIVOT_METHODS
-    from brachycal.calibration.labels import POSE_UNITS as UNITS
+    from brachycal.calibration.labels import PIVOT_METHODS  # lazy: start-up (the command's run only)
+    from brachycal.calibration.labels import POSE_UNITS as UNITS  # lazy: start-up (the command's run only)
 
     parser = sub.add_parser(
         "pivot", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -40,8 +40,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from brachycal.calibration import pivot_from_file, write_pivot
-    from brachycal.files import OutputSet
+    from brachycal.calibration import pivot_from_file, write_pivot  # lazy: start-up (the command's run only)
+    from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
 
     with OutputSet(force=args.force, inputs=command_inputs(args, "poses")) as outputs:
         staged = outputs.claim(args.out, label="--out")

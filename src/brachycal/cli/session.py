@@ -53,8 +53,12 @@ examples:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from brachycal.data.bags import DEFAULT_TOPIC
+    from brachycal.data.formats.bags import DEFAULT_TOPIC  # lazy: start-up (the command's run only)
+
+    # lazy: start-up (the command's run only)
     from brachycal.data.recording import MAX_SPEED_RAD_S, SPEED_SPAN_S, STILL_WINDOW_S
+
+    # lazy: start-up (the command's run only)
     from brachycal.data.session_build import MAX_STILL_SPEED_RAD_S, MAX_WINDOW_S
 
     parser = sub.add_parser("session", help=HELP, description=HELP)
@@ -142,15 +146,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run_build(args: argparse.Namespace) -> int:
-    from brachycal.data.session import FILES as SESSION_FILES
-    from brachycal.data.session_build import (
+    from brachycal.data.session import FILES as SESSION_FILES  # lazy: start-up (the command's run only)
+    from brachycal.data.session_build import (  # lazy: start-up (the command's run only)
         REPORT_FILES,
         StillSettings,
         build_session_from_files,
         session_settings,
         write_build,
     )
-    from brachycal.files import OutputSet
+    from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
 
     out = Path(args.out)
     if args.speed_span_s > args.still_window_s:

@@ -21,7 +21,7 @@ from brachycal.validate import (
 )
 
 if TYPE_CHECKING:
-    from brachycal.simulation.study import RunParams
+    from brachycal.studies.study import RunParams
 
 HELP = "sweep noise, sample count and grid size on the twin: truth error vs leave-one-out"
 DESCRIPTION = """\
@@ -46,7 +46,7 @@ example:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from brachycal.simulation.settings import (
+    from brachycal.simulation.settings import (  # lazy: start-up (the command's run only)
         MAX_ANNOTATION_SD_PX,
         MAX_OUTLIER_RATE,
         MAX_STUDY_RUNS,
@@ -131,7 +131,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from brachycal.files import OutputSet
+    from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
 
     runs = _sweep(args)  # every option and the size of the sweep checked before any work
     with OutputSet(force=args.force) as outputs:
@@ -144,11 +144,11 @@ def run(args: argparse.Namespace) -> int:
 
 def _sweep(args: argparse.Namespace) -> list[RunParams]:
     """The runs of the study (each option already range-checked by argparse)."""
-    from brachycal.cli.common import load_robot
-    from brachycal.simulation.study import sweep
+    from brachycal.cli.common import load_robot  # lazy: start-up (the command's run only)
+    from brachycal.studies.study import sweep  # lazy: start-up (the command's run only)
 
     if args.urdf is not None:  # each run loads its robot again, in its own process: by description
-        from brachycal.errors import InputError
+        from brachycal.errors import InputError  # lazy: start-up (the command's run only)
 
         raise InputError("study simulates a described robot: use --robot NAME|FILE, not --urdf")
     robot = load_robot(args)  # a bad description is refused here, before any run
@@ -170,9 +170,9 @@ def _sweep(args: argparse.Namespace) -> list[RunParams]:
 
 def _run(args: argparse.Namespace, files: list[Path], runs: list[RunParams]) -> None:
     """Run the study ``runs``; write runs, summary and plot to the staging paths ``files``."""
-    from brachycal.files import write_csv
-    from brachycal.reporting import save_figure, study_figure, study_table
-    from brachycal.simulation.study import run_study, summarise
+    from brachycal.io import write_csv  # lazy: start-up (the command's run only)
+    from brachycal.reporting import save_figure, study_figure, study_table  # lazy: start-up (the command's run only)
+    from brachycal.studies.study import run_study, summarise  # lazy: start-up (the command's run only)
 
     print(
         f"study: {len(runs)} simulated sessions ({args.seeds} seeds each), "

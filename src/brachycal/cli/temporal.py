@@ -84,13 +84,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _robot_route(args: argparse.Namespace) -> TemporalCalibration:
-    import numpy as np
+    import numpy as np  # lazy: start-up (the command's run only)
 
+    # lazy: start-up (the command's run only)
     from brachycal.calibration.temporal import DEFAULT_MAX_LAG_S, lag_from_signals
-    from brachycal.data import read_joint_log
-    from brachycal.data.metaimage import read_image_sequence
-    from brachycal.errors import InputError
-    from brachycal.imaging.tank_line import find_tank_line
+    from brachycal.data import read_joint_log  # lazy: start-up (the command's run only)
+    from brachycal.data.formats.metaimage import read_image_sequence  # lazy: start-up (the command's run only)
+    from brachycal.errors import InputError  # lazy: start-up (the command's run only)
+    from brachycal.imaging.tank_line import find_tank_line  # lazy: start-up (the command's run only)
 
     robot = load_robot(args)
     if args.frame not in robot.frame_names:
@@ -119,9 +120,9 @@ def _robot_route(args: argparse.Namespace) -> TemporalCalibration:
 
 
 def run(args: argparse.Namespace) -> int:
-    from brachycal.calibration.temporal import lag_from_plus_files
-    from brachycal.errors import InputError
-    from brachycal.files import OutputSet, sha256_file, write_json
+    from brachycal.calibration.temporal import lag_from_plus_files  # lazy: start-up (the command's run only)
+    from brachycal.errors import InputError  # lazy: start-up (the command's run only)
+    from brachycal.io import OutputSet, sha256_file, write_json  # lazy: start-up (the command's run only)
 
     if (args.tracker is None) == (args.joints is None):
         raise InputError("give either TRACKER (PLUS route) or --joints LOG (robot route), not both or neither")

@@ -45,7 +45,7 @@ examples:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from brachycal.validate import finite_float, number_list
+    from brachycal.validate import finite_float, number_list  # lazy: start-up (the command's run only)
 
     parser = sub.add_parser(
         "tips", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -76,12 +76,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import numpy as np
+    import numpy as np  # lazy: start-up (the command's run only)
 
-    from brachycal.data.metaimage import read_image_sequence
-    from brachycal.errors import InputError
-    from brachycal.files import OutputSet
-    from brachycal.imaging.needle_tip import MIN_CONFIDENCE, detect_tip
+    from brachycal.data.formats.metaimage import read_image_sequence  # lazy: start-up (the command's run only)
+    from brachycal.errors import InputError  # lazy: start-up (the command's run only)
+    from brachycal.imaging.needle_tip import MIN_CONFIDENCE, detect_tip  # lazy: start-up (the command's run only)
+    from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
 
     min_confidence = MIN_CONFIDENCE if args.min_confidence is None else args.min_confidence
     with OutputSet(force=args.force, inputs=command_inputs(args, "frames", "truth")) as outputs:
@@ -114,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
         low = confidence < min_confidence
         _write_images(out, sequence.timestamps_s, uv, confidence, low)
         if sheet is not None:
-            from brachycal.reporting.contact_sheet import contact_sheet
+            from brachycal.reporting.contact_sheet import contact_sheet  # lazy: start-up (the command's run only)
 
             contact_sheet(sheet, sequence.pixels, uv, confidence, min_confidence=min_confidence, true_px=truth)
     n = len(detections)
@@ -136,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _write_images(path: Path, times: np.ndarray, uv: np.ndarray, confidence: np.ndarray, low: np.ndarray) -> None:
-    import numpy as np
+    import numpy as np  # lazy: start-up (the command's run only)
 
     with open(path, "w", encoding="utf-8") as f:
         f.write("time,u_px,v_px,confidence,proposed_u_px,proposed_v_px\n")
@@ -148,10 +148,10 @@ def _write_images(path: Path, times: np.ndarray, uv: np.ndarray, confidence: np.
 
 def _read_truth(path: str, times: np.ndarray) -> np.ndarray:
     """``(N, 2)`` true tips of the frames, paired by time (to the microsecond the truth file keeps)."""
-    import numpy as np
+    import numpy as np  # lazy: start-up (the command's run only)
 
-    from brachycal.data.csv_log import read_table, to_float
-    from brachycal.errors import InputError
+    from brachycal.data.formats.csv_log import read_table, to_float  # lazy: start-up (the command's run only)
+    from brachycal.errors import InputError  # lazy: start-up (the command's run only)
 
     file = Path(path)
     header, rows, records = read_table(file, ["time", "u_px", "v_px"])

@@ -12,7 +12,7 @@ from brachycal.validate import finite_float
 HELP = "check a stored calibration on a few new samples: PASS, or RECALIBRATE naming the part that moved"
 DESCRIPTION = """\
 Predicts each sample of CHECK_SESSION (a session folder with session.toml and samples.csv: the 8
-poses of 'brachycal plan --verify', the needle tip annotated; optionally touches.csv with single
+poses of 'brachycal plan check', the needle tip annotated; optionally touches.csv with single
 touches of the probe and/or the needle on a reference tip) from RESULT, and tests the residuals:
 where the image shows the needle tip against where the needle arm puts it (Table II's error, in
 base_link, along the image's axes), and each tool tip against the reference tip the result located.
@@ -101,9 +101,11 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("give RESULT and CHECK_SESSION (or --demo DIR)")
     if not args.out:
         raise InputError("--out is required: the verification record a lab files")
-    from brachycal.calibration import read_result
-    from brachycal.calibration.check import check_calibration, outcome_json, read_check_session, verdict_text
-    from brachycal.files import OutputSet, write_json
+    from brachycal.calibration import read_result  # lazy: start-up (the command's run only)
+
+    # lazy: start-up (the command's run only)
+    from brachycal.calibration.verify.check import check_calibration, outcome_json, read_check_session, verdict_text
+    from brachycal.io import OutputSet, write_json  # lazy: start-up (the command's run only)
 
     out = Path(args.out)
     with OutputSet(force=args.force, inputs=command_inputs(args, "result", "check", "calibration_session")) as outputs:
@@ -116,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
         session = read_check_session(args.check, robot)
         calibration = None
         if args.calibration_session is not None:
-            from brachycal.data.session import read_session
+            from brachycal.data.session import read_session  # lazy: start-up (the command's run only)
 
             calibration = read_session(args.calibration_session, robot)
         outcome = check_calibration(
@@ -131,12 +133,14 @@ def run(args: argparse.Namespace) -> int:
         record = outcome_json(outcome, stored, session, robot)
         write_json(staged, record, force=args.force)
         if staged_report is not None:
+            # lazy: start-up (the command's run only)
             from brachycal.reporting.html_report import write_verification_page
 
             write_verification_page(staged_report, record, force=args.force)
         refusal = None
         if staged_update is not None:
-            from brachycal.calibration.check_update import update_refusal, updated_result
+            # lazy: start-up (the command's run only)
+            from brachycal.calibration.verify.update import update_refusal, updated_result
 
             refusal = update_refusal(outcome)
             if refusal is None:
@@ -144,9 +148,9 @@ def run(args: argparse.Namespace) -> int:
             else:
                 outputs.release(Path(args.update))
     if calibration is None:
-        import warnings
+        import warnings  # lazy: start-up (the command's run only)
 
-        from brachycal.errors import BrachycalWarning
+        from brachycal.errors import BrachycalWarning  # lazy: start-up (the command's run only)
 
         warnings.warn(
             "no --calibration-session: every check pose had the average null SD; at the cube's corners the "
@@ -169,12 +173,12 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    """Twin seed 0 calibrated with the whole chain; two check sessions at ``plan --verify``'s poses."""
-    import numpy as np
+    """Twin seed 0 calibrated with the whole chain; two check sessions at ``plan check``'s poses."""
+    import numpy as np  # lazy: start-up (the command's run only)
 
-    from brachycal.data.session import write_session
-    from brachycal.files import OutputSet
-    from brachycal.simulation.check_twin import (
+    from brachycal.data.session import write_session  # lazy: start-up (the command's run only)
+    from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
+    from brachycal.studies.check_twin import (  # lazy: start-up (the command's run only)
         CHANGES,
         CalibratedTwin,
         changed_setup,
@@ -197,7 +201,7 @@ def _demo(args: argparse.Namespace) -> int:
             session, _ = record_check(twin.twin, setup, twin.q_planned, twin.uv_planned, rng, touches=twin.touches)
             write_check_session(session, twin.twin, folder / f"check_{name}", robot, force=args.force, outputs=outputs)
     print(
-        f"twin seed 0 calibrated (whole chain) and checked at {len(twin.q_planned)} poses of 'brachycal plan --verify' "
+        f"twin seed 0 calibrated (whole chain) and checked at {len(twin.q_planned)} poses of 'brachycal plan check' "
         f"plus single touches of rtip1 ({', '.join(twin.check_plan.touch_tools) or 'none'}; "
         f"{twin.check_plan.robot_minutes:.1f} robot minutes at 10 s per sample and 30 s per touch)"
     )

@@ -51,7 +51,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from brachycal.reporting.viewer import Viewer
+    from brachycal.reporting.viewer import Viewer  # lazy: start-up (the command's run only)
 
     content = _content(args)
     try:
@@ -67,31 +67,31 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _content(args: argparse.Namespace):  # -> ViewContent (imported lazily)
-    from brachycal.imaging.pixels import DEFAULT_IMAGE_SIZE_PX
-    from brachycal.reporting.viewer import calibration_content, poses_content
+    from brachycal.imaging.pixels import DEFAULT_IMAGE_SIZE_PX  # lazy: start-up (the command's run only)
+    from brachycal.reporting.viewer import calibration_content, poses_content  # lazy: start-up (the command's run only)
 
     robot = load_robot(args)
     if args.result is not None:
         if args.session is None:
             raise InputError("RESULT needs --session DIR: the samples to show it on")
-        from pathlib import Path
+        from pathlib import Path  # lazy: start-up (the command's run only)
 
-        from brachycal.calibration import read_result
-        from brachycal.data import read_session
+        from brachycal.calibration import read_result  # lazy: start-up (the command's run only)
+        from brachycal.data import read_session  # lazy: start-up (the command's run only)
 
         stored = read_result(args.result)
         method = stored.method(args.method)  # the robot is checked with the result's corrections
         session = read_session(args.session, robot)
         twin = None
         if (Path(args.session) / "truth.json").is_file():
-            from brachycal.simulation.twin_files import read_twin
+            from brachycal.simulation.twin_files import read_twin  # lazy: start-up (the command's run only)
 
             twin = read_twin(args.session, robot)
         return calibration_content(robot, stored, session, method, twin=twin, n_targets=args.targets)
     if args.method is not None:
         raise InputError("--method needs a RESULT")
     if args.session is not None:
-        from brachycal.data import read_session
+        from brachycal.data import read_session  # lazy: start-up (the command's run only)
 
         session = read_session(args.session, robot)
         size = (int(session.size_px[0]), int(session.size_px[1]))
@@ -99,7 +99,7 @@ def _content(args: argparse.Namespace):  # -> ViewContent (imported lazily)
             robot, session.samples_q, session.sample_ids, image_size_px=size, spacing_m=session.spacing_m
         )
     if args.plan is not None:
-        from brachycal.data.session_build import read_plan
+        from brachycal.data.session_build import read_plan  # lazy: start-up (the command's run only)
 
         plan = read_plan(args.plan, robot)
         return poses_content(robot, plan.q, plan.names, image_size_px=DEFAULT_IMAGE_SIZE_PX)

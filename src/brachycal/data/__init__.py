@@ -22,18 +22,16 @@ from typing import TYPE_CHECKING
 from brachycal._lazy import attach
 
 if TYPE_CHECKING:  # imported on first use: `brachycal <command> --help` and `fk` need only a few of these
-    from brachycal.data.bag_images import read_bag_images
-    from brachycal.data.bags import DEFAULT_TOPIC, bag_log_blocks, is_bag, read_bag_log, write_bag_log
-    from brachycal.data.csv_log import csv_log_blocks, read_configurations, read_csv_log, read_times
-    from brachycal.data.joint_log import (
-        JointLog,
-        JointLogChecker,
-        interpolate_blocks,
-        joint_columns,
-        joint_log_from_columns,
+    from brachycal.data.formats.bag_images import read_bag_images
+    from brachycal.data.formats.bags import DEFAULT_TOPIC, bag_log_blocks, is_bag, read_bag_log, write_bag_log
+    from brachycal.data.formats.csv_log import csv_log_blocks, read_configurations, read_csv_log, read_times
+    from brachycal.data.formats.metaimage import (
+        ImageSequence,
+        read_image_sequence,
+        read_sequence_header,
+        write_image_sequence,
     )
-    from brachycal.data.metaimage import ImageSequence, read_image_sequence, read_sequence_header, write_image_sequence
-    from brachycal.data.plus_files import (
+    from brachycal.data.formats.plus_files import (
         PlusConfig,
         SegmentedFrame,
         Wire,
@@ -41,8 +39,15 @@ if TYPE_CHECKING:  # imported on first use: `brachycal <command> --help` and `fk
         read_plus_config,
         read_segmented_frames,
     )
-    from brachycal.data.plus_segmentation import read_segmentation_parameters
-    from brachycal.data.plus_segmented_xml import write_segmented_frames
+    from brachycal.data.formats.plus_segmentation import read_segmentation_parameters
+    from brachycal.data.formats.plus_segmented_xml import write_segmented_frames
+    from brachycal.data.joint_log import (
+        JointLog,
+        JointLogChecker,
+        interpolate_blocks,
+        joint_columns,
+        joint_log_from_columns,
+    )
     from brachycal.data.pose_list import read_pose_list
     from brachycal.data.pose_table import PoseTableWriter, read_pose_table, write_pose_table
     from brachycal.data.recording import (
@@ -75,10 +80,11 @@ __getattr__, __dir__ = attach(__name__, __file__)
 
 def read_joint_log(path: str | os.PathLike[str], robot: Robot, topic: str | None = None) -> JointLog:
     """Read a joint log from a CSV file, a ROS 1 ``.bag`` or a ROS 2 bag folder (``topic``: the
-    bag's JointState topic, default :data:`~brachycal.data.bags.DEFAULT_TOPIC`)."""
-    from brachycal.data.bags import DEFAULT_TOPIC, is_bag, read_bag_log
-    from brachycal.data.csv_log import read_csv_log
-    from brachycal.errors import InputError
+    bag's JointState topic, default :data:`~brachycal.data.formats.bags.DEFAULT_TOPIC`)."""
+    # lazy: the package's names load on first use (the readers are imported by the reading only)
+    from brachycal.data.formats.bags import DEFAULT_TOPIC, is_bag, read_bag_log
+    from brachycal.data.formats.csv_log import read_csv_log  # lazy: as above
+    from brachycal.errors import InputError  # lazy: as above
 
     path = Path(path)
     if not path.exists():

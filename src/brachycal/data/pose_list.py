@@ -12,7 +12,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from brachycal.data.csv_log import read_table, to_float
+from brachycal.data.formats.csv_log import read_table, to_float
 from brachycal.se3 import FloatArray
 from brachycal.validate import MAX_POSITION_M, check_positions, check_transform
 

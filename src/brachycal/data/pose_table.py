@@ -28,8 +28,8 @@ from typing import IO, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
-from brachycal.data.csv_log import read_table, to_float
-from brachycal.files import atomic_open
+from brachycal.data.formats.csv_log import read_table, to_float
+from brachycal.io import atomic_open
 from brachycal.se3 import FloatArray, make_transform
 from brachycal.validate import MAX_POSITION_M, check_positions
 
@@ -232,7 +232,7 @@ class BackgroundPoseWriter:
     ``brachycal fk`` computes block k + 1 while block k is turned into text: the formatting is
     NumPy work on large arrays and the file writes are I/O, both mostly without the GIL, so on a
     second core they take the writing off the command's path (the log's parsing is a third thread,
-    :func:`~brachycal.data.csv_log.prefetched`). :meth:`write` takes the quaternions in the caller's
+    :func:`~brachycal.data.formats.csv_log.prefetched`). :meth:`write` takes the quaternions in the caller's
     thread (:meth:`PoseTableWriter.numbers`, ~20 % of a block's writing) so that the two threads'
     shares of a block are about even; the worker formats and writes (:meth:`PoseTableWriter.write_numbers`).
     The text is the same as :meth:`PoseTableWriter.write`'s: one worker, blocks in the order given.
@@ -330,7 +330,7 @@ def write_pose_table(
 
 def read_pose_table(path: str | os.PathLike[str]) -> tuple[FloatArray, list[str], FloatArray]:
     """Read a pose table back: ``(time (R,), frame (R,), T_base_frame (R, 4, 4))``, one per row."""
-    from scipy.spatial.transform import Rotation
+    from scipy.spatial.transform import Rotation  # lazy: start-up (scipy)
 
     path = Path(path)
     header, rows, records = read_table(path, list(HEADER))

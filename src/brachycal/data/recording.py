@@ -38,8 +38,8 @@ from typing import TYPE_CHECKING, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
-from brachycal.data.bags import bag_folder, bag_messages
-from brachycal.data.csv_log import read_table, to_float
+from brachycal.data.formats.bags import bag_folder, bag_messages
+from brachycal.data.formats.csv_log import read_table, to_float
 from brachycal.data.joint_log import JointLog
 from brachycal.data.json_files import read_json
 from brachycal.errors import InputError

@@ -24,10 +24,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from brachycal.data.csv_log import read_table, table_configurations, to_float, unique_names
+from brachycal.data.formats.csv_log import read_table, table_configurations, to_float, unique_names
 from brachycal.errors import InputError
-from brachycal.files import OutputSet, atomic_open, output_set, sha256_file
 from brachycal.inputs import MAX_DOCUMENT_BYTES, read_input_text
+from brachycal.io import OutputSet, atomic_open, output_set, sha256_file
 from brachycal.se3 import FloatArray
 from brachycal.validate import MAX_IMAGE_PX, TOOL_LENGTH_M_RANGE, check_positions, check_spacing_mm, check_token
 
@@ -320,7 +320,7 @@ def write_session(
 ) -> Path:
     """Write a session folder (:data:`FILES`, all or nothing); the folder is created if needed.
 
-    With ``outputs`` (a command's :class:`~brachycal.files.OutputSet`) the files join that set.
+    With ``outputs`` (a command's :class:`~brachycal.io.OutputSet`) the files join that set.
     """
     folder = Path(folder)
     for sample in session.sample_ids:  # written as they are: a comma or a quote would break the row

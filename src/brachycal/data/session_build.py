@@ -32,8 +32,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike
 
-from brachycal.data.bags import DEFAULT_TOPIC, is_bag
-from brachycal.data.csv_log import read_table, to_float
+from brachycal.data import read_joint_log  # the package's reader dispatch (CSV or bag)
+from brachycal.data.formats.bags import DEFAULT_TOPIC, is_bag
+from brachycal.data.formats.csv_log import read_table, to_float
 from brachycal.data.joint_log import (
     LIMIT_TOLERANCE_RAD,
     JointLog,
@@ -60,7 +61,7 @@ from brachycal.data.recording import (
 )
 from brachycal.data.session import Session, Touches, read_session_toml, write_session
 from brachycal.errors import BrachycalWarning, InputError
-from brachycal.files import OutputSet, output_set, sha256_file, write_csv, write_json
+from brachycal.io import OutputSet, output_set, sha256_file, write_csv, write_json
 from brachycal.se3 import FloatArray
 from brachycal.validate import MAX_IMAGE_PX, check_pixel, check_range, check_spacing_mm, check_token, check_vector
 
@@ -738,8 +739,6 @@ def build_session_from_files(
         InputError: marks given both ways or neither, a marks topic on a CSV log, or any refusal
             of the readers and of :func:`build_session`.
     """
-    from brachycal.data import read_joint_log  # the package's reader dispatch (CSV or bag)
-
     log_path = Path(log_path)
     if (marks is None) == (marks_topic is None):
         raise InputError("give the marks either as a file (--marks) or as a topic of the bag (--marks-topic)")
@@ -777,7 +776,7 @@ def write_build(
 ) -> Path:
     """Write the session folder and the build report in it (:data:`REPORT_FILES`), all or nothing.
 
-    With ``outputs`` (a command's :class:`~brachycal.files.OutputSet`) the files join that set.
+    With ``outputs`` (a command's :class:`~brachycal.io.OutputSet`) the files join that set.
     """
     folder = Path(folder)
     with output_set(outputs, force=force) as out:

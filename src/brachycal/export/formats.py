@@ -41,16 +41,16 @@ from typing import TYPE_CHECKING, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
-from brachycal.calibration.image_to_probe import ImageCalibration
+from brachycal.calibration.result import ImageCalibration, calibrated_robot
 from brachycal.errors import InputError, OutputError
-from brachycal.files import OutputSet, atomic_open, output_set
 from brachycal.inputs import MAX_DOCUMENT_BYTES, MAX_MESH_BYTES, open_input, read_input_text
+from brachycal.io import OutputSet, atomic_open, output_set
 from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, make_transform, to_position_quaternion
 
 if TYPE_CHECKING:
-    from brachycal.model.description import Rig
+    from brachycal.model.rig import Rig
 
 LPS = np.diag([-1.0, -1.0, 1.0, 1.0])
 
@@ -95,12 +95,6 @@ EXPORT_FILES = (
     "PlusCoordinateDefinitions.xml",
     "static_transforms.yaml",
 )
-
-
-def calibrated_robot(robot: Robot, T_ER_Ntip: ArrayLike, T_EL_Ptip: ArrayLike, image: ImageCalibration) -> Robot:
-    """The model with the calibrated tool and image frames."""
-    out = robot.with_tool_transform(NEEDLE_TIP, T_ER_Ntip).with_tool_transform(PROBE_TIP, T_EL_Ptip)
-    return out.with_tool_transform(US_IMAGE, image.T_Ptip_I)
 
 
 def image_to_probe_mm(image: ImageCalibration) -> FloatArray:
@@ -199,7 +193,7 @@ def _yaml_float(representer, value: float):  # ruamel's representer type is not 
 
 
 def _yaml_text(data: object, header: str) -> str:
-    from ruamel.yaml import YAML
+    from ruamel.yaml import YAML  # lazy: start-up (ruamel)
 
     yaml = YAML(typ="safe", pure=True)
     yaml.default_flow_style = None  # lists of numbers on one line, mappings in blocks
@@ -286,8 +280,8 @@ def ros_static_transforms(
 
 def read_ros_static_transforms(text: str) -> dict[tuple[str, str], FloatArray]:
     """``(parent, child)`` → ``T_parent_child (4, 4)`` from :func:`ros_static_transforms` YAML."""
-    from ruamel.yaml import YAML
-    from scipy.spatial.transform import Rotation
+    from ruamel.yaml import YAML  # lazy: start-up (ruamel)
+    from scipy.spatial.transform import Rotation  # lazy: start-up (scipy)
 
     data = YAML(typ="safe").load(io.StringIO(text))
     out = {}
@@ -346,7 +340,7 @@ def write_exports(
     (:meth:`~brachycal.calibration.StoredCalibration.software_robot`); only its tool joints are
     replaced here. ``record``: the ``<brachycal_export>`` attributes the URDF carries
     (:meth:`~brachycal.calibration.StoredCalibration.export_record`). With ``outputs`` (a command's
-    :class:`~brachycal.files.OutputSet`) the files join that set and are committed with it; without,
+    :class:`~brachycal.io.OutputSet`) the files join that set and are committed with it; without,
     they are committed together on return. Returns the files' final paths (the meshes last).
     """
     folder = Path(folder)

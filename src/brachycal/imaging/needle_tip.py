@@ -163,7 +163,7 @@ class TipDetection:
 
 def _contrast_map(frame: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Smoothed frame ``S``, local mean, local SD and the mask of imaged pixels, all ``(H, W)``."""
-    from scipy.ndimage import gaussian_filter, uniform_filter
+    from scipy.ndimage import gaussian_filter, uniform_filter  # lazy: start-up (scipy)
 
     f = frame.astype(np.float32)
     imaged = (f > 0).astype(np.float32)
@@ -180,7 +180,7 @@ def _contrast_map(frame: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
 
 def _bilinear(image: np.ndarray, u: FloatArray, v: FloatArray) -> FloatArray:
-    from scipy.ndimage import map_coordinates
+    from scipy.ndimage import map_coordinates  # lazy: start-up (scipy)
 
     return map_coordinates(image, [v, u], order=1, mode="nearest")
 
@@ -232,7 +232,7 @@ def detect_tip(frame: ArrayLike, prior_direction: ArrayLike | None = None) -> Ti
     )
 
     # The shaft: the streak connected to the peak, above half its contrast, within the radius.
-    from scipy.ndimage import label
+    from scipy.ndimage import label  # lazy: start-up (scipy)
 
     r = SHAFT_RADIUS_PX
     ra, rb = max(v_peak - r, 0), min(v_peak + r + 1, height)

@@ -1,13 +1,13 @@
 """Fixed tolerances of N-wire phantom segmentation, and its settings' type.
 
 The settings a device set gives (PLUS fCal's ``<Segmentation>`` element) are a
-:class:`~brachycal.data.plus_segmentation.NWireSegmentationParameters` (metres, radians), defined
+:class:`~brachycal.data.formats.plus_segmentation.NWireSegmentationParameters` (metres, radians), defined
 with its reader in the data layer; the tolerances here are those PLUS hard-codes.
 """
 
 from __future__ import annotations
 
-from brachycal.data.plus_segmentation import NWireSegmentationParameters
+from brachycal.data.formats.plus_segmentation import NWireSegmentationParameters
 
 __all__ = [
     "EDGE_MARGIN_PX",

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from brachycal.data.plus_files import Wire
+from brachycal.data.formats.plus_files import Wire
 from brachycal.imaging.nwire_dots import Dots
 from brachycal.imaging.nwire_parameters import (
     MIDDLE_DISTANCE_TOLERANCE_M,

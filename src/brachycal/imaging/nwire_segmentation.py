@@ -3,7 +3,7 @@
 Each frame: dot candidates (:mod:`brachycal.imaging.nwire_dots`), then the phantom's N pattern
 (:mod:`brachycal.imaging.nwire_patterns`); with the frame's tracker readings (``ProbeToTracker``,
 ``ReferenceToTracker`` from the sequence's frame fields, millimetres → metres) it becomes a
-:class:`~brachycal.data.plus_files.SegmentedFrame`, which is what :func:`brachycal.calibration.
+:class:`~brachycal.data.formats.plus_files.SegmentedFrame`, which is what :func:`brachycal.calibration.
 nwire_file.nwire_from_files` calibrates from. A frame without a pattern, or without both tracker
 readings, is kept with ``ok=False`` and its reason, and counted.
 """
@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from brachycal.data.metaimage import ImageSequence
-from brachycal.data.plus_files import PlusConfig, SegmentedFrame, sequence_transform
+from brachycal.data.formats.metaimage import ImageSequence
+from brachycal.data.formats.plus_files import PlusConfig, SegmentedFrame, sequence_transform
 from brachycal.errors import InputError
 from brachycal.imaging.nwire_dots import find_dots
 from brachycal.imaging.nwire_parameters import NWireSegmentationParameters
@@ -99,7 +99,7 @@ def segment_sequence(
     Args:
         sequence: ``(N, H, W)`` uint8 frames with PLUS's per-frame fields (tracker readings in mm).
         config: the phantom's N patterns (wire names and geometry).
-        params: segmentation settings (:func:`brachycal.data.plus_segmentation.read_segmentation_parameters`).
+        params: segmentation settings (:func:`brachycal.data.formats.plus_segmentation.read_segmentation_parameters`).
         source: the sequence's file, for messages and the frames' ``source``.
         label: what a frame index counts (``"CalibrationData Frame"``), for messages.
         orientation: the frames' ultrasound orientation (``MF``, ``UF``, ``MN``, ``UN``), which says

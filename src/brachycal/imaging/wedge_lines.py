@@ -1,7 +1,7 @@
 """A multi-wedge phantom's face lines in a B-mode frame, sub-pixel, each assigned to its face.
 
 Each planar face of a wedge crosses the image plane in a straight bright line; the multi-wedge
-calibration (:mod:`brachycal.calibration.wedge_phantom`) reads each line by two of its points.
+calibration (:mod:`brachycal.calibration.phantom.wedge`) reads each line by two of its points.
 :func:`find_wedge_lines` finds them in three steps:
 
 1. **Ridge points along columns.** The frame is smoothed (Gaussian, SD :data:`SMOOTH_SD_PX`
@@ -11,10 +11,10 @@ calibration (:mod:`brachycal.calibration.wedge_phantom`) reads each line by two 
    by a parabola through the maximum and its two neighbours. The brightest depth, not the leading
    edge: a face tilted in elevation is smeared by the beam's thickness to both sides of its
    in-plane depth, and the leading edge is biased by half that smear (what
-   :mod:`~brachycal.simulation.phantom_twin`'s simulated segmentation models) while the maximum of a
+   :mod:`~brachycal.studies.phantom_twin`'s simulated segmentation models) while the maximum of a
    symmetric beam profile is not. The threshold: log-compressed speckle (Rayleigh envelope of mean
    m) exceeds m·10^(12/20) with probability exp(−π/4 · 3.98²) ≈ 4e-6 per independent sample; a
-   face echoes ~25 dB above tissue (:data:`~brachycal.simulation.phantom_images.FACE_LEVEL_DB`
+   face echoes ~25 dB above tissue (:data:`~brachycal.studies.phantom_images.FACE_LEVEL_DB`
    against the renderer's −35 dB tissue), so 12 dB leaves margin for the attenuation left after
    time-gain compensation (~0.65 dB/cm).
 2. **Lines.** Sequential RANSAC over the candidates (a seeded generator: the same frame gives the
@@ -25,7 +25,7 @@ calibration (:mod:`brachycal.calibration.wedge_phantom`) reads each line by two 
    (the faces are tilted 30° from the scan plane's lateral axis; a line steeper than 60° is not a
    face). Its points are then removed and the next line sought.
 3. **Assignment to faces**, by the expected order and slope signs from the nominal scan
-   (:func:`~brachycal.simulation.phantom_images.nominal_face_order`): the lines sorted left to
+   (:func:`~brachycal.studies.phantom_images.nominal_face_order`): the lines sorted left to
    right (by their middle's ``u``) must be as many as the faces and each must slope the way its
    face does (a roof face rises towards its ridge: ``dv/du < 0`` left of it, ``> 0`` right of it).
    A probe held within a few degrees of the nominal scan keeps the order (the wedges stand 30 mm
@@ -76,7 +76,7 @@ _MAX_LINES = 12
 
 def _candidates(frame: np.ndarray, dynamic_range_db: float) -> FloatArray:
     """``(M, 2)`` sub-pixel ``(u, v)`` of the columns' local maxima above the threshold."""
-    from scipy.ndimage import gaussian_filter
+    from scipy.ndimage import gaussian_filter  # lazy: start-up (scipy)
 
     grey = frame.astype(np.float32)
     inside = grey > 0  # the renderer's sector is black outside

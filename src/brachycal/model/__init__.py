@@ -15,7 +15,7 @@ from brachycal._lazy import attach
 
 if TYPE_CHECKING:  # imported on first use: the names need no Pinocchio, the Robot and its helpers do
     from brachycal.model.collision import ClearanceChecker, collision_link_pairs
-    from brachycal.model.description import BUNDLED_ROBOTS, Rig, RobotDescription, load_description
+    from brachycal.model.description import BUNDLED_ROBOTS, RobotDescription, load_description
     from brachycal.model.ik import solve_ik
     from brachycal.model.names import (
         BASE,
@@ -33,6 +33,7 @@ if TYPE_CHECKING:  # imported on first use: the names need no Pinocchio, the Rob
         TOP_MODEL_TIP,
         US_IMAGE,
     )
+    from brachycal.model.rig import Rig
     from brachycal.model.robot import Robot, bundled_urdf_path
 
 __getattr__, __dir__ = attach(__name__, __file__)

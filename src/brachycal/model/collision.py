@@ -19,8 +19,8 @@ import pinocchio as pin
 from numpy.typing import ArrayLike
 
 from brachycal.errors import InputError
-from brachycal.files import bundled
 from brachycal.inputs import MAX_DOCUMENT_BYTES, read_input_bytes
+from brachycal.io import bundled
 from brachycal.model.robot import Robot
 
 

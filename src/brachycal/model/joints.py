@@ -174,7 +174,7 @@ class Coordinates:
                 out[:, i : i + 2] = Q[:, column : column + 2]
                 out[:, i + 2], out[:, i + 3] = np.cos(theta), np.sin(theta)
             elif j.kind == "floating":
-                from scipy.spatial.transform import Rotation
+                from scipy.spatial.transform import Rotation  # lazy: start-up (scipy)
 
                 out[:, i : i + 3] = Q[:, column : column + 3]
                 # Extrinsic x-y-z angles are URDF's rpy, R = Rz(yaw) Ry(pitch) Rx(roll); scipy's quaternion

@@ -5,7 +5,7 @@ is built from it, a calibrated robot is a new :class:`Robot` whose tool joints c
 ``<origin>`` values (:meth:`Robot.with_tool_transform`), and :meth:`Robot.write_urdf` writes that
 text back out for ROS/MoveIt.
 
-A robot carries its rig (:attr:`Robot.rig`, a :class:`~brachycal.model.description.Rig`): which arm
+A robot carries its rig (:attr:`Robot.rig`, a :class:`~brachycal.model.rig.Rig`): which arm
 holds which tool, the ready stance, the collision pairs, the controller's joint order, the
 workspace. A description sets it (:func:`~brachycal.model.description.load_description`);
 :meth:`Robot.load` gives the SDA10F's; every ``with_*`` robot keeps it.
@@ -39,17 +39,17 @@ import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
 from brachycal.errors import InputError
-from brachycal.files import atomic_open, bundled
 from brachycal.inputs import MAX_DOCUMENT_BYTES, MAX_MESH_BYTES, check_input_file, read_input_bytes, read_input_text
+from brachycal.io import atomic_open, bundled
 from brachycal.model import urdf_text
 from brachycal.model.batch_fk import BatchForwardKinematics
+from brachycal.model.description_file import bundled_description_path, read_description_file, rig_of
 from brachycal.model.joints import ONE_AXIS, Coordinates, UnsupportedJoint
+from brachycal.model.rig import Rig
 from brachycal.se3 import FloatArray, inverse, make_transform
 
 if TYPE_CHECKING:
     import mujoco
-
-    from brachycal.model.description import Rig
 
 #: Configurations evaluated per block by the batch path: bounds the working memory (~2 MiB
 #: besides the output) and paces progress reports; 4096 measured fastest of 1024 to 20,000.
@@ -63,10 +63,12 @@ def bundled_urdf_path() -> Path:
 
 @functools.cache
 def sda10f_rig() -> Rig:
-    """The bundled SDA10F's rig (``robots/sda10f.toml``, equivalent to :mod:`brachycal.model.names`), read once."""
-    from brachycal.model.description import load_description
-
-    return load_description("sda10f").rig
+    """The bundled SDA10F's rig (``robots/sda10f.toml``, equivalent to :mod:`brachycal.model.names`), read once:
+    the one :func:`~brachycal.model.description.load_description` gives, checked against the model of
+    the description's own URDF."""
+    file = read_description_file(bundled_description_path("sda10f").resolve())
+    robot = Robot(file.urdf_xml, base_dir=file.base_dir, source=str(file.source))
+    return rig_of(file, robot.model, robot.joint_names, robot.lower, robot.upper)
 
 
 class Robot:
@@ -77,7 +79,7 @@ class Robot:
         base_dir: folder that relative mesh paths in the URDF are resolved against.
         source: name used in error messages (usually the file path).
         rig: which arm holds which tool, the ready stance, the collision pairs, the workspace
-            (:class:`~brachycal.model.description.Rig`); ``None``: none (:attr:`rig` refuses).
+            (:class:`~brachycal.model.rig.Rig`); ``None``: none (:attr:`rig` refuses).
 
     Raises:
         InputError: the text is not a URDF that Pinocchio can load.
@@ -346,7 +348,7 @@ class Robot:
 
         ``FK_new(q) = FK_this(q + offsets)``: each offset turns the joint's origin about its axis.
         """
-        from scipy.spatial.transform import Rotation
+        from scipy.spatial.transform import Rotation  # lazy: start-up (scipy)
 
         origins = {}
         for name, offset in offsets_rad.items():
@@ -412,7 +414,7 @@ class Robot:
         under a name of its own (``m<k>_<stem>.<ext>``: MuJoCo strips folders, so two files of the same
         name in different folders would clash). Visual geometry is dropped: planning never sees it.
         """
-        import mujoco
+        import mujoco  # lazy: start-up (mujoco)
 
         root = urdf_text.parse(self.urdf_xml, self.source)
         for link in root.iter("link"):
@@ -457,7 +459,7 @@ def _mujoco_mesh(path: Path, k: int, source: str) -> tuple[str, bytes]:
 def _stl_bytes(path: Path, mtime_ns: int) -> bytes:
     """Binary STL of a mesh file trimesh reads (COLLADA through pycollada), cached by file and
     modification time: converting Baxter's torso takes 0.07 s and every planner asks again."""
-    import trimesh
+    import trimesh  # lazy: start-up (trimesh)
 
     mesh = trimesh.load(path, force="mesh")
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:

@@ -9,7 +9,7 @@ The robot's rig (``robot.rig``) gives the arms, the ready stance planning starts
 pairs, the controller order and the workspace (:meth:`PlanSpec.for_robot`); :data:`READY` is the
 SDA10F's ready stance (:data:`brachycal.model.READY`).
 
-Excitation poses (robot identification, ``plan --excitation``): :func:`plan_excitation` chooses
+Excitation poses (robot identification, ``plan excitation``): :func:`plan_excitation` chooses
 extra touches and samples for a session whose robot was identified (:class:`ExcitationPlan` of
 :class:`Candidate` poses), :func:`write_excitation` writes them.
 """
@@ -24,8 +24,8 @@ if TYPE_CHECKING:  # imported on first use: the plan's options need only the lig
     from brachycal.planning.excitation import Candidate, ExcitationPlan, plan_excitation, write_excitation
     from brachycal.planning.output import infeasible_path, write_infeasible, write_plan
     from brachycal.planning.plan import GridPoint, Infeasible, Plan, PlannedPose, grid_points, plan_poses
+    from brachycal.planning.pose_checks import PoseCheck, PoseVerifier, Thresholds
     from brachycal.planning.spec import PlanSpec, RectFOV, SectorFOV
-    from brachycal.planning.verify import PoseCheck, PoseVerifier, Thresholds
 
 __getattr__, __dir__ = attach(__name__, __file__)
 

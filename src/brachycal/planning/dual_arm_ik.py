@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from brachycal.errors import InputError, SolverError
+from brachycal.model.collision import collision_link_pairs
 from brachycal.model.names import NEEDLE_TIP, PROBE_TIP
 from brachycal.se3 import FloatArray
 from brachycal.validate import check_finite, check_int, check_range, check_transform
@@ -49,7 +50,7 @@ class IKSettings:
             tools can reach their targets exactly.
 
     Every setting must be finite and in range: margins in [0, 0.15 m] and [0, 50 deg] (a little
-    above the largest :class:`~brachycal.planning.verify.Thresholds`, since the IK keeps more
+    above the largest :class:`~brachycal.planning.pose_checks.Thresholds`, since the IK keeps more
     than the check asks; the thresholds set the floors a plan must keep), ``dt`` in (0, 1] s,
     ``max_iterations`` in [1, 100000], tolerances in (0, 1 mm] and (0, 0.1 rad], ``posture_cost``
     in [0, 1], ``finish_radius_m`` in [0, 0.1 m].
@@ -89,7 +90,7 @@ class IKOutcome:
 
 
 def _se3(T: FloatArray) -> mink.SE3:
-    import mink
+    import mink  # lazy: start-up (mink)
 
     return mink.SE3.from_matrix(np.asarray(T, dtype=float))
 
@@ -107,10 +108,8 @@ class DualArmIK:
     """
 
     def __init__(self, robot: Robot, settings: IKSettings = IKSettings()) -> None:
-        import mink
-        import mujoco
-
-        from brachycal.model.collision import collision_link_pairs
+        import mink  # lazy: start-up (mink)
+        import mujoco  # lazy: start-up (mujoco)
 
         self.robot = robot
         self.settings = settings
@@ -208,8 +207,8 @@ class DualArmIK:
 
     def _step(self, tasks: list, iteration: int, T_base_needle: FloatArray, T_base_probe: FloatArray) -> FloatArray:
         """One differential-IK velocity, ``(nv,)`` rad/s; a QP without solution becomes :class:`SolverError`."""
-        import mink
-        import qpsolvers
+        import mink  # lazy: start-up (mink)
+        import qpsolvers  # lazy: start-up (qpsolvers)
 
         try:
             velocity = mink.solve_ik(

@@ -1,7 +1,7 @@
 """Excitation poses: extra touches and image samples that identify the robot where the session does not.
 
 Candidates (:func:`candidates`), each a configuration the robot model reaches within its limits and
-clear of collisions (checked again here with :mod:`brachycal.planning.verify`'s thresholds):
+clear of collisions (checked again here with :mod:`brachycal.planning.pose_checks`'s thresholds):
 
 - **touches** of the session's reference tips (their positions as the calibration estimated them)
   by the needle and the probe, from new approach directions (the tool turned about the vertical by
@@ -14,11 +14,11 @@ clear of collisions (checked again here with :mod:`brachycal.planning.verify`'s 
   arms move together; the closed loop between them does not see the torso, so such a sample only
   repeats its source — the criterion scores it so).
 
-Costs (minutes): an image sample :data:`~brachycal.simulation.design.SECONDS_PER_SAMPLE` (move,
+Costs (minutes): an image sample :data:`~brachycal.planning.robot_time.SECONDS_PER_SAMPLE` (move,
 image, annotate), a touch :data:`TOUCH_SECONDS` (jogging a tool tip onto a reference tip by hand:
 the paper's 5-minute mechanical part is 18 touches and 6 axes points, ~12 s each done in one flow;
 a touch on its own, with the approach to set up, is taken at 30 s), each plus the motion from its
-source pose and back at a quarter of the vendor's speed (:data:`~brachycal.simulation.design.SPEED_SCALE`).
+source pose and back at a quarter of the vendor's speed (:data:`~brachycal.planning.robot_time.SPEED_SCALE`).
 The chosen poses' total is then the ordered tour's (:func:`tour_minutes`).
 """
 
@@ -33,16 +33,26 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from brachycal.calibration.chain import ChainFit
-from brachycal.calibration.robot_identification import RobotIdentification
-from brachycal.calibration.robot_observability import SAMPLE, TOUCH, Observation
+from brachycal.calibration.robot.identification import RobotIdentification
+from brachycal.calibration.robot.observability import (
+    SAMPLE,
+    TOUCH,
+    Observation,
+    base_criterion,
+    greedy,
+    observation_rows,
+    resolution,
+)
 from brachycal.data.session import Session
 from brachycal.errors import SolverError
+from brachycal.io import atomic_open
+from brachycal.model.collision import ClearanceChecker, collision_link_pairs
 from brachycal.model.ik import solve_ik
 from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, TOP_MODEL_TIP, US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.planning import order as ordering
-from brachycal.planning.excitation_budget import DEFAULT_BUDGET_MINUTES, MAX_BUDGET_MINUTES
-from brachycal.planning.verify import Thresholds
+from brachycal.planning.pose_checks import Thresholds
+from brachycal.planning.robot_time import DEFAULT_BUDGET_MINUTES, MAX_BUDGET_MINUTES, SECONDS_PER_SAMPLE, SPEED_SCALE
 from brachycal.se3 import FloatArray, make_transform
 from brachycal.validate import check_range
 
@@ -108,8 +118,6 @@ class _Checks:
     """Joint margins and clearances with the independent check's thresholds."""
 
     def __init__(self, robot: Robot, thresholds: Thresholds) -> None:
-        from brachycal.model.collision import ClearanceChecker, collision_link_pairs
-
         self.robot, self.thresholds = robot, thresholds
         self.checker = ClearanceChecker(robot, collision_link_pairs(robot))
 
@@ -178,8 +186,6 @@ def candidates(
         samples: which session samples to vary (default all).
         touches: also touches (:data:`TOUCHES_RECORDABLE`: a session cannot hold them yet).
     """
-    from brachycal.simulation.design import SECONDS_PER_SAMPLE, SPEED_SCALE
-
     rig = robot.rig
     checks = _Checks(robot, thresholds)
     shared = rig.shared_indices
@@ -283,8 +289,6 @@ def tour(robot: Robot, chosen: Sequence[Candidate]) -> tuple[np.ndarray, FloatAr
     """The visiting order of ``chosen`` from the rig's ready stance (nearest neighbour + 2-opt at a
     quarter of the vendor's speed), each pose's move time from the previous one (s), and the minutes
     to record them all and return to the ready stance (dwells plus motion)."""
-    from brachycal.simulation.design import SECONDS_PER_SAMPLE, SPEED_SCALE
-
     if not chosen:
         return np.zeros(0, dtype=int), np.zeros(0), 0.0
     ready = robot.rig.ready
@@ -317,7 +321,7 @@ class ExcitationPlan:
             writes them in visiting order, :func:`tour`).
         rms_before_mm: predicted RMS landing error of the session alone (mm).
         rms_after_mm: with the chosen poses (mm; equal to before when nothing is chosen).
-        resolution: relative SD of the predicted RMS (:func:`~brachycal.calibration.robot_observability.resolution`).
+        resolution: relative SD of the predicted RMS (:func:`~brachycal.calibration.robot.observability.resolution`).
         minutes: the chosen poses' robot time (:func:`tour_minutes`).
         budget_minutes: the budget they were chosen under.
         minimum_improvement: the relative fall judged worth recording.
@@ -354,7 +358,7 @@ def plan_excitation(
     touches: bool = TOUCHES_RECORDABLE,
 ) -> ExcitationPlan:
     """Choose excitation poses for a session whose robot was identified (module docstring and
-    :mod:`brachycal.calibration.robot_observability`).
+    :mod:`brachycal.calibration.robot.observability`).
 
     Args:
         identified: the robot identified on ``session`` with ``nominal``.
@@ -364,15 +368,13 @@ def plan_excitation(
         thresholds: joint margin, clearance and IK residual every pose keeps.
         minimum_improvement: relative fall of the predicted RMS landing error below which the poses
             are not worth recording; default the larger of the prediction's own uncertainty
-            (:func:`~brachycal.calibration.robot_observability.resolution`) and
+            (:func:`~brachycal.calibration.robot.observability.resolution`) and
             :data:`MIN_IMPROVEMENT`. The greedy stops below this fraction per budget per minute.
         touches: offer touches too (default :data:`TOUCHES_RECORDABLE`).
 
     Raises:
         InputError: a budget out of range.
     """
-    from brachycal.calibration.robot_observability import base_criterion, greedy, observation_rows, resolution
-
     check_range(budget_minutes, "excitation budget", low=0.0, high=MAX_BUDGET_MINUTES, low_open=True, unit="min")
     fit = identified.fit
     rtips = fit.layout(nominal.joint_names).unpack(fit.x, fit.base, session.spacing_m)[3]
@@ -431,8 +433,6 @@ def write_excitation(plan: ExcitationPlan, robot: Robot, path: str | os.PathLike
     ``joint_margin_deg``, then the joints in the controller's order in radians and in degrees.
     A touch's ``u_px,v_px`` are empty; a sample's ``tool,reference`` are empty.
     """
-    from brachycal.files import atomic_open
-
     controller = robot.rig.controller_joint_names
     columns = [robot.joint_names.index(name) for name in controller]
     visit, moves, _ = tour(robot, plan.chosen)

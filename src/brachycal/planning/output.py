@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from brachycal.files import atomic_open
+from brachycal.io import atomic_open
 from brachycal.model.robot import Robot
 from brachycal.planning import order as ordering
 from brachycal.planning.plan import Plan

@@ -10,11 +10,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from brachycal.errors import SolverError
+from brachycal.model.collision import ClearanceChecker, collision_link_pairs
 from brachycal.model.names import PROBE_TIP, US_IMAGE
 from brachycal.planning import order as ordering
 from brachycal.planning.dual_arm_ik import DualArmIK, IKSettings
+from brachycal.planning.pose_checks import PoseCheck, PoseVerifier, Thresholds
 from brachycal.planning.spec import PlanSpec
-from brachycal.planning.verify import PoseCheck, PoseVerifier, Thresholds
 from brachycal.se3 import FloatArray
 from brachycal.validate import check_range
 
@@ -115,8 +116,6 @@ def plan_poses(
         speed_scale: fraction of the vendor's velocity limits for the motion-time estimate.
         progress: called with 1 after each grid point.
     """
-    from brachycal.model.collision import ClearanceChecker, collision_link_pairs
-
     check_range(speed_scale, "speed scale", low=0.0, high=1.0, low_open=True)
     start = time.perf_counter()
     ik = DualArmIK(robot, settings)

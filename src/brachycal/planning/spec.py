@@ -31,7 +31,7 @@ from brachycal.validate import (
 )
 
 if TYPE_CHECKING:  # types only: a spec loads without the robot model
-    from brachycal.model.description import Workspace
+    from brachycal.model.rig import Workspace
     from brachycal.model.robot import Robot
 
 #: Cube edge, metres: at least 1 mm (a smaller cube puts grid points a few pixels apart, below what
@@ -196,7 +196,7 @@ class PlanSpec:
 
     @classmethod
     def for_workspace(cls, workspace: Workspace, **changes: Any) -> PlanSpec:
-        """The spec of a rig's :class:`~brachycal.model.description.Workspace`, with ``changes`` on top."""
+        """The spec of a rig's :class:`~brachycal.model.rig.Workspace`, with ``changes`` on top."""
         spec = cls(
             cube_centre_m=np.array(workspace.cube_centre_m),
             insertion_dir=np.array(workspace.insertion_dir),

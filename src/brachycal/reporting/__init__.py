@@ -3,7 +3,7 @@
 Tables return text (millimetres and degrees, as their heads say). Every figure has a builder that
 returns a matplotlib ``Figure`` (``*_figure``; neither touches pyplot, the backend or
 ``rcParams``) and a function that saves it (:func:`save_figure` and the functions named after the
-figure, which write through :mod:`brachycal.files`). The 3D scene (:func:`robot_scene`,
+figure, which write through :mod:`brachycal.io`). The 3D scene (:func:`robot_scene`,
 :func:`scene_figure`, :func:`render_png`, :func:`save_glb`) loads trimesh on first use. The
 interactive view in the browser (:class:`Viewer` of a :class:`ViewContent`: :func:`poses_content`,
 :func:`calibration_content`) is served by viser.

@@ -1,4 +1,4 @@
-"""The demo's text and report folder (:class:`~brachycal.simulation.demo.DemoRun` rendered).
+"""The demo's text and report folder (:class:`~brachycal.studies.demo.DemoRun` rendered).
 
 :func:`demo_text` is what ``brachycal demo`` prints: the twin's set-up, Tables I and II, the
 end-to-end targeting error of every method, Table III (the tracker route against the fusion
@@ -15,13 +15,13 @@ from pathlib import Path
 
 import numpy as np
 
-from brachycal.calibration.image_to_probe import METHOD_LABELS, METHODS
 from brachycal.calibration.metrics import ErrorStats
-from brachycal.files import OutputSet, atomic_open, output_set
+from brachycal.calibration.sequential.image_to_probe import METHOD_LABELS, METHODS
 from brachycal.imaging.pixels import SCANNER_SOUND_SPEED_M_S
+from brachycal.io import OutputSet, atomic_open, output_set
 from brachycal.reporting.figures import error_histogram, method_comparison, points_3d
 from brachycal.reporting.tables import table_i, table_ii, table_iii, targeting_table
-from brachycal.simulation.demo import TRUTH_METHODS, DemoRun
+from brachycal.studies.demo import TRUTH_METHODS, DemoRun
 
 #: The files :func:`write_demo_report` writes into its folder.
 DEMO_REPORT_FILES = ("fig10_points.png", "fig11_loo_histogram.png", "targeting_errors.png", "residuals.csv")
@@ -94,11 +94,11 @@ def write_demo_report(
     """Write the demo's figures and residuals into ``folder`` (:data:`DEMO_REPORT_FILES`).
 
     Fig. 10 (real and calibrated points, the run's ``figure_method``'s leave-one-out: normally
-    :data:`~brachycal.simulation.demo.FIGURE_METHOD`), Fig. 11 (its error histogram), the
+    :data:`~brachycal.studies.demo.FIGURE_METHOD`), Fig. 11 (its error histogram), the
     targeting error per method, and ``residuals.csv``: per sample its pixel, the needle tip's
     distance from the image plane (mm), whether its annotation is a gross outlier, and each
     method's leave-one-out error (mm; a method that refused the session has no column).
-    All or nothing, as :func:`~brachycal.files.output_set` says; returns the final paths.
+    All or nothing, as :func:`~brachycal.io.output_set` says; returns the final paths.
     """
     folder = Path(folder)
     label = METHOD_LABELS[run.figure_method]

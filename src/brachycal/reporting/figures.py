@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike
 
 from brachycal.calibration.labels import ALL_LABELS, METHOD_LABELS
 from brachycal.calibration.metrics import ErrorStats
-from brachycal.files import atomic_path
+from brachycal.io import atomic_path
 
 
 def save_figure(fig: Figure, path: str | os.PathLike[str], *, dpi: int) -> None:
@@ -123,7 +123,7 @@ def study_figure(summary: Sequence[Mapping[str, Any]]) -> Figure:
     against the number of samples, one line per method and setting.
 
     Args:
-        summary: rows of :func:`brachycal.simulation.study.summarise`.
+        summary: rows of :func:`brachycal.studies.study.summarise`.
     """
     fig = Figure(figsize=(11, 4), layout="tight")
     axes = fig.subplots(1, 2, sharey=True)

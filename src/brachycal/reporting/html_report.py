@@ -13,11 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
-from brachycal.calibration.image_to_probe import METHOD_LABELS
 from brachycal.calibration.metrics import ErrorStats
-from brachycal.calibration.sequential import CalibrationResult, loo_points
+from brachycal.calibration.sequential.image_to_probe import METHOD_LABELS
+from brachycal.calibration.sequential.method import CalibrationResult, loo_points
 from brachycal.data.session import Session
-from brachycal.files import OutputSet, atomic_open, output_set, staged_destination
+from brachycal.io import OutputSet, atomic_open, output_set, staged_destination
 from brachycal.model.robot import Robot
 from brachycal.reporting.figures import error_histogram, points_3d, residuals_per_sample
 from brachycal.reporting.tables import chain_summary, table_i, table_ii
@@ -49,7 +49,7 @@ def write_report(
     """Write ``folder/report.html`` and its PNG figures (:data:`REPORT_FILES`); returns the HTML path.
 
     The folder is created if needed; existing files are replaced only with ``force``. All or
-    nothing: with ``outputs`` (a command's :class:`~brachycal.files.OutputSet`) the files join that
+    nothing: with ``outputs`` (a command's :class:`~brachycal.io.OutputSet`) the files join that
     set and are committed with it; without, they are committed together on return.
     """
     folder = Path(folder)
@@ -113,7 +113,7 @@ def _threshold(value: float | None) -> str:
 
 def verification_page(record: dict) -> str:
     """The HTML page of a verification record (``brachycal verify --report``; ``record``: the
-    ``brachycal-verification/1`` dict of :func:`brachycal.calibration.check.outcome_json`)."""
+    ``brachycal-verification/1`` dict of :func:`brachycal.calibration.verify.check.outcome_json`)."""
     test = record["test"]
     verdict = record["verdict"]
     colour = "#1a7f37" if verdict == "PASS" else "#b3261e"

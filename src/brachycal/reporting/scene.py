@@ -22,8 +22,8 @@ from matplotlib.figure import Figure
 from numpy.typing import ArrayLike
 from trimesh.visual import ColorVisuals, TextureVisuals
 
-from brachycal.files import atomic_path
 from brachycal.imaging.pixels import DEFAULT_IMAGE_SIZE_PX, DEFAULT_SPACING_M, image_points
+from brachycal.io import atomic_path
 from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.reporting.figures import save_figure
@@ -107,7 +107,7 @@ def scene_figure(
         azimuth: view angle, degrees.
         zoom_to: ``(2, 3)`` low and high corners of the box to show, metres; default the whole scene.
     """
-    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # lazy: start-up (mpl_toolkits)
 
     fig = Figure(figsize=(7, 6), layout="tight")
     ax = fig.add_subplot(projection="3d")

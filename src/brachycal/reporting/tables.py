@@ -14,9 +14,10 @@ import numpy as np
 from brachycal.calibration.labels import ALL_LABELS, METHOD_LABELS
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.imaging.pixels import SCANNER_SOUND_SPEED_M_S
+from brachycal.planning.robot_time import MECHANICAL_MINUTES, SECONDS_PER_SAMPLE
 
 if TYPE_CHECKING:  # types only: `brachycal plan` prints plan_text without loading the calibration
-    from brachycal.calibration.sequential import CalibrationResult
+    from brachycal.calibration.sequential.method import CalibrationResult
     from brachycal.planning.plan import Plan
 
 
@@ -193,12 +194,9 @@ def uncertainty_table(result: CalibrationResult) -> str:
 
 
 def design_table(rows: Sequence[Mapping[str, object]]) -> str:
-    """Sample designs compared (rows of :func:`~brachycal.simulation.design.compare_designs`): per
+    """Sample designs compared (rows of :func:`~brachycal.studies.design.compare_designs`): per
     design the mean over seeds of robot minutes, predicted and actual RMS landing error (mm), and
     information per minute."""
-    # Imported here: the simulation loads SciPy's statistics and mink, which plan_text's callers do not need.
-    from brachycal.simulation.design import MECHANICAL_MINUTES, SECONDS_PER_SAMPLE
-
     lines = [
         f"time model: {MECHANICAL_MINUTES:g} min mechanical + {SECONDS_PER_SAMPLE:g} s per sample + motion",
         f"{'design':<12} {'samples':>7} {'minutes':>8} {'predicted RMS (mm)':>19} {'actual RMS (mm)':>16} "
@@ -223,7 +221,7 @@ def _held_out(s: Mapping[str, object]) -> str:
 
 
 def study_table(summary: Sequence[Mapping[str, object]]) -> str:
-    """A study's summary (:func:`~brachycal.simulation.study.summarise`): per setting and method the
+    """A study's summary (:func:`~brachycal.studies.study.summarise`): per setting and method the
     leave-one-out and targeting MAE (mean ± SD over seeds), the targeting MAE at held-out
     configurations (torso turned 3°; "no torso" on a robot without a joint shared by both arms) and
     the mean largest targeting error, mm. The first line names the robot(s) the twin simulated."""

@@ -16,6 +16,7 @@ client, meshcat-python, has had no release since 2021.
 from __future__ import annotations
 
 import io
+import socket
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import partial
@@ -24,16 +25,19 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from brachycal.calibration.result import calibrated_robot
+from brachycal.calibration.sequential.method import locate
 from brachycal.errors import InputError
 from brachycal.imaging.pixels import image_points
 from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, transform_points
+from brachycal.studies.targeting import targeting_error
 
 if TYPE_CHECKING:
     import viser
 
-    from brachycal.calibration.result_file import StoredCalibration
+    from brachycal.calibration.session.result_file import StoredCalibration
     from brachycal.data.session import Session
     from brachycal.simulation.twin import Twin
 
@@ -112,7 +116,7 @@ class Viewer:
     """
 
     def __init__(self, content: ViewContent, host: str = "127.0.0.1", port: int = 0) -> None:
-        import viser
+        import viser  # lazy: start-up (viser)
 
         if port == 0:
             port = _free_port(host)
@@ -130,8 +134,8 @@ class Viewer:
             raise
 
     def _build(self) -> None:
-        import yourdfpy
-        from viser.extras import ViserUrdf
+        import yourdfpy  # lazy: start-up (yourdfpy)
+        from viser.extras import ViserUrdf  # lazy: start-up (viser)
 
         content = self.content
         scene = self.server.scene
@@ -219,7 +223,7 @@ class Viewer:
 
     def show(self, height: int = 600) -> Any:
         """The view in a Jupyter notebook (an IFrame of :attr:`url`)."""
-        from IPython.display import IFrame
+        from IPython.display import IFrame  # lazy: start-up (IPython)
 
         return IFrame(self.url, width="100%", height=height)
 
@@ -229,15 +233,13 @@ class Viewer:
 
 
 def _wxyz(R: FloatArray) -> tuple[float, float, float, float]:
-    from scipy.spatial.transform import Rotation
+    from scipy.spatial.transform import Rotation  # lazy: start-up (scipy)
 
     x, y, z, w = Rotation.from_matrix(R).as_quat()
     return (float(w), float(x), float(y), float(z))
 
 
 def _free_port(host: str) -> int:
-    import socket
-
     with socket.socket() as s:
         s.bind((host, 0))
         return int(s.getsockname()[1])
@@ -271,14 +273,11 @@ def calibration_content(
     (``calibrated``: ``T_R_EL(q) @ T_EL_Ptip @ T_Ptip_I @ p_I``, Fig. 10's pair) joined by their
     ``residual``; the sample cube, aligned with the image as the planner aligns it. With the twin
     the session was simulated by, also ``target`` and ``landed`` points (the end-to-end targeting
-    error, :func:`~brachycal.simulation.targeting_error`, with the model the software commands).
+    error, :func:`~brachycal.studies.targeting_error`, with the model the software commands).
 
     Raises:
         InputError: ``method`` is not in the result.
     """
-    from brachycal.calibration.sequential import locate
-    from brachycal.export.formats import calibrated_robot
-
     method = stored.method(method)
     software = stored.software_robot(robot)
     image = stored.image[method]
@@ -294,8 +293,6 @@ def calibration_content(
     extent = np.ptp((real - T_cube[:3, 3]) @ T_cube[:3, :3], axis=0)
     cube = (T_cube, float(max(extent.max(), 1e-3)))
     if twin is not None:
-        from brachycal.simulation.targeting import targeting_error
-
         hit = targeting_error(twin, stored.T_ER_Ntip, stored.T_EL_Ptip, image, n_targets, software=software)
         points["target"], points["landed"] = hit.targets_m, hit.landed_m
         vectors["landed"] = (hit.targets_m, hit.landed_m)

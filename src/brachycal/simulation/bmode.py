@@ -60,10 +60,8 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -71,25 +69,21 @@ from numpy.typing import ArrayLike
 
 from brachycal.errors import InputError
 from brachycal.imaging.pixels import DEFAULT_IMAGE_SIZE_PX, DEFAULT_SPACING_M
+from brachycal.model.names import NEEDLE_TIP, US_IMAGE
 from brachycal.se3 import FloatArray
 from brachycal.validate import check_range, check_seed
 
 if TYPE_CHECKING:
-    from brachycal.files import OutputSet
-    from brachycal.simulation.recording import Recording
     from brachycal.simulation.twin import Twin
 
 __all__ = [
     "EFFECTS",
-    "FRAME_FILES",
     "BModeSettings",
     "NeedleView",
-    "frame_samples",
     "needle_views",
     "render_frame",
     "render_samples",
     "true_tip_px",
-    "write_recording_frames",
 ]
 
 #: The switches of :class:`BModeSettings`, one per effect.
@@ -212,7 +206,7 @@ def _kernel(sd_px: float) -> FloatArray:
 
 def _speckle(rng: np.random.Generator, shape: tuple[int, int], sd_px: tuple[float, float]) -> np.ndarray:
     """``(H, W)`` Rayleigh envelope of mean 1, correlated over a Gaussian PSF (SDs (lateral, axial) px)."""
-    from scipy.ndimage import correlate1d
+    from scipy.ndimage import correlate1d  # lazy: start-up (scipy)
 
     k_lat, k_ax = _kernel(sd_px[0]), _kernel(sd_px[1])
     field = rng.standard_normal((2, *shape), dtype=np.float32)
@@ -245,7 +239,7 @@ def render_frame(
         frame_index: which frame of ``settings.seed`` this is: the random effects draw from the
             streams of ``(seed, frame_index)``, so frames differ and each is reproducible.
         echoes: other reflectors (e.g. a phantom's faces,
-            :func:`~brachycal.simulation.phantom_images.render_wedge_frame`): called as
+            :func:`~brachycal.studies.phantom_images.render_wedge_frame`): called as
             ``echoes(envelope, origin_px, spacing_m, psf_sd_m)`` to add their linear echo to the
             envelope in place (``envelope[0, 0]`` is pixel ``origin_px`` ``(u, v)``; ``psf_sd_m``
             ``(lateral, axial)`` SDs), before the depth gains, noise and compression apply.
@@ -478,7 +472,7 @@ def _cast_shadow(
     y = (np.arange(v0, ov + height) * sv - apex[1])[:, None]
     r = np.hypot(x, y)
     theta = np.arctan2(x, y)
-    from scipy.special import erf
+    from scipy.special import erf  # lazy: start-up (scipy)
 
     blocked = np.zeros(r.shape)
     sd_lateral = s.needle_diameter_m * _FWHM_TO_SD  # a rod of that diameter covers the ray's width
@@ -497,8 +491,6 @@ def needle_views(twin: Twin) -> list[NeedleView]:
     The shaft is the needle tip frame's z axis (:class:`~brachycal.planning.PlanSpec`'s insertion
     direction).
     """
-    from brachycal.model.names import NEEDLE_TIP, US_IMAGE
-
     views = []
     for q in twin.true_samples_q:
         T_I_Ntip = np.linalg.solve(twin.physical.fk(US_IMAGE, q), twin.physical.fk(NEEDLE_TIP, q))
@@ -525,61 +517,3 @@ def render_samples(
         for m, k in enumerate(which)
     ]
     return np.stack(frames) if frames else np.zeros((0, size[1], size[0]), dtype=np.uint8)
-
-
-#: The files :func:`write_recording_frames` adds to a recording.
-FRAME_FILES = ("frames.mha", "frames_truth.csv")
-
-
-def frame_samples(rec: Recording) -> np.ndarray:
-    """``(M,)`` the sample each of the recording's frames shows: the sample whose stop the robot
-    holds at the frame's time on the joint log's clock (a hold repeats its stop's joints exactly).
-
-    Frames stamped on the ultrasound's clock (a lag and a drift: ``RecordingConfig.image_time``, an
-    affine map of the log's clock) are taken back to the log's clock first.
-    """
-    samples_q = rec.session.samples_q
-    to_image = getattr(rec.recording, "image_time", None)
-    scale, offset = 1.0, 0.0
-    if to_image is not None:  # affine: image = scale * log + offset
-        t0 = float(rec.time[0])
-        offset_at_t0 = float(to_image(t0))
-        scale = float(to_image(t0 + 1.0)) - offset_at_t0
-        offset = offset_at_t0 - scale * t0
-    out = np.empty(len(rec.frames), dtype=int)
-    for m, frame in enumerate(rec.frames):
-        log_time = (frame.time_s - offset) / scale
-        i = int(np.clip(np.searchsorted(rec.time, log_time), 0, len(rec.time) - 1))
-        out[m] = int(np.argmin(np.abs(samples_q - rec.q_true[i]).max(axis=1)))
-    return out
-
-
-def write_recording_frames(
-    rec: Recording, folder: str | os.PathLike[str], settings: BModeSettings, outputs: OutputSet
-) -> None:
-    """Add the recording's frames to ``folder`` as part of ``outputs``: :data:`FRAME_FILES`.
-
-    ``frames.mha``: one rendered frame per row of ``images.csv`` (same order, ``Timestamp`` = its
-    time), the header's spacing in mm. ``frames_truth.csv`` (``time,sample,u_px,v_px,elevation_mm``):
-    per frame the sample it shows and where the tip truly is (pixels; mm off the image plane).
-    """
-    folder = Path(folder)
-    samples = frame_samples(rec)
-    pixels = render_samples(rec.twin, settings, samples)
-    times = np.array([f.time_s for f in rec.frames])
-    truth_px = true_tip_px(rec.twin)
-    elevation_mm = np.array([v.tip_I_m[2] * 1e3 for v in needle_views(rec.twin)])
-    spacing_mm = tuple(float(x) * 1e3 for x in rec.session.spacing_m)
-    from brachycal.data.metaimage import write_image_sequence
-
-    write_image_sequence(
-        outputs.path(folder / "frames.mha", make_parents=True),
-        pixels,
-        timestamps_s=times,
-        spacing=(spacing_mm[0], spacing_mm[1]),
-    )
-    with outputs.path(folder / "frames_truth.csv", make_parents=True).open("w") as f:
-        f.write("time,sample,u_px,v_px,elevation_mm\n")
-        for t, k in zip(times, samples, strict=True):
-            u, v = (float(x) for x in truth_px[k])
-            f.write(f"{t:.6f},{rec.session.sample_ids[k]},{u!r},{v!r},{float(elevation_mm[k])!r}\n")

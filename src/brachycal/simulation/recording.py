@@ -32,33 +32,34 @@ import shutil
 import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-from brachycal.data.bags import DEFAULT_TOPIC, JOINT_STATE
+from brachycal.data.formats.bags import DEFAULT_TOPIC, JOINT_STATE
+from brachycal.data.formats.metaimage import write_image_sequence
 from brachycal.data.joint_log import JointLog, joint_log_from_columns
 from brachycal.data.recording import AXES_POINTS, MARK_TYPE, REFERENCES, STILL_WINDOW_S, TOUCH_TOOLS, Frame, Mark
 from brachycal.data.session import Session, write_session
 from brachycal.errors import InputError
-from brachycal.files import OutputSet, atomic_open, output_set
+from brachycal.io import OutputSet, atomic_open, output_set
 from brachycal.model.robot import Robot
 from brachycal.planning import Plan, plan_poses
 from brachycal.planning.output import write_plan
 from brachycal.se3 import FloatArray
+from brachycal.simulation.bmode import BModeSettings, needle_views, render_samples, true_tip_px
 from brachycal.simulation.twin import Twin, TwinConfig, simulate
 from brachycal.validate import check_int, check_range
 
-if TYPE_CHECKING:
-    from brachycal.simulation.bmode import BModeSettings
-
 __all__ = [
+    "FRAME_FILES",
     "MARKS_TOPIC",
     "RECORDING_FILES",
     "Recording",
     "RecordingConfig",
+    "frame_samples",
     "record",
     "write_recording",
+    "write_recording_frames",
 ]
 
 #: Files :func:`write_recording` writes (the bag, if asked for, is a folder beside them).
@@ -280,8 +281,8 @@ def _write_images_csv(path: Path, rec: Recording) -> None:
 
 def _write_bag(folder: Path, rec: Recording, storage: str) -> None:
     """A ROS 2 bag at ``folder`` (must not exist): joint states and marks, in time order."""
-    from rosbags.rosbag2 import StoragePlugin, Writer
-    from rosbags.typesys import Stores, get_typestore
+    from rosbags.rosbag2 import StoragePlugin, Writer  # lazy: start-up (rosbags)
+    from rosbags.typesys import Stores, get_typestore  # lazy: start-up (rosbags)
 
     typestore = get_typestore(Stores.ROS2_HUMBLE)
     JointState = typestore.types[JOINT_STATE]
@@ -330,9 +331,9 @@ def write_recording(
         bag: also write the joint states (``/joint_states``) and the marks (:data:`MARKS_TOPIC`) as
             a ROS 2 bag folder ``folder/bag``: ``"sqlite3"`` or ``"mcap"``; ``None`` for none.
         images: also render the frames as B-mode images with these settings: ``frames.mha`` and
-            ``frames_truth.csv`` (:func:`brachycal.simulation.bmode.write_recording_frames`).
+            ``frames_truth.csv`` (:func:`write_recording_frames`).
         force: replace existing files.
-        outputs: a command's :class:`~brachycal.files.OutputSet` to join (all or nothing with it).
+        outputs: a command's :class:`~brachycal.io.OutputSet` to join (all or nothing with it).
 
     Raises:
         InputError: an unknown bag storage.
@@ -347,8 +348,6 @@ def write_recording(
         _write_images_csv(out.path(folder / "images.csv", make_parents=True), rec)
         write_plan(rec.plan, rec.twin.nominal, out.path(folder / "plan.csv", make_parents=True))
         if images is not None:
-            from brachycal.simulation.bmode import write_recording_frames
-
             write_recording_frames(rec, folder, images, out)
         # The session.toml of the set-up (what the lab knows before recording), as a template.
         with tempfile.TemporaryDirectory(prefix="brachycal-recording-") as tmp:
@@ -359,3 +358,59 @@ def write_recording(
                 for item in sorted((Path(tmp) / "bag").iterdir()):
                     shutil.copyfile(item, out.path(folder / "bag" / item.name, make_parents=True))
     return folder
+
+
+#: The files :func:`write_recording_frames` adds to a recording.
+FRAME_FILES = ("frames.mha", "frames_truth.csv")
+
+
+def frame_samples(rec: Recording) -> np.ndarray:
+    """``(M,)`` the sample each of the recording's frames shows: the sample whose stop the robot
+    holds at the frame's time on the joint log's clock (a hold repeats its stop's joints exactly).
+
+    Frames stamped on the ultrasound's clock (a lag and a drift: ``RecordingConfig.image_time``, an
+    affine map of the log's clock) are taken back to the log's clock first.
+    """
+    samples_q = rec.session.samples_q
+    to_image = getattr(rec.recording, "image_time", None)
+    scale, offset = 1.0, 0.0
+    if to_image is not None:  # affine: image = scale * log + offset
+        t0 = float(rec.time[0])
+        offset_at_t0 = float(to_image(t0))
+        scale = float(to_image(t0 + 1.0)) - offset_at_t0
+        offset = offset_at_t0 - scale * t0
+    out = np.empty(len(rec.frames), dtype=int)
+    for m, frame in enumerate(rec.frames):
+        log_time = (frame.time_s - offset) / scale
+        i = int(np.clip(np.searchsorted(rec.time, log_time), 0, len(rec.time) - 1))
+        out[m] = int(np.argmin(np.abs(samples_q - rec.q_true[i]).max(axis=1)))
+    return out
+
+
+def write_recording_frames(
+    rec: Recording, folder: str | os.PathLike[str], settings: BModeSettings, outputs: OutputSet
+) -> None:
+    """Add the recording's frames to ``folder`` as part of ``outputs``: :data:`FRAME_FILES`.
+
+    ``frames.mha``: one rendered frame per row of ``images.csv`` (same order, ``Timestamp`` = its
+    time), the header's spacing in mm. ``frames_truth.csv`` (``time,sample,u_px,v_px,elevation_mm``):
+    per frame the sample it shows and where the tip truly is (pixels; mm off the image plane).
+    """
+    folder = Path(folder)
+    samples = frame_samples(rec)
+    pixels = render_samples(rec.twin, settings, samples)
+    times = np.array([f.time_s for f in rec.frames])
+    truth_px = true_tip_px(rec.twin)
+    elevation_mm = np.array([v.tip_I_m[2] * 1e3 for v in needle_views(rec.twin)])
+    spacing_mm = tuple(float(x) * 1e3 for x in rec.session.spacing_m)
+    write_image_sequence(
+        outputs.path(folder / "frames.mha", make_parents=True),
+        pixels,
+        timestamps_s=times,
+        spacing=(spacing_mm[0], spacing_mm[1]),
+    )
+    with outputs.path(folder / "frames_truth.csv", make_parents=True).open("w") as f:
+        f.write("time,sample,u_px,v_px,elevation_mm\n")
+        for t, k in zip(times, samples, strict=True):
+            u, v = (float(x) for x in truth_px[k])
+            f.write(f"{t:.6f},{rec.session.sample_ids[k]},{u!r},{v!r},{float(elevation_mm[k])!r}\n")

@@ -45,10 +45,10 @@ ROBOT_ERROR_LEVELS: dict[str, tuple[float, float, float]] = {
 MAX_STUDY_RUNS = 10_000
 
 #: Methods a study can run: the sequential registrations, the whole-chain fit, and the whole-chain
-#: fit with the robot identified (:mod:`brachycal.calibration.robot_identification`, its prior the
+#: fit with the robot identified (:mod:`brachycal.calibration.robot.identification`, its prior the
 #: twin's own robot-error level: the study states the accuracy a lab would state).
 STUDY_METHODS = (*METHODS, "chain", "chain+robot")
-#: Torso turn of the held-out targeting configurations (see :mod:`brachycal.simulation.targeting`):
+#: Torso turn of the held-out targeting configurations (see :mod:`brachycal.studies.targeting`):
 #: 3°, postures the calibration never saw, reachable from every sample pose's neighbourhood.
 HELD_OUT_TORSO_TURN_RAD = float(np.radians(3.0))
 

@@ -19,7 +19,7 @@ from brachycal.data.json_files import read_format_json
 from brachycal.data.session import FILES as SESSION_FILES
 from brachycal.data.session import read_session, write_session
 from brachycal.errors import InputError
-from brachycal.files import OutputSet, output_set, write_json
+from brachycal.io import OutputSet, output_set, write_json
 from brachycal.model.robot import Robot
 from brachycal.planning import PlanSpec, SectorFOV
 from brachycal.simulation.exact import SessionTruth
@@ -51,7 +51,7 @@ def write_twin(
 ) -> Path:
     """Write the session and its truth to ``folder`` (created if needed): :data:`TWIN_FILES`.
 
-    All or nothing: with ``outputs`` (a command's :class:`~brachycal.files.OutputSet`) the files
+    All or nothing: with ``outputs`` (a command's :class:`~brachycal.io.OutputSet`) the files
     join that set and are committed with it; without, they are committed together on return.
     """
     folder = Path(folder)

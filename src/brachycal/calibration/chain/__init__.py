@@ -18,7 +18,7 @@ Image models (one table, :data:`IMAGE_MODELS`): ``rigid`` (the scanner's spacing
 spacing as the scanner says, depth spacing times c / 1540 m/s, with the speed of sound c estimated).
 The unknowns sit in the parameter vector by name (:class:`ParameterLayout`, ``ChainFit.block``).
 
-Two stages, both least-squares solves (:mod:`~brachycal.calibration.chain.solver`: SciPy's trust-region
+Two stages, both least-squares solves (:mod:`~brachycal.calibration.least_squares`: SciPy's trust-region
 objective and tolerances, without its per-call overhead) from the sequential result:
 
 1. **Robust stage** (finds gross errors): soft-L1 loss on the normalised residuals, each group's
@@ -168,6 +168,7 @@ from brachycal.calibration.chain.residuals import (
 )
 from brachycal.calibration.chain.result import (
     ChainFit,
+    robot_jacobian,
 )
 from brachycal.calibration.chain.robot_terms import (
     DEFAULT_ROBOT_ACCURACY,
@@ -177,7 +178,6 @@ from brachycal.calibration.chain.robot_terms import (
     ROBOT_STEP,
     RobotAccuracy,
     joint_twists,
-    robot_jacobian,
     robot_jacobian_at,
 )
 

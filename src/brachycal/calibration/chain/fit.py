@@ -34,9 +34,9 @@ from brachycal.calibration.chain.noise import (
 from brachycal.calibration.chain.problem import ChainProblem, Reweighted
 from brachycal.calibration.chain.result import ChainFit
 from brachycal.calibration.chain.robot_terms import DEFAULT_ROBOT_ACCURACY, RobotAccuracy, robot_jacobian_at
-from brachycal.calibration.chain.solver import MAX_ITERATIONS
-from brachycal.calibration.image_to_probe import ImageCalibration
-from brachycal.calibration.sequential import CalibrationResult
+from brachycal.calibration.least_squares import MAX_ITERATIONS
+from brachycal.calibration.sequential.image_to_probe import ImageCalibration
+from brachycal.calibration.sequential.method import CalibrationResult
 from brachycal.data.session import Session
 from brachycal.errors import SolverError
 from brachycal.model.robot import Robot

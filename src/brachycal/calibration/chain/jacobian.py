@@ -6,8 +6,7 @@ import numpy as np
 
 from brachycal.calibration.chain.data import N_AXES_ROWS, ChainData
 from brachycal.calibration.chain.layout import ParameterLayout, Unpacked
-from brachycal.calibration.chain.rotations import left_jacobian, skew
-from brachycal.se3 import FloatArray
+from brachycal.se3 import FloatArray, left_jacobian, skew
 
 
 def chain_jacobian(

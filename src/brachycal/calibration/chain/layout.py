@@ -15,9 +15,8 @@ from functools import cached_property
 import numpy as np
 
 from brachycal.calibration.chain.image_models import ImageModel, image_model
-from brachycal.calibration.chain.rotations import rotation
-from brachycal.calibration.sequential import CalibrationResult
-from brachycal.se3 import FloatArray
+from brachycal.calibration.sequential.method import CalibrationResult
+from brachycal.se3 import FloatArray, rotation
 
 #: The fixed blocks of the parameter vector, in order: name → length.
 FIXED_BLOCKS = {

@@ -15,7 +15,7 @@ from brachycal.calibration.chain.problem import ChainProblem
 from brachycal.calibration.chain.result import ChainFit
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.parallel import parallel_calls
-from brachycal.calibration.sequential import CalibrationResult
+from brachycal.calibration.sequential.method import CalibrationResult
 from brachycal.data.session import Session
 from brachycal.errors import DegenerateDataError
 from brachycal.model.robot import Robot

@@ -2,7 +2,7 @@
 
 :class:`ChainProblem` is what the stages of :func:`~brachycal.calibration.chain.fit.fit_chain`
 share: normalised residuals (with the joint offsets' prior rows when they are estimated), their
-Jacobian, one least-squares solve (:func:`~brachycal.calibration.chain.solver.solve_least_squares`),
+Jacobian, one least-squares solve (:func:`~brachycal.calibration.least_squares.solve_least_squares`),
 and the image samples it flags.
 """
 
@@ -16,8 +16,8 @@ from brachycal.calibration.chain.data import ChainData
 from brachycal.calibration.chain.jacobian import chain_jacobian
 from brachycal.calibration.chain.layout import ParameterLayout, Unpacked
 from brachycal.calibration.chain.residuals import chain_residuals, image_residuals
-from brachycal.calibration.chain.solver import Solution, solve_least_squares
-from brachycal.calibration.sequential import CalibrationResult
+from brachycal.calibration.least_squares import Solution, solve_least_squares
+from brachycal.calibration.sequential.method import CalibrationResult
 from brachycal.data.session import Session
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray
@@ -136,7 +136,7 @@ class ChainProblem:
     ) -> Solution:
         """One least-squares solve from ``x`` with noise levels ``sigma`` on the image samples ``keep``;
         ``loss`` ``"soft_l1"`` (robust) or ``"linear"``; converged to ``tol`` (SciPy's ``xtol``, ``ftol``,
-        ``gtol``: :func:`~brachycal.calibration.chain.solver.solve_least_squares`).
+        ``gtol``: :func:`~brachycal.calibration.least_squares.solve_least_squares`).
 
         ``at``: the normalised residuals and Jacobian already evaluated at ``x`` (same samples) with
         other noise levels ``(fun, jac, sigma_at)``: a group's rows scale by ``sigma_at / sigma``, so

@@ -1,4 +1,4 @@
-"""One solved chain problem: :class:`ChainFit`."""
+"""One solved chain problem: :class:`ChainFit`, and its robot Jacobian (:func:`robot_jacobian`)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,11 @@ import numpy as np
 from brachycal.calibration.chain.conditioning import Conditioning
 from brachycal.calibration.chain.layout import ParameterLayout
 from brachycal.calibration.chain.noise import NoiseLevel
-from brachycal.calibration.chain.robot_terms import RobotAccuracy
-from brachycal.calibration.image_to_probe import ImageCalibration
+from brachycal.calibration.chain.robot_terms import robot_jacobian_at
+from brachycal.calibration.result import ImageCalibration
+from brachycal.calibration.robot_accuracy import RobotAccuracy
+from brachycal.data.session import Session
+from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray
 
 
@@ -104,3 +107,12 @@ class ChainFit:
         return "; ".join(f"{names[g]} {n.note}" for g, n in self.noise.items()) or ", ".join(
             f"{names[g]} {v * 1e3:.3f} mm" for g, v in self.sigma_m.items()
         )
+
+
+def robot_jacobian(session: Session, robot: Robot, fit: ChainFit) -> FloatArray:
+    """``(M, 6 nq)`` ``J_c``: the fit's normalised residuals (its final problem: its noise levels,
+    its samples) differentiated with respect to every joint's origin motion ``(v, ω)`` (metres,
+    radians; joint-major in ``robot.joint_names`` order; see
+    :func:`~brachycal.calibration.chain.robot_terms.joint_twists`)."""
+    layout = fit.layout(robot.joint_names)
+    return robot_jacobian_at(session, robot, layout, fit.x, fit.base, fit.sigma_m, ~fit.outliers)

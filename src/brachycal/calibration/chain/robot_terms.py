@@ -3,18 +3,16 @@
 See the module docstring of :mod:`brachycal.calibration.chain` ("The robot model's own error"):
 each joint's origin is off by a small motion ``c_j = (v, ω)`` (translation in metres, rotation in
 radians about the origin's own axes, plus a zero offset about the joint axis); :class:`RobotAccuracy`
-states its covariance, :func:`robot_jacobian` gives ``J_c``.
+states its covariance, :func:`robot_jacobian_at` gives ``J_c``
+(:func:`~brachycal.calibration.chain.result.robot_jacobian`: of a solved fit).
 """
 
 from __future__ import annotations
-
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from brachycal.calibration.chain.data import AXES_MOVES, ChainData
 from brachycal.calibration.chain.layout import ParameterLayout
-from brachycal.calibration.chain.rotations import skew
 from brachycal.calibration.robot_accuracy import (  # noqa: F401  (re-exported: their home before)
     DEFAULT_ROBOT_ACCURACY,
     MAX_ENCODER_SD_RAD,
@@ -24,10 +22,7 @@ from brachycal.calibration.robot_accuracy import (  # noqa: F401  (re-exported: 
 )
 from brachycal.data.session import Session
 from brachycal.model.robot import Robot
-from brachycal.se3 import FloatArray
-
-if TYPE_CHECKING:
-    from brachycal.calibration.chain.result import ChainFit
+from brachycal.se3 import FloatArray, skew
 
 
 def joint_twists(robot: Robot, Q: FloatArray, flange: str) -> FloatArray:
@@ -40,7 +35,7 @@ def joint_twists(robot: Robot, Q: FloatArray, flange: str) -> FloatArray:
     flange moves by ``v_w + ω_w × p``. Zero for joints not between the base and the flange. A zero
     offset of joint ``j`` is the motion ``(0, axis_j)``.
     """
-    import pinocchio as pin
+    import pinocchio as pin  # lazy: start-up (pinocchio)
 
     model = robot.model
     support = set(model.supports[model.frames[robot.frame_id(flange)].parentJoint])
@@ -164,11 +159,3 @@ def robot_jacobian_at(
     )
     parts.append(image / sigma["image"])
     return np.vstack(parts)
-
-
-def robot_jacobian(session: Session, robot: Robot, fit: ChainFit) -> FloatArray:
-    """``(M, 6 nq)`` ``J_c``: the fit's normalised residuals (its final problem: its noise levels,
-    its samples) differentiated with respect to every joint's origin motion ``(v, ω)`` (metres,
-    radians; joint-major in ``robot.joint_names`` order; see :func:`joint_twists`)."""
-    layout = fit.layout(robot.joint_names)
-    return robot_jacobian_at(session, robot, layout, fit.x, fit.base, fit.sigma_m, ~fit.outliers)

@@ -1,0 +1,1 @@
+"""Tracker routes: pivot, hand-eye, N-wire (+ PLUS variants), multi-wedge, arbitrary wire."""

@@ -1,0 +1,1 @@
+"""A session folder calibrated end to end, and the result file."""

@@ -1,0 +1,1 @@
+"""The pre-procedure check: null model, parts, test, record, update."""

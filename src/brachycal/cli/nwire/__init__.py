@@ -1,0 +1,1 @@
+"""brachycal nwire: calibrate (default), nwire segment."""
