@@ -20,9 +20,9 @@ if os.environ.get("CI"):
 
 ROOT = Path(__file__).parents[1]
 #: Outside data (the vendor's SDA10F description, PLUS and SciKit-Surgery recordings) is not in the
-#: repository: it sits in ``shared/reference`` beside the clone (the team's copy; CI has it), or
-#: wherever ``BRACHYCAL_REFERENCE`` points. README ("Credits and licence", "Outside data") says where
-#: each part comes from.
+#: repository: it is read from wherever ``BRACHYCAL_REFERENCE`` points (default: ``shared/reference``
+#: beside the clone; CI has it). README ("Credits and licence") says where each part
+#: comes from.
 REFERENCE = Path(os.environ.get("BRACHYCAL_REFERENCE") or ROOT.parent / "shared" / "reference")
 
 
@@ -36,7 +36,8 @@ def reference(*parts: str) -> Path:
     if not path.exists():
         reason = (
             f"needs {path} (outside data: the PLUS toolkit's PlusLibData, SciKit-Surgery and ROS-Industrial "
-            "motoman files; the team's copy is ../shared/reference, or set BRACHYCAL_REFERENCE; see README)"
+            "motoman files: set BRACHYCAL_REFERENCE to a copy of them; README, 'Credits and licence', says where "
+            "each comes from)"
         )
         if os.environ.get("CI"):
             pytest.fail(reason)

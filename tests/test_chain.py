@@ -261,7 +261,7 @@ def test_stated_uncertainty_with_robot_error_is_calibrated(robot):
         fit = fit_chain(twin.session, robot, initial, "sound_speed")
         error, C = _parameter_errors(fit, twin.truth)
         parameter_d2 += error @ np.linalg.solve(C, error)
-        noise_only = fit_chain(twin.session, robot, initial, "sound_speed", robot_accuracy=None)  # as before
+        noise_only = fit_chain(twin.session, robot, initial, "sound_speed", robot_accuracy=None)  # image noise only
         noise_only_d2 += error @ np.linalg.solve(_parameter_errors(noise_only, twin.truth)[1], error)
         parameter_dof += len(error)
         hit = targeting_error(twin, fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image, 1)  # encoder noise when aiming
@@ -396,7 +396,7 @@ def test_samples_without_spread_are_refused(robot, stretched):
     limit = f"limit {np.degrees(ROTATION_SD_LIMIT):.1f}"
     with pytest.raises(DegenerateDataError, match=f"image rotation is determined only to .*{limit}") as refused:
         fit_chain(patch, robot, sequential, "rigid")
-    # Both causes are named: too little spread, and a robot off its URDF (issue 19's remedy).
+    # Both causes are named: too little spread, and a robot off its URDF (the remedy: identify the robot).
     assert "--identify-robot" in str(refused.value) and "spread over the image" in str(refused.value)
     one_pose = _subset(twin.session, np.zeros(64, dtype=int))  # and pixels scattered by 1 px
     jitter = replace(one_pose, uv_px=uv[0] + np.random.default_rng(0).normal(size=(64, 2)))

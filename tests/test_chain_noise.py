@@ -36,7 +36,7 @@ def fits(robot):
 
 def test_image_noise_along_each_axis_is_the_known_noise(fits):
     # Each σ̂²/σ² is χ²_ν/ν (ν ≈ 62 per axis): its mean over the seeds has SD √(2/ν)/√(seeds); the
-    # band is four of those. The pooled per-coordinate level (the old figure) gives 2/3 of the
+    # band is four of those. A pooled per-coordinate level would give 2/3 of the
     # annotation variance along the plane's axes and 1.5 times the beam's along the normal.
     ratios = {axis: [] for axis in IMAGE_AXES}
     dofs = []

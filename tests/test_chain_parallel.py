@@ -1,4 +1,4 @@
-"""Refits shared between cores (issue 13): the same answers as in turn, and the leave-one-out as before.
+"""Refits shared between cores: the same answers and the same leave-one-out as in turn.
 
 :func:`~brachycal.calibration.parallel.parallel_map` forks workers on Linux; everything it computes
 must be what one process computes, and a worker's failure must look like the same failure in turn.
@@ -103,7 +103,7 @@ def test_model_choice_on_two_cores_is_the_same_as_in_turn(robot, twin):
     alone = select_model(session, robot, result, workers=1)
     assert shared.model == alone.model and shared.undetermined == alone.undetermined
     for model, stats in alone.cv.items():
-        assert np.array_equal(stats.errors_m, shared.cv[model].errors_m), model  # each CV is one run, as before
+        assert np.array_equal(stats.errors_m, shared.cv[model].errors_m), model  # each CV is one run, shared or not
 
 
 def test_leave_one_out_in_runs_agrees_with_one_run_of_all_folds(robot, twin):

@@ -1,4 +1,4 @@
-"""Robot descriptions (issue 15): the bundled SDA10F, Baxter and a cell of two UR5 arms, and the
+"""Robot descriptions: the bundled SDA10F, Baxter and a cell of two UR5 arms, and the
 refusals of a bad description file.
 
 Pose agreements use 1e-12 (metres, and rotation entries): two evaluations of the same kinematic

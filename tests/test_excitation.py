@@ -1,4 +1,4 @@
-"""Excitation poses (issue 19): the A-optimal criterion on the landing error, its greedy choice under a
+"""Excitation poses: the A-optimal criterion on the landing error, its greedy choice under a
 robot-time budget, the candidates' reachability, their effect on a twin, and ``plan excitation``."""
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 of its range, is refused before any work with one line naming the option, exit code 2, nothing
 written (``hostile.check_refusal``).
 
-The issue's examples come first (negative margins that used to plan poses past the joint limits,
+The known failures come first (negative margins that would plan poses past the joint limits,
 NaN switching checks off, a zero spacing writing infinite pixels, a typo exhausting memory), then
 one NaN, one infinity and one out-of-range case per numeric option, and last the spacings and
 image sizes that reach a command through its input files (a result, a session). Each refusal
@@ -49,7 +49,7 @@ INF = ("inf", ("finite",))
 MINUS_INF = ("-inf", ("finite",))
 
 CASES = [
-    # --- the examples ----------------------------------------------------------------------
+    # --- the known failures -------------------------------------------------------------------------
     Case(
         "plan-negative-margins",
         [*PLAN, "--joint-margin-deg=-20", "--collision-margin-mm=-500"],

@@ -1,4 +1,4 @@
-"""Planning on any dual-arm set-up (issue 15): the robot carries its rig, and ``plan`` plans the
+"""Planning on any dual-arm set-up: the robot carries its rig, and ``plan`` plans the
 paper's 4 x 4 x 4 poses on every bundled robot.
 
 The poses are checked here independently of the planner (Pinocchio's forward kinematics and Coal's

@@ -95,8 +95,8 @@ def test_degrees_in_a_session(session_dir, robot):
 
 
 def test_a_reading_within_the_encoder_tolerance_of_a_limit_is_calibrated_with_a_warning(session_dir, tmp_path, capsys):
-    # Issue 18: one sample read a few encoder counts beyond a limit (a pose planned on the limit)
-    # made calibrate refuse the whole session. Within 1e-3 rad it is kept as read, with a warning
+    # One sample read a few encoder counts beyond a limit (a pose planned on the limit) must not
+    # make calibrate refuse the whole session. Within 1e-3 rad it is kept as read, with a warning
     # naming the file, row and joint; the first sample's wrist sits 0.05 rad inside its limit π.
     edit(session_dir / "samples.csv", 2, "arm_right_joint_7_t", repr(np.pi + 7e-6))
     out = tmp_path / "result.json"

@@ -1,4 +1,4 @@
-"""Solver failures say what happened, and retries catch only them (issue 11).
+"""Solver failures say what happened, and retries catch only them.
 
 A solver that finds no solution raises :class:`SolverError` naming what was asked of it; bad input
 raises :class:`InputError`. Every retry loop (turning an approach, trying another start) retries

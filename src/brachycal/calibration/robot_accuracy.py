@@ -17,7 +17,7 @@ from brachycal.validate import check_range
 if TYPE_CHECKING:
     from brachycal.model.robot import Robot
 
-#: Largest stated per-joint placement error (typo guards, 100 times issue 19's 0.1 mm / 0.01° for
+#: Largest stated per-joint placement error (typo guards, 100 times the 0.1 mm / 0.01° of
 #: real arms): beyond them the URDF does not describe the robot and no linearisation holds.
 MAX_ROBOT_TRANSLATION_SD_M = 1e-2
 MAX_ROBOT_ROTATION_SD_RAD = np.radians(1.0)
@@ -37,7 +37,7 @@ class RobotAccuracy:
 
     Defaults (:data:`DEFAULT_ROBOT_ACCURACY`): the twin's well-built arm, 0.03 mm / 0.003° per
     joint and 2e-5 rad per reading. The vendor states ±0.1 mm repeatability (not accuracy), and
-    arms off their URDF by 0.1 mm / 0.01° per joint are common (issue 19): state the arm's own
+    arms off their URDF by 0.1 mm / 0.01° per joint are common: state the arm's own
     figures when known; a figure stated too small gives intervals too narrow.
 
     Raises:

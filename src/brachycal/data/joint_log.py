@@ -28,8 +28,8 @@ if TYPE_CHECKING:  # annotations only: reading a file needs no Pinocchio
 #: Largest |angle| in radians a revolute joint can report; beyond it the log is taken for degrees.
 DEGREES_THRESHOLD = 2.0 * np.pi
 #: How far beyond a URDF limit a revolute joint's reading may lie and still be taken as read (rad).
-#: A pose planned on a limit is reported by the encoders a few counts to either side of it (the
-#: issue's example: 1.919869 against 1.919862, 7e-6 rad over); encoder resolution and noise are
+#: A pose planned on a limit is reported by the encoders a few counts to either side of it (for
+#: example 1.919869 against 1.919862, 7e-6 rad over); encoder resolution and noise are
 #: of order 1e-5 rad (the twin's encoder noise is 2e-5 rad SD). 1e-3 rad (0.06°, ~1 mm at the end
 #: of a 1 m arm) is fifty such SDs, so every honest reading passes, while what the limit check is
 #: for — degrees, another robot's log, swapped columns — lands far beyond it.

@@ -1,6 +1,6 @@
 """Independent check of planned poses with Pinocchio and Coal (not MuJoCo, which planned them).
 
-Thresholds (issue 4): tip position error < 0.01 mm, needle direction error < 0.05°, tip within
+Thresholds: tip position error < 0.01 mm, needle direction error < 0.05°, tip within
 0.01 mm of the image plane, tip inside the field of view, joints inside their limits by a
 margin, and every checked link pair apart by at least the collision margin.
 """

@@ -3,7 +3,7 @@ excitation poses' budget (light: the options read it; minutes and seconds as nam
 
 from __future__ import annotations
 
-#: Default budget of extra robot time, minutes (issue 19: the 15-minute session plus at most 5).
+#: Default budget of extra robot time, minutes (the 15-minute session plus at most 5).
 DEFAULT_BUDGET_MINUTES = 5.0
 #: Largest budget, minutes: a typo guard (an hour of extra poses is a new session, not an addition).
 MAX_BUDGET_MINUTES = 60.0

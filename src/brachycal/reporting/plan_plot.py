@@ -44,8 +44,8 @@ def _figure(
     in visiting order, infeasible), their pixels ``(N, 2)`` and ``(K, 2)``, the field of view's outline
     ``(M, 2)`` (pixels)."""
     fig = Figure(figsize=(11, 4.8))
-    # Fixed margins, not layout="tight": the tight layout engine measured the text of both panels
-    # and took ~0.2 s of the plan command's ~1.9 s (issue 13); these fit the two panels' labels.
+    # Fixed margins, not layout="tight": the tight layout engine measures the text of both panels
+    # and takes ~0.2 s of the plan command's ~1.9 s; these fit the two panels' labels.
     fig.subplots_adjust(left=0.02, right=0.98, bottom=0.1, top=0.92, wspace=0.1)
     ax = fig.add_subplot(1, 2, 1, projection="3d")
     if len(p_planned_m):

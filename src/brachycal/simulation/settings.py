@@ -30,7 +30,7 @@ SOUND_SPEED_RANGE_M_S = (1000.0, 2000.0)
 #:
 #: - ``well-built`` (the default; 0.17 mm at the flanges): a carefully built and mastered arm.
 #: - ``real-arm`` (0.1 mm / 0.01° per joint; 0.58 mm at the flanges): the level the project states
-#:   for real arms off their URDF (issue 19), matching the 0.5–1 mm absolute accuracy commonly
+#:   for real arms off their URDF, matching the 0.5–1 mm absolute accuracy commonly
 #:   quoted for industrial arms without kinematic calibration (the vendor states only its ±0.1 mm
 #:   repeatability, which bounds what any calibration can reach).
 #: - ``worn`` (0.3 mm / 0.03° per joint; 1.7 mm at the flanges): three times that, a stress level.

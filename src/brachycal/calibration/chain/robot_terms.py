@@ -13,7 +13,7 @@ import numpy as np
 
 from brachycal.calibration.chain.data import AXES_MOVES, ChainData
 from brachycal.calibration.chain.layout import ParameterLayout
-from brachycal.calibration.robot_accuracy import (  # noqa: F401  (re-exported: their home before)
+from brachycal.calibration.robot_accuracy import (  # noqa: F401  (re-exported for the chain's users)
     DEFAULT_ROBOT_ACCURACY,
     MAX_ENCODER_SD_RAD,
     MAX_ROBOT_ROTATION_SD_RAD,

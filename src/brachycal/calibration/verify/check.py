@@ -79,7 +79,7 @@ CHECK_TOOLS = ("needle", "probe")
 #: Fewest samples a check reads: 3 points fix the image's 6 degrees of freedom; a check of fewer
 #: has no redundancy against one mislabelled frame. ``plan --verify`` plans 5 or more.
 MIN_CHECK_SAMPLES = 3
-#: Default false-alarm rate of the test (the issue's goal: at most 5 % on unchanged set-ups).
+#: Default false-alarm rate of the test (the goal: at most 5 % on unchanged set-ups).
 DEFAULT_FALSE_ALARM = 0.05
 #: Central-difference steps: 1 µm and 1 µrad (the residuals are smooth; truncation error ~step²,
 #: rounding ~1e-16/step: both far below the 0.1 mm noise the residuals are compared with).

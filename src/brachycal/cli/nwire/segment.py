@@ -25,10 +25,10 @@ Frames where the pattern is not found are written as Failed and counted by reaso
 The first sequence gives the calibration frames, the second (optional) the validation frames;
 `brachycal nwire` needs both.
 
-example (PLUS's fCal 2.0 recording, from PlusLibData; the team's copy is ../shared/reference):
-  brachycal nwire segment ../shared/reference/plus_fcal_nwire/fCal_Test_Calibration_3NWires_fCal2.0.igs.mha \\
-      ../shared/reference/plus_fcal_nwire/fCal_Test_Validation_3NWires_fCal2.0.igs.mha \\
-      --config ../shared/reference/plus_fcal_nwire/PlusDeviceSet_fCal_Sim_SpatialCalibration_2.0.xml \\
+example (PLUS's fCal 2.0 recording, from PlusLibData, in $BRACHYCAL_REFERENCE/plus_fcal_nwire):
+  brachycal nwire segment $BRACHYCAL_REFERENCE/plus_fcal_nwire/fCal_Test_Calibration_3NWires_fCal2.0.igs.mha \\
+      $BRACHYCAL_REFERENCE/plus_fcal_nwire/fCal_Test_Validation_3NWires_fCal2.0.igs.mha \\
+      --config $BRACHYCAL_REFERENCE/plus_fcal_nwire/PlusDeviceSet_fCal_Sim_SpatialCalibration_2.0.xml \\
       --out frames.xml
 """
 

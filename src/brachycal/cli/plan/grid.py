@@ -132,7 +132,7 @@ class _FigureProcess:
 
     Importing matplotlib with its 3D axes (~0.4 s) and drawing the figure (~0.5 s) would add to the
     planning (~1 s with its imports); on two cores the second process takes them off the command's
-    path. The figure is drawn by :func:`brachycal.reporting.plot_plan`, as before, into the staging
+    path. The figure is drawn by :func:`brachycal.reporting.plot_plan` into the staging
     path of the command's :class:`~brachycal.io.OutputSet` (committed with the plan or not at
     all). The process (this Python, ``-c``; the plan goes to it pickled on its stdin, the outcome
     comes back on its stdout) ignores Ctrl-C, which the command handles by ending it, and prints
@@ -194,7 +194,7 @@ class _FigureProcess:
         if self._process is not None and self._process.stdout is not None:
             with self._process.stdout as pipe:
                 reply = pipe.read()
-        if not reply:  # no process, or it could not start brachycal or died: draw here, as before
+        if not reply:  # no process, or it could not start brachycal or died: draw here
             # lazy: start-up (the command's run only)
             from brachycal.reporting import plot_plan  # (only then: matplotlib takes ~0.4 s to load)
 
