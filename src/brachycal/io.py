@@ -1,30 +1,6 @@
 """Files: every output of a command written all or nothing, JSON and CSV tables, input hashes, bundled data.
 
-One mechanism writes every output (:class:`OutputSet`; :func:`atomic_path` and :func:`atomic_open`
-are the one-file case of it):
-
-- **Checked up front.** Each destination is claimed before any work: it must be a regular file
-  or absent (a directory, device, FIFO or socket is refused, even with ``force``), its folder must
-  exist (or be created, where a command's contract says so), it is replaced only with ``force``,
-  and two outputs of one command may not share a path.
-- **Never an input.** A destination that is one of the command's input files (the same file,
-  by inode: the command line records every input opened, :mod:`brachycal.inputs`) is refused,
-  even with ``force``: when claimed if the input was read already, else when committed.
-- **Claimed against other brachycal processes.** A hidden lock file next to each destination,
-  ``.<name>.brachycal-lock``, held with ``flock``: a second writer of the same file is refused at
-  once ("another brachycal process is writing it"); the kernel releases the lock when its holder
-  dies, so a lock file left by a killed process is stale and simply taken over.
-- **Staged next to the destination.** The command writes each output to a hidden staging file in
-  the destination's folder (``.<name>.brachycal-<token><suffix>``; the suffix is kept so that
-  writers that go by it, like matplotlib, still work). Same folder, so the final rename is atomic.
-- **Committed together.** Only when the whole command succeeded are the staged files moved into
-  place; if a move fails, the ones already moved are undone (the old files are kept, as hard
-  links, until the end). On any failure — an error, Ctrl-C, SIGTERM (the CLI turns it into an
-  exception) — every staged file, lock and folder the set created is removed. Only a hard kill
-  (SIGKILL, power loss) can leave hidden staging or lock files; they are never mistaken for outputs,
-  and the next claim of the same destination removes them (a staging file is stale when the
-  destination's lock is not held: with the lock taken, no live writer has one). A lock file of
-  another user that this process may not open is taken over the same way if no one holds it.
+Design: ``docs/design/files.md``, "Outputs: all or nothing".
 """
 
 from __future__ import annotations

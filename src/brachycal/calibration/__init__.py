@@ -1,36 +1,9 @@
 """Calibration: the estimators, pure functions on arrays and small dataclasses (SI units inside).
 
-The paper's sequential method, step by step (``T_a_b`` maps frame b into frame a; metres):
-
-- :func:`calibrate` — a whole session: reference tips, ``T_ER_Ntip`` (needle tip on the needle
-  arm's flange ER: the SDA10F's right ``tool0``, ``robot.rig.needle_flange`` on any robot),
-  ``T_EL_Ptip`` (probe tip on the probe arm's flange EL) with Table I, and ``T_Ptip_I`` (image on
-  the probe) by every method of :data:`METHODS` with its leave-one-out figures (Table II), as a
-  :class:`CalibrationResult`; :func:`calibrate_folder` reads a session folder first (and can add
-  the whole chain); :func:`loo_points` gives one method's leave-one-out points (Fig. 10);
-  :func:`locate` maps image pixels to the robot's base frame through a calibration (targeting).
-- :class:`ImageCalibration` — a rigid ``T_Ptip_I (4, 4)`` with the pixel spacing ``(2,)`` it goes
-  with, metres per pixel; :class:`ErrorStats` — MAE, RMSE, SD and max of 3D errors (``*_mm``).
-
-Beyond the paper: the whole chain as one least-squares problem (:func:`calibrate_chain`,
-:func:`fit_chain`, :func:`select_model`; its uncertainty with :func:`landing_covariance` and
-:func:`predicted_rms_mm`); pivot calibration (:func:`pivot_algebraic`, :func:`pivot_robust`, and
-of a pose-list file :func:`pivot_from_file`); N-wire phantom calibration from PLUS files
-(:func:`nwire_from_files`); the multi-wedge and arbitrary-wire phantoms (:func:`read_wedge_phantom`,
-:func:`calibrate_wedge`, :func:`image_pose_in_phantom`, :func:`read_wire_phantom`, :func:`calibrate_wire`,
-:func:`read_phantom_observations`: a :class:`PhantomCalibration`); hand–eye calibration (:func:`hand_eye`);
-the robot's own geometry
-identified with the chain (:func:`identify_robot`, :class:`RobotIdentification`,
-:func:`corrected_robot`, :func:`cross_validate_identification`) and which extra observations would
-identify it best (:func:`base_criterion`, :func:`observation_rows`: the A-optimal criterion on the
-landing error, :class:`Criterion`; an :class:`Observation` is a touch or an image sample). Result files:
-``brachycal-result/1`` (:func:`write_result`, :func:`read_result`; :class:`RobotRecord` says which
-robot a result was calibrated with; :func:`validate_result_document` checks a whole document's
-types, shapes, finite numbers, ranges and proper rotations before it is used), ``brachycal-pivot/1``
-(:func:`write_pivot`, :func:`read_pivot`), ``brachycal-nwire/1`` (:func:`write_nwire`,
-:func:`read_nwire`). Temporal calibration: the lag between two time-stamped position signals
-(:func:`estimate_lag`, a :class:`LagEstimate`), from PLUS's water-tank recordings
-(:func:`lag_from_plus_files`) or any video and pose stream (:func:`lag_from_signals`).
+``T_a_b`` maps frame b into frame a; lengths in metres. The paper's sequential method
+(:func:`calibrate`, :func:`locate`, :class:`ImageCalibration`) and what goes beyond it: the whole
+chain, phantoms, robot identification, result files, temporal calibration. Overview:
+``docs/api/calibration.md``.
 """
 
 from typing import TYPE_CHECKING

@@ -1,32 +1,9 @@
 """Temporal calibration: the lag between two time-stamped streams that see the same motion.
 
-Ultrasound frames and robot joint states (or tracker readings) are stamped by different clocks. A
-probe moved up and down over a flat target (the bottom of a water tank) gives two position
-signals of the same motion: the target line's position in each image, and the probe's position
-from its poses. The lag is the time shift that best aligns them.
+``lag_s`` (seconds) follows PLUS's ``TrackerLagSec``: positive when the moving stream's (tracker's
+or robot's) timestamps are late; add it to the video's times to bring them onto its clock.
 
-Sign convention (PLUS's ``TrackerLagSec``): with the *fixed* signal ``a`` (video) and the *moving*
-signal ``b`` (tracker or robot), ``lag_s`` is the ``L`` such that ``x_b(t + L)`` matches
-``x_a(t)``: the same physical instant carries the stamp ``t`` in stream a and ``t + L`` in stream
-b. Positive ``L``: b's timestamps are late (b lags a). To bring a's frames onto b's clock, add
-``L`` to their times.
-
-Method (PLUS's ``vtkPlusTemporalCalibrationAlgo``, re-derived): the fixed samples whose shifted
-time stays inside the moving signal for every lag searched are kept; for each lag on a grid of
-``resolution_s`` over ``±max_lag_s`` the moving signal is linearly interpolated at ``t_a + L`` and
-compared with the fixed signal by the Pearson correlation (PLUS's sum of squared differences of
-standardised signals is ``2(n-1)(1-r)``: the same optimum). The peak is refined to below the grid
-by the parabola through its neighbours. PLUS also tries the moving signal inverted (the principal
-axis's sign is arbitrary) and keeps the peak of smaller ``|L|``; :func:`estimate_lag` tries both
-when ``allow_inverted`` and keeps the higher peak (the better alignment; PLUS's rule picks the
-wrong polarity's half-period shift when the lag exceeds a quarter period of a periodic motion).
-
-Uncertainty: the model ``x_a(t_i) = α + β x_b(t_i + L) + e_i`` is a nonlinear regression in
-``(α, β, L)``; the lag's standard deviation is the Gauss–Newton one, ``σ² [(JᵀJ)⁻¹]_LL`` with the
-Jacobian columns ``1, x_b(t+L), β ẋ_b(t+L)`` and ``σ²`` the residual variance, inflated by
-``(1+ρ)/(1−ρ)`` for the residuals' lag-1 autocorrelation ``ρ`` (residuals of neighbouring frames
-are not independent: the effective sample count is ``n (1−ρ)/(1+ρ)``). Noise in the moving signal
-is not propagated (it is the denser, more precise stream: tracker or encoders).
+Design: ``docs/design/temporal.md``.
 """
 
 from __future__ import annotations

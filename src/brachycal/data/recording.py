@@ -1,29 +1,9 @@
 """A lab's recording of a calibration session: operator marks, captured frames, still windows.
 
-While the robot streams its joint states (a CSV log or a ROS bag, :mod:`brachycal.data.joint_log`),
-the operator marks the moments that make a session and the scanner captures frames:
+Times in seconds on the joint log's clock; pixels with the origin at the centre of pixel (0, 0),
+``u`` along columns, ``v`` along rows.
 
-- **Marks** (``marks.csv``: ``time,kind,tool,name``, or ``std_msgs/String`` messages
-  ``kind,tool,name`` on a topic of the bag): ``kind`` is ``touch`` (``tool`` ``top_model``,
-  ``needle`` or ``probe`` on the reference tip ``name``, ``rtip1`` or ``rtip2``) or ``axes``
-  (``tool`` ``needle`` or ``probe`` at point ``name``, ``p1``, ``p2`` or ``p3``). Trial numbers
-  follow from the order in time: the k-th touch of a tool on a tip is trial k.
-- **Frames** (``images.csv``: ``time,u_px,v_px[,sample]``): the time of each captured ultrasound
-  frame and the needle tip annotated in it, in pixels (convention of the image frame: the centre
-  of pixel (0, 0) is the origin, u along columns, v along rows). Empty ``u_px`` and ``v_px`` mean
-  "not annotated": the frame is skipped and reported. The annotations may instead come from a 3D
-  Slicer markups file (:func:`read_slicer_markups`), one control point per frame, in the order of
-  the rows of ``images.csv`` (which then has no ``u_px``/``v_px`` columns).
-
-The configuration at a mark or frame is the mean of the joint log over the **still window**
-around its time (:func:`still_configuration`): the robot must have been still — every joint's
-speed below :data:`MAX_SPEED_RAD_S` — for :data:`STILL_WINDOW_S` centred on it. A mark taken
-while the robot moved is refused, naming it and its time; the log is interpolated inside its span
-and never extrapolated.
-
-Times are seconds on the joint log's clock (any origin): a bag's joint states carry the driver's
-``header.stamp``, marks on a bag topic the time the bag recorded them (``std_msgs/String`` has
-no header), so record both on one machine's clock.
+Design: ``docs/design/files.md``, "A lab's recording".
 """
 
 from __future__ import annotations

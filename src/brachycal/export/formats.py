@@ -1,30 +1,6 @@
 """Writers (and readers, for round trips) of the formats a calibration is used in.
 
-- **URDF** (``<robot>_calibrated.urdf``, ``<robot>`` the description's name: ``sda10f``,
-  ``ur5_pair``, ...): the robot's URDF with the calibrated ``needle_tip``, ``probe_tip`` and
-  ``us_image`` joints (for ROS/MoveIt), and, for a result that corrects the robot, the corrected
-  joint origins (the robot given is the software robot, corrected exactly once). The URDF frame
-  ``us_image`` is rigid; the pixel spacing stays in the result file (and in the PLUS/Slicer image
-  transforms below). The folder is self-contained: a ``meshes/`` folder beside the URDF holds a
-  copy of every mesh it names (only those), by relative path, so the folder loads wherever it is
-  copied. A ``<brachycal_export>`` element records the result it was written from (SHA-256) and
-  which of its corrections the joints carry, so that they are never applied twice.
-- **ROS 2 package** (:func:`write_ros_package`, ``export --ros-package NAME``): an ament_cmake
-  description package with the same URDF (``package://NAME/meshes/...``), the meshes, a launch
-  file and the static transforms.
-- **3D Slicer / ITK** ``.tfm``: ``#Insight Transform File V1.0`` with an ``AffineTransform_double_3_3``.
-  ITK files store the *resampling* transform (Slicer's "from parent") in LPS; Slicer converts to
-  RAS and shows the inverse as "to parent". So for a to-parent matrix ``M`` (RAS, mm) the file
-  holds ``F M⁻¹ F`` with ``F = diag(-1, -1, 1)``, and Slicer displays ``M`` again.
-- **PLUS** ``CoordinateDefinitions``: ``<Transform From="Image" To="Probe" Matrix="…"/>`` in PLUS's
-  convention (``From A To B`` maps A into B; millimetres; ``Image`` in pixels, so the matrix
-  carries the pixel spacing, and its third column is the image normal scaled by the mean pixel
-  spacing, as PLUS's fCal writes it: :func:`image_to_probe_mm`), plus ``Probe→LeftFlange`` and
-  ``NeedleTip→RightFlange``.
-- **ROS** static transforms (YAML, written by a YAML library: numbers are YAML floats that YAML 1.1
-  readers such as PyYAML read as numbers too): parent, child, translation (m), rotation (x, y, z,
-  w), one entry per calibrated joint, with the ``static_transform_publisher`` command line for
-  each in ROS 2's named-argument form and in ROS 1's argument order.
+Design: ``docs/design/files.md``, "Export formats".
 """
 
 from __future__ import annotations

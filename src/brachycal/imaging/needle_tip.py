@@ -1,48 +1,9 @@
 """Needle tip in a B-mode frame: a proposed annotation, sub-pixel, with a confidence in [0, 1].
 
-The needle's tip (its bevel) is the brightest echo of the needle, at the deep end of the shaft's
-short bright streak (the shaft fades as it leaves the beam's thickness). :func:`detect_tip` works
-on one 8-bit frame ``(H, W)`` (``frame[v, u]``), in pixels of the image frame (``u`` along
-columns, ``v`` along rows, the origin at the centre of pixel (0, 0)):
+:func:`detect_tip` works on one 8-bit frame ``(H, W)`` (``frame[v, u]``), in pixels of the image
+frame (``u`` along columns, ``v`` along rows, the origin at the centre of pixel (0, 0)).
 
-1. **Contrast map.** The frame is smoothed over about the tip echo's size (Gaussian, SD
-   :data:`SMOOTH_SD_PX`) and expressed in units of its speckle: ``Z = (S − mean) / SD`` with the
-   local mean of the smoothed frame over a :data:`BACKGROUND_PX` square around each pixel (pixels
-   outside the imaged sector — exactly 0 — are left out), which removes the depth trend of
-   attenuation and gain, and the frame's speckle SD (the median of the local SDs: after log
-   compression speckle has the same SD at every depth), so one threshold holds everywhere.
-2. **Peak.** The strongest contrast (``Z`` maximum) is the tip candidate; its position is refined
-   to sub-pixel as the centroid of the smoothed brightness above half the peak's height over the
-   background, in a :data:`PEAK_PX` window.
-3. **Shaft.** The pixels within :data:`SHAFT_RADIUS_PX` that are connected to the peak and above
-   half its contrast are the bright streak; a brightness-weighted principal axis gives the shaft's
-   direction (towards the peak), its RMS distance from that axis the fit's residual. An expected
-   direction (``prior_direction``: from the plan, e.g. the insertion direction seen in the image)
-   replaces the axis when the streak is too short to tell one (elongation below
-   :data:`MIN_ELONGATION`) and otherwise orients it.
-4. **The echo's end.** Beyond the tip only the blur of its echo is left: a Gaussian edge. Along
-   the axis (the profile averaged over three parallel lines 1 px apart) the brightness falls from
-   the peak's height to 3/4 and to 1/4 of it over the background at ``s0 + 0.76 σ`` and
-   ``s0 + 1.67 σ``; the two crossings give the end ``s0`` — the proposed tip — and the edge's
-   length ``σ``. A peak pulled back by the shaft's echo sits a little behind ``s0``; a bright point
-   mid-shaft sits far behind it.
-
-Confidence = product of four factors in [0, 1]:
-
-- contrast: ``1 − exp(−max(Z − Z_fa, 0)²)`` with ``Z_fa`` = :data:`FALSE_ALARM_Z`, the largest
-  contrast speckle alone reaches in a frame (measured on the twin's needle-free frames): 0 at
-  that level, 0.63 one speckle SD above it, 0.98 two above;
-- line: ``exp(−½ (max(r − r0, 0) / r0)²)`` for a shaft residual ``r`` against :data:`SHAFT_WIDTH_PX`
-  (a blob with no line, or a cluttered one, scores low);
-- agreement: ``exp(−½ (shift / AGREEMENT_PX)²)`` for the distance between the peak and the
-  echo's end (a peak that is the echo's end scores 1);
-- sharpness: ``exp(−½ (max(r − r0, 0) / 0.2)²)`` for the ratio ``r`` of the echo's fall-off
-  length beyond its end to its width across the shaft, ``r0`` = :data:`MAX_EDGE_RATIO`: a tip
-  ends within the PSF, a shaft fading out of the beam's thickness (the tip in front of the plane,
-  the visible end not the tip) ends over millimetres.
-
-:data:`MIN_CONFIDENCE` (the threshold below which a frame is listed for a person) is set from the
-twin's measured error against confidence (``benchmarks/needle_tip.py``; see the README).
+Design: ``docs/design/image_analysis.md``, "The needle tip in a B-mode frame".
 """
 
 from __future__ import annotations

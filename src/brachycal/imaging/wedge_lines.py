@@ -1,40 +1,9 @@
 """A multi-wedge phantom's face lines in a B-mode frame, sub-pixel, each assigned to its face.
 
-Each planar face of a wedge crosses the image plane in a straight bright line; the multi-wedge
-calibration (:mod:`brachycal.calibration.phantom.wedge`) reads each line by two of its points.
-:func:`find_wedge_lines` finds them in three steps:
+Pixels of the image frame (``u`` along columns, ``v`` along rows); each line is given by its two
+ends, as the observations file holds them (``u0_px,v0_px,u1_px,v1_px``).
 
-1. **Ridge points along columns.** The frame is smoothed (Gaussian, SD :data:`SMOOTH_SD_PX`
-   ``(lateral, axial)`` pixels: below the PSF's width, so the line keeps its shape while speckle's
-   pixel-to-pixel spread drops), and in every column each local maximum along the depth ``v`` that
-   stands :data:`THRESHOLD_DB` above the sector's median grey is a candidate, refined to sub-pixel
-   by a parabola through the maximum and its two neighbours. The brightest depth, not the leading
-   edge: a face tilted in elevation is smeared by the beam's thickness to both sides of its
-   in-plane depth, and the leading edge is biased by half that smear (what
-   :mod:`~brachycal.studies.phantom_twin`'s simulated segmentation models) while the maximum of a
-   symmetric beam profile is not. The threshold: log-compressed speckle (Rayleigh envelope of mean
-   m) exceeds m·10^(12/20) with probability exp(−π/4 · 3.98²) ≈ 4e-6 per independent sample; a
-   face echoes ~25 dB above tissue (:data:`~brachycal.studies.phantom_images.FACE_LEVEL_DB`
-   against the renderer's −35 dB tissue), so 12 dB leaves margin for the attenuation left after
-   time-gain compensation (~0.65 dB/cm).
-2. **Lines.** Sequential RANSAC over the candidates (a seeded generator: the same frame gives the
-   same lines): the line through two candidates with the most candidates within
-   :data:`INLIER_PX` of it (at most one per column), refined by least squares ``v = a + b·u`` over
-   its inliers and cut to its longest run of columns without a gap over :data:`MAX_GAP_PX`; kept if
-   the run has at least :data:`MIN_COLUMNS` columns and is not steeper than :data:`MAX_SLOPE`
-   (the faces are tilted 30° from the scan plane's lateral axis; a line steeper than 60° is not a
-   face). Its points are then removed and the next line sought.
-3. **Assignment to faces**, by the expected order and slope signs from the nominal scan
-   (:func:`~brachycal.studies.phantom_images.nominal_face_order`): the lines sorted left to
-   right (by their middle's ``u``) must be as many as the faces and each must slope the way its
-   face does (a roof face rises towards its ridge: ``dv/du < 0`` left of it, ``> 0`` right of it).
-   A probe held within a few degrees of the nominal scan keeps the order (the wedges stand 30 mm
-   apart, the faces 12 mm wide); a frame where a face is missing, split or merged with a
-   neighbour fails the count or a sign and is skipped (``None``): a wrong assignment would put a
-   line on another plane, an error the fit cannot see.
-
-The line's two ends (its outermost inlier columns, the fitted ``v`` there) are what the
-observations file holds (``u0_px,v0_px,u1_px,v1_px``).
+Design: ``docs/design/image_analysis.md``, "A multi-wedge phantom's face lines".
 """
 
 from __future__ import annotations

@@ -2,58 +2,9 @@
 
 :func:`render_frame` draws one 8-bit frame ``(H, W)`` (``frame[v, u]``) of a needle whose tip and
 direction are given in the image frame ``us_image`` (metres). Every effect is a switch of
-:class:`BModeSettings` with its parameter, unit and source; the random effects (speckle, electronic
-noise) draw from their own streams of the frame's seed, so switching one off leaves the other's
-draws unchanged and the same seed gives the same frame.
+:class:`BModeSettings`; the same seed gives the same frame.
 
-The model works on the echo envelope (linear amplitude, 1 = full white) and compresses it last:
-
-- **speckle** (``speckle``): tissue (a tissue-mimicking phantom) is a diffuse scatterer; its
-  envelope is the magnitude of a circular complex Gaussian field blurred by the point-spread
-  function (PSF), i.e. Rayleigh-distributed and spatially correlated over the PSF. PSF full widths
-  at half maximum ``psf_fwhm_m = (lateral, axial)`` = (0.8, 0.35) mm: at the paper's 6.5 MHz the
-  wavelength is λ = 1540/6.5e6 = 0.24 mm; axial resolution ≈ 1.5 λ (a two-cycle pulse), lateral ≈
-  λ·F# with F# ≈ 3 (Szabo, *Diagnostic Ultrasound Imaging: Inside Out*, 2nd ed., 2014, ch. 7 and
-  10). The mean tissue echo sits ``tissue_level_db`` = −35 dB below white. Off: the tissue echo is
-  its mean, a constant.
-- **needle shaft** (``shaft``): a segment of ``needle_length_m`` (0.2 m, a brachytherapy needle)
-  and ``needle_diameter_m`` (1.27 mm, 18 G) echoing at ``needle_level_db`` (−8 dB) where it lies in
-  the beam, drawn as the segment blurred by the PSF widened by the needle's radius. The specular
-  angle dependence of a metal rod and its reverberation (comet tail) are not modelled.
-- **tip** (``tip``): the bevel echoes brighter than the shaft, ``tip_level_db`` (−2 dB), a PSF-sized
-  spot centred on the tip's projection — where an operator clicks.
-- **beam thickness** (``beam_thickness``): the elevational (out-of-plane) pulse-echo profile is a
-  Gaussian of full width ``elevation_fwhm_m`` = 1.5 mm. The slice thickness of TRUS convex arrays
-  is millimetres, narrowest in the elevation focus near the transducer and growing beyond it
-  (measured with a purpose-built device in M. Peikari, *Characterization of ultrasound elevation
-  beamwidth artefacts for brachytherapy needle insertion*, MSc thesis, Queen's University, 2011);
-  1.5 mm is an assumption at the focus, not a measured figure of the paper's probe. A point of the
-  needle at elevation ``z`` echoes ``exp(−4 ln2 z²/FWHM²)`` of its in-plane echo: the shaft fades as
-  it leaves the plane and the tip's brightness follows its out-of-plane distance. Off: the echo
-  does not depend on elevation (the whole shaft shows).
-- **shadow** (``shadow``): the needle stops the sound behind it: along each ray (from the convex
-  array's apex) the tissue beyond the needle is darkened by up to ``shadow_db`` = 20 dB, in
-  proportion to the needle's one-way beam weight and lateral cover (a rod of the needle's diameter).
-- **attenuation** (``attenuation``): round trip ``2·α·f·r`` dB at depth ``r`` from the apex, α =
-  ``attenuation_db_cm_mhz`` = 0.5 dB/(cm·MHz) (soft tissue and IEC 61685 tissue-mimicking
-  phantoms), f = ``frequency_hz`` = 6.5 MHz (the paper's probe).
-- **time-gain compensation** (``tgc``): the scanner's gain grows with depth, compensating
-  ``tgc_fraction`` = 0.9 of that loss (what is left darkens the image by ~0.65 dB/cm).
-- **electronic noise** (``noise``): receiver noise, Rayleigh-distributed with mean
-  ``noise_level_db`` = −80 dB below white at the receiver, amplified by the TGC gain: it shows at
-  depth.
-- **log compression** (``log_compression``): 20·log10 of the envelope over a dynamic range of
-  ``dynamic_range_db`` = 60 dB mapped to 0–255 (white = 0 dB). Off: linear, 255 × envelope.
-- **sector** (``sector``): the convex array's field of view (apex ``apex_px``, radius ``radius_m``,
-  opening ``angle_rad``: the planner's :class:`~brachycal.planning.SectorFOV` defaults, the paper's
-  2π/3); outside it the frame is black.
-
-Speed: 46 ms per 1080×720 frame on one thread of a shared 2-core VM (only the sector's bounding
-box is drawn; speckle and its PSF blur dominate; the needle is drawn in its own bounding box):
-``python benchmarks/needle_tip.py --timing-only``. Simulated TRUS images of needles for training
-(Goksel et al., "Prostate brachytherapy training with simulated ultrasound and fluoroscopy
-images", IEEE TBME 2013) use richer, interpolated appearance models; this one is analytic, so that
-every effect can be switched off and checked on its own.
+Design: ``docs/design/bmode.md``.
 """
 
 from __future__ import annotations

@@ -1,28 +1,6 @@
 """The twin records too: what a lab's session leaves behind, with a known truth.
 
-:func:`record` turns a twin (:func:`brachycal.simulation.simulate`) into a recording: a continuous
-joint log at 100 Hz in which the robot moves from stop to stop — the touches of each tool on each
-reference tip, the axes moves, then the planned sample poses in the plan's order — with the
-operator's marks and the captured frames at the stops.
-
-- **Stops** are the twin's configurations (the same seed, the same truth): the twin is simulated
-  with its encoder noise switched off, so its session holds the true joints of each stop — the
-  "direct session" a built session must reproduce. The twin's other noise (robot geometry, jog,
-  annotation, beam, sound speed) is in those configurations and pixels as usual.
-- **Moves** between stops are synchronised minimum-jerk joint moves (every joint starts and
-  arrives together, position ``q0 + Δq·(10s³ − 15s⁴ + 6s⁵)``), timed so that no joint exceeds
-  ``speed_scale`` × the vendor's velocity limit (peak speed of the profile: 1.875 Δq/T), and at
-  least ``min_move_s``.
-- **Encoder noise** is on every reading of the log (``TwinConfig.encoder_sd_rad``, white): a
-  reading at a stop is the true joints plus noise, as the twin's direct readings are.
-- **Marks and frames** are taken at random moments of each hold, at least half a still window
-  plus ``margin_s`` from its ends, so every one of them has a still window around it. A few extra
-  frames (``unannotated_frames``) are captured at sample stops and left without annotation, as
-  happens when the operator grabs a frame twice.
-
-:func:`write_recording` writes it as a lab would have it: ``joint_log.csv``, ``marks.csv``,
-``images.csv`` (no ``sample`` column: frames are paired with the plan), ``plan.csv`` and a
-``session.toml`` template, and optionally the same log and marks as a ROS 2 bag (sqlite3 or MCAP).
+Design: ``docs/design/twin.md``, "The twin's recordings".
 """
 
 from __future__ import annotations

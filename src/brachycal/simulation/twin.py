@@ -1,42 +1,9 @@
 """Digital twin of a calibration session: a "physical" robot and tools with a known truth.
 
-What the twin adds to :mod:`brachycal.simulation.exact`, each with a switch, a documented default
-and its own random stream (so switching one source off does not change the others' draws):
+Every error source is a switch of :class:`TwinConfig` with a documented default and its own random
+stream (switching one off leaves the others' draws unchanged).
 
-- ``kinematic_error``: the physical robot's joint origins differ from the URDF's — each joint is
-  shifted (0.03 mm SD per axis), tilted (0.003° SD) and has a zero offset (0.003° SD). The error
-  is fixed for a robot (structured), not white; the tools end up 0.1–0.3 mm off. Named levels
-  (:data:`ROBOT_ERROR_LEVELS`, :meth:`TwinConfig.with_robot_error`): ``well-built`` (this
-  default), ``real-arm`` (0.1 mm / 0.01°) and ``worn`` (0.3 mm / 0.03°).
-- ``encoder_noise``: joint readings = true joints + 2e-5 rad SD (≈ 0.02 mm at 1 m).
-- ``jog_error``: a touched tool tip stops 0.05 mm SD per axis away from the reference tip.
-- ``annotation_noise``: the annotated pixel is off by 1.0 px SD per axis.
-- ``sound_speed``: water at 20 °C carries sound at 1482 m/s, the scanner assumes 1540 m/s, so a
-  depth pixel is really 1482/1540 of its nominal spacing (the image reads 3.9 % deep).
-- ``out_of_plane``: the needle tip sits anywhere within 0.3 mm of the image plane (the part of the
-  beam's thickness where an operator still calls it the brightest frame).
-- ``outliers`` (off by default): a fraction (10 %) of annotations are gross mistakes, 15–40 px off.
-
-With these defaults the twin reproduces the paper's figures: Table I MAE ≈ 0.18 mm (needle) and
-0.28 mm (probe) against the paper's 0.19 and 0.19; Table II (Kabsch) MAE / RMSE / SD ≈ 0.62 /
-0.69 / 0.28 mm against 0.65 / 0.71 / 0.30, and 0.32 mm MAE without the sound-speed stretch
-(mean of seeds 0–5: ``brachycal study --points 4 --annotation-px 1 --seeds 6 --methods kabsch
---sound both``).
-
-The session follows the paper's protocol: three touches per tool and reference tip (top-model,
-needle and probe on ``rtip1`` and ``rtip2``), three-point axes moves, and one image per planned
-pose (:func:`brachycal.planning.plan_poses`): the needle arm goes to its planned joints, then the
-probe is adjusted until the needle tip shows near its planned pixel (as an operator does), the
-joints are read and the tip annotated. The tools and image sit 2 mm / 1° SD away from the URDF's
-nominal frames (their truth). The same seed gives the same files.
-
-Any robot: everything robot-specific comes from its rig (``robot.rig``, a robot description):
-which arm holds the needle and which the probe, the ready stance every touch starts from, the
-nominal tool mounts the truth is drawn around, and the workspace that places the cube, the
-reference tips and the axes moves (:mod:`brachycal.simulation.exact`). A :class:`TwinConfig`
-whose ``spec`` is left at its default plans in the simulated robot's own workspace
-(:meth:`PlanSpec.for_robot <brachycal.planning.PlanSpec.for_robot>`); on the SDA10F that is the
-planner's default spec itself, so its twin is unchanged.
+Design: ``docs/design/twin.md``.
 """
 
 from __future__ import annotations

@@ -1,63 +1,9 @@
 """N-wire calibration with an optical tracker, simulated on the twin's probe (Table III's comparator).
 
-The tracker route as a lab with an optical tracker would run it on this robot, given the best
-practice such a lab has:
+Every error source of the tracker route is a switch of :class:`NWireSimConfig` with a default and
+its own random stream (:data:`NWIRE_STREAMS`).
 
-1. N-wire: the robot holds the probe over an fCal 2.0 phantom in the tank and stops at varied
-   poses (static captures); at each, one image is segmented and the tracker's readings of the
-   probe's marker body and of the phantom's reference body are averaged over ``tracker_frames``
-   frames. :mod:`brachycal.calibration.phantom.nwire` gives ``T_Marker_I`` (rigid + two pixel spacings).
-2. Hand–eye: the robot turns the probe about three axes and stops at each pose; the averaged
-   tracker reading of the marker and the robot's read joints give ``A X = X B``, whose solution
-   (:func:`brachycal.calibration.phantom.hand_eye.hand_eye`) is ``T_EL_Marker``.
-
-The whole-system chain ``T_R_EL @ T_EL_Marker @ T_Marker_I`` is judged by the same end-to-end
-targeting error as the fusion methods on the same simulated robot, whose geometry error and
-encoder noise (from the twin) apply to both routes.
-
-Error sources of the tracker route, each with a switch in :class:`NWireSimConfig`, a default with
-its source, and its own random stream (:data:`NWIRE_STREAMS`; switching one off leaves the others'
-draws unchanged):
-
-- ``tracker_noise``: the paper's tracker (§III.C) is an NDI Polaris Spectra, specified at
-  0.25 mm RMS volumetric accuracy (pyramid volume): the 3D error of a single marker's reading over
-  positions stepped through the measurement volume (NDI's acceptance criterion, as the Polaris
-  Vicra user guide's appendix A states it for its sibling). The twin splits it in two parts.
-  Frame-to-frame jitter, 0.1 mm RMS (3D): infrared trackers' jitter was 0.08–0.10 mm in a
-  longitudinal QA of Spectra, Vega and Vicra units (Computer Assisted Surgery, 2023,
-  doi:10.1080/24699322.2023.2275522); averaging reduces it by √frames. The rest,
-  √(0.25² − 0.1²) = 0.23 mm RMS, is a smooth error field over the volume, the residual of the
-  tracker's own calibration: a place reads the same error every time (Wiles, Thompson & Frantz,
-  "Accuracy assessment and interpretation for optical tracking systems", SPIE 5367, 2004), and no
-  averaging reduces it. The field is a sum of 64 random Fourier modes with a 0.1 m correlation
-  length (an assumption: the error changes over tens of centimetres of the volume;
-  ``benchmarks/table3.py`` shows what 0.05 and 0.3 m give). The error is spread equally over the
-  axes (real trackers err most along the viewing direction).
-- ``tracker_frames``: 20 frames averaged per static capture (a third of a second at the Spectra's
-  60 Hz; what a lab does at a still pose).
-- ``segmentation_noise``: 0.5 px SD per axis on every segmented wire intersection.
-- ``wire_beam_thickness``: the beam is about a millimetre thick in elevation, so a wire echoes
-  from anywhere within ±0.3 mm of the image plane (0.6 mm, the twin's figure for the needle tip:
-  ``TwinConfig.beam_thickness_m``); an oblique wire's point is where it crosses that offset plane.
-- ``phantom_tolerance``: the printed phantom's wire holes and landmark divots lie 0.1 mm SD per
-  axis from its CAD (an assumption for a good PolyJet/SLA print, whose tolerance is about
-  ±0.1 mm); the calibration uses the CAD, as PLUS's configuration does.
-- ``landmark_noise``: the phantom's registration to its reference body from 8 landmarks touched
-  with a tracked stylus, 0.3 mm SD per landmark (pivot-calibrated stylus on the same tracker).
-- ``latency`` (off): static captures are read while nothing moves, so a time offset between the
-  tracker and the scanner does not matter and is 0. A freehand-style sweep (one tracker frame per
-  image, no averaging) can be simulated: the pose read is the probe's pose ``latency_s`` (10 ms,
-  an assumed residual after temporal calibration) earlier, moving at 10 mm/s and 0.1 rad/s.
-
-Not modelled (each favours the tracker route): line of sight and partial occlusion of the
-markers, the marker bodies' own geometry error, the tracker's warm-up drift, wire sag, and the
-error's anisotropy. Nothing of the clinic is in either route: no tissue, no needle deflection.
-
-Measured (``python benchmarks/table3.py``, seeds 0–9, MAE over 50 targets, mean ± SD over seeds):
-the tracker route lands 0.49 ± 0.13 mm, the paper's Kabsch fusion 0.40 ± 0.02 mm, the scaled u/v
-fusion 0.07 ± 0.01 mm. With every error of this module off the tracker route still lands
-0.26 ± 0.09 mm: it calibrates the probe against the tracker, so the robot's own geometry error
-between the arms stays in its chain, where the fusion calibrates against the needle arm.
+Design: ``docs/design/tracker_routes.md``, "The N-wire route".
 """
 
 from __future__ import annotations

@@ -1,29 +1,6 @@
 """B-mode images of a multi-wedge phantom session: each face a bright specular line, thickened by the beam.
 
-The faces of :mod:`brachycal.calibration.phantom.wedge` are drawn into
-:func:`brachycal.simulation.bmode.render_frame`'s envelope (its ``echoes`` hook), so that the
-phantom's frames have the renderer's speckle, point-spread function, attenuation, time-gain
-compensation, receiver noise, log compression and sector (:class:`~brachycal.simulation.bmode.BModeSettings`).
-
-A face is a plane of the phantom cut to its extent: from its ridge (where it meets the other face
-of its wedge) outwards by :data:`FACE_HALF_WIDTH_M` (the bundled wedges are 24 mm wide). It echoes
-at ``face_level_db`` = −10 dB re white: the reflection coefficient of a water/printed-plastic
-interface, (Z₂ − Z₁)/(Z₂ + Z₁) with Z ≈ 1.48 MRayl for water and ≈ 2.8 MRayl for PLA, is 0.31,
-i.e. −10 dB (the angle dependence of a specular reflector is not modelled: the faces are tilted
-30° and the scanner's compound imaging shows them). **Beam thickness**: the elevational pulse-echo
-profile (the renderer's Gaussian of full width ``elevation_fwhm_m``) weighs the face's echo from
-every elevation ``z`` in the beam: a face tilted in elevation crosses the planes ``z`` at other
-depths, so its line is thickened towards both sides — symmetrically for a Gaussian beam, so that
-the line's brightest depth stays the in-plane one while its leading (shallowest) edge moves up by
-about half the smear. Each elevation's echo is blurred in depth by the axial PSF; along the line the
-lateral PSF only smooths the ends (not drawn). Not modelled: reverberations inside the wedges, the
-wedges' shadow, the floor between wedges, surface roughness.
-
-:func:`render_wedge_session` renders every frame of a simulated session
-(:func:`~brachycal.studies.phantom_twin.simulate_phantom`) from its true poses and printed faces;
-:func:`rendered_wedge_observations` segments them (:func:`brachycal.imaging.wedge_lines.find_wedge_lines`)
-into the observations the multi-wedge calibration reads, frames where not every face is found
-skipped and counted.
+Design: ``docs/design/bmode.md``, "B-mode frames of a multi-wedge phantom".
 """
 
 from __future__ import annotations

@@ -1,45 +1,6 @@
 """Multi-wedge and arbitrary-wire phantom calibrations with an optical tracker, simulated on the twin's probe.
 
-The same tracker route as :mod:`brachycal.studies.nwire_twin` (Table III's N-wire comparator),
-with another phantom in the tank: the robot holds the tracked probe over the phantom and stops at
-varied poses; at each, one image is segmented and the tracker's readings of the probe's marker
-body and of the phantom's reference body are averaged; :mod:`brachycal.calibration.phantom.wedge`
-or :mod:`brachycal.calibration.phantom.wire` gives ``T_Marker_I`` (rigid + two pixel spacings);
-the hand–eye calibration ``T_EL_Marker`` is the N-wire route's (the same robot turns, the same
-tracker), so the three phantom routes differ only in their phantom. Every route is judged by the
-same end-to-end targeting error (:mod:`brachycal.studies.targeting`).
-
-The lab's practice, each figure with its source (the settings are those of
-:class:`~brachycal.studies.nwire_twin.NWireSimConfig`, reused, not restated):
-
-- Tracker: NDI Polaris Spectra, 0.25 mm RMS per marker (the paper's §III.C), 0.1 mm of it jitter
-  that 20 averaged frames per still pose reduce, the rest a fixed error field over the volume:
-  the N-wire twin's :class:`~brachycal.studies.nwire_twin.Tracker`, with the *same* field (one
-  tracker in one lab) and this session's own jitter draws.
-- Phantom registration: 8 printed divots (the geometry's ``landmarks_mm``) touched with a tracked
-  stylus, 0.3 mm SD each; print tolerance 0.1 mm SD per axis (N-wire twin's figures).
-- Multi-wedge: 100 frames, Najafi et al.'s (UMB 2014) largest set ("with 100 RF images ... 0.09 ±
-  0.39 mm"; one image already matches N-wire's precision with 50). Each face's line is segmented
-  from 2 to 10 mm off its ridge (the face's flat part) and recorded by its two ends, each
-  0.5 px SD across the line (the N-wire twin's point error; an assumption: a line fitted over
-  many edge pixels may do better). Beam thickness (0.6 mm, the twin's): a surface tilted in
-  elevation echoes first where it is nearest the probe within the beam, so the segmented edge is
-  the shallowest of the face's depths across ±0.3 mm of elevation — a bias that the B-mode
-  leading edge carries (Najafi et al.'s RF *differential* measurement cancels much of it; a lab
-  segmenting B-mode images does not). Print tolerance of a face: its plane moved 0.1 mm SD along
-  its normal and tilted by 0.1 mm over its 10 mm half-width (10 mrad SD per axis).
-- Arbitrary wire: 120 frames (as the N-wire twin's calibration set: an assumption, Shen et al.'s
-  count is not restated here), one point per wire, 0.5 px SD per axis; the wire echoes from
-  within ±0.3 mm of the image plane (beam thickness, as the N-wire twin's wires); wire ends
-  0.1 mm SD per axis off the CAD.
-
-Poses: as over the N-wire phantom — the image plane turned by 6° SD about each axis from the
-nominal scan (depth along the phantom's −z, the normal along its y), its centre moved a few
-millimetres; a pose is kept only if every feature shows inside the sector (judged on the CAD).
-
-Not modelled (each favours the phantom routes, as for the N-wire): occlusion of the markers, the
-marker bodies' geometry error, the tracker's drift, speckle and reverberation in the images, wire
-sag, wedge-surface roughness.
+Design: ``docs/design/tracker_routes.md``, "The multi-wedge and wire routes".
 """
 
 from __future__ import annotations

@@ -1,31 +1,8 @@
 """How good is a chain calibration: parameter covariance, bootstrap intervals, predicted targeting error.
 
-Landing error model (linearised): aiming the needle at an image point, the software computes
-``p̂ = T_R_EL(q) T_EL_I(θ̂) p_I(u, v; θ̂)`` and commands the needle arm so that its calibrated tip
-is there; the physical tip lands at ``p̂ + R_R_ER (p_ER_Ntip − p̂_ER_Ntip)``. So the landing error
-is ``e ≈ G δθ`` with ``G = ∂p/∂θ − R_R_ER ∂p_ER_Ntip/∂θ``, and its covariance ``G Σ Gᵀ`` follows
-from the parameter covariance ``Σ`` of the fit (from its Jacobian, with the noise levels the fit
-estimated).
+Landing errors are 3D, in ``base_link``, metres; covariances in the fit's parameter units.
 
-With a stated robot accuracy (:class:`~brachycal.calibration.chain.RobotAccuracy`) two more terms
-enter. The joints' origin errors ``c`` move the estimate by ``S c`` and, at the aiming pose, move
-the physical needle tip and the physical target by ``L_c c`` (``L_c`` the image residual
-``T_R_ER p_N − T_R_EL T_EL_I p_I`` differentiated with respect to ``c`` at the aiming joints and
-pixel: the software computes and commands with the URDF); the two are correlated, so
-``e ≈ G δθ_noise + (G S + L_c) c``. And the joint readings when aiming (the shared joints, e.g. the
-SDA10F's torso, and the probe arm; the needle arm's joints are the commanded ones) place the target
-with encoder noise ``n``:
-``e_n = −L_q n`` (``L_q`` the same residual differentiated with respect to those joints). The
-landing covariance is ``G Σ_noise Gᵀ + (G S + L_c) Σ_c (G S + L_c)ᵀ + σ_enc² L_q L_qᵀ``.
-``benchmarks/chain_checks.py`` measures its coverage on the twin.
-
-Bootstrap (:func:`bootstrap`): each replicate refits the final least-squares problem of the chain
-on resampled data, every group that informs a reported quantity resampled: the image samples are
-drawn with replacement (pairs: each sample's pose and pixel together), the touches by residual
-(each touch's leverage-corrected residual vector drawn with replacement among all touches and
-added to the fitted positions: three trials per tool and tip are too few to draw from themselves,
-a draw of 3 has 10 possible outcomes and 2/3 of the variance). The axes moves are kept: they
-determine only the tool rotations, for which the bootstrap reports nothing. Percentile intervals.
+Design: ``docs/design/chain.md``, "Uncertainty of a chain calibration".
 """
 
 from __future__ import annotations

@@ -1,33 +1,9 @@
 """The fit shared by the multi-wedge and arbitrary-wire phantom methods: image → marker from features of known pose.
 
-A tracked probe images a phantom whose features (planar wedge faces, straight wires) have known
-places in the phantom frame. For frame ``f`` the tracker gives ``T_phantom_marker(f)`` (the probe's
-marker body in the phantom frame: ``inv(T_tracker_reference @ T_reference_phantom) @ T_tracker_probe``),
-and an image point ``(u, v)`` on a feature lies on it:
+Unknowns: ``T_marker_image`` and the pixel spacings ``(s_u, s_v)`` (8 parameters); residuals are
+distances in metres.
 
-``g · (R_f (R (s_u u, s_v v, 0) + t) + t_f) = d``,
-
-one scalar equation per *row* ``(g, d)``: a point on a plane gives one row (``g`` the unit normal,
-``d = g · p₀`` for a point ``p₀`` of the plane); a point on a wire gives two (``g`` two unit
-directions perpendicular to the wire, ``d = g · p₀``). The residual of a row is a distance in
-metres. The unknowns are the calibration ``T_marker_image = (R, t)`` and the pixel spacings
-``(s_u, s_v)``: 8 parameters.
-
-Closed-form start (:func:`linear_start`): with ``r₁ = s_u R e_x`` and ``r₂ = s_v R e_y`` the
-equation is linear in ``(r₁, r₂, t)`` (9 unknowns):
-``h · r₁ u + h · r₂ v + h · t = d − g · t_f`` with ``h = R_fᵀ g``. Its least-squares solution is
-exact for exact data whenever the design has rank 9; the spacings are ``|r₁|``, ``|r₂|`` and the
-rotation the nearest to ``(r₁/|r₁|, r₂/|r₂|, r₁ × r₂)``. Refinement (:func:`refine`):
-Levenberg–Marquardt on the 8 parameters (rotation updated on the left by a rotation vector).
-
-Conditioning (every fit, :func:`conditioning`): from the Jacobian ``J`` at the solution,
-``Cov = σ² (JᵀJ)⁻¹``, the predicted 3D SD of the mapped image point at :data:`REACH_M` (50 mm)
-from the observed points' centroid along ``u`` and ``v`` (where a needle is targeted), as in the
-fusion methods (:mod:`brachycal.calibration.sequential.image_to_probe`). With ``σ`` the segmentation error
-alone, :data:`SEGMENTATION_SD_PX` (0.5 px) at the fitted spacing — the least error any session
-has (the tracker adds more) — above :data:`MAX_REACH_SD_M` (2 mm) the fit is refused: the layout
-and the poses cannot determine it. With ``σ`` the larger of that and the fit's own residual level
-``σ̂``, above :data:`WARN_REACH_SD_M` (0.5 mm) it warns.
+Design: ``docs/design/phantoms.md``, "The fit shared by the wedge and wire phantoms".
 """
 
 from __future__ import annotations

@@ -1,31 +1,9 @@
 """PLUS fCal's refinements of the N-wire calibration (its ``OptimizationMethod`` settings), by least squares.
 
-PLUS (``vtkPlusProbeCalibrationOptimizerAlgo``) refines its linear fit
-(:func:`~brachycal.calibration.phantom.nwire.fit_affine`) over an Image→Probe model of a rotation, a
-translation and the pixel spacing::
+Names ``{cost}-{spacing}``: ``3d-aniso`` (PLUS's OPEA), ``3d-iso`` (OPEI), ``2d-aniso`` (IPEA),
+``2d-iso`` (IPEI).
 
-    M = [R[:, 0]·s_u, R[:, 1]·s_v, R[:, 2]·(s_u + s_v)/2, t]     (pixels → probe frame)
-
-with one spacing (``iso``: ``s_u = s_v``) or two (``aniso``), minimising the RMS of one of two errors
-over the calibration frames its linear fit kept (a frame is dropped if any of its middle-wire points
-was rejected, PLUS's ``CALIBRATION_NOT_OUTLIER`` set):
-
-- ``3d`` (PLUS's "3D", out-of-plane error): ``|M·(u, v, 0, 1) − p|`` for each middle wire, where ``p``
-  is the wire point carried from the phantom into the probe frame (similar triangles), metres;
-- ``2d`` (PLUS's "2D", in-plane error): for every wire (all three of each N), the pixel distance
-  between its segmented point and where the wire, carried into the image frame, crosses the image
-  plane ``z = 0``.
-
-PLUS minimises with ITK's Powell optimiser from the linear fit; here SciPy's ``least_squares``
-(Levenberg–Marquardt, relative tolerances 1e-12) minimises the same sums of squares, started from
-the linear fit (``start="affine"``, as PLUS) or from brachycal's rotation + u/v spacings fit
-(``start="rigid"``); the Jacobian is SciPy's central differences (7 or 8 parameters, up to a few
-thousand residuals: 0.05–3 s a fit on PLUS's recordings, the in-plane one-spacing fit of fCal 2.0
-the slowest, its residuals far from zero). The rotation is ``R = exp([ω]) R_0`` about the start,
-the translation and spacings are in millimetres so every parameter is of order one.
-
-Names: ``{cost}-{spacing}``: ``3d-aniso`` is PLUS's OPEA setting, ``3d-iso`` OPEI, ``2d-aniso``
-IPEA, ``2d-iso`` IPEI (the names of PLUS's regression tests).
+Design: ``docs/nwire.md``, "How the refinements are computed".
 """
 
 from __future__ import annotations

@@ -1,40 +1,9 @@
 """Files of the phantom methods: the phantom's geometry (TOML), the observations (CSV), the result (JSON).
 
-Geometry, ``brachycal-phantom/1`` (lengths in millimetres in the phantom frame; the probe scans
-along the phantom's ``y`` axis, the image plane's normal, with depth along ``−z``, as over PLUS's
-fCal phantom)::
+Geometry ``brachycal-phantom/1`` in millimetres in the phantom frame; tracker readings in metres
+with quaternions in ROS order (x, y, z, w).
 
-    format = "brachycal-phantom/1"
-    kind = "multi-wedge"                  # or "wire"
-    name = "a readable name"
-    landmarks_mm = [[x, y, z], ...]       # optional: registration divots (the twin touches them)
-    T_reference_phantom_mm = [[...4x4...]]  # the phantom in its reference body's frame (its
-                                            # registration, PLUS's Phantom->Reference), translation
-                                            # in mm; needed to calibrate from tracker readings
-
-    [[wedge]]                             # multi-wedge: wedges of two (or more) planar faces
-    name = "A"
-    [[wedge.face]]
-    name = "A1"
-    point_mm = [x, y, z]                  # a point of the face's plane
-    normal = [nx, ny, nz]                 # its normal (any length; normalised)
-
-    [[wire]]                              # wire: straight wires through two points
-    name = "W1"
-    from_mm = [x, y, z]
-    to_mm = [x, y, z]
-
-Observations (CSV, one row per feature seen in a frame)::
-
-    frame,feature,probe_x,probe_y,probe_z,probe_qx,probe_qy,probe_qz,probe_qw,
-        reference_x,reference_y,reference_z,reference_qx,reference_qy,reference_qz,reference_qw,<pixels>
-
-``frame`` names the image; ``feature`` is a face (multi-wedge) or a wire name of the geometry.
-``probe_*`` is the tracker's reading of the probe's marker body (``T_tracker_probe``) and
-``reference_*`` of the phantom's reference body (``T_tracker_reference``): positions in metres,
-unit quaternions in ROS order (x, y, z, w); every row of a frame carries the same readings.
-Pixels: multi-wedge ``u0_px,v0_px,u1_px,v1_px`` — two points of the face's segmented line (its
-visible ends); wire ``u_px,v_px`` — the wire's segmented point.
+Design: ``docs/design/phantoms.md``, "Phantom files".
 """
 
 from __future__ import annotations

@@ -1,36 +1,9 @@
 """Pivot calibration: a tracked tool rotated about its fixed tip.
 
-For poses ``T_ref_marker(i) = (R_i, t_i)`` of a tool whose tip stays on one point,
-``R_i p_tip + t_i = p_pivot`` for all i. The algebraic one-step solution (Yaniv 2015) stacks
-``[R_i  −I] [p_tip; p_pivot] = −t_i`` and solves it by linear least squares. The robust variant
-solves the same equations with a soft-L1 loss (:func:`scipy.optimize.least_squares`), scaled by
-a robust estimate of the noise, and flags poses whose 3D residual exceeds
-``outlier_threshold`` times that scale.
+Units are those of the input (the pose-list file says which); poses that turn too little to
+determine the tip are refused.
 
-Residuals are reported both ways, since tools differ: ``rms_per_axis`` is the RMS over all 3N
-coordinates (what SciKit-Surgery calls the residual error) and ``rms_3d`` the RMS of the N
-distances ``‖R_i p_tip + t_i − p_pivot‖`` (= √3 × per-axis).
-
-Units are those of the input (the pose-list file says which: the SciKit-Surgery recording is in
-millimetres; brachycal's own files are in metres).
-
-Error propagation and the conditioning check. With noise of SD ``σ`` per coordinate on each
-pose's equations, ``Cov([p_tip; p_pivot]) = σ² (AᵀA)⁻¹`` for the stacked ``A = [R_i  −I]``; ``σ`` is
-estimated from the residual, ``σ̂² = RSS / (3N − 6)``. The tip block of ``(AᵀA)⁻¹`` is
-``(I − R̄ᵀR̄)⁻¹ / N`` with ``R̄ = mean_i R_i`` (Schur complement), and for small rotations
-``I − R̄ᵀR̄ ≈ tr(C) I − C`` with ``C`` the covariance of the rotation vectors: its smallest eigenvalue
-is the sum of the two smallest rotation variances. Its square root, the *rotation spread* ``φ``
-(radians), is how far the tool turned about the two least-covered axes, and an error of a pose that
-does not average out over the poses (a tracker's bias, a flexing tool) reaches the tip multiplied
-by ``1/φ``. Hence, independent of units and of the noise level (which exact data do not show):
-
-- ``1/φ`` above :data:`MAX_GAIN` (φ < 1.15°) refuses
-  (:class:`~brachycal.errors.DegenerateDataError`): a 0.1-mm pose error would move the tip by 5 mm;
-  rotations about one axis (φ = 0) leave the tip undetermined along it;
-- ``1/φ`` above :data:`WARN_GAIN` (φ < 5.7°) warns (:class:`~brachycal.errors.ConditioningWarning`).
-
-The predicted 3D SDs ``sqrt(trace(Cov))`` of tip and pivot (units of the input) are reported with
-the result (``tip_sd``, ``pivot_sd``).
+Design: ``docs/design/phantoms.md``, "Pivot calibration".
 """
 
 from __future__ import annotations

@@ -1,28 +1,6 @@
 """Multi-wedge phantom calibration (Najafi et al., Ultrasound Med. Biol. 40(9), 2014): planes seen as lines.
 
-The phantom carries wedges, each of two planar faces, at known places in the phantom frame. The
-image plane cuts each face along a line that the B-mode image shows as a bright edge; a lab
-segments it and records two points of it (its visible ends). Each point ``(u, v)`` of face ``k``
-satisfies ``n_k · p_phantom = n_k · p_k`` — one scalar equation, linear in the image plane's
-scaled axes and origin — so:
-
-- one image of at least five faces whose normals span 3D gives the image plane's pose *and* pixel
-  spacings in the phantom in closed form (:func:`image_pose_in_phantom`; 9 linear unknowns,
-  two equations per face), the multi-wedge's point: one image suffices;
-- a tracked session gives ``T_marker_image`` with the spacings: the same linear equations through
-  every frame's tracker reading for a closed-form start, then Levenberg–Marquardt over all frames
-  (:func:`calibrate_wedge`, :mod:`brachycal.calibration.phantom.features`, which also checks the
-  conditioning).
-
-Najafi et al. measure *differences* of axial positions between neighbouring faces from RF data
-(whence "differential": a common depth offset, e.g. from the beam's leading edge, cancels); here
-the absolute line ends are used, as a lab segmenting B-mode images would, and the twin shows the
-beam-thickness bias that this leaves (:mod:`brachycal.studies.phantom_twin`).
-
-Refused (one line): a geometry with one wedge (two faces cannot fix the image plane), or faces
-whose normals leave a direction free (:func:`~brachycal.calibration.phantom.features.check_layout` on
-the nominal scan: the image plane ``y = const`` through the faces' centroid); fewer than
-:data:`~brachycal.calibration.phantom.features.MIN_FRAMES` frames; data that cannot determine the fit.
+Design: ``docs/design/phantoms.md``, "Multi-wedge phantom".
 """
 
 from __future__ import annotations

@@ -1,32 +1,6 @@
 """Arbitrary-wire phantom calibration (Shen et al., the paper's ref. [27]): each image point lies on its wire.
 
-Shen, Lyu, Wang and Wu, "A method for ultrasound probe calibration based on arbitrary wire
-phantom", Cogent Engineering 6(1), 1592739, 2019; the paper quotes its image calibration's
-accuracy, 1.022 ± 0.085 mm (§IV), beside its own Table III.
-
-The phantom holds straight wires of known but arbitrary 3D placement. The image plane crosses
-each wire at one point, which the B-mode image shows as a bright dot; a lab segments it. With the
-wire through ``a`` along the unit ``w`` (phantom frame), the point lies on it when its offset from
-``a`` has no component perpendicular to ``w``: two scalar equations per point,
-``e_j · (p_phantom − a) = 0`` with ``e₁, e₂ ⟂ w`` — the Plücker condition ``w × p = w × a`` in
-two independent rows. Through the frame's tracker reading they are linear in the image plane's
-scaled axes and origin, so (:mod:`brachycal.calibration.phantom.features`):
-
-- start: the closed-form linear least-squares solution of those equations over all frames
-  (exact for exact data; no N-wire-like initialisation is needed, and none of the wires has to
-  form an N), projected onto a rotation and two spacings;
-- refine: point-to-line least squares (the two perpendicular distance components, metres) over
-  the 8 parameters by Levenberg–Marquardt.
-
-Which layouts are ill-posed (refused in one line when the geometry is read,
-:func:`~brachycal.calibration.phantom.features.check_layout` on one nominal image ``y = const``
-through the wires' middle): fewer than three wires (two equations each, six for the image
-plane's pose); all wires parallel (the image plane's position along them is free: every image
-looks the same as the probe slides along the wires); all wires in one plane (the image shows
-collinear points: the plane can turn about their line). Given the data, the conditioning check of
-:func:`~brachycal.calibration.phantom.features.conditioning` refuses what the frames cannot determine
-(too few frames, poses that do not turn) with the threshold from error propagation: predicted
-SD 2 mm at 50 mm from the image centre with segmentation error alone.
+Design: ``docs/design/phantoms.md``, "Arbitrary-wire phantom".
 """
 
 from __future__ import annotations

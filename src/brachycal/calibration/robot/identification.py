@@ -1,40 +1,10 @@
 """Robot identification: the robot's own geometry estimated with the tools, from the same session.
 
-The physical robot's joint origins differ from its URDF's by small motions ``c_j`` (per joint: a
-translation ``v`` and a rotation ``ω`` about the origin's own axes, applied on the right of the
-URDF's ``<origin>``: ``T_parent_joint ← T_parent_joint @ T(exp(ω), v)``; a rotation about the
-joint's axis is its zero offset). That is the complete first-order error of a serial chain of
-one-axis joints (link lengths and twists, joint placements, zero offsets), 6 numbers per joint,
-``6 nq`` in all, the parameterisation of :func:`~brachycal.calibration.chain.joint_twists` and of
-the twin's physical robot.
+Joint-origin corrections ``c_j``, 6 per joint (translation ``v`` in metres, rotation ``ω`` in
+radians about the origin's own axes), estimated with the chain's unknowns under the stated robot
+accuracy as prior.
 
-The session's data are closed-loop constraints between the two arms (touches of fixed reference
-tips from several postures; the needle tip through the right arm seen in the image through the
-left arm at every sample), so they see part of ``c``. The estimator is the maximum a posteriori
-fit of the whole chain's unknowns ``θ`` (tools, image, scale, reference tips) and all of ``c``,
-with the stated robot accuracy (:class:`~brachycal.calibration.chain.RobotAccuracy`: independent,
-zero-mean, the level the consider covariance already uses) as the Gaussian prior of ``c``:
-
-    minimise  ‖r(θ, c)‖² + ‖Σ_c^{-1/2} c‖²       (r: the chain's normalised residuals)
-
-by Gauss–Newton (the robot part of the Jacobian by central differences of the flange poses,
-:func:`~brachycal.calibration.chain.robot_jacobian`), with the groups' noise levels re-estimated
-from the residuals between rounds (the robot's own error first inflates them; once it is
-modelled, the touches' scatter falls from ~0.8 mm to their jog noise and they weigh in).
-
-Why a prior rather than a hard base-parameter reduction: with a 0.3 mm / 0.03° robot, keeping only
-the combinations a pivoted QR of the identification Jacobian ranks above the prior (FIGAROH's
-reduction, threshold |R_kk| ≥ 1 in prior units) gave 0.14–0.20 mm targeting on twin seeds 0–1,
-and the prior-weighted fit of all 6 nq parameters 0.10–0.13 mm (the robot's true geometry gives
-0.06–0.08 mm): the weakly seen combinations still carry information, and the prior keeps the
-unseen ones at zero instead of letting noise move them. The base set is still computed and
-reported (:class:`Identifiability`): which combinations the data determine beyond the stated
-accuracy, and, per parameter, why one is not identifiable.
-
-Uncertainty: the joint posterior ``(AᵀA)⁻¹`` of ``(θ, c)`` (``A`` the normalised Jacobian with the
-prior's rows) is exact for the linearised problem. It is handed to the chain's uncertainty
-machinery in its consider form: ``Σ = Cov(c)``, ``S = −Cov(θ, c) Σ⁻¹``, noise part the Schur
-complement ``Cov(θ) − S Σ Sᵀ`` (the remaining robot error is ``c − ĉ``, hence the sign).
+Design: ``docs/design/robot_identification.md``.
 """
 
 from __future__ import annotations

@@ -1,45 +1,6 @@
 """Which extra observations would identify the robot best: an A-optimal criterion on the landing error.
 
-The robot identification (:mod:`brachycal.calibration.robot.identification`) is the linearised MAP
-problem ``A δ = −r`` over ``δ = (θ, c/s)``: the chain's unknowns ``θ`` (tools, image, scale,
-reference tips) and the joint-origin corrections ``c`` in prior units (``s`` their stated prior SD),
-``A`` the data's normalised rows stacked on the prior's identity rows. Its posterior is
-``Σ = (AᵀA)⁻¹`` (:attr:`RobotIdentification.posterior`, the same units).
-
-An extra observation adds rows ``B`` (``k × n``, normalised by its group's noise level): a touch of
-a reference tip at a configuration ``q`` three rows (tool tip at the reference tip), an image sample
-three (the needle tip through one arm minus the pixel through the other: two in the image plane and
-the out-of-plane one, whose noise level the fit estimated with the others). The posterior becomes,
-by Woodbury, ``Σ' = Σ − Σ Bᵀ (I + B Σ Bᵀ)⁻¹ B Σ``, so no re-inversion per candidate.
-
-What the lab cares about is where the needle lands. At a targeting pose ``t`` (a configuration and
-the target's pixel) the landing error is ``e_t ≈ W_t δ`` with ``W_t = [G_t, −L_c,t · s]``
-(:func:`~brachycal.calibration.chain.uncertainty.landing_jacobian` and
-:func:`~brachycal.calibration.chain.uncertainty.landing_robot_jacobians`: the chain's error ``G_t δθ``
-and the remaining robot error ``c − ĉ`` moving the needle and the target). The score is the
-predicted mean squared landing error ``mean_t trace(W_t Σ W_tᵀ) = trace(H Σ)`` with
-``H = mean_t W_tᵀ W_t``; an observation's gain is ``trace((I + BΣBᵀ)⁻¹ BΣHΣBᵀ)``. The encoder
-noise when aiming adds a constant (no observation changes it); :attr:`Criterion.constant_m2`
-carries it so that the stated RMS is the one ``landing_covariance`` gives.
-
-Targeting poses: the session's own sample configurations and pixels (the planned 4 × 4 × 4 cube:
-the needle is aimed there in the clinic). A torso turn of all of them (the twin's held-out
-configurations) gives the same score: the torso moves both arms, so it drops out of the closed loop.
-
-Stopping rule (:func:`greedy`): the predicted RMS is itself an estimate, its scale set by the noise
-levels estimated from the residuals. With ``ν`` residual degrees of freedom a noise SD is known to a
-relative SD of about ``1/√(2ν)`` (chi-squared); :func:`resolution` propagates each group's through
-its share of the predicted error (~4 % on a 64-sample twin session). An improvement smaller than
-that cannot be told from the prediction's own uncertainty. The greedy adds observations while the
-predicted RMS falls by at least ``floor / budget`` per added minute (spending the whole budget at a
-lower rate could not reach the floor), and the selection is kept only if its total improvement
-reaches the floor; otherwise the answer is "the session is enough". The floor is the resolution,
-at least 1 % (:data:`brachycal.planning.excitation.MIN_IMPROVEMENT`: with noise-free data the
-resolution tends to zero).
-
-The criterion is linear: it ranks observations by what they add to the linearised problem at the
-session's estimate, with the session's noise levels; its predicted gain is checked against twins
-in ``benchmarks/robot_identification.py --excitation``.
+Design: ``docs/design/robot_identification.md``, "Which observations identify the robot best".
 """
 
 from __future__ import annotations

@@ -1,45 +1,9 @@
 """Image-to-probe calibration, §II.D: eq. (8) points, eq. (9) by several methods, LOO-CV (§III.A).
 
-Eq. (8): the needle tip, known on the right flange, seen in the probe frame:
-``p_Ptip(i) = inv(T_R_EL(i) @ T_EL_Ptip) @ T_R_ER(i) @ p_ER_Ntip``. Eq. (9):
-``p_Ptip(i) = T_Ptip_I @ p_I(i)`` with the annotated pixel ``p_I = (u·s_u, v·s_v, 0)``.
+Every method yields an :class:`ImageCalibration`: a rigid ``T_Ptip_I`` and the pixel spacing
+(metres per pixel) it goes with; fits the samples cannot determine are refused.
 
-Every method yields an :class:`ImageCalibration`: a rigid ``T_Ptip_I`` and the pixel spacing it
-uses. The rigid methods (Kabsch, Horn, ICP) keep the nominal spacing; ``similarity`` scales both
-axes by one factor; ``scaled_uv`` fits each axis's spacing.
-
-Leave-one-out (Table II): for each sample i, fit on the other N−1 and predict
-``P_cal(i) = T_R_EL(i) @ T_EL_Ptip @ T_Ptip_I^(−i) @ p_I(i)`` against
-``P_real(i) = T_R_ER(i) @ p_ER_Ntip``, both in ``base_link``.
-
-Conditioning (every fit, including each leave-one-out fold, so that no Table II row comes from data
-that cannot determine it). The figure checked is the predicted 3D SD of the fitted map at
-:data:`REACH_M` (50 mm) from the samples' centroid along the image's principal directions, where the
-needle is targeted (:func:`~brachycal.calibration.sequential.registration.fit_uncertainty`). Computed from the
-design with the annotation noise, :data:`ANNOTATION_SD_PX` pixels (``σ_a`` in metres at the nominal
-spacing), above :data:`MAX_REACH_SD_M` (2 mm, three times the paper's whole Table II error) the
-fit is refused (:class:`~brachycal.errors.DegenerateDataError`): the samples' geometry cannot
-determine it. Computed with ``σ_a`` or the fit's own residual level ``σ̂``, whichever gives more,
-above :data:`WARN_REACH_SD_M` (0.5 mm, as large as that error) it warns
-(:class:`~brachycal.errors.ConditioningWarning`): noisy data still determine the fit, poorly.
-
-Before fitting, the same bound gives the least spread the samples need: the image plane's tilt
-about the samples' long axis has SD ``σ/(√N s₂)`` (``s₂`` the second principal SD of the points),
-so both the annotated points and the probe-frame points must have
-``s₂ ≥ REACH · σ_a / (√N · MAX_REACH_SD_M)`` (64 samples at 1 px of 0.19 mm: 0.6 mm, 3 px).
-
-Fitted spacings must be positive and within :data:`MAX_SPACING_FACTOR` of the nominal (refused
-otherwise, unless 3 predicted SDs of noisy data reach back into that range), and within
-:data:`WARN_SPACING_CHANGE` of it (warns otherwise): the speed of sound in water and soft tissue
-(1400–1650 m/s against the scanner's 1540) changes the axial spacing by −9…+7 %, no more.
-
-ICP starts from the nominal and from 48 orientations
-(:func:`~brachycal.calibration.sequential.registration.icp_global`), so the URDF's nominal image frame only
-breaks ties between fits the data cannot tell apart (a symmetric pattern of samples). A result more
-than :data:`NOMINAL_ANGLE_DEG` or :data:`NOMINAL_SHIFT_M` from the nominal warns that the nominal is
-off; if such a result is also tied with another fit, the data cannot determine it and ICP refuses;
-a fit that puts the samples on other samples' probe-frame points (a mirror-image twin chosen by the
-nominal) is refused too.
+Design: ``docs/design/sequential.md``, "Image-to-probe calibration".
 """
 
 from __future__ import annotations

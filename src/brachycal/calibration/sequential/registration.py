@@ -1,35 +1,9 @@
 """Point-set registration for eq. (9), ``p_Ptip = T_Ptip_I @ p_I``, and its scale variants.
 
-All functions take corresponding points ``p_src (N, 3)`` and ``p_dst (N, 3)`` (metres) and return
-``T_dst_src (4, 4)``, the proper rigid transform (det R = +1) that best maps ``p_src`` onto
-``p_dst`` in the least-squares sense, unless said otherwise.
+Functions take corresponding points ``p_src (N, 3)`` and ``p_dst (N, 3)`` (metres) and return
+``T_dst_src (4, 4)``, a proper rigid transform, unless said otherwise.
 
-- :func:`kabsch`: SVD of the cross-covariance with the reflection guard (Kabsch 1976).
-- :func:`horn`: unit quaternion as the top eigenvector of Horn's 4×4 matrix (Horn 1987), the
-  method behind VTK's ``vtkLandmarkTransform`` (the paper's "Landmark").
-- :func:`icp`: point-to-point ICP (Besl & McKay; Chen & Medioni) with nearest-neighbour
-  correspondences from an initial guess; each step is a Kabsch fit.
-- :func:`similarity`: rigid + one isotropic scale (Umeyama 1991).
-- :func:`scaled_uv`: rigid + separate pixel spacings (s_u, s_v) for image points, by
-  nonlinear least squares (analytic Jacobian) from a Kabsch start; needed when the speed of sound in the medium
-  differs from the scanner's assumption (the axial scale is off by a few per cent).
-
-Image points are planar (z = 0); all methods handle planar point sets. Collinear or too few
-points make the problem degenerate and raise :class:`~brachycal.errors.InputError`; a
-similarity or u/v scale that comes out zero or negative raises
-:class:`~brachycal.errors.DegenerateDataError`.
-
-:func:`icp_global` removes ICP's dependence on its initial guess: it starts from the nominal and
-from 48 orientations (the two sets' principal axes aligned, normals both ways, every 15° about the
-normal), keeps the distinct converged fits, and returns the best RMS residual; fits within a tie
-tolerance of the best (a symmetric pattern of points matches itself turned over) are told apart by
-closeness to the prior guess, and reported.
-
-:func:`fit_uncertainty` gives every fit's predicted uncertainty by linear error propagation: with
-isotropic noise of SD ``σ`` per coordinate on the residuals ``r_i = R S p_i + t − q_i``,
-``Cov(x) = σ² (JᵀJ)⁻¹`` for the parameters ``x`` = (rotation increment ``δθ`` [rad], translation
-``t`` [m], scale factors), ``J`` the residuals' Jacobian at the solution, and
-``σ̂² = RSS / (3N − p)``.
+Design: ``docs/design/sequential.md``, "Point-set registration".
 """
 
 from __future__ import annotations

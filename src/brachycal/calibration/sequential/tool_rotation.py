@@ -1,33 +1,8 @@
 """Tool rotation from three points, §II.C.2, eq. (7) and steps 1–5 (with the errata).
 
-The tool, held at one orientation, is translated from p1 to p2 (this direction *defines* the
-tool's y axis) and from p1 to p3 (its z axis). With the tip just calibrated, the tip positions
-``P_k = T_R_E(p_k) @ p_E_tool`` give the axes in the flange frame:
-``n_y = R_R_E(p1)ᵀ (P_2 − P_1)/‖·‖``, ``n_z = R_R_E(p1)ᵀ (P_3 − P_1)/‖·‖``; then
-``n_x = n_y × n_z`` (normalised) and ``n_z = n_x × n_y``, so ``R_E_tool = [n_x, n_y, n_z]`` is a
-proper rotation even when the two moves were not exactly perpendicular. The angle between the
-measured axes (ideally 90°) is the quality figure.
+The move p1→p2 defines the tool's y axis, p1→p3 its z axis; the rotation is in the flange frame.
 
-Error propagation. Each point ``P_k`` is off by the positioning noise, isotropic with SD ``σ`` per
-axis (:data:`~brachycal.calibration.sequential.tool_tips.TOUCH_SD_M`; the tip's own error is common to the
-three points held at one orientation and cancels in the moves). A move of length ``L`` then has a
-direction error of RMS angle ``2σ/L`` (two perpendicular components of SD ``√2σ/L``); the angle
-between the measured axes has SD ``√2σ·sqrt(1/L_y² + 1/L_z²)``; the rotation's predicted RMS angle
-is ``σ·sqrt(trace(J Jᵀ))`` with ``J`` the Jacobian of the rotation (as a rotation vector) with
-respect to the nine point coordinates. The three-point method has only one redundant figure (the
-axes angle), too few to estimate ``σ`` from the data; the stated ``σ`` is used.
-
-Checks (thresholds in the module constants):
-
-- direction RMS angle ``2σ/L`` above :data:`MAX_DIRECTION_SD_RAD` (2°) refuses, above
-  :data:`WARN_DIRECTION_SD_RAD` (0.5°) warns. Why these: the needle's direction carries a point
-  100 mm down the shaft by 100 mm × angle, 3.5 mm at 2° (unusable for targeting) and 0.9 mm at 0.5°
-  (as large as the paper's whole Table II error). With σ = 0.05 mm: refuse below 2.9 mm of move,
-  warn below 11.5 mm (20 mm is usual).
-- axes angle off 90° by more than :data:`WARN_ANGLE_SIGMAS` predicted SDs warns (not noise: the
-  moves were not along perpendicular tool axes), by more than :data:`MAX_ANGLE_SIGMAS` refuses (the
-  orthonormalisation would hide a protocol error of several degrees; parallel moves are refused
-  this way).
+Design: ``docs/design/sequential.md``, "Tool rotation from three points".
 """
 
 from __future__ import annotations

@@ -1,35 +1,9 @@
 """Tool-tip positions by touching reference tips, §II.C.1, eqs. (4)–(6), and Table I.
 
-The top-model, whose tip ``p_ER_Mtip`` on the right flange is known from its CAD and test
-report, locates a fixed reference tip in ``base_link`` (eq. 4). The needle tip (right flange)
-and the probe tip (left flange) are then touched to the same reference tip (eqs. 5, 6), and
-each tip follows from ``inv(T_R_E) @ p_R_Rtip``, averaged over the trials (``docs/conventions.md``,
-"How the paper's estimators are computed"). Validation (Table I) touches a second reference tip with both the tool and
-the top-model, trial by trial.
+Tips in metres: reference tips in ``base_link``, tool tips on their flange (``p_ER_Ntip``,
+``p_EL_Ptip``); touches whose geometry cannot determine a tip are refused.
 
-Error propagation (what the conditioning checks and the predicted uncertainties rest on). A touch
-puts the tip on the reference tip up to a positioning error ``ε_t`` (jog resolution, robot
-repeatability, encoders), isotropic with SD ``σ`` per axis. With ``T`` trials:
-
-- reference tip: ``p_R_Rtip = mean_t T_R_ER(t) @ p_ER_Mtip``, covariance ``σ_ref² I / T``;
-- tool tip: ``p_E = mean_t R_t^T (p_R_Rtip − t_t)``, covariance
-  ``σ_tool² I / T + M Cov(p_R_Rtip) Mᵀ`` with ``M = mean_t R_tᵀ`` (the reference tip's error
-  enters through the trials' mean orientation).
-
-``σ`` of each estimate comes from the spread of its own trials,
-``σ̂² = Σ_t ‖x_t − x̄‖² / (3 (T − 1))`` (``x_t`` the per-trial tips); with a single trial there is
-no spread and the stated positioning noise :data:`TOUCH_SD_M` stands in. The predicted 3D SD is
-``sqrt(trace(Cov))``.
-
-Refusals (:class:`~brachycal.errors.DegenerateDataError`):
-
-- two touch rows with the same joints (within :data:`SAME_CONFIGURATION_RAD`): a copied row, e.g.
-  the needle "touching" at the top-model's very configuration, which makes the needle tip the
-  top-model's tip and Table I a self-comparison (0.00 mm whatever the truth);
-- validation tip ``rtip2`` within :data:`MIN_SEPARATION_SIGMAS` predicted SDs of ``rtip1``: the
-  two are then statistically the same point and Table I re-tests the calibration data.
-
-A predicted tip SD above :data:`TIP_SD_WARN_M` warns (:class:`~brachycal.errors.ConditioningWarning`).
+Design: ``docs/design/sequential.md``, "Tool tips by touching reference tips".
 """
 
 from __future__ import annotations

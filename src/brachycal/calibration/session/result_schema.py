@@ -1,29 +1,7 @@
 """The schema of a ``brachycal-result/1`` document: every key the writer lays out, its type, shape
 and physical range, checked before anything in the file is used.
 
-:func:`validate_result_document` is the one check :func:`~brachycal.calibration.read_result`
-runs; it refuses the first problem in one line naming the file and the key's place in the
-document (``transforms.Ptip_T_I.kabsch``, ``loocv.icp.errors_mm[3]``).
-
-The schema is a small declarative table of Python checks (:class:`Spec` values), not a JSON
-Schema: what matters most here — a 4x4 transform's rotation being proper (det +1), pixel spacings
-in a plausible range, NaN never passing a comparison — is not expressible in JSON Schema, and the
-numbers are checked by :mod:`brachycal.validate`'s own functions, so that a result file is held to
-the same rules as every other input.
-
-Ranges (typo and corruption guards, not precision claims):
-
-- translations of stored transforms, reference tips and joint-origin corrections: within
-  :data:`MAX_TRANSLATION_M` of their parent frame;
-- pixel spacings: :func:`~brachycal.validate.check_spacing_mm` (:data:`~brachycal.validate.SPACING_MM_RANGE`);
-- joint zero offsets and joint-origin rotation corrections: within ±π rad
-  (:data:`MAX_JOINT_CORRECTION_RAD`);
-- image size: whole pixels in ``[1, MAX_IMAGE_PX]``;
-- errors, SDs, RMSEs (mm, deg): non-negative; angles between axes within ``[0, 180]`` deg;
-  the speed of sound within :data:`SOUND_SPEED_RANGE_M_S`.
-
-Keys the writer does not lay out are accepted (the conventions allow added keys); they, like every
-value, must still be finite numbers and nest no deeper than the JSON reader allows.
+Design: ``docs/design/files.md``, "The result file's schema".
 """
 
 from __future__ import annotations

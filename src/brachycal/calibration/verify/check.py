@@ -1,49 +1,10 @@
 """Is the calibration still good? A check of a few samples against a stored result (``brachycal verify``).
 
-A *check session* is a session folder (``brachycal-session/1``) holding only what a few minutes of
-robot time records: ``session.toml`` and ``samples.csv`` (5–8 images with the needle tip annotated,
-at poses from ``brachycal plan --verify``), and optionally ``touches.csv`` (single touches of the
-needle and the probe on the reference tips; ``top_model`` rows are ignored). ``axes.csv`` is not
-needed. A full calibration session is a check session too.
+Residuals are in millimetres (samples along the image's lateral, depth and normal axes; touches in
+``base_link``); the test's false-alarm rate is stated (:data:`DEFAULT_FALSE_ALARM`), and a failed
+check names the part that most likely moved.
 
-Residuals, per check observation, in millimetres:
-
-- sample ``i`` (Table II's definition, so that the result's own leave-one-out error is its null):
-  ``e_i = T_R_EL(q_i) T_EL_Ptip T_Ptip_I p_I(u_i, v_i) − T_R_ER(q_i) p_ER_Ntip`` (3D, ``base_link``),
-  expressed along the predicted image's axes (lateral, depth, normal). It is also the targeting
-  error at that pose: a target imaged at ``(u_i, v_i)`` would be missed by ``e_i``.
-- touch of a tool on reference tip ``k``: ``T_R_E(q) p_E_tool − p_R_Rtipk`` (the tip the result
-  located, ``reference_tips_m``; the reference tips are fixed in the lab).
-
-Null hypothesis (nothing moved): each residual coordinate is zero-mean with the SD the result
-itself measured for a *new* observation — for samples its leave-one-out RMSE over √3 (each fold
-fits without the sample and predicts it, so the figure holds the annotation noise, the needle tip's
-distance from the image plane, the joint readings' noise, the robot's error left over at those
-poses and the calibration's own error), for touches its Table I RMSE (the tool against the
-top-model at ``rtip2``: jog, joint readings, robot error) over √3 or, if larger, a whole-chain
-result's touch noise SD (all touches' scatter, pooled over the tools; the larger is taken because
-either alone, three trials or pooled, failed single twin calibrations every time). Where the check
-is given the calibration session, a check pose that repeats a calibration pose takes its own SD
-(:func:`with_calibration_poses`). A whole-chain result's sample SD is spread over the image's
-lateral, depth and normal axes as its image noise is (:func:`image_axis_scale`: the annotation
-noise lies in the plane). With the calibration session and a stated robot accuracy, that accuracy
-is propagated to the check's own poses and touches (:func:`with_robot_accuracy`): the residuals'
-whole covariance, by which they are whitened, each variance at least the one above. The test
-(:func:`union_test`) fails (RECALIBRATE) when the sum of the squared normalised residuals (χ²,
-``m`` = 3 × (samples + touches) degrees of freedom) exceeds its ``1 − α/2`` quantile, or when the
-χ² that one part explains, fitted alone, exceeds its ``1 − α/(2P)`` quantile: at most ``α``, the
-stated false-alarm rate, in all.
-
-Which part moved: each hypothesis ``h`` — needle tip (3 parameters), probe mount (6: the probe
-with its image rigidly moved on the flange), image transform (6: the image moved on the probe; the
-samples alone cannot tell it from the probe mount, a probe touch can), image scale (2: pixel
-spacings, e.g. a speed of sound change) and robot (the joints' zero offsets) — is fitted by linear
-least squares to the normalised residuals (``J_h`` by central differences); the named part is the
-hypothesis of largest Bayesian evidence (``r ~ N(0, I + J_h diag(prior²) J_hᵀ)``: a hypothesis of
-more parameters is not preferred for fitting noise; ties go to :data:`PARTS`' order). Its
-``δ̂_h`` is how much it moved (mm, degrees, % for the scale), with its SD from ``(J_hᵀJ_h)⁻¹``,
-and the targeting error if it were ignored is the RMS of the fitted sample residuals ``J_h δ̂_h``
-over the check's poses (which span the prostate cube).
+Design: ``docs/design/verification.md``.
 """
 
 from __future__ import annotations

@@ -1,37 +1,6 @@
 """The raw messages of one topic of a ROS bag, a chunk's worth at a time, for :mod:`brachycal.data.formats.bags`.
 
-rosbags opens the bag (header, connections, chunk index, message definitions) and its public
-``messages()`` is the reference; but it hands out messages one at a time through several layers
-of Python generators and, for ROS 1 and MCAP, parses every record header in Python, which is
-most of the time of reading a bag of 100,000 small JointStates. Here the two formats whose
-records are laid out in fixed-size fields are cut out of each decompressed chunk with NumPy
-instead, in the same order and with the same bytes as rosbags' ``messages()``:
-
-- ROS 1: from the index rosbags read when it opened the bag (``Reader.indexes``, ``chunks``,
-  ``bio``: per message its time, chunk and offset in the chunk), merged by time as
-  ``Reader.messages`` merges them. A record at an indexed offset whose header is, byte for byte
-  except its time, the first message record's (``op=2``, the same connection, the same data
-  length) is taken as a block; any other takes the record-by-record walk (connection records
-  skipped, as rosbags skips them).
-- MCAP (a ROS 2 bag folder with one ``.mcap`` file and a chunk index): each chunk's records are
-  walked for their offsets (one comparison and one addition each, or none when the records
-  are equally long) and the message records of the topic's channels in the chunk's time range
-  taken as rosbags' ``McapReader.messages`` takes them (each chunk's messages sorted by log
-  time, stably); chunks are read in turn only if rosbags' merge of them is that order (no two
-  chunks overlap in time), else the bag is read through rosbags.
-
-These use attributes and functions of rosbags' readers that are not its documented API
-(``rosbags`` 0.11): if a version lacks them, the bag is read through ``messages()``, slower but
-with the same results; ``tests/test_bags_records.py`` fails if that happens to the bags
-``write_bag_log`` writes, or if a fast path gives other messages than ``messages()``.
-Everything else (ROS 2 sqlite3, several bags, per-message compression, unindexed MCAP) is read
-through ``messages()``, gathered into batches. Why go below the public API at all: reading the
-joint states of a bag of 100,000 JointStates message by message takes 0.63 s (ROS 1)
-and 0.72 s (MCAP) of the ~2 s of ``brachycal fk`` on it; a chunk at a time, 0.25 s and 0.09 s
-(the ROS 1 figure is mostly rosbags' opening of the bag, which builds its index).
-
-A damaged record or chunk is refused as an unreadable bag (:class:`~brachycal.errors.InputError`)
-rather than passing on whatever rosbags or ``struct`` raised.
+Design: ``docs/design/files.md``, "Reading ROS bags a chunk at a time".
 """
 
 from __future__ import annotations
