@@ -295,7 +295,7 @@ def test_joint_offsets_are_applied_once_through_an_exported_urdf(results, tmp_pa
     again = located(old, results["joints"], "--urdf", urdf)
     # locate prints nanometres: the same point, not the offsets applied a second time.
     assert np.abs(again - direct).max() <= 2e-9
-    # What a second application would have done (the 0.14 mm): far above that tolerance.
+    # What a second application would have done (0.14 mm on this robot): far above that tolerance.
     q = np.loadtxt(results["joints"], delimiter=",", skiprows=1)[1:]
     once = robot.with_joint_offsets(stored.joint_offsets_rad)
     twice = once.with_joint_offsets(stored.joint_offsets_rad)

@@ -118,7 +118,7 @@ def test_values_outside_joint_limits(good_log, robot):
 
 
 def test_readings_within_the_encoder_tolerance_of_a_limit_are_kept_with_one_warning(good_log, robot):
-    # The case: 1.919869 rad read against the limit 1.9198622 (6.8e-6 rad over, encoder noise
+    # 1.919869 rad read against the limit 1.9198622 (6.8e-6 rad over, encoder noise
     # at a pose planned on the limit). Kept as read; one warning for the file names the first
     # reading and counts them all.
     edit(good_log, 5, "arm_left_joint_2_l", "1.919869")

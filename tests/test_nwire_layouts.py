@@ -116,11 +116,11 @@ def assert_reads_the_phantom_and_registration(config):
 
 
 def test_a_1x_device_set_with_transform_names_is_read(tmp_path):
-    """The issue's refusal: ``column 'Transform ->': expected 16 finite numbers, got None``.
+    """Not the refusal ``column 'Transform ->': expected 16 finite numbers, got None``.
 
     PLUS 1.x device sets name the transforms their data collection records (``<Transform
-    Name="ProbeToTracker"/>``): names, not coordinate definitions. The reader took every
-    ``Transform`` in the file; it now takes those under ``CoordinateDefinitions`` only.
+    Name="ProbeToTracker"/>``): names, not coordinate definitions. The reader takes only
+    the ``Transform`` elements under ``CoordinateDefinitions``.
     """
     path = write(tmp_path, device_set())
     assert_reads_the_phantom_and_registration(read_plus_config(path))

@@ -136,7 +136,7 @@ def test_the_check_plan_takes_few_minutes_and_spreads_over_the_cube(calibrated):
     index = np.array([p.point.index for p in plan.plan.poses])
     assert all(index[:, axis].min() == 0 and index[:, axis].max() == 3 for axis in range(3))
     # 8 x 10 s of samples, the motion (seconds at full speed) and the default's one 30 s touch:
-    # under the two minutes.
+    # under the check's budget of two minutes.
     assert plan.touches == DEFAULT_TOUCH_COUNT == 1
     assert plan.robot_minutes < 2.0
     assert plan.robot_minutes - DEFAULT_TOUCH_COUNT * SECONDS_PER_TOUCH / 60 < DEFAULT_CHECK_POSES * 10 / 60 + 0.1
