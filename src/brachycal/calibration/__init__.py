@@ -30,7 +30,9 @@ types, shapes, finite numbers, ranges and proper rotations before it is used), `
 (:func:`write_pivot`, :func:`read_pivot`), ``brachycal-nwire/1`` (:func:`write_nwire`,
 :func:`read_nwire`). Temporal calibration: the lag between two time-stamped position signals
 (:func:`estimate_lag`, a :class:`LagEstimate`), from PLUS's water-tank recordings
-(:func:`lag_from_plus_files`) or any video and pose stream (:func:`lag_from_signals`).
+(:func:`lag_from_plus_files`) or any video and pose stream (:func:`lag_from_signals`). The check
+before each procedure: :func:`verify_folder` tests a result file on a check session folder (a
+:class:`FolderCheck`: PASS, or RECALIBRATE naming the part that moved).
 """
 
 from typing import TYPE_CHECKING
@@ -104,6 +106,7 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
         lag_from_signals,
         principal_motion,
     )
+    from brachycal.calibration.verify.folder import FolderCheck, verify_folder
 
 __getattr__, __dir__ = attach(__name__, __file__)
 
@@ -119,6 +122,7 @@ __all__ = [
     "ChainReport",
     "Criterion",
     "ErrorStats",
+    "FolderCheck",
     "ImageCalibration",
     "LagEstimate",
     "NWireCalibration",
@@ -177,6 +181,7 @@ __all__ = [
     "read_wire_phantom",
     "select_model",
     "validate_result_document",
+    "verify_folder",
     "wire_point_pairs",
     "write_nwire",
     "write_phantom_observations",

@@ -122,7 +122,7 @@ def add_robot_accuracy_options(
         MAX_ROBOT_ROTATION_SD_RAD,
         MAX_ROBOT_TRANSLATION_SD_M,
     )
-    from brachycal.validate import finite_float  # lazy: start-up (the command's run only)
+    from brachycal.cli.option_types import finite_float  # lazy: start-up (the command's run only)
 
     millimetres = finite_float(low=0.0, high=MAX_ROBOT_TRANSLATION_SD_M * 1e3, low_open=not zero, unit="mm")
     parser.add_argument(
