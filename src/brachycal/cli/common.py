@@ -26,6 +26,11 @@ def output_file(text: str) -> str:
     return text
 
 
+def spelling_note(old: str, new: str) -> None:
+    """Say on stderr, in one line, that an earlier release's spelling ``old`` of a command is now ``new``."""
+    print(f"brachycal: note: '{old}' is now '{new}'; the old spelling goes in the next release", file=sys.stderr)
+
+
 def add_urdf_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
     parser.add_argument(
         "--urdf",

@@ -2,7 +2,7 @@
 
 A *check session* is a session folder (``brachycal-session/1``) holding only what a few minutes of
 robot time records: ``session.toml`` and ``samples.csv`` (5–8 images with the needle tip annotated,
-at poses from ``brachycal plan --verify``), and optionally ``touches.csv`` (single touches of the
+at poses from ``brachycal plan check``), and optionally ``touches.csv`` (single touches of the
 needle and the probe on the reference tips; ``top_model`` rows are ignored). ``axes.csv`` is not
 needed. A full calibration session is a check session too.
 
@@ -77,7 +77,7 @@ if TYPE_CHECKING:
 PARTS = ("needle tip", "probe mount", "image transform", "image scale", "robot")
 CHECK_TOOLS = ("needle", "probe")
 #: Fewest samples a check reads: 3 points fix the image's 6 degrees of freedom; a check of fewer
-#: has no redundancy against one mislabelled frame. ``plan --verify`` plans 5 or more.
+#: has no redundancy against one mislabelled frame. ``plan check`` plans 5 or more.
 MIN_CHECK_SAMPLES = 3
 #: Default false-alarm rate of the test (the issue's goal: at most 5 % on unchanged set-ups).
 DEFAULT_FALSE_ALARM = 0.05
@@ -137,7 +137,7 @@ def read_check_session(folder: str | os.PathLike[str], robot: Robot) -> CheckSes
     ids, q, uv = read_sample_table(path, robot, size_px)
     if len(ids) < MIN_CHECK_SAMPLES:
         raise DegenerateDataError(
-            f"{len(ids)} samples: a check needs at least {MIN_CHECK_SAMPLES} (brachycal plan --verify plans 5 to 16)",
+            f"{len(ids)} samples: a check needs at least {MIN_CHECK_SAMPLES} (brachycal plan check plans 5 to 16)",
             file=path,
         )
     inputs = {name: sha256_file(folder / name) for name in ("session.toml", "samples.csv")}
