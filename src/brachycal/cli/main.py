@@ -151,11 +151,12 @@ def build_parser(full: Collection[str] | None = None) -> argparse.ArgumentParser
             sub.add_parser(name, help=module.HELP)
     # One line per command group: a sub-command is listed under its group, not by its own name.
     # (argparse keeps the listing in a private list: `_choices_actions`, one entry per named parser.)
+    listed_under_group = set(TWO_WORD_COMMANDS.values()) - set(GROUPS)
     shown = []
     for entry in sub._choices_actions:
         if entry.dest in GROUPS:
             entry.help = f"{entry.help}; also {', '.join(f'{entry.dest} {word}' for word in GROUPS[entry.dest])}"
-        if entry.dest not in set(TWO_WORD_COMMANDS.values()) - set(GROUPS):
+        if entry.dest not in listed_under_group:
             shown.append(entry)
     sub._choices_actions[:] = shown
     return parser
