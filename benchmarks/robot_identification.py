@@ -23,7 +23,7 @@ N twin sessions (seeds 100…), the prior stated at the twin's own level: the ne
 :func:`~brachycal.calibration.chain.uncertainty.landing_covariance` with the identified robot). A
 calibrated 95 % region covers 95 %; with 20 sessions, 16–20 of 20 is within binomial chance.
 
-``--excitation [SEEDS] [LEVEL,...]``: the excitation poses (``brachycal plan --excitation``) on the
+``--excitation [SEEDS] [LEVEL,...]``: the excitation poses (``brachycal plan excitation``) on the
 twin (:func:`~brachycal.studies.excitation.evaluate_excitation`, 5-minute budget): per seed
 and level, the predicted RMS landing error without and with them, the held-out and plain targeting
 MAE with identification on the session alone, on the session plus the chosen poses, and on the

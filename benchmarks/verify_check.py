@@ -1,8 +1,8 @@
-"""The pre-procedure check (``brachycal plan --verify`` + ``brachycal verify``) measured on the twin.
+"""The pre-procedure check (``brachycal plan check`` + ``brachycal verify``) measured on the twin.
 
 Run: ``.venv/bin/python benchmarks/verify_check.py [SEEDS] [CHECKS] [LEVEL,...] [--poses N] [--touches WHICH]
-[--first-seed K] [--average-null] [--updates]`` (default: the check of ``plan --verify``, 8 samples + the probe's
-touch; ``--touches`` both, probe or none: which tools touch ``rtip1`` once, ``plan --verify-touches``;
+[--first-seed K] [--average-null] [--updates]`` (default: the check of ``plan check``, 8 samples + the probe's
+touch; ``--touches`` both, probe or none: which tools touch ``rtip1`` once, ``plan check --touches``;
 20 seeds from :data:`FIRST_SEED`, 10 checks per seed for the unchanged set-up and 5 per seed for each
 change; the ``well-built`` and ``real-arm`` robots; each check is given the calibration session, for
 each pose's own null SD, unless ``--average-null``; about 15 minutes on a busy 2-core machine).
@@ -13,7 +13,7 @@ updated result (means over the updated checks).
 
 Per robot-error level (:data:`brachycal.simulation.twin.ROBOT_ERROR_LEVELS`) and seed, the twin's
 session is calibrated with the whole chain (:class:`~brachycal.studies.check_twin.CalibratedTwin`)
-and the check's poses are chosen from the same grid (``plan --verify``'s criterion). Then each
+and the check's poses are chosen from the same grid (``plan check``'s criterion). Then each
 change of :data:`~brachycal.studies.check_twin.CHANGES` is applied and a check session is
 recorded with fresh noise (the checks of one seed share its calibration: the rates are over
 seeds × checks, and the binomial 95 % interval printed assumes independent checks, which the

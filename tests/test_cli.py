@@ -8,9 +8,10 @@ from pathlib import Path
 
 import numpy as np
 from conftest import ROOT
+from hostile import run_cli
 from test_joint_log import write_log
 
-from brachycal.cli.main import main
+from brachycal.cli.main import build_parser, joined_command, main
 from brachycal.data import read_csv_log, read_pose_table
 
 EXAMPLE = ROOT / "examples" / "joint_log.csv"
@@ -107,6 +108,28 @@ def test_help_explains_the_commands():
         assert word in result.stdout
     fk_help = subprocess.run([str(CONSOLE), "fk", "--help"], capture_output=True, text=True, check=True).stdout
     assert "ROS 2 bag folder" in fk_help and "--times" in fk_help
+
+
+def test_a_command_group_is_listed_once_with_its_sub_commands():
+    listing = build_parser(full=()).format_help()
+    assert "nwire segment" in listing and "plan check" in listing and "plan excitation" in listing
+    # A sub-command's own name is how the parser knows it, not how a user spells it.
+    assert "nwire-segment" not in listing and "plan-check" not in listing and "plan-excitation" not in listing
+
+
+def test_nwire_calibrate_is_the_default_of_the_nwire_group():
+    args = ["CONFIG", "FRAMES", "--out", "nwire.json"]
+    assert joined_command(["nwire", "calibrate", *args]) == ["nwire", *args]
+    assert joined_command(["nwire", "segment", "CAL.mha", "--out", "f.xml"])[0] == "nwire-segment"
+
+
+def test_the_earlier_spelling_nwire_segment_runs_nwire_segment_with_a_note(tmp_path):
+    argv = [str(tmp_path / "missing.mha"), "--config", str(tmp_path / "config.xml"), "--out", str(tmp_path / "f.xml")]
+    old, new = run_cli(["nwire-segment", *argv]), run_cli(["nwire", "segment", *argv])
+    note = "brachycal: note: 'nwire-segment' is now 'nwire segment'"
+    assert old.code == new.code == 2 and old.err.splitlines()[0].startswith(note)
+    assert old.err.splitlines()[1:] == new.err.splitlines() and note not in new.err
+    assert not (tmp_path / "f.xml").exists()
 
 
 def test_output_into_a_closed_pipe_ends_quietly(tmp_path, robot):

@@ -15,6 +15,16 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from brachycal.cli.option_types import (
+    bounded_int,
+    direction,
+    finite_float,
+    name_list,
+    number_list,
+    probability,
+    seed,
+    spacing_mm,
+)
 from brachycal.errors import InputError
 from brachycal.model.collision import ClearanceChecker, collision_link_pairs
 from brachycal.planning import IKSettings, PlanSpec, PoseVerifier, RectFOV, SectorFOV, Thresholds, plan_poses
@@ -25,7 +35,6 @@ from brachycal.studies.targeting import targeting_error
 from brachycal.validate import (
     MAX_IMAGE_PX,
     SEED_LIMIT,
-    bounded_int,
     check_direction,
     check_int,
     check_pixel,
@@ -35,15 +44,8 @@ from brachycal.validate import (
     check_spacing_m,
     check_spacing_mm,
     check_transform,
-    direction,
-    finite_float,
-    name_list,
-    number_list,
     parse_name_list,
     parse_number_list,
-    probability,
-    seed,
-    spacing_mm,
 )
 
 NON_FINITE = [math.nan, math.inf, -math.inf]
@@ -266,7 +268,7 @@ def test_argparse_types_refuse_with_one_line_naming_the_option():
 
 def test_every_bounded_option_states_its_rule_in_help():
     from brachycal.cli.main import build_parser
-    from brachycal.validate import OptionType
+    from brachycal.cli.option_types import OptionType
 
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
     checked = 0

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from hostile import run_cli
 
+from brachycal.calibration import verify_folder
 from brachycal.calibration.verify.check import (
     DEFAULT_FALSE_ALARM,
     GROSS_PRIOR_MULTIPLES,
@@ -332,6 +333,20 @@ def test_verify_exits_0_on_pass_and_writes_a_record(check_folders, tmp_path):
         and data["test"]["value"] <= data["test"]["threshold"]
     )
     assert "PASS" in report.read_text()
+
+
+def test_verify_folder_is_the_commands_check_as_a_library_call(check_folders, tmp_path):
+    record = tmp_path / "record.json"
+    outcome = run_cli(["verify", check_folders["result"], str(check_folders["remounted"]), "--out", str(record)])
+    check = verify_folder(check_folders["result"], check_folders["remounted"])
+    written = json.loads(record.read_text())
+    assert not check.passed and check.outcome.part is not None and check.outcome.part.part == written["part"]
+    assert check.record["test"] == written["test"] and check.record["verdict"] == written["verdict"]
+    assert outcome.out.startswith(check.verdict_text())
+    assert not check.calibration_session and check.updated is None and check.update_refusal is None
+    # With update asked: the updated result, or why not, never both.
+    asked = verify_folder(check_folders["result"], check_folders["remounted"], update=True)
+    assert (asked.updated is None) != (asked.update_refusal is None)
 
 
 def test_verify_exits_1_on_recalibrate_naming_the_part(check_folders, tmp_path):

@@ -6,11 +6,9 @@ column) when it is not; ``file`` and ``row`` pass through to the error so that i
 value came from. Every comparison is written so that NaN fails it (NaN compares False), so a NaN
 can never switch a check off.
 
-The command line uses the same checks through argparse ``type=`` factories (:func:`finite_float`,
-:func:`bounded_int`, :func:`number_list`, :func:`name_list`, :func:`probability`, :func:`seed`,
-:func:`spacing_mm`): a bad value is refused while the arguments are parsed, before any work, as
-``brachycal CMD: error: argument --OPTION: <what is wrong>``. Each factory's ``rule`` attribute is
-the accepted range in words, for ``--help``.
+The command line uses the same checks through its option types
+(:mod:`brachycal.cli.option_types`): a bad value is refused while the arguments are parsed, before
+any work; :func:`interval_text` states a range in words for ``--help``.
 
 Bounds that are not physics are typo guards, chosen so that no accepted value can exhaust memory
 or time: see :data:`MAX_GRID_POINTS`, :data:`MAX_TARGETS`, :data:`MAX_WORKERS`, :data:`MAX_SEEDS`.
@@ -18,12 +16,10 @@ or time: see :data:`MAX_GRID_POINTS`, :data:`MAX_TARGETS`, :data:`MAX_WORKERS`, 
 
 from __future__ import annotations
 
-import argparse
 import math
 import re
-from collections.abc import Callable, Collection, Sequence
+from collections.abc import Collection, Sequence
 from os import PathLike
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -173,7 +169,7 @@ def check_finite(
     return A
 
 
-def _interval(
+def interval_text(
     low: float | None, high: float | None, low_open: bool = False, high_open: bool = False, unit: str = ""
 ) -> str:
     """The accepted range in words: ``in [1, 500] mm``, ``>= 0``, ``in (0, 1]``."""
@@ -226,7 +222,7 @@ def check_range(
     if not math.isfinite(x):
         raise InputError(f"{_where(name)}must be a finite number, got {x}", file=file, row=row)
     if not _inside(x, low, high, low_open, high_open):
-        rule = _interval(low, high, low_open, high_open, unit)
+        rule = interval_text(low, high, low_open, high_open, unit)
         raise InputError(f"{_where(name)}must be {rule}, got {x:g}{unit_text}", file=file, row=row)
     return x
 
@@ -250,7 +246,7 @@ def check_int(
     above = low is None or n >= low
     below = high is None or n <= high
     if not (above and below):
-        raise InputError(f"{_where(name)}must be {_interval(low, high)}, got {n}", file=file, row=row)
+        raise InputError(f"{_where(name)}must be {interval_text(low, high)}, got {n}", file=file, row=row)
     return n
 
 
@@ -432,7 +428,7 @@ def check_pixel(uv_px: ArrayLike, name: str, *, size_px: ArrayLike | None = None
 
 
 # ---------------------------------------------------------------------------------------------
-# Comma-separated lists (``--centre-mm 800,100,1050``) and argparse ``type=`` factories
+# Comma-separated lists (``--centre-mm 800,100,1050``)
 
 
 def parse_number_list(
@@ -517,126 +513,3 @@ def parse_name_list(text: str, name: str, choices: Collection[str] | None = None
             raise InputError(f"{_where(name)}names {item!r} twice")
         seen.add(item)
     return items
-
-
-class OptionType:
-    """An argparse ``type=``: converts and checks one option's text; ``rule`` is for ``--help``.
-
-    A refused value raises :class:`argparse.ArgumentTypeError`, which argparse prints as one line
-    naming the option (``argument --edge-mm: must be in [1, 500] mm, got 0 mm``).
-    """
-
-    def __init__(self, convert: Callable[[str], Any], rule: str, label: str) -> None:
-        self.convert, self.rule, self.__name__ = convert, rule, label
-
-    def __call__(self, text: str) -> Any:
-        try:
-            return self.convert(text)
-        except InputError as exc:
-            raise argparse.ArgumentTypeError(exc.problem) from None
-
-    def __repr__(self) -> str:
-        return f"{self.__name__}({self.rule})"
-
-
-def _number(text: str, kind: type) -> float:
-    """One option value: :func:`number_from_text` (or :func:`whole_from_text`) of ``text`` without blanks around."""
-    value = (whole_from_text if kind is int else number_from_text)(text.strip())
-    if value is None:
-        raise InputError(f"must be {'a whole number' if kind is int else 'a number'}, got {text!r}")
-    return value
-
-
-def finite_float(
-    *,
-    low: float | None = None,
-    high: float | None = None,
-    low_open: bool = False,
-    high_open: bool = False,
-    unit: str = "",
-) -> OptionType:
-    """argparse type: one finite number in the range (NaN and ±inf refused)."""
-    rule = _interval(low, high, low_open, high_open, unit)
-
-    def convert(text: str) -> float:
-        return check_range(
-            _number(text, float), "", low=low, high=high, low_open=low_open, high_open=high_open, unit=unit
-        )
-
-    return OptionType(convert, rule, "number")
-
-
-def bounded_int(*, low: int, high: int) -> OptionType:
-    """argparse type: one whole number in ``[low, high]``."""
-
-    def convert(text: str) -> int:
-        return check_int(_number(text, int), "", low=low, high=high)
-
-    return OptionType(convert, _interval(low, high), "whole number")
-
-
-def number_list(
-    *,
-    count: int | None = None,
-    kind: type = float,
-    low: float | None = None,
-    high: float | None = None,
-    low_open: bool = False,
-    high_open: bool = False,
-    unit: str = "",
-    max_items: int = 100,
-) -> OptionType:
-    """argparse type: comma-separated numbers as a NumPy array (``count`` of them, or a list of 1..max)."""
-    rule = (
-        f"each {_interval(low, high, low_open, high_open, unit)}" if (low is not None or high is not None) else "finite"
-    )
-
-    def convert(text: str) -> np.ndarray:
-        values = parse_number_list(
-            text,
-            "",
-            count=count,
-            kind=kind,
-            low=low,
-            high=high,
-            low_open=low_open,
-            high_open=high_open,
-            unit=unit,
-            max_items=max_items,
-        )
-        return np.array(values, dtype=kind)
-
-    return OptionType(convert, rule, "numbers")
-
-
-def name_list(choices: Sequence[str] | None = None) -> OptionType:
-    """argparse type: comma-separated names (a list), each among ``choices`` when given."""
-    rule = f"from {', '.join(choices)}" if choices is not None else "non-empty names"
-    return OptionType(lambda text: parse_name_list(text, "", choices), rule, "names")
-
-
-def _probability(text: str) -> float:
-    return check_probability(_number(text, float), "")
-
-
-def _seed(text: str) -> int:
-    return check_seed(_number(text, int), "")
-
-
-def _spacing_mm(text: str) -> np.ndarray:
-    values = parse_number_list(text, "", count=2)
-    return check_spacing_mm(values, "")
-
-
-def _direction(text: str) -> np.ndarray:
-    return check_direction(parse_number_list(text, "", count=3), "")
-
-
-#: argparse type: ``DX,DY,DZ`` a direction (finite, not all zero), returned as a unit ``(3,)`` array.
-direction = OptionType(_direction, "finite, not all zero", "direction")
-#: argparse type: a probability in [0, 1].
-probability = OptionType(_probability, "in [0, 1]", "probability")
-#: argparse type: a random seed, a whole number in [0, 2**32).
-seed = OptionType(_seed, "in [0, 2**32)", "seed")
-#: argparse type: ``SU,SV`` pixel spacing in mm/px, each plausible for ultrasound.
-spacing_mm = OptionType(_spacing_mm, f"each in [{SPACING_MM_RANGE[0]:g}, {SPACING_MM_RANGE[1]:g}] mm/px", "spacing")

@@ -77,6 +77,7 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
         lag_from_signals,
         principal_motion,
     )
+    from brachycal.calibration.verify.folder import FolderCheck, verify_folder
 
 __getattr__, __dir__ = attach(__name__, __file__)
 
@@ -92,6 +93,7 @@ __all__ = [
     "ChainReport",
     "Criterion",
     "ErrorStats",
+    "FolderCheck",
     "ImageCalibration",
     "LagEstimate",
     "NWireCalibration",
@@ -150,6 +152,7 @@ __all__ = [
     "read_wire_phantom",
     "select_model",
     "validate_result_document",
+    "verify_folder",
     "wire_point_pairs",
     "write_nwire",
     "write_phantom_observations",

@@ -16,8 +16,8 @@ from brachycal.cli.common import (
     robot_accuracy,
     warn_refused,
 )
+from brachycal.cli.option_types import bounded_int, name_list
 from brachycal.errors import InputError
-from brachycal.validate import bounded_int, name_list
 
 #: Most bootstrap refits --bootstrap takes: a 95% percentile interval is settled by ~2000; 10000
 #: refits of the chain already take hours, so a larger count is a typo.

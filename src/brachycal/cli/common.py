@@ -26,6 +26,11 @@ def output_file(text: str) -> str:
     return text
 
 
+def spelling_note(old: str, new: str) -> None:
+    """Say on stderr, in one line, that an earlier release's spelling ``old`` of a command is now ``new``."""
+    print(f"brachycal: note: '{old}' is now '{new}'; the old spelling goes in the next release", file=sys.stderr)
+
+
 def add_urdf_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
     parser.add_argument(
         "--urdf",
@@ -122,7 +127,7 @@ def add_robot_accuracy_options(
         MAX_ROBOT_ROTATION_SD_RAD,
         MAX_ROBOT_TRANSLATION_SD_M,
     )
-    from brachycal.validate import finite_float  # lazy: start-up (the command's run only)
+    from brachycal.cli.option_types import finite_float  # lazy: start-up (the command's run only)
 
     millimetres = finite_float(low=0.0, high=MAX_ROBOT_TRANSLATION_SD_M * 1e3, low_open=not zero, unit="mm")
     parser.add_argument(

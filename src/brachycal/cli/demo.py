@@ -12,7 +12,8 @@ import time
 from pathlib import Path
 
 from brachycal.cli.common import add_robot_option, warn_refused
-from brachycal.validate import MAX_TARGETS, bounded_int, seed
+from brachycal.cli.option_types import bounded_int, seed
+from brachycal.validate import MAX_TARGETS
 
 HELP = "calibrate a simulated session (digital twin) and compare with the truth"
 DESCRIPTION = """\

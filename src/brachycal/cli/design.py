@@ -6,8 +6,9 @@ import argparse
 from pathlib import Path
 
 from brachycal.cli.common import add_robot_option, load_robot, progress_bar
+from brachycal.cli.option_types import bounded_int, name_list
 from brachycal.cli.plan.excitation import add_excitation_minutes_option
-from brachycal.validate import MAX_SEEDS, bounded_int, name_list
+from brachycal.validate import MAX_SEEDS
 
 HELP = "compare sample designs (4x4x4, 3x3x3, random, optimal) by predicted targeting error per robot minute"
 DESCRIPTION = """\

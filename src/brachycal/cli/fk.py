@@ -14,8 +14,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from brachycal.cli.common import add_robot_option, load_robot, output_file, progress_bar
+from brachycal.cli.option_types import finite_float, name_list
 from brachycal.io import OutputSet
-from brachycal.validate import finite_float, name_list
 
 if TYPE_CHECKING:
     import numpy as np

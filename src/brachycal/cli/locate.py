@@ -6,7 +6,8 @@ import argparse
 import sys
 
 from brachycal.cli.common import add_method_option, add_robot_option, load_robot
-from brachycal.validate import MAX_IMAGE_PX, check_pixel, number_list
+from brachycal.cli.option_types import number_list
+from brachycal.validate import MAX_IMAGE_PX, check_pixel
 
 HELP = "map an image pixel to base_link through the calibrated chain (targeting)"
 DESCRIPTION = """\

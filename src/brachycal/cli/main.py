@@ -35,9 +35,10 @@ from brachycal.cli import (
     verify,
     view,
 )
+from brachycal.cli import nwire as nwire_group
+from brachycal.cli import plan as plan_group
 from brachycal.cli.nwire import calibrate as nwire
 from brachycal.cli.nwire import segment as nwire_segment
-from brachycal.cli.plan import SUBCOMMANDS, current_spelling
 from brachycal.cli.plan import check as plan_check
 from brachycal.cli.plan import excitation as plan_excitation
 from brachycal.cli.plan import grid as plan
@@ -71,7 +72,7 @@ start here:
                                       the calibrated session in 3D, in the browser
   brachycal pivot POSES.csv --out pivot.json
                                       pivot calibration of a tracked tool
-  brachycal nwire CONFIG FRAMES --out nwire.json
+  brachycal nwire [calibrate] CONFIG FRAMES --out nwire.json
                                       N-wire phantom calibration of a tracked probe (PLUS files)
   brachycal nwire segment CAL.mha VAL.mha --config CONFIG --out frames.xml
                                       the N-wire phantom's points in tracked B-mode sequences
@@ -116,6 +117,20 @@ COMMANDS = {
 }
 
 
+#: Two-word commands: ``brachycal nwire segment …`` is the command ``nwire-segment``, ``brachycal plan check …``
+#: the command ``plan-check``; ``brachycal nwire calibrate …`` is ``brachycal nwire …``.
+TWO_WORD_COMMANDS = {
+    **{("nwire", word): name for word, name in nwire_group.SUBCOMMANDS.items()},
+    **{("plan", word): name for word, name in plan_group.SUBCOMMANDS.items()},
+}
+#: Each command group (``plan``, ``nwire``) with its sub-commands' words: ``brachycal --help`` lists the group
+#: once, naming them, and not the sub-commands' own names.
+GROUPS = {
+    group: [word for (g, word), name in TWO_WORD_COMMANDS.items() if g == group and name != group]
+    for group, _ in TWO_WORD_COMMANDS
+}
+
+
 def build_parser(full: Collection[str] | None = None) -> argparse.ArgumentParser:
     """The command's parser.
 
@@ -134,6 +149,16 @@ def build_parser(full: Collection[str] | None = None) -> argparse.ArgumentParser
             module.add_parser(sub)
         else:
             sub.add_parser(name, help=module.HELP)
+    # One line per command group: a sub-command is listed under its group, not by its own name.
+    # (argparse keeps the listing in a private list: `_choices_actions`, one entry per named parser.)
+    listed_under_group = set(TWO_WORD_COMMANDS.values()) - set(GROUPS)
+    shown = []
+    for entry in sub._choices_actions:
+        if entry.dest in GROUPS:
+            entry.help = f"{entry.help}; also {', '.join(f'{entry.dest} {word}' for word in GROUPS[entry.dest])}"
+        if entry.dest not in listed_under_group:
+            shown.append(entry)
+    sub._choices_actions[:] = shown
     return parser
 
 
@@ -178,18 +203,10 @@ def _command_environment() -> Iterator[None]:
                 signal.signal(signal.SIGTERM, previous)
 
 
-#: Two-word commands: ``brachycal nwire segment …`` is the command ``nwire-segment``, ``brachycal plan check …``
-#: the command ``plan-check``.
-TWO_WORD_COMMANDS = {
-    ("nwire", "segment"): nwire_segment.NAME,
-    **{("plan", word): name for word, name in SUBCOMMANDS.items()},
-}
-
-
 def joined_command(arguments: list[str]) -> list[str]:
     """``arguments`` with a two-word command (:data:`TWO_WORD_COMMANDS`) joined into its one name (and an
     earlier release's spelling of one made current)."""
-    arguments = current_spelling(arguments)
+    arguments = nwire_group.current_spelling(plan_group.current_spelling(arguments))
     words = [k for k, word in enumerate(arguments) if not word.startswith("-")][:2]
     if len(words) == 2 and words[1] == words[0] + 1:
         name = TWO_WORD_COMMANDS.get((arguments[words[0]], arguments[words[1]]))

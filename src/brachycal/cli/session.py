@@ -6,8 +6,9 @@ import argparse
 from pathlib import Path
 
 from brachycal.cli.common import add_robot_option, command_inputs, load_robot
+from brachycal.cli.option_types import finite_float, number_list, spacing_mm
 from brachycal.errors import InputError
-from brachycal.validate import MAX_IMAGE_PX, finite_float, number_list, spacing_mm
+from brachycal.validate import MAX_IMAGE_PX
 
 HELP = "session folders: build one from a lab's recording (joint log, marks, frames)"
 BUILD_HELP = "build a session folder from a joint log, the operator's marks and the annotated frames"

@@ -8,17 +8,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from brachycal.cli.common import add_robot_option, progress_bar
+from brachycal.cli.option_types import bounded_int, name_list, number_list
 from brachycal.imaging import SCANNER_SOUND_SPEED_M_S
 from brachycal.planning.spec import EDGE_RANGE_M
-from brachycal.validate import (
-    MAX_GRID_POINTS,
-    MAX_SEEDS,
-    MAX_TARGETS,
-    MAX_WORKERS,
-    bounded_int,
-    name_list,
-    number_list,
-)
+from brachycal.validate import MAX_GRID_POINTS, MAX_SEEDS, MAX_TARGETS, MAX_WORKERS
 
 if TYPE_CHECKING:
     from brachycal.studies.study import RunParams

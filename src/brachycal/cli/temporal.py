@@ -6,7 +6,7 @@ import argparse
 from typing import TYPE_CHECKING
 
 from brachycal.cli.common import add_robot_option, command_inputs, load_robot, output_file
-from brachycal.validate import finite_float
+from brachycal.cli.option_types import finite_float
 
 if TYPE_CHECKING:
     from brachycal.calibration.temporal import TemporalCalibration

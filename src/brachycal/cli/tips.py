@@ -45,7 +45,7 @@ examples:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from brachycal.validate import finite_float, number_list  # lazy: start-up (the command's run only)
+    from brachycal.cli.option_types import finite_float, number_list  # lazy: start-up (the command's run only)
 
     parser = sub.add_parser(
         "tips", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter

@@ -6,8 +6,8 @@ import argparse
 from pathlib import Path
 
 from brachycal.cli.common import add_method_option, add_robot_option, command_inputs, load_robot, output_file
+from brachycal.cli.option_types import finite_float
 from brachycal.errors import InputError
-from brachycal.validate import finite_float
 
 HELP = "check a stored calibration on a few new samples: PASS, or RECALIBRATE naming the part that moved"
 DESCRIPTION = """\
@@ -101,10 +101,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("give RESULT and CHECK_SESSION (or --demo DIR)")
     if not args.out:
         raise InputError("--out is required: the verification record a lab files")
-    from brachycal.calibration import read_result  # lazy: start-up (the command's run only)
-
-    # lazy: start-up (the command's run only)
-    from brachycal.calibration.verify.check import check_calibration, outcome_json, read_check_session, verdict_text
+    from brachycal.calibration import verify_folder  # lazy: start-up (the command's run only)
     from brachycal.io import OutputSet, write_json  # lazy: start-up (the command's run only)
 
     out = Path(args.out)
@@ -112,42 +109,27 @@ def run(args: argparse.Namespace) -> int:
         staged = outputs.claim(out, label="--out")
         staged_report = outputs.claim(Path(args.report), label="--report") if args.report else None
         staged_update = outputs.claim(Path(args.update), label="--update") if args.update else None
-        stored = read_result(args.result)
-        method = stored.method(args.method)
-        robot = stored.software_robot(load_robot(args))
-        session = read_check_session(args.check, robot)
-        calibration = None
-        if args.calibration_session is not None:
-            from brachycal.data.session import read_session  # lazy: start-up (the command's run only)
-
-            calibration = read_session(args.calibration_session, robot)
-        outcome = check_calibration(
-            stored,
-            method,
-            robot,
-            session,
+        check = verify_folder(
+            args.result,
+            args.check,
+            calibration_session=args.calibration_session,
+            method=args.method,
+            robot=load_robot(args),
             false_alarm=args.false_alarm,
-            calibration=calibration,
-            calibration_folder=args.calibration_session or "calibration session",
+            update=staged_update is not None,
         )
-        record = outcome_json(outcome, stored, session, robot)
-        write_json(staged, record, force=args.force)
+        write_json(staged, check.record, force=args.force)
         if staged_report is not None:
             # lazy: start-up (the command's run only)
             from brachycal.reporting.html_report import write_verification_page
 
-            write_verification_page(staged_report, record, force=args.force)
-        refusal = None
+            write_verification_page(staged_report, check.record, force=args.force)
         if staged_update is not None:
-            # lazy: start-up (the command's run only)
-            from brachycal.calibration.verify.update import update_refusal, updated_result
-
-            refusal = update_refusal(outcome)
-            if refusal is None:
-                write_json(staged_update, updated_result(stored, outcome, session), force=args.force)
+            if check.updated is not None:
+                write_json(staged_update, check.updated, force=args.force)
             else:
                 outputs.release(Path(args.update))
-    if calibration is None:
+    if not check.calibration_session:
         import warnings  # lazy: start-up (the command's run only)
 
         from brachycal.errors import BrachycalWarning  # lazy: start-up (the command's run only)
@@ -158,18 +140,18 @@ def run(args: argparse.Namespace) -> int:
             BrachycalWarning,
             stacklevel=1,
         )
-    print(verdict_text(outcome))
-    if args.update and refusal is not None:
-        print(f"no update written to {args.update}: {refusal}")
+    print(check.verdict_text())
+    if args.update and check.update_refusal is not None:
+        print(f"no update written to {args.update}: {check.update_refusal}")
     elif args.update:
-        part = outcome.part
+        part = check.outcome.part
         assert part is not None
         print(
             f"updated: the {part.part} refitted from the check, by {part.size_text()}; "
             f"confirm it with a new check of fresh samples before use"
         )
     print("wrote " + ", ".join(map(str, outputs.written)))
-    return 0 if outcome.passed else 1
+    return 0 if check.passed else 1
 
 
 def _demo(args: argparse.Namespace) -> int:

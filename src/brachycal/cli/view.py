@@ -6,8 +6,8 @@ import argparse
 import time
 
 from brachycal.cli.common import add_method_option, add_robot_option, load_robot
+from brachycal.cli.option_types import bounded_int
 from brachycal.errors import InputError
-from brachycal.validate import bounded_int
 
 HELP = "an interactive 3D view in the browser: the robot, a plan, or a calibrated session"
 DESCRIPTION = """\

@@ -3,7 +3,7 @@
 One trial (:func:`check_trial`): the twin's calibration session (:func:`~brachycal.simulation.simulate`)
 is calibrated and stored as a result file; then the set-up is changed (:data:`CHANGES`: nothing,
 the probe holder remounted, the needle bent or replaced, another speed of sound, a joint's zero
-drifted) and a check session is recorded at the check poses (``plan --verify``'s choice from the
+drifted) and a check session is recorded at the check poses (``plan check``'s choice from the
 same grid): the needle arm goes to its planned joints, the probe is adjusted until the needle tip
 shows near its planned pixel, the joints are read (encoder noise) and the tip annotated (1 px),
 the tip within the beam's thickness of the plane, as in the calibration session; optionally the

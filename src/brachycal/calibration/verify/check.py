@@ -38,7 +38,7 @@ if TYPE_CHECKING:
 PARTS = ("needle tip", "probe mount", "image transform", "image scale", "robot")
 CHECK_TOOLS = ("needle", "probe")
 #: Fewest samples a check reads: 3 points fix the image's 6 degrees of freedom; a check of fewer
-#: has no redundancy against one mislabelled frame. ``plan --verify`` plans 5 or more.
+#: has no redundancy against one mislabelled frame. ``plan check`` plans 5 or more.
 MIN_CHECK_SAMPLES = 3
 #: Default false-alarm rate of the test (the goal: at most 5 % on unchanged set-ups).
 DEFAULT_FALSE_ALARM = 0.05
@@ -98,7 +98,7 @@ def read_check_session(folder: str | os.PathLike[str], robot: Robot) -> CheckSes
     ids, q, uv = read_sample_table(path, robot, size_px)
     if len(ids) < MIN_CHECK_SAMPLES:
         raise DegenerateDataError(
-            f"{len(ids)} samples: a check needs at least {MIN_CHECK_SAMPLES} (brachycal plan --verify plans 5 to 16)",
+            f"{len(ids)} samples: a check needs at least {MIN_CHECK_SAMPLES} (brachycal plan check plans 5 to 16)",
             file=path,
         )
     inputs = {name: sha256_file(folder / name) for name in ("session.toml", "samples.csv")}

@@ -1,4 +1,4 @@
-"""``brachycal nwire``: N-wire phantom calibration of a tracked probe from PLUS files."""
+"""``brachycal nwire`` (``nwire calibrate``): N-wire phantom calibration of a tracked probe from PLUS files."""
 
 from __future__ import annotations
 
@@ -29,11 +29,22 @@ example:
   brachycal nwire examples/nwire/PlusDeviceSet_twin_fCal2.xml examples/nwire/twin_segmented_frames.xml \\
       --out nwire.json
 """
+EPILOG = """\
+sub-commands (each with its own --help):
+  brachycal nwire [calibrate] CONFIG FRAMES --out nwire.json
+      this page: calibrate (the default, so 'calibrate' may be left out)
+  brachycal nwire segment CALIBRATION.mha VALIDATION.mha --config CONFIG --out frames.xml
+      the N-wire phantom's points in tracked B-mode sequences (PLUS's segmented-frames XML)
+"""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
-        "nwire", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
+        "nwire",
+        help=HELP,
+        description=DESCRIPTION,
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("config", metavar="CONFIG", help="PLUS device-set configuration XML")
     parser.add_argument(

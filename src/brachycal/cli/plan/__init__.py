@@ -9,8 +9,9 @@ words ``plan check`` name it (:data:`SUBCOMMANDS`). The spellings of an earlier 
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Sequence
+
+from brachycal.cli.common import spelling_note
 
 #: ``brachycal plan WORD``: the command each word names.
 SUBCOMMANDS = {"check": "plan-check", "excitation": "plan-excitation"}
@@ -36,17 +37,13 @@ def current_spelling(arguments: Sequence[str]) -> list[str]:
         for word in rest:
             name, eq, value = word.partition("=")
             renamed.append(_RENAMED.get(name, name) + eq + value if name in _RENAMED else word)
-        _note("plan --verify", "plan check")
+        spelling_note("plan --verify", "plan check")
         return [*head, SUBCOMMANDS["check"], *renamed]
     for k, word in enumerate(rest):
         if word == "--excitation" and k + 1 < len(rest):
-            _note("plan --excitation SESSION", "plan excitation SESSION")
+            spelling_note("plan --excitation SESSION", "plan excitation SESSION")
             return [*head, SUBCOMMANDS["excitation"], rest[k + 1], *rest[:k], *rest[k + 2 :]]
         if word.startswith("--excitation="):
-            _note("plan --excitation SESSION", "plan excitation SESSION")
+            spelling_note("plan --excitation SESSION", "plan excitation SESSION")
             return [*head, SUBCOMMANDS["excitation"], word.partition("=")[2], *rest[:k], *rest[k + 1 :]]
     return arguments
-
-
-def _note(old: str, new: str) -> None:
-    print(f"brachycal: note: '{old}' is now '{new}'; the old spelling goes in the next release", file=sys.stderr)

@@ -10,6 +10,7 @@ import argparse
 from pathlib import Path
 
 from brachycal.cli.common import command_inputs, output_file
+from brachycal.cli.option_types import bounded_int
 from brachycal.cli.plan.options import (
     add_grid_options,
     add_imaging_options,
@@ -18,7 +19,6 @@ from brachycal.cli.plan.options import (
     planning_robot,
 )
 from brachycal.errors import InputError
-from brachycal.validate import bounded_int
 
 NAME = "plan-check"
 HELP = "plan the few poses of a check before each procedure (brachycal verify)"

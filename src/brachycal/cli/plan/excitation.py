@@ -18,9 +18,9 @@ from brachycal.cli.common import (
     output_file,
     robot_accuracy,
 )
+from brachycal.cli.option_types import finite_float
 from brachycal.cli.plan.options import add_safety_options
 from brachycal.errors import InputError
-from brachycal.validate import finite_float
 
 NAME = "plan-excitation"
 HELP = "plan extra poses that identify the robot where a recorded session does not"

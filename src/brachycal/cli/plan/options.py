@@ -12,17 +12,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from brachycal.cli.common import add_method_option, add_robot_option, load_robot
+from brachycal.cli.option_types import bounded_int, direction, finite_float, number_list, spacing_mm
 from brachycal.errors import InputError
 from brachycal.planning.spec import EDGE_RANGE_M, MAX_CENTRE_M, MAX_SECTOR_DEPTH_M, PlanSpec, RectFOV, SectorFOV
-from brachycal.validate import (
-    MAX_GRID_POINTS,
-    MAX_IMAGE_PX,
-    bounded_int,
-    direction,
-    finite_float,
-    number_list,
-    spacing_mm,
-)
+from brachycal.validate import MAX_GRID_POINTS, MAX_IMAGE_PX
 
 if TYPE_CHECKING:
     from brachycal.model.robot import Robot
