@@ -1,13 +1,14 @@
 # Two commands on a fresh machine with Python 3.11 and pip:  make demo  and  make test.
 # The first one creates .venv and installs brachycal (editable) with its test tools; later runs
 # reuse it until pyproject.toml changes.
+# make test runs the fast tests; make test-all (what CI runs) runs them, then the slow tail (marked slow).
 
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint docs bench mutants clean
+.PHONY: demo test test-all lint docs bench mutants clean
 
 demo: $(STAMP)
 	$(BIN)/brachycal demo --force  # demo_output is make's own: a second run replaces it
@@ -16,7 +17,10 @@ test: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks examples urdf docs
 	$(BIN)/lint-imports
 	$(BIN)/mypy
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -m 'not slow'
+
+test-all: test
+	$(BIN)/python -m pytest -m slow
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks examples urdf docs

@@ -152,6 +152,7 @@ def test_flanges_that_do_not_name_a_side_are_named_by_their_tool():
     assert export_files(unnamed)[2:4] == ("ProbeToProbeFlange.tfm", "NeedleTipToNeedleFlange.tfm")
 
 
+@pytest.mark.slow
 def test_the_ur5_cell_identifies_its_robot_and_reads_only_the_probe_arm_when_aiming(calibrated):
     c = calibrated("ur5_pair")
     rig = c.robot.rig

@@ -213,6 +213,7 @@ def _parameter_errors(fit, truth) -> tuple[np.ndarray, np.ndarray]:
 EXACT_ROBOT = RobotAccuracy(0.0, 0.0, 0.0, "exact")
 
 
+@pytest.mark.slow
 def test_stated_uncertainty_is_calibrated_on_both_sides(robot):
     """Standardised errors over 8 sessions of a twin whose robot is exactly its model, stated so
     (robot accuracy 0: the covariance is the session's noise alone; the default twin, with robot
@@ -245,6 +246,7 @@ def test_stated_uncertainty_is_calibrated_on_both_sides(robot):
     assert low <= landing_d2 <= high, landing_d2 / (3 * runs)
 
 
+@pytest.mark.slow
 def test_stated_uncertainty_with_robot_error_is_calibrated(robot):
     """The default twin (its physical robot off its URDF by 0.03 mm / 0.003° per joint, the default
     stated accuracy): the covariance with the robot term must cover the tips, reference tips,

@@ -7,6 +7,9 @@ must be what one process computes, and a worker's failure must look like the sam
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
+import textwrap
 import warnings
 
 import numpy as np
@@ -207,41 +210,50 @@ def test_calibrating_a_folder_on_two_cores_is_the_same_as_in_turn(robot, monkeyp
     assert np.array_equal(alone.chain.predicted_fov_mm, shared.chain.predicted_fov_mm)
 
 
-def test_frozen_heap_and_the_command_leave_the_collector_as_they_found_it(tmp_path, capsys):
+def _in_a_fresh_interpreter(code: str) -> None:
+    """Run ``code`` in a new Python process: the collector's state (enabled, frozen) is the process's, so
+    a test of it must not see what other tests (or their leftover threads) did to this one's."""
+    result = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+
+
+def test_frozen_heap_and_the_command_leave_the_collector_as_they_found_it(tmp_path):
     """The command line disables the collector while it imports and freezes the long-lived objects while
     it computes (forked workers then share their pages); a refusal or a library call leaves neither behind."""
-    import gc
+    _in_a_fresh_interpreter(
+        f"""
+        import contextlib, gc, io
 
-    from brachycal.calibration.parallel import frozen_heap
-    from brachycal.cli.main import main
+        from brachycal.calibration.parallel import frozen_heap
+        from brachycal.cli.main import main
 
-    assert gc.get_freeze_count() == 0
-    with frozen_heap():
-        assert gc.get_freeze_count() > 0
-    assert gc.get_freeze_count() == 0
-    for enabled in (True, False):
-        (gc.enable if enabled else gc.disable)()
-        try:  # refused after the imports, before any computation
-            code = main(["calibrate", str(tmp_path / "no_session"), "--out", str(tmp_path / "r.json")])
-            assert code == 2 and gc.isenabled() is enabled and gc.get_freeze_count() == 0
-        finally:
-            gc.enable()
-    capsys.readouterr()
+        assert gc.get_freeze_count() == 0
+        with frozen_heap():
+            assert gc.get_freeze_count() > 0
+        assert gc.get_freeze_count() == 0
+        for enabled in (True, False):
+            (gc.enable if enabled else gc.disable)()
+            with contextlib.redirect_stderr(io.StringIO()):  # refused after the imports, before any computation
+                code = main(["calibrate", {str(tmp_path / "no_session")!r}, "--out", {str(tmp_path / "r.json")!r}])
+            assert code == 2 and gc.isenabled() is enabled and gc.get_freeze_count() == 0, (code, enabled)
+        """
+    )
 
 
 def test_frozen_heap_leaves_a_callers_own_freeze_alone():
-    import gc
+    _in_a_fresh_interpreter(
+        """
+        import gc
 
-    from brachycal.calibration.parallel import frozen_heap
+        from brachycal.calibration.parallel import frozen_heap
 
-    gc.freeze()
-    try:
-        frozen = gc.get_freeze_count()
+        gc.freeze()
         with frozen_heap():
             pass
-        assert gc.get_freeze_count() == frozen  # not released by the command's exit
-    finally:
+        assert gc.get_freeze_count() > 0  # the caller's freeze is not released by the command's exit
         gc.unfreeze()
-    with frozen_heap():
-        assert gc.get_freeze_count() > 0
-    assert gc.get_freeze_count() == 0
+        with frozen_heap():
+            assert gc.get_freeze_count() > 0
+        assert gc.get_freeze_count() == 0
+        """
+    )

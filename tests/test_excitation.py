@@ -169,6 +169,7 @@ def test_candidates_are_reachable(robot, real_arm, pool):
             assert np.linalg.norm(software.fk(frame, q)[:3, 3] - rtips[k]) <= 1e-5
 
 
+@pytest.mark.slow
 @pytest.mark.filterwarnings("ignore::brachycal.errors.ConditioningWarning")  # a worn robot's touches scatter
 def test_excitation_lowers_the_landing_error_as_predicted(robot, worn):
     """Worn robot, no other noise: the identification's error is the robot's own combinations the
@@ -198,6 +199,7 @@ SESSION = ROOT / "examples" / "twin_session"
 EXCITE = ["plan", "excitation", str(SESSION), "--out", "{tmp}/excitation.csv", "--quiet"]
 
 
+@pytest.mark.slow
 def test_command_writes_the_poses_or_says_the_session_is_enough(tmp_path):
     """With 5 minutes it prints both predictions and writes the pose table (every row a sample with
     its joints), nothing else in the folder (no staging files); with a budget too small

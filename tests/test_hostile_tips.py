@@ -6,9 +6,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hostile import Case, check_refusal
 
 from brachycal.data.formats.metaimage import write_image_sequence
-from tests.hostile import Case, check_refusal
 
 FRAMES = ["tips", "{tmp}/frames.mha", "--out", "{tmp}/images.csv"]
 

@@ -71,6 +71,8 @@ def unmarked_imports(text: str) -> list[int]:
 
 
 def test_every_module_imports():
+    """Every module of the package, imported: so the fast tests (``make test``, this one not marked
+    ``slow``) load each module, whatever the slow tail holds."""
     names = [m.name for m in pkgutil.walk_packages(brachycal.__path__, "brachycal.")]
     assert len(names) > 100
     for name in names:

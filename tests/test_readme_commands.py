@@ -161,6 +161,7 @@ def test_the_documents_show_the_commands_this_test_runs():
 HELP_ORDER = ["examples", "demo", "model", "fk", "session", "calibrate", "locate", "export", "pivot", "nwire", "plan"]
 
 
+@pytest.mark.slow
 def test_every_documented_command_runs_as_written(tmp_path, monkeypatch):
     """README, then the procedure, then the --help examples (HELP_ORDER), in one folder."""
     monkeypatch.chdir(tmp_path)
@@ -187,6 +188,7 @@ def test_every_documented_command_runs_as_written(tmp_path, monkeypatch):
     assert cpu < CPU_BUDGET_S, f"the documented commands took {cpu:.0f} s of CPU in this process"
 
 
+@pytest.mark.slow
 def test_commands_on_outside_recordings_run(tmp_path, monkeypatch):
     """The README's commands on PLUS's and SciKit-Surgery's real recordings, where that data is."""
     reference("sksurgery_pivot", "tracked_pointer_pivot.csv")

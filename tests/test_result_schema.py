@@ -82,6 +82,7 @@ def one_leaf(document: dict, keys: tuple[str | int, ...], value: object) -> Iter
         node[keys[-1]] = kept
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", KINDS)
 def test_every_result_the_writer_produces_passes_and_reads_back(kind, results):
     path = results[kind]
@@ -102,6 +103,7 @@ def test_every_result_the_writer_produces_passes_and_reads_back(kind, results):
     assert stored.robot is not None and stored.robot.joint_names == tuple(document["robot"]["joint_names"])
 
 
+@pytest.mark.slow
 def test_the_kinds_hold_what_they_are_for(results):
     # The round trip above covers joint offsets and corrected joint origins only if they are there.
     offsets = json.loads(results["chain-joint-offsets"].read_text())["chain"]
@@ -125,6 +127,7 @@ def test_a_verify_update_and_a_refused_block_pass(tmp_path):
     validate_result_document(document, update)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", KINDS)
 def test_any_number_made_nan_is_refused_naming_its_place(kind, results):
     document = json.loads(results[kind].read_text())
@@ -137,6 +140,7 @@ def test_any_number_made_nan_is_refused_naming_its_place(kind, results):
     assert json.loads(results[kind].read_text()) == document  # every leaf was put back
 
 
+@pytest.mark.slow
 def test_nan_written_into_the_file_is_refused_naming_its_place(results, tmp_path):
     document = json.loads(results["chain-joint-offsets"].read_text())
     path = tmp_path / "r.json"
@@ -152,6 +156,7 @@ def test_nan_written_into_the_file_is_refused_naming_its_place(results, tmp_path
 CHECKED_WHOLE = ("image.size_px",)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", KINDS)
 def test_any_number_made_a_string_is_refused_naming_its_place(kind, results):
     # The schema knows the type of every number the writer lays out.
@@ -163,6 +168,7 @@ def test_any_number_made_a_string_is_refused_naming_its_place(kind, results):
         assert named == place or (named in CHECKED_WHOLE and place.startswith(named)), (place, named)
 
 
+@pytest.mark.slow
 def test_a_number_out_of_its_range_is_refused(results):
     document = json.loads(results["chain-joint-offsets"].read_text())
     joint = next(iter(document["chain"]["joint_offsets_rad"]))
@@ -178,6 +184,7 @@ def test_a_number_out_of_its_range_is_refused(results):
         assert refused.value.column.startswith(".".join(str(k) for k in keys[:2])), refused.value
 
 
+@pytest.mark.slow
 def test_unknown_keys_are_accepted_but_still_finite(results):
     document = json.loads(results["sequential"].read_text())
     validate_result_document({**document, "added_later": {"note": "x", "values": [1, 2.5]}}, "r.json")
@@ -227,6 +234,7 @@ def test_the_reader_accepts_the_largest_integers_it_allows(tmp_path):
     assert read_json(path) == {"a": -(10**20 - 1), "b": 1.5e300}
 
 
+@pytest.mark.slow
 def test_a_refusal_stays_one_short_line_whatever_the_file_holds(results):
     # A huge key, value or format is cut: the line names the place without carrying the data.
     document = json.loads(results["sequential"].read_text())

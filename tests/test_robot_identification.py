@@ -114,6 +114,7 @@ def test_identified_chain_predicts_the_closed_loop_at_new_postures(robot, worn):
     assert error_identified < 2 / 3 * error_urdf, (error_identified, error_urdf)
 
 
+@pytest.mark.slow
 def test_identification_does_not_overfit_held_out_configurations(robot, worn):
     """K-fold over configurations, every fold identifying the robot again: the held-out image
     error falls (measured 0.43 -> 0.34 mm RMS on this twin), it does not rise as an over-fitted

@@ -149,6 +149,7 @@ def _hue_pixels(shot: np.ndarray, rgb: tuple[int, int, int], window_deg: float =
     return int(((distance < window_deg) & (hsv[..., 1] > 0.35) & (hsv[..., 2] > 0.3)).sum())
 
 
+@pytest.mark.slow
 def test_a_headless_browser_shows_the_robot_and_the_points(calibrated, tmp_path: Path) -> None:
     robot, session, stored = calibrated
     chromium = _chromium()
@@ -194,6 +195,7 @@ def _served(result: str) -> Iterator[tuple[subprocess.Popen[str], str]]:
         view.wait(timeout=30)
 
 
+@pytest.mark.slow
 def test_the_command_serves_the_view_and_stops_on_sigterm(calibrated, tmp_path: Path) -> None:
     _chromium()
     with _served(calibrated[2].source) as (view, url):
