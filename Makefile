@@ -44,6 +44,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/nwire_variants.py
 	$(BIN)/python benchmarks/needle_tip.py
 	$(BIN)/python benchmarks/verify_check.py
+	$(BIN)/python benchmarks/parallel_pool.py
 
 # Each stated SD, dof count, inflation and threshold has a test that fails when it is wrong: every
 # mutant of benchmarks/mutants.py's table must be caught (a few minutes; non-zero exit if one survives).
