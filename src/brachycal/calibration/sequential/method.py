@@ -19,6 +19,7 @@ order): a tool step's refusal refuses it at once, since every method needs the t
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
@@ -28,7 +29,8 @@ import numpy as np
 
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.parallel import parallel_calls
-from brachycal.calibration.result import ImageCalibration
+from brachycal.calibration.result import Calibration, ImageCalibration, Provenance, best_method
+from brachycal.calibration.result import locate as result_locate
 from brachycal.calibration.sequential import image_to_probe
 from brachycal.calibration.sequential.image_to_probe import METHODS
 from brachycal.calibration.sequential.tool_rotation import ToolRotation, tool_rotation
@@ -111,6 +113,25 @@ class CalibrationResult:
     @property
     def T_EL_Ptip(self) -> FloatArray:
         return self.probe.T_E_tool
+
+    def calibration(self, method: str | None = None) -> Calibration:
+        """The :class:`~brachycal.calibration.result.Calibration` of image method ``method`` (None:
+        the lowest leave-one-out RMSE, :func:`~brachycal.calibration.result.best_method`), with the
+        session's inputs as provenance.
+
+        Raises:
+            KeyError: no image calibration of that method.
+        """
+        if method is None:
+            order = list(dict.fromkeys(m for m in (*METHODS, *self.image) if m in self.image))
+            method = best_method(order, {m: s.rmse_mm for m, s in self.loocv.items()})
+        return Calibration(
+            self.T_ER_Ntip,
+            self.T_EL_Ptip,
+            self.image[method],
+            image_size_px=self.image_size_px,
+            provenance=Provenance(inputs=self.inputs),
+        )
 
 
 @contextmanager
@@ -392,12 +413,31 @@ def loo_points(session: Session, robot: Robot, result: CalibrationResult, method
 
 
 def locate(
-    robot: Robot, q: FloatArray, uv_px: FloatArray, T_EL_Ptip: FloatArray, calibration: ImageCalibration
+    robot: Robot,
+    q: FloatArray,
+    uv_px: FloatArray,
+    calibration: Calibration | FloatArray,
+    image: ImageCalibration | None = None,
 ) -> FloatArray:
-    """Targeting: image pixels ``(N, 2)`` → ``p_R (N, 3)`` in the robot's base frame at configuration(s) ``q``
-    (``T_R_EL`` is the rig's probe flange).
+    """Targeting: image pixels ``(N, 2)`` → ``p_R (N, 3)`` in the robot's base frame at configuration(s)
+    ``q`` with ``calibration`` (:func:`brachycal.calibration.result.locate`).
 
     ``p_R = T_R_EL(q) @ T_EL_Ptip @ T_Ptip_I @ p_I`` with ``p_I = (u·s_u, v·s_v, 0)``.
+
+    The loose form ``locate(robot, q, uv_px, T_EL_Ptip, image)`` still works for one release, with a
+    :class:`DeprecationWarning`.
     """
+    if isinstance(calibration, Calibration):
+        if image is not None:
+            raise TypeError("locate() takes a Calibration alone, or the deprecated (T_EL_Ptip, image)")
+        return result_locate(robot, q, uv_px, calibration)
+    if image is None:
+        raise TypeError("locate() needs a Calibration")
+    warnings.warn(
+        "locate(robot, q, uv_px, T_EL_Ptip, image) is deprecated: pass one Calibration "
+        "(locate(robot, q, uv_px, calibration))",
+        DeprecationWarning,
+        stacklevel=2,
+    )
     q = np.asarray(q, dtype=float)
-    return image_to_probe.predict_base(calibration, robot.fk(robot.rig.probe_flange, q), T_EL_Ptip, uv_px)
+    return image_to_probe.predict_base(image, robot.fk(robot.rig.probe_flange, q), calibration, uv_px)

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from statistics import NormalDist
 from typing import Any
@@ -43,6 +43,7 @@ from brachycal.calibration.chain.model_choice import FoldRuns
 from brachycal.calibration.chain.uncertainty import Bootstrap, bootstrap, landing_covariance, predicted_rms_mm
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.parallel import parallel_calls
+from brachycal.calibration.result import Calibration
 from brachycal.calibration.robot.identification import (
     IDENTIFICATION_FOLDS,
     RobotIdentification,
@@ -96,6 +97,12 @@ class ChainReport:
     identification: RobotIdentification | None = None
     identification_cv: tuple[ErrorStats, ErrorStats] | None = None
     joint_origins: dict[str, dict[str, FloatArray]] | None = None
+
+    def calibration(self) -> Calibration:
+        """The chain's :class:`~brachycal.calibration.result.Calibration`, with its robot corrections
+        (joint offsets and the corrected joint origins, as the result file stores them)."""
+        origins = {k: (v["urdf"], v["corrected"]) for k, v in (self.joint_origins or {}).items()}
+        return replace(self.fit.calibration(), joint_origins=origins)
 
     def intervals(self, level: float = 0.95) -> dict[str, dict[str, object]]:
         """Intervals at ``level`` of the quantities a user asks about.

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from brachycal._version import __version__
-from brachycal.calibration.result import ImageCalibration
+from brachycal.calibration.result import Calibration, ImageCalibration, Provenance, best_method
 from brachycal.calibration.sequential.image_to_probe import METHODS
 from brachycal.calibration.sequential.method import CalibrationResult
 from brachycal.calibration.session.chain_report import chain_json
@@ -226,20 +226,33 @@ class StoredCalibration:
         without a leave-one-out RMSE come last. A method refused at calibration (:attr:`refused`)
         has no transform, so it is never chosen.
         """
-        for chain in ("chain+robot", "chain"):
-            if chain in self.image:
-                return chain
         loocv = self.raw.get("loocv", {}) if isinstance(self.raw.get("loocv"), dict) else {}
-
-        def rmse(method: str) -> float:
-            entry = loocv.get(method)
-            value = entry.get("rmse_mm") if isinstance(entry, dict) else None
-            return float(value) if isinstance(value, int | float) and np.isfinite(value) else np.inf
-
+        rmse = {m: e.get("rmse_mm") for m, e in loocv.items() if isinstance(e, dict)}
         order = list(dict.fromkeys(m for m in (*METHODS, *self.image) if m in self.image))
-        best = min(rmse(m) for m in order)
-        # The first in Table II's order within the tie tolerance of the best (all inf: the first).
-        return next(m for m in order if rmse(m) <= best * (1 + TIE_RELATIVE))
+        return best_method(order, rmse)
+
+    def calibration(self, method: str | None = None) -> Calibration:
+        """The :class:`~brachycal.calibration.result.Calibration` of image method ``method``
+        (:meth:`best_method` for None), with the result's robot corrections and provenance.
+
+        Raises:
+            InputError: as :meth:`method` (no such method, or refused at calibration).
+        """
+        chosen = self.method(method)
+        inputs = self.raw.get("inputs", {})
+        return Calibration(
+            T_ER_Ntip=self.T_ER_Ntip,
+            T_EL_Ptip=self.T_EL_Ptip,
+            image=self.image[chosen],
+            joint_offsets_rad=self.joint_offsets_rad,
+            joint_origins=self.joint_origins,
+            image_size_px=self.image_size_px,
+            provenance=Provenance(
+                source=self.source,
+                sha256=self.sha256,
+                inputs={str(k): str(v) for k, v in inputs.items()} if isinstance(inputs, dict) else {},
+            ),
+        )
 
     def method(self, asked: str | None) -> str:
         """The image calibration ``asked`` for (an option's value), or :meth:`best_method` for None.
@@ -393,12 +406,6 @@ class StoredCalibration:
 def _carries_joints(record: dict[str, str]) -> bool:
     """Whether an export record says its URDF's joints carry robot corrections."""
     return bool({"joint_origins", "joint_offsets"} & set(record.get("carries", "").split()))
-
-
-#: Leave-one-out RMSEs closer than this (relative) are a tie in :meth:`StoredCalibration.best_method`:
-#: far above rounding (two methods that solve the same least squares agree to ~1e-14), far below
-#: any difference between methods that matters (a nanometre in a millimetre).
-TIE_RELATIVE = 1e-9
 
 
 #: Two joint origins are the same when no entry differs by more than this (metres, and unitless
