@@ -77,7 +77,7 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
         read_wedge_phantom,
     )
     from brachycal.calibration.phantom.wire import WirePhantom, calibrate_wire, calibrate_wire_files, read_wire_phantom
-    from brachycal.calibration.result import ImageCalibration, PredictedUncertainty
+    from brachycal.calibration.result import Calibration, ImageCalibration, PredictedUncertainty, Provenance
     from brachycal.calibration.robot.identification import (
         RobotIdentification,
         corrected_robot,
@@ -114,6 +114,7 @@ __all__ = [
     "MODELS",
     "PAPER_METHODS",
     "PIVOT_METHODS",
+    "Calibration",
     "CalibrationResult",
     "ChainFit",
     "ChainReport",
@@ -129,6 +130,7 @@ __all__ = [
     "PivotCalibration",
     "PivotResult",
     "PredictedUncertainty",
+    "Provenance",
     "RobotIdentification",
     "RobotRecord",
     "SessionCalibration",
