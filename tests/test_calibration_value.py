@@ -101,3 +101,14 @@ def test_the_calibrated_robot_carries_the_values_frames(robot, exact, stored):
 
 def test_a_calibration_is_the_public_type(stored):
     assert isinstance(stored.calibration(), Calibration)
+
+
+def test_the_old_image_on_probe_spelling_still_reads_for_one_release():
+    from brachycal.calibration import NWireCalibration
+
+    T = np.eye(4)
+    T[:3, 3] = [0.01, 0.02, 0.03]
+    nwire = NWireCalibration(T, np.array([1e-4, 1e-4]), T, np.ones(3, dtype=bool), np.zeros(3))
+    with pytest.warns(DeprecationWarning, match="use T_Ptip_I"):
+        old = nwire.T_probe_image
+    assert old is nwire.T_Ptip_I

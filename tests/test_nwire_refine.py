@@ -52,12 +52,12 @@ def twin():
     return {False: session(SPACING_M), True: session(np.array([0.19e-3, 0.19e-3]))}
 
 
-def _perturbed(T_probe_image, spacing_m, angle_rad=0.02, shift_m=0.002, scale=1.03):
+def _perturbed(T_Ptip_I, spacing_m, angle_rad=0.02, shift_m=0.002, scale=1.03):
     """A start matrix some way off the truth (rotated, shifted, pixels scaled)."""
     M = np.eye(4)
-    R = Rotation.from_rotvec([angle_rad, -angle_rad, angle_rad / 2]).as_matrix() @ T_probe_image[:3, :3]
+    R = Rotation.from_rotvec([angle_rad, -angle_rad, angle_rad / 2]).as_matrix() @ T_Ptip_I[:3, :3]
     M[:3, :3] = R * np.array([spacing_m[0], spacing_m[1], spacing_m.mean()]) * scale
-    M[:3, 3] = T_probe_image[:3, 3] + shift_m
+    M[:3, 3] = T_Ptip_I[:3, 3] + shift_m
     return M
 
 
@@ -76,7 +76,7 @@ def test_each_refinement_recovers_the_exact_twin(twin, name, start):
     }[start]
     result = refine(observations(config, frames), M0, name, start_name=start)
     # 1e-9 m: the solver's stopping point on exact data (pixels of ~0.2 mm, points within 0.1 m).
-    assert np.abs(result.T_probe_image - T_MARKER_IMAGE).max() < 1e-9
+    assert np.abs(result.T_Ptip_I - T_MARKER_IMAGE).max() < 1e-9
     assert np.abs(result.spacing_m - truth).max() < 1e-12
     data = observations(config, validation)
     assert np.abs(errors_3d(result.matrix, data)).max() < 1e-9
@@ -192,7 +192,7 @@ def test_both_starts_reach_the_same_minimum(recording):
         b = refine(subset, fitted.matrix("rigid"), name)
         # Same minimum: costs equal to 1e-9 relative, parameters to 1e-7 m and 1e-10 m/px.
         assert abs(a.cost_rms - b.cost_rms) <= 1e-9 * a.cost_rms
-        assert np.abs(a.T_probe_image - b.T_probe_image).max() < 1e-7
+        assert np.abs(a.T_Ptip_I - b.T_Ptip_I).max() < 1e-7
         assert np.abs(a.spacing_m - b.spacing_m).max() < 1e-10
 
 
@@ -235,5 +235,5 @@ def test_a_file_written_before_models_were_stored_reads_as_rigid(tmp_path):
     path.write_text(json.dumps(payload))
     stored = read_nwire(path)
     assert stored.model == "rigid" and stored.models == {}
-    expected = stored.T_probe_image @ np.diag([*stored.spacing_m, stored.spacing_m.mean(), 1.0])
+    expected = stored.T_Ptip_I @ np.diag([*stored.spacing_m, stored.spacing_m.mean(), 1.0])
     assert np.array_equal(stored.image_to_probe, expected)

@@ -84,7 +84,7 @@ def test_nwire_file_round_trip(tmp_path):
     stored = read_nwire(out)
     # JSON keeps every float exactly; the spacing and the affine matrix are stored in millimetres,
     # so reading them back may differ by an ulp (1e-19 m/px and 1e-15 m guard that, nothing coarser).
-    np.testing.assert_array_equal(stored.T_probe_image, run.calibration.T_probe_image)
+    np.testing.assert_array_equal(stored.T_Ptip_I, run.calibration.T_Ptip_I)
     assert np.abs(stored.spacing_m - run.calibration.spacing_m).max() < 1e-19
     assert np.abs(stored.affine - run.calibration.affine).max() < 1e-15
     assert stored.raw == run.to_json() and stored.raw["format"] == "brachycal-nwire/1"

@@ -22,6 +22,7 @@ u/v pixel spacings (the constrained model), with 3D outlier rejection.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from typing import cast
 
@@ -177,35 +178,41 @@ def wire_point_pairs(config: PlusConfig, frames: list[SegmentedFrame]) -> tuple[
 
 @dataclass(frozen=True)
 class NWireCalibration:
-    """``T_Probe_Image`` as a rigid transform with pixel spacings, and as PLUS's affine matrix.
+    """``T_Ptip_I`` as a rigid transform with pixel spacings, and as PLUS's affine matrix.
 
     Attributes:
-        T_probe_image: ``(4, 4)`` rigid.
+        T_Ptip_I: ``(4, 4)`` rigid.
         spacing_m: ``(2,)`` pixel spacing (s_u, s_v), metres.
         affine: ``(4, 4)`` unconstrained affine image→probe (columns 0, 1 carry the scales; metres).
         inliers: ``(K,)`` which calibration points were kept.
         residuals_m: ``(K,)`` 3D residuals of the rigid+scales fit at all points.
     """
 
-    T_probe_image: FloatArray
+    T_Ptip_I: FloatArray
     spacing_m: FloatArray
     affine: FloatArray
     inliers: np.ndarray
     residuals_m: FloatArray
+
+    @property
+    def T_probe_image(self) -> FloatArray:
+        """Deprecated spelling of :attr:`T_Ptip_I` (kept one release)."""
+        warnings.warn("T_probe_image is deprecated: use T_Ptip_I", DeprecationWarning, stacklevel=2)
+        return self.T_Ptip_I
 
     def to_probe(self, uv_px: ArrayLike, model: str = "rigid") -> FloatArray:
         """Pixels ``(N, 2)`` mapped into the probe frame by ``model`` (``"affine"``, ``"rigid"``), metres ``(N, 3)``."""
         uv = np.atleast_2d(np.asarray(uv_px, dtype=float))
         if model == "affine":
             return uv @ self.affine[:3, :2].T + self.affine[:3, 3]
-        return transform_points(self.T_probe_image, image_points(uv, self.spacing_m))
+        return transform_points(self.T_Ptip_I, image_points(uv, self.spacing_m))
 
     def matrix(self, model: str = "rigid") -> FloatArray:
         """``model``'s Image→Probe ``(4, 4)`` as PLUS writes it (pixels → metres; the rigid model's
         columns scaled by ``(s_u, s_v, (s_u + s_v)/2)``)."""
         if model == "affine":
             return self.affine.copy()
-        M = self.T_probe_image.copy()
+        M = self.T_Ptip_I.copy()
         M[:3, :3] = M[:3, :3] * np.array([*self.spacing_m, self.spacing_m.mean()])
         return M
 
@@ -272,7 +279,7 @@ def calibrate_nwire(
             break
         inliers = keep
     affine = fit_affine(uv, p)[0]
-    for name, value in (("T_Probe_Image", T), ("pixel spacing", spacing), ("affine Image->Probe", affine)):
+    for name, value in (("T_Ptip_I", T), ("pixel spacing", spacing), ("affine Image->Probe", affine)):
         if not np.all(np.isfinite(value)):
             raise DegenerateDataError(
                 f"the N-wire fit's {name} is not finite: the {len(uv)} middle-wire points do not determine it"

@@ -19,6 +19,7 @@ chosen ``model`` and why, and ``models``: every model's Image→Probe matrix (PL
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -81,7 +82,7 @@ class NWireRun:
     """An N-wire calibration of PLUS files and its validation.
 
     Attributes:
-        calibration: the fitted models (rigid ``T_probe_image`` with spacings, and PLUS's affine).
+        calibration: the fitted models (rigid ``T_Ptip_I`` with spacings, and PLUS's affine).
         models: model (:data:`NWIRE_MODELS`) → its validation.
         calibration_points, validation_points: middle-wire points used to fit and to validate.
         frames_used, frames_total: calibration frames whose segmentation is usable, and all of them.
@@ -120,7 +121,7 @@ class NWireRun:
     @property
     def rigid_vs_affine_deg(self) -> float:
         """Angle between the rigid and the affine models' rotations, degrees."""
-        return rotation_difference_deg(self.calibration.T_probe_image, self.calibration.affine)
+        return rotation_difference_deg(self.calibration.T_Ptip_I, self.calibration.affine)
 
     def to_json(self) -> dict[str, object]:
         """The ``brachycal-nwire/1`` payload (metres; ``*_mm`` and ``*_px`` where the key says)."""
@@ -129,7 +130,7 @@ class NWireRun:
         affine_mm[:3, :] *= 1e3
         return {
             "format": FORMAT,
-            "T_Probe_Image": c.T_probe_image.tolist(),
+            "T_Probe_Image": c.T_Ptip_I.tolist(),
             "spacing_mm": (c.spacing_m * 1e3).tolist(),
             "affine_mm": affine_mm.tolist(),
             "affine_spacing_mm": (self.affine_spacing_m * 1e3).tolist(),
@@ -267,7 +268,7 @@ class StoredNWire:
     """What a ``brachycal-nwire/1`` file holds.
 
     Attributes:
-        T_probe_image: ``(4, 4)`` rigid Image → Probe, metres.
+        T_Ptip_I: ``(4, 4)`` rigid Image → Probe, metres.
         spacing_m: ``(2,)`` its pixel spacing, metres per pixel.
         affine: ``(4, 4)`` PLUS's affine Image → Probe, metres (pixels in, metres out).
         raw: the whole payload (errors, counts, input hashes).
@@ -275,7 +276,7 @@ class StoredNWire:
         models: model → its Image→Probe ``(4, 4)``, pixels → metres (empty in those files).
     """
 
-    T_probe_image: FloatArray
+    T_Ptip_I: FloatArray
     spacing_m: FloatArray
     affine: FloatArray
     raw: dict
@@ -283,11 +284,17 @@ class StoredNWire:
     models: dict[str, FloatArray] = field(default_factory=dict)
 
     @property
+    def T_probe_image(self) -> FloatArray:
+        """Deprecated spelling of :attr:`T_Ptip_I` (kept one release)."""
+        warnings.warn("T_probe_image is deprecated: use T_Ptip_I", DeprecationWarning, stacklevel=2)
+        return self.T_Ptip_I
+
+    @property
     def image_to_probe(self) -> FloatArray:
         """The chosen model's Image→Probe ``(4, 4)``, pixels → metres (PLUS's form)."""
         if self.model in self.models:
             return self.models[self.model]
-        M = self.T_probe_image.copy()
+        M = self.T_Ptip_I.copy()
         M[:3, :3] = M[:3, :3] * np.array([*self.spacing_m, self.spacing_m.mean()])
         return M
 

@@ -30,6 +30,7 @@ IPEA, ``2d-iso`` IPEI (the names of PLUS's regression tests).
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -153,7 +154,7 @@ class Refinement:
     Attributes:
         name: :data:`REFINEMENTS` key.
         start: ``"affine"`` (PLUS's linear fit) or ``"rigid"`` (brachycal's rotation + spacings).
-        T_probe_image: ``(4, 4)`` rigid, metres.
+        T_Ptip_I: ``(4, 4)`` rigid, metres.
         spacing_m: ``(2,)`` pixel spacing (equal for ``iso``), metres per pixel.
         cost_rms: RMS of the minimised error at the solution: pixels (``2d``) or metres (``3d``).
         frames: calibration frames used (PLUS's non-outlier frames).
@@ -162,16 +163,22 @@ class Refinement:
 
     name: str
     start: str
-    T_probe_image: FloatArray
+    T_Ptip_I: FloatArray
     spacing_m: FloatArray
     cost_rms: float
     frames: int
     evaluations: int
 
     @property
+    def T_probe_image(self) -> FloatArray:
+        """Deprecated spelling of :attr:`T_Ptip_I` (kept one release)."""
+        warnings.warn("T_probe_image is deprecated: use T_Ptip_I", DeprecationWarning, stacklevel=2)
+        return self.T_Ptip_I
+
+    @property
     def matrix(self) -> FloatArray:
         """PLUS's ``(4, 4)`` Image→Probe of this model (pixels → metres)."""
-        return model_matrix(self.T_probe_image[:3, :3], self.T_probe_image[:3, 3], self.spacing_m)
+        return model_matrix(self.T_Ptip_I[:3, :3], self.T_Ptip_I[:3, 3], self.spacing_m)
 
 
 def _parameters(x: FloatArray, R0: FloatArray, isotropic: bool) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -263,7 +270,7 @@ def refine_all(data: WireObservations, calibration: NWireCalibration, kept_point
         kept_points: the middle-wire points the linear fit kept, frame-major (:func:`linear_fit_frames`).
     """
     subset = data.subset(linear_fit_frames(data, kept_points))
-    rigid = model_matrix(calibration.T_probe_image[:3, :3], calibration.T_probe_image[:3, 3], calibration.spacing_m)
+    rigid = model_matrix(calibration.T_Ptip_I[:3, :3], calibration.T_Ptip_I[:3, 3], calibration.spacing_m)
     starts = {"affine": calibration.affine, "rigid": rigid}
     out = {}
     for name in REFINEMENTS:
