@@ -6,9 +6,11 @@
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -231,3 +233,19 @@ def best_method(methods: Sequence[str], rmse_mm: Mapping[str, object]) -> str:
     best = min(rmse(m) for m in methods)
     # The first in the given order within the tie tolerance of the best (all inf: the first).
     return next(m for m in methods if rmse(m) <= best * (1 + TIE_RELATIVE))
+
+
+def calibration_args(function: str, first: Calibration | ArrayLike, rest: tuple[Any, ...]) -> tuple[Calibration, tuple]:
+    """``(calibration, the remaining positional arguments)`` of a function that takes one
+    :class:`~brachycal.calibration.result.Calibration`, or the loose ``T_ER_Ntip, T_EL_Ptip, image``
+    it took before (accepted for one release, with a :class:`DeprecationWarning`)."""
+    if isinstance(first, Calibration):
+        return first, rest
+    if len(rest) < 2 or not isinstance(rest[1], ImageCalibration):
+        raise TypeError(f"{function}() takes a Calibration")
+    warnings.warn(
+        f"{function}(T_ER_Ntip, T_EL_Ptip, image, ...) is deprecated: pass one Calibration",
+        DeprecationWarning,
+        stacklevel=3,
+    )
+    return Calibration(np.asarray(first, dtype=float), rest[0], rest[1]), rest[2:]

@@ -33,7 +33,6 @@ import io
 import os
 import re
 import shutil
-import warnings
 from collections.abc import Mapping
 from datetime import UTC, datetime
 from pathlib import Path
@@ -42,7 +41,7 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
-from brachycal.calibration.result import Calibration, ImageCalibration
+from brachycal.calibration.result import Calibration, ImageCalibration, calibration_args
 from brachycal.errors import InputError, OutputError
 from brachycal.inputs import MAX_DOCUMENT_BYTES, MAX_MESH_BYTES, open_input, read_input_text
 from brachycal.io import OutputSet, atomic_open, output_set
@@ -120,24 +119,6 @@ def image_to_probe_mm(image: ImageCalibration) -> FloatArray:
     return M
 
 
-def _calibration_args(
-    function: str, first: Calibration | ArrayLike, rest: tuple[Any, ...]
-) -> tuple[Calibration, tuple]:
-    """``(calibration, the remaining positional arguments)`` of a function that takes one
-    :class:`~brachycal.calibration.result.Calibration`, or the loose ``T_ER_Ntip, T_EL_Ptip, image``
-    it took before (accepted for one release, with a :class:`DeprecationWarning`)."""
-    if isinstance(first, Calibration):
-        return first, rest
-    if len(rest) < 2 or not isinstance(rest[1], ImageCalibration):
-        raise TypeError(f"{function}() takes a Calibration")
-    warnings.warn(
-        f"{function}(T_ER_Ntip, T_EL_Ptip, image, ...) is deprecated: pass one Calibration",
-        DeprecationWarning,
-        stacklevel=3,
-    )
-    return Calibration(np.asarray(first, dtype=float), rest[0], rest[1]), rest[2:]
-
-
 def _one(function: str, rest: tuple[Any, ...], default: Any) -> Any:
     """The one optional positional argument left in ``rest`` (``default`` if none)."""
     if len(rest) > 1:
@@ -191,7 +172,7 @@ def plus_coordinate_definitions(calibration: Calibration, *args: Any) -> str:
     are the needle and probe flanges' PLUS names (:func:`flange_labels`; default the SDA10F's). The
     loose form ``(T_ER_Ntip, T_EL_Ptip, image, labels)`` works for one release (deprecated).
     """
-    calibration, rest = _calibration_args("plus_coordinate_definitions", calibration, args)
+    calibration, rest = calibration_args("plus_coordinate_definitions", calibration, args)
     labels: tuple[str, str] = _one("plus_coordinate_definitions", rest, ("RightFlange", "LeftFlange"))
     T_ER_Ntip, T_EL_Ptip, image = calibration.T_ER_Ntip, calibration.T_EL_Ptip, calibration.image
     date = datetime.now(UTC).strftime("%Y.%m.%d %H:%M:%S")
@@ -281,7 +262,7 @@ def ros_static_transforms(calibration: Calibration, *args: Any) -> str:
     ``ros_static_transforms(calibration, flanges=...)``; the loose form ``(T_ER_Ntip, T_EL_Ptip,
     image, flanges)`` works for one release (deprecated).
     """
-    calibration, rest = _calibration_args("ros_static_transforms", calibration, args)
+    calibration, rest = calibration_args("ros_static_transforms", calibration, args)
     flanges: tuple[str, str] = _one("ros_static_transforms", rest, ("arm_right_link_tool0", "arm_left_link_tool0"))
     transforms = []
     for parent, child, p, q in static_transforms(calibration, flanges):
@@ -368,7 +349,7 @@ def write_exports(
     ``write_exports(robot, calibration, folder, ...)``; the loose form ``(robot, T_ER_Ntip,
     T_EL_Ptip, image, folder, ...)`` works for one release (deprecated).
     """
-    calibration, rest = _calibration_args("write_exports", calibration, args)
+    calibration, rest = calibration_args("write_exports", calibration, args)
     if len(rest) != 1:
         raise TypeError("write_exports() takes (robot, calibration, folder)")
     folder = Path(rest[0])
@@ -537,7 +518,7 @@ def write_ros_package(
     ``write_ros_package(robot, calibration, folder, name, ...)``; the loose form ``(robot,
     T_ER_Ntip, T_EL_Ptip, image, folder, name, ...)`` works for one release (deprecated).
     """
-    calibration, rest = _calibration_args("write_ros_package", calibration, args)
+    calibration, rest = calibration_args("write_ros_package", calibration, args)
     if len(rest) != 2:
         raise TypeError("write_ros_package() takes (robot, calibration, folder, name)")
     folder, name = rest

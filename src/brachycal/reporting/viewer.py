@@ -292,7 +292,7 @@ def calibration_content(
     extent = np.ptp((real - T_cube[:3, 3]) @ T_cube[:3, :3], axis=0)
     cube = (T_cube, float(max(extent.max(), 1e-3)))
     if twin is not None:
-        hit = targeting_error(twin, stored.T_ER_Ntip, stored.T_EL_Ptip, image, n_targets, software=software)
+        hit = targeting_error(twin, calibration, n_targets, software=software)
         points["target"], points["landed"] = hit.targets_m, hit.landed_m
         vectors["landed"] = (hit.targets_m, hit.landed_m)
     size = (int(session.size_px[0]), int(session.size_px[1]))

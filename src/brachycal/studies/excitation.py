@@ -115,12 +115,10 @@ def evaluate_excitation(
 
     def targeting(ident: RobotIdentification) -> tuple[float, float]:
         fit, software = ident.fit, ident.robot(robot)
-        hit = targeting_error(twin, fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image, targets, software=software)
+        hit = targeting_error(twin, fit.calibration(), targets, software=software)
         held = targeting_error(
             twin,
-            fit.T_ER_Ntip,
-            fit.T_EL_Ptip,
-            fit.image,
+            fit.calibration(),
             targets,
             software=software,
             torso_turn_rad=HELD_OUT_TORSO_TURN_RAD,
