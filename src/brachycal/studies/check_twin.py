@@ -359,17 +359,7 @@ class CalibratedTwin:
         self.method = self.stored.method(None)
         self.robot = self.stored.software_robot(robot)
         full = plan_poses(robot, twin.config.spec)
-        image = self.stored.image[self.method]
-        self.check_plan = plan_check(
-            full,
-            robot,
-            self.stored.T_ER_Ntip,
-            self.stored.T_EL_Ptip,
-            image.T_Ptip_I,
-            image.spacing_m,
-            count=count,
-            touches=touches,
-        )
+        self.check_plan = plan_check(full, robot, self.stored.calibration(self.method), count=count, touches=touches)
         self.touches = touches
         self.pose_nulls = pose_nulls
         self.q_planned = np.array([p.q for p in self.check_plan.plan.poses])
