@@ -112,3 +112,17 @@ def test_the_old_image_on_probe_spelling_still_reads_for_one_release():
     with pytest.warns(DeprecationWarning, match="use T_Ptip_I"):
         old = nwire.T_probe_image
     assert old is nwire.T_Ptip_I
+
+
+def test_a_chain_result_file_gives_back_the_chains_calibration(session_dir, robot, tmp_path):
+    from brachycal.calibration import calibrate_folder
+
+    calibrated = calibrate_folder(session_dir, robot, ("kabsch",), chain=True)
+    path = write_result(calibrated.result, tmp_path / "chain.json", chain=calibrated.chain, robot=robot)
+    stored = read_result(path)
+    assert stored.best_method() == "chain" == calibrated.calibration().method
+    assert stored.calibration().max_difference(calibrated.calibration()) <= 1e-12
+    assert calibrated.calibration("kabsch").method == "kabsch"  # the file keeps it under "sequential" only
+    assert calibrated.chain is not None
+    fit = calibrated.chain.fit
+    np.testing.assert_array_equal(calibrated.calibration().T_EL_Ptip, fit.T_EL_Ptip)

@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from brachycal.calibration.chain import DEFAULT_ROBOT_ACCURACY, MODELS, ModelChoice, ModelSelection, RobotAccuracy
 from brachycal.calibration.parallel import parallel_calls
+from brachycal.calibration.result import Calibration, Provenance
 from brachycal.calibration.sequential.image_to_probe import METHODS
 from brachycal.calibration.sequential.method import CalibrationResult, SequentialPlan, calibrate
 from brachycal.calibration.session.chain_report import ChainReport, calibrate_chain
@@ -37,6 +38,23 @@ class SessionCalibration:
     session: Session
     result: CalibrationResult
     chain: ChainReport | None = None
+
+    def calibration(self, method: str | None = None) -> Calibration:
+        """The :class:`~brachycal.calibration.result.Calibration` of ``method``: the whole chain's
+        for ``"chain"`` (and for None when the chain was asked for, as the result file's best
+        method), else the sequential method's (None: the lowest leave-one-out RMSE).
+
+        Raises:
+            KeyError: no calibration of that method.
+        """
+        if self.chain is not None and method in (None, "chain"):
+            chain = self.chain.calibration()
+            return replace(
+                chain, image_size_px=self.result.image_size_px, provenance=Provenance(inputs=self.result.inputs)
+            )
+        if method == "chain":
+            raise KeyError("chain")
+        return self.result.calibration(method)
 
 
 def calibrate_folder(
