@@ -26,7 +26,7 @@ from pathlib import Path
 
 from timing import record
 
-from brachycal.calibration.phantom.nwire_file import NWIRE_MODELS, nwire_from_files
+from brachycal.calibration.phantom.nwire_file import NWIRE_MODELS, calibrate_nwire_files
 from brachycal.calibration.phantom.nwire_refine import PLUS_NAMES
 from brachycal.data.formats.plus_files import parse_xml
 
@@ -109,7 +109,7 @@ def main() -> None:
     print("|---|---|" + "---|" * len(NWIRE_MODELS) + "---|")
     for rec in found:
         start = time.perf_counter()
-        run = nwire_from_files(rec.config, rec.frames)
+        run = calibrate_nwire_files(rec.config, rec.frames)
         seconds = time.perf_counter() - start
         best = {name: v.validation_best95 for name, v in run.models.items()}
         cells = [

@@ -104,11 +104,11 @@ def test_a_calibration_is_the_public_type(stored):
 
 
 def test_the_old_image_on_probe_spelling_still_reads_for_one_release():
-    from brachycal.calibration import NWireCalibration
+    from brachycal.calibration import NWireResult
 
     T = np.eye(4)
     T[:3, 3] = [0.01, 0.02, 0.03]
-    nwire = NWireCalibration(T, np.array([1e-4, 1e-4]), T, np.ones(3, dtype=bool), np.zeros(3))
+    nwire = NWireResult(T, np.array([1e-4, 1e-4]), T, np.ones(3, dtype=bool), np.zeros(3))
     with pytest.warns(DeprecationWarning, match="use T_Ptip_I"):
         old = nwire.T_probe_image
     assert old is nwire.T_Ptip_I

@@ -18,7 +18,7 @@ from scipy.spatial.transform import Rotation
 
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.phantom.nwire import best_fraction, calibrate_nwire, fit_affine, wire_point_pairs
-from brachycal.calibration.phantom.nwire_file import NWIRE_MODELS, nwire_from_files, read_nwire
+from brachycal.calibration.phantom.nwire_file import NWIRE_MODELS, calibrate_nwire_files, read_nwire
 from brachycal.calibration.phantom.nwire_refine import (
     PLUS_NAMES,
     REFINEMENTS,
@@ -199,13 +199,13 @@ def test_both_starts_reach_the_same_minimum(recording):
 def test_default_model_is_the_lowest_validation_error_and_model_chooses(recording):
     config_path = reference(VARIANTS_FOLDER, "PlusDeviceSet_OPEA_OptimizationMethod.xml")
     frames_path = reference(VARIANTS_FOLDER, "OPEA_OptimizationMethod_Calibration.results.xml")
-    run = nwire_from_files(config_path, frames_path)
+    run = calibrate_nwire_files(config_path, frames_path)
     assert set(run.models) == set(NWIRE_MODELS)
     best = {name: v.validation_best95.mae_mm for name, v in run.models.items()}
     assert run.model == min(best, key=best.__getitem__) == "2d-aniso"
     # At or below PLUS's best setting on this recording (IPEA, 1.19028 mm), to its printed digits.
     assert best[run.model] <= min(PLUS_VALIDATION_MEAN_MM.values()) + 5e-6
-    chosen = nwire_from_files(config_path, frames_path, model="3d-iso")
+    chosen = calibrate_nwire_files(config_path, frames_path, model="3d-iso")
     assert chosen.model == "3d-iso" and chosen.chosen_by == "--model"
 
 
@@ -221,14 +221,14 @@ def test_cli_prints_every_model_writes_them_and_model_chooses(tmp_path, capsys):
     assert stored.model == "3d-aniso" and set(stored.models) == set(NWIRE_MODELS)
     assert stored.raw["models"]["3d-aniso"]["plus_name"] == "OPEA"
     # The chosen model's matrix is the one the file names; mm in the file, metres read (1e-15 m: an ulp).
-    run = nwire_from_files(config, frames, model="3d-aniso")
+    run = calibrate_nwire_files(config, frames, model="3d-aniso")
     assert np.abs(stored.image_to_probe - run.matrix()).max() < 1e-15
 
 
 def test_a_file_written_before_models_were_stored_reads_as_rigid(tmp_path):
     config = reference(VARIANTS_FOLDER, "PlusDeviceSet_OPEA_OptimizationMethod.xml")
     frames = reference(VARIANTS_FOLDER, "OPEA_OptimizationMethod_Calibration.results.xml")
-    payload = nwire_from_files(config, frames).to_json()
+    payload = calibrate_nwire_files(config, frames).to_json()
     for key in ("model", "model_chosen_by", "models"):
         del payload[key]
     path = tmp_path / "old.json"

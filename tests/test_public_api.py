@@ -255,3 +255,29 @@ def test_every_name_brachycal_simulation_lost_is_covered():
 def test_an_unknown_top_level_name_is_an_attribute_error():
     with pytest.raises(AttributeError, match="no attribute 'not_a_name'"):
         brachycal.not_a_name  # noqa: B018
+
+
+def renamed_names() -> list[tuple[str, str]]:
+    return sorted(importlib.import_module("brachycal.calibration")._RENAMED.items())
+
+
+@pytest.mark.parametrize(("old", "new"), renamed_names())
+def test_a_former_result_or_entry_point_name_still_works_for_one_release_and_warns(old, new):
+    calibration = importlib.import_module("brachycal.calibration")
+    assert new in calibration.__all__ and old not in calibration.__all__
+    with pytest.warns(
+        DeprecationWarning, match=rf"calibration\.{old} is deprecated: use brachycal\.calibration\.{new}"
+    ):
+        value = getattr(calibration, old)
+    assert value is getattr(calibration, new)
+    home = importlib.import_module(value.__module__)  # the defining module gives the old name too
+    with pytest.warns(DeprecationWarning, match=rf"{old} is deprecated: use {re.escape(value.__module__)}\.{new}"):
+        assert getattr(home, old) is value
+
+
+def test_results_and_file_entry_points_follow_one_naming_pattern():
+    # Results end in ``Result``, what a file gives back in ``File``, and a method from files is
+    # ``calibrate_<method>_files``.
+    calibration = importlib.import_module("brachycal.calibration")
+    for new in calibration._RENAMED.values():
+        assert new.endswith(("Result", "File")) or re.fullmatch(r"calibrate_\w+_files", new), new

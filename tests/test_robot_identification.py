@@ -18,7 +18,7 @@ from brachycal.calibration.robot.identification import (
     cross_validate_identification,
     identify_robot,
 )
-from brachycal.calibration.session.result_file import StoredCalibration
+from brachycal.calibration.session.result_file import ResultFile
 from brachycal.errors import InputError
 from brachycal.model.names import LEFT_FLANGE, RIGHT_FLANGE
 from brachycal.model.robot import Robot
@@ -181,10 +181,10 @@ def test_identified_noise_levels_count_the_priors_share_of_the_leverage(robot, w
     assert fit.noise["touch"].source == "residuals"
 
 
-def _stored(robot: Robot, corrected: Robot) -> StoredCalibration:
+def _stored(robot: Robot, corrected: Robot) -> ResultFile:
     eye = np.eye(4)
     origins = {n: (robot.joint_origin(n), corrected.joint_origin(n)) for n in robot.joint_names}
-    return StoredCalibration(eye, eye, {}, {}, joint_origins=origins, source="result.json")
+    return ResultFile(eye, eye, {}, {}, joint_origins=origins, source="result.json")
 
 
 def test_a_result_applies_its_robot_corrections_exactly_once(robot, tmp_path):

@@ -340,9 +340,9 @@ def write_exports(
     needed), with a ``meshes/`` folder holding a copy of each mesh the URDF names, all or nothing.
 
     ``robot`` is the model to write: for a result that corrects the robot, the corrected one
-    (:meth:`~brachycal.calibration.StoredCalibration.software_robot`); only its tool joints are
+    (:meth:`~brachycal.calibration.ResultFile.software_robot`); only its tool joints are
     replaced here. ``record``: the ``<brachycal_export>`` attributes the URDF carries
-    (:meth:`~brachycal.calibration.StoredCalibration.export_record`). With ``outputs`` (a command's
+    (:meth:`~brachycal.calibration.ResultFile.export_record`). With ``outputs`` (a command's
     :class:`~brachycal.io.OutputSet`) the files join that set and are committed with it; without,
     they are committed together on return. Returns the files' final paths (the meshes last).
 

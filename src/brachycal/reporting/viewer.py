@@ -36,7 +36,7 @@ from brachycal.studies.targeting import targeting_error
 if TYPE_CHECKING:
     import viser
 
-    from brachycal.calibration.session.result_file import StoredCalibration
+    from brachycal.calibration.session.result_file import ResultFile
     from brachycal.data.session import Session
     from brachycal.simulation.twin import Twin
 
@@ -260,7 +260,7 @@ def poses_content(
 
 def calibration_content(
     robot: Robot,
-    stored: StoredCalibration,
+    stored: ResultFile,
     session: Session,
     method: str,
     *,

@@ -43,7 +43,7 @@ from brachycal.simulation.exact import touch, touch_tools
 from brachycal.simulation.twin import Twin, TwinConfig, simulate
 
 if TYPE_CHECKING:
-    from brachycal.calibration.session.result_file import StoredCalibration
+    from brachycal.calibration.session.result_file import ResultFile
 
 
 @dataclass(frozen=True)
@@ -265,7 +265,7 @@ def _turned_touch(robot: Robot, frame: str, arm: list[int], q: FloatArray, rotve
 
 
 def noise_free_residuals_mm(
-    stored: StoredCalibration,
+    stored: ResultFile,
     method: str,
     robot: Robot,
     twin: Twin,

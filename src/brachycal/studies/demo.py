@@ -27,7 +27,7 @@ from brachycal.calibration.chain import fit_chain, select_model
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.result import Calibration
 from brachycal.calibration.sequential.image_to_probe import METHODS
-from brachycal.calibration.sequential.method import CalibrationResult, calibrate, loo_points
+from brachycal.calibration.sequential.method import SequentialResult, calibrate, loo_points
 from brachycal.calibration.session.result_file import write_result
 from brachycal.data.session import FILES as SESSION_FILES
 from brachycal.data.session import Session, read_session
@@ -69,7 +69,7 @@ class DemoRun:
     origin: str
     twin: Twin
     session: Session
-    result: CalibrationResult
+    result: SequentialResult
     n_targets: int
     targeting: dict[str, TargetingResult]
     tracking: NWireSimConfig
@@ -249,7 +249,7 @@ def table3_seed(
 
 def table3_twin(
     robot: Robot, twin: Twin, n_targets: int = 50, chain: bool = True
-) -> tuple[dict[str, float], str | None, CalibrationResult]:
+) -> tuple[dict[str, float], str | None, SequentialResult]:
     """Table III's row values on one twin: MAEs (mm) by :data:`TABLE3_PAPER` label and the phantom
     routes' image errors alone (mm, :data:`TABLE3_IMAGE` labels), the chain's image model (None
     without the chain), and the fusion calibration (its needle tip serves the tracker routes too).

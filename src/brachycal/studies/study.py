@@ -32,7 +32,7 @@ from brachycal.calibration.robot.identification import (
     cross_validate_identification,
 )
 from brachycal.calibration.sequential.image_to_probe import METHODS
-from brachycal.calibration.sequential.method import CalibrationResult
+from brachycal.calibration.sequential.method import SequentialResult
 from brachycal.errors import DegenerateDataError, InputError
 from brachycal.model.description import load_description
 from brachycal.model.robot import Robot
@@ -175,7 +175,7 @@ def run_one(params: RunParams) -> list[dict[str, object]]:
     )
     twin = simulate(robot, config)
     sequential = tuple(m for m in params.methods if m in METHODS)
-    result: CalibrationResult | None = None
+    result: SequentialResult | None = None
     refusal = ""
     try:
         result = calibrate(twin.session, robot, sequential or ("scaled_uv",))
@@ -222,7 +222,7 @@ FIGURES = (
 )
 
 
-def _judge(twin: Twin, robot: Robot, result: CalibrationResult, method: str, targets: int) -> dict[str, object]:
+def _judge(twin: Twin, robot: Robot, result: SequentialResult, method: str, targets: int) -> dict[str, object]:
     """One method's calibration of the twin's session and its figures (:data:`FIGURES`)."""
     session, software = twin.session, robot
     n, chosen = len(session.uv_px), ""

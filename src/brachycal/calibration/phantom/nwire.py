@@ -24,11 +24,12 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
-from typing import cast
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from brachycal._lazy import renamed
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.sequential import registration
 from brachycal.data.formats.plus_files import PlusConfig, SegmentedFrame, Wire
@@ -177,7 +178,7 @@ def wire_point_pairs(config: PlusConfig, frames: list[SegmentedFrame]) -> tuple[
 
 
 @dataclass(frozen=True)
-class NWireCalibration:
+class NWireResult:
     """``T_Ptip_I`` as a rigid transform with pixel spacings, and as PLUS's affine matrix.
 
     Attributes:
@@ -254,7 +255,7 @@ def fit_affine(uv_px: ArrayLike, p_probe: ArrayLike, reject_sd: float = 3.0) -> 
 
 def calibrate_nwire(
     uv_px: ArrayLike, p_probe: ArrayLike, nominal_spacing_m: float, *, reject_sd: float = 3.0, max_rounds: int = 5
-) -> NWireCalibration:
+) -> NWireResult:
     """Fit rigid + pixel spacings (and an affine) with iterative outlier rejection.
 
     Each round fits on the inliers and drops points whose 3D residual exceeds the mean plus
@@ -286,11 +287,11 @@ def calibrate_nwire(
             )
     if np.any(spacing <= 0):
         raise DegenerateDataError(f"the N-wire fit's pixel spacing {spacing.tolist()} is not positive")
-    return NWireCalibration(T, spacing, affine, inliers, residuals)
+    return NWireResult(T, spacing, affine, inliers, residuals)
 
 
 def reprojection_errors(
-    calibration: NWireCalibration, uv_px: ArrayLike, p_probe: ArrayLike, model: str = "rigid"
+    calibration: NWireResult, uv_px: ArrayLike, p_probe: ArrayLike, model: str = "rigid"
 ) -> ErrorStats:
     """3D distances between the image points mapped into the probe and the wire points."""
     return ErrorStats.between(p_probe, calibration.to_probe(uv_px, model))
@@ -304,7 +305,7 @@ def best_fraction(stats: ErrorStats, fraction: float = 0.95) -> ErrorStats:
 
 
 def wire_errors_2d(
-    calibration: NWireCalibration, config: PlusConfig, frames: list[SegmentedFrame], model: str = "rigid"
+    calibration: NWireResult, config: PlusConfig, frames: list[SegmentedFrame], model: str = "rigid"
 ) -> dict[str, FloatArray]:
     """Per wire: signed pixel error ``segmented − projected`` ``(F, 2)``, as PLUS reports it.
 
@@ -356,3 +357,8 @@ def rotation_difference_deg(A: FloatArray, B: FloatArray) -> float:
     """Angle between the rotations of two (possibly scaled) 4×4 matrices, degrees (via SVD)."""
     R = nearest_rotation(A[:3, :3]).T @ nearest_rotation(B[:3, :3])
     return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0))))
+
+
+#: Former names, given for one release with a DeprecationWarning.
+if not TYPE_CHECKING:  # type checkers see only the new names
+    __getattr__ = renamed(__name__, {"NWireCalibration": "NWireResult"})

@@ -22,12 +22,14 @@ import os
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from brachycal._lazy import renamed
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.phantom.nwire import (
-    NWireCalibration,
+    NWireResult,
     best_fraction,
     calibrate_nwire,
     fit_affine,
@@ -78,7 +80,7 @@ class ModelValidation:
 
 
 @dataclass(frozen=True)
-class NWireRun:
+class NWireFileResult:
     """An N-wire calibration of PLUS files and its validation.
 
     Attributes:
@@ -93,7 +95,7 @@ class NWireRun:
         model: the chosen model (:data:`NWIRE_MODELS`), and ``chosen_by`` how it was chosen.
     """
 
-    calibration: NWireCalibration
+    calibration: NWireResult
     models: dict[str, ModelValidation]
     calibration_points: int
     validation_points: int
@@ -191,9 +193,9 @@ def _stats_json(stats: ErrorStats) -> dict[str, float | int]:
     }
 
 
-def nwire_from_files(
+def calibrate_nwire_files(
     config_path: str | os.PathLike[str], frames_path: str | os.PathLike[str], *, model: str | None = None
-) -> NWireRun:
+) -> NWireFileResult:
     """Calibrate Image → Probe from a PLUS configuration and segmented frames, and validate every model.
 
     Fits PLUS's linear model, brachycal's rigid + u/v spacings model and PLUS fCal's four refinements
@@ -233,7 +235,7 @@ def nwire_from_files(
             wires_2d={name: WireErrors(e.mean(axis=0), e.std(axis=0), len(e)) for name, e in wires.items()},
         )
     chosen = model or min(models, key=lambda name: models[name].validation_best95.mae_mm)
-    return NWireRun(
+    return NWireFileResult(
         calibration=calibration,
         models=models,
         calibration_points=len(uv),
@@ -254,7 +256,7 @@ def _to_probe(image_to_probe: FloatArray, uv_px: FloatArray) -> FloatArray:
     return uv_px @ image_to_probe[:3, :2].T + image_to_probe[:3, 3]
 
 
-def write_nwire(run: NWireRun, path: str | os.PathLike[str], *, force: bool = False) -> Path:
+def write_nwire(run: NWireFileResult, path: str | os.PathLike[str], *, force: bool = False) -> Path:
     """Write ``run`` as ``brachycal-nwire/1`` JSON, all or nothing (never NaN).
 
     Raises:
@@ -264,7 +266,7 @@ def write_nwire(run: NWireRun, path: str | os.PathLike[str], *, force: bool = Fa
 
 
 @dataclass(frozen=True)
-class StoredNWire:
+class NWireFile:
     """What a ``brachycal-nwire/1`` file holds.
 
     Attributes:
@@ -299,7 +301,7 @@ class StoredNWire:
         return M
 
 
-def read_nwire(path: str | os.PathLike[str]) -> StoredNWire:
+def read_nwire(path: str | os.PathLike[str]) -> NWireFile:
     """Read a ``brachycal-nwire/1`` file back.
 
     Raises:
@@ -346,4 +348,12 @@ def read_nwire(path: str | os.PathLike[str]) -> StoredNWire:
     model = raw.get("model", "rigid")
     if not isinstance(model, str) or (models and model not in models):
         raise InputError(f"must name one of the file's models, got {model!r}", file=path, column="model")
-    return StoredNWire(T, spacing_m, affine, raw, model, models)
+    return NWireFile(T, spacing_m, affine, raw, model, models)
+
+
+#: Former names, given for one release with a DeprecationWarning.
+if not TYPE_CHECKING:  # type checkers see only the new names
+    __getattr__ = renamed(
+        __name__,
+        {"NWireRun": "NWireFileResult", "StoredNWire": "NWireFile", "nwire_from_files": "calibrate_nwire_files"},
+    )

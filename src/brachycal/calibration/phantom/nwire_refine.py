@@ -37,7 +37,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from brachycal.calibration.phantom.nwire import NWireCalibration, phantom_to_probe, wire_point_pairs
+from brachycal.calibration.phantom.nwire import NWireResult, phantom_to_probe, wire_point_pairs
 from brachycal.data.formats.plus_files import PlusConfig, SegmentedFrame
 from brachycal.errors import DegenerateDataError
 from brachycal.se3 import FloatArray, nearest_rotation
@@ -260,7 +260,7 @@ def linear_fit_frames(data: WireObservations, kept_points: np.ndarray) -> np.nda
     return np.all(kept, axis=1, keepdims=False).reshape(len(data.frame))
 
 
-def refine_all(data: WireObservations, calibration: NWireCalibration, kept_points: np.ndarray) -> dict[str, Refinement]:
+def refine_all(data: WireObservations, calibration: NWireResult, kept_points: np.ndarray) -> dict[str, Refinement]:
     """Every refinement, from both starts, on PLUS's non-outlier frames; per name the start whose
     solution has the lower calibration cost (the validation frames are never looked at).
 

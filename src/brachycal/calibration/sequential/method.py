@@ -24,9 +24,11 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from functools import partial
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from brachycal._lazy import renamed
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.parallel import parallel_calls
 from brachycal.calibration.result import Calibration, ImageCalibration, Provenance, best_method
@@ -75,7 +77,7 @@ class ToolCalibration:
 
 
 @dataclass(frozen=True)
-class CalibrationResult:
+class SequentialResult:
     """Everything the sequential method estimates and measures (SI units).
 
     Attributes:
@@ -313,7 +315,7 @@ class SequentialPlan:
         ]
         return calls, costs
 
-    def start_result(self) -> CalibrationResult:
+    def start_result(self) -> SequentialResult:
         """What the chain starts from (:meth:`ParameterLayout.start`): the tools, the reference tips
         and :attr:`start`'s image calibration, before any leave-one-out figure (those stay empty).
 
@@ -325,9 +327,9 @@ class SequentialPlan:
         method, full = self.start
         return self._result({method: full}, {}, {})
 
-    def result(self, outcomes: list[MethodOutcome]) -> CalibrationResult:
-        """The :class:`CalibrationResult` from :meth:`calls`' outcomes (methods' order); a refused
-        method is recorded in :attr:`CalibrationResult.refused` and the others proceed.
+    def result(self, outcomes: list[MethodOutcome]) -> SequentialResult:
+        """The :class:`SequentialResult` from :meth:`calls`' outcomes (methods' order); a refused
+        method is recorded in :attr:`SequentialResult.refused` and the others proceed.
 
         Raises:
             DegenerateDataError: every method refused: the first refusal, in the methods' order.
@@ -350,9 +352,9 @@ class SequentialPlan:
         residuals: dict[str, ErrorStats],
         loocv: dict[str, ErrorStats],
         refused: dict[str, str] | None = None,
-    ) -> CalibrationResult:
+    ) -> SequentialResult:
         session = self.session
-        return CalibrationResult(
+        return SequentialResult(
             p_R_Rtip={ref: tip.p for ref, tip in self.reference_tips.items()},
             needle=self.needle,
             probe=self.probe,
@@ -372,7 +374,7 @@ def calibrate(
     robot: Robot,
     methods: tuple[str, ...] = METHODS,
     T_Ptip_I_init: FloatArray | None = None,
-) -> CalibrationResult:
+) -> SequentialResult:
     """Run the sequential calibration on a validated session.
 
     Args:
@@ -395,10 +397,10 @@ def calibrate(
     return plan.result(parallel_calls(*plan.calls()))
 
 
-def loo_points(session: Session, robot: Robot, result: CalibrationResult, method: str) -> tuple[FloatArray, FloatArray]:
+def loo_points(session: Session, robot: Robot, result: SequentialResult, method: str) -> tuple[FloatArray, FloatArray]:
     """``(P_real (N, 3), P_cal (N, 3))`` of one method's leave-one-out, for figures (Fig. 10).
 
-    The same folds as :attr:`CalibrationResult.loocv`, ICP started from the model's ``us_image``.
+    The same folds as :attr:`SequentialResult.loocv`, ICP started from the model's ``us_image``.
     """
     return image_to_probe.leave_one_out_points(
         method,
@@ -441,3 +443,8 @@ def locate(
     )
     q = np.asarray(q, dtype=float)
     return image_to_probe.predict_base(image, robot.fk(robot.rig.probe_flange, q), calibration, uv_px)
+
+
+#: Former names, given for one release with a DeprecationWarning.
+if not TYPE_CHECKING:  # type checkers see only the new names
+    __getattr__ = renamed(__name__, {"CalibrationResult": "SequentialResult"})

@@ -30,13 +30,15 @@ import os
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from brachycal._lazy import renamed
 from brachycal._version import __version__
 from brachycal.calibration.result import Calibration, ImageCalibration, Provenance, best_method
 from brachycal.calibration.sequential.image_to_probe import METHODS
-from brachycal.calibration.sequential.method import CalibrationResult
+from brachycal.calibration.sequential.method import SequentialResult
 from brachycal.calibration.session.chain_report import chain_json
 from brachycal.calibration.session.result_schema import FORMAT, validate_result_document
 from brachycal.data.json_files import parse_json, read_json_bytes
@@ -93,7 +95,7 @@ class RobotRecord:
 
 
 def to_json(
-    result: CalibrationResult,
+    result: SequentialResult,
     *,
     robot_source: str = "",
     robot_sha256: str = "",
@@ -106,7 +108,7 @@ def to_json(
     SHA-256 (``robot_source`` and ``robot_sha256`` are then ignored) and ``robot`` its
     :class:`RobotRecord`.
 
-    With ``chain`` (a :class:`~brachycal.calibration.session.chain_report.ChainReport`), the transforms
+    With ``chain`` (a :class:`~brachycal.calibration.session.chain_report.ChainResult`), the transforms
     are the whole-chain method's (``Ptip_T_I`` and ``spacing_mm`` under ``"chain"``), its section
     ``chain`` is added, and the sequential method's transforms and figures stay under
     ``sequential`` for comparison (they go with its own ``EL_T_Ptip``).
@@ -170,7 +172,7 @@ def to_json(
 
 
 def write_result(
-    result: CalibrationResult,
+    result: SequentialResult,
     path: str | os.PathLike[str],
     *,
     force: bool = False,
@@ -193,7 +195,7 @@ def write_result(
 
 
 @dataclass(frozen=True)
-class StoredCalibration:
+class ResultFile:
     """What targeting needs from a result file."""
 
     T_ER_Ntip: FloatArray
@@ -423,7 +425,7 @@ def _matrix(value: object) -> FloatArray:
     return np.array(value, dtype=float)
 
 
-def read_result(path: str | os.PathLike[str]) -> StoredCalibration:
+def read_result(path: str | os.PathLike[str]) -> ResultFile:
     """Read a result file back; refuses anything that is not a valid ``brachycal-result/1``.
 
     The whole document is checked first (:func:`~brachycal.calibration.session.result_schema.validate_result_document`:
@@ -443,7 +445,7 @@ def read_result(path: str | os.PathLike[str]) -> StoredCalibration:
     }
     chain = raw.get("chain", {})
     size = raw.get("image", {}).get("size_px")
-    return StoredCalibration(
+    return ResultFile(
         T_ER_Ntip=_matrix(transforms["ER_T_Ntip"]),
         T_EL_Ptip=_matrix(transforms["EL_T_Ptip"]),
         image=image,
@@ -491,3 +493,8 @@ def _robot_record(raw: dict) -> RobotRecord | None:
         urdf_sha256=block["urdf_sha256"],
         joint_names=tuple(block["joint_names"]),
     )
+
+
+#: Former names, given for one release with a DeprecationWarning.
+if not TYPE_CHECKING:  # type checkers see only the new names
+    __getattr__ = renamed(__name__, {"StoredCalibration": "ResultFile"})
