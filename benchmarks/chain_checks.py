@@ -33,7 +33,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.stats import binom, norm
 
-from brachycal.calibration import calibrate
+from brachycal.calibration import Calibration, calibrate
 from brachycal.calibration.chain import DEFAULT_ROBOT_ACCURACY, RobotAccuracy, fit_chain, select_model
 from brachycal.calibration.chain.uncertainty import bootstrap, inside_ellipsoid, interval, landing_covariance
 from brachycal.calibration.session.chain_report import WARN_LANDING_RMS_MM
@@ -115,7 +115,7 @@ def one_session(
         out["c_boot_in"] = bool(lo <= c <= hi)
     exact_reading = replace(twin, config=replace(twin.config, encoder_noise=False))
     for part, tw in (("calibration", exact_reading), ("total", twin)):
-        hit = targeting_error(tw, fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image, TARGETS)
+        hit = targeting_error(tw, fit.calibration(), TARGETS)
         C = landing_covariance(fit, robot, twin.session.spacing_m, hit.q_read, hit.uv_px, encoder_noise=part == "total")
         inside = inside_ellipsoid(hit.landed_m - hit.targets_m, C, LEVEL)
         out[f"landing_{part}_first"] = bool(inside[0])
@@ -178,12 +178,12 @@ def outliers_and_targeting(robot: Robot, seeds: int) -> None:
             initial = calibrate(twin.session, robot, ("kabsch", "scaled_uv"))
             choice = select_model(twin.session, robot, initial)
             fit = fit_chain(twin.session, robot, initial, choice.model)
-            hit = targeting_error(twin, fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image, 30).stats.mae_mm
+            hit = targeting_error(twin, fit.calibration(), 30).stats.mae_mm
             maes.append(hit)
             if dirty:
                 exact_flags += bool(np.array_equal(fit.outliers, twin.outlier))
                 continue
-            paper = targeting_error(twin, initial.T_ER_Ntip, initial.T_EL_Ptip, initial.image["kabsch"], 30)
+            paper = targeting_error(twin, initial.calibration("kabsch"), 30)
             chain_mae.append(hit)
             paper_mae.append(paper.stats.mae_mm)
             gains.append(paper.stats.mae_mm / hit)
@@ -226,12 +226,10 @@ def joint_offsets(robot: Robot) -> None:
         initial = calibrate(twin.session, robot, ("scaled_uv",))
         plain = fit_chain(twin.session, robot, initial, "sound_speed")
         corrected = fit_chain(twin.session, robot, initial, "sound_speed", joint_offsets=True)
-        a = targeting_error(twin, plain.T_ER_Ntip, plain.T_EL_Ptip, plain.image, 30).stats.mae_mm
+        a = targeting_error(twin, plain.calibration(), 30).stats.mae_mm
         b = targeting_error(
             twin,
-            corrected.T_ER_Ntip,
-            corrected.T_EL_Ptip,
-            corrected.image,
+            Calibration(corrected.T_ER_Ntip, corrected.T_EL_Ptip, corrected.image),
             30,
             software=robot.with_joint_offsets(corrected.joint_offsets_rad),
         ).stats.mae_mm

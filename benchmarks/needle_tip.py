@@ -102,7 +102,7 @@ def main() -> None:
         for how, session in sessions.items():
             result = calibrate(session, robot, METHODS)
             for method in METHODS:
-                hit = targeting_error(twin, result.T_ER_Ntip, result.T_EL_Ptip, result.image[method], args.targets)
+                hit = targeting_error(twin, result.calibration(method), args.targets)
                 target[f"{method} {how}"].append(hit.stats.mae_mm)
         e = np.array(errors["prior"][-len(views) :])
         print(

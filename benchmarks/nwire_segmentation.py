@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 from timing import record
 
-from brachycal.calibration.phantom.nwire_file import nwire_from_files
+from brachycal.calibration.phantom.nwire_file import calibrate_nwire_files
 from brachycal.data.formats.metaimage import read_image_sequence
 from brachycal.data.formats.plus_files import read_plus_config, read_segmented_frames
 from brachycal.data.formats.plus_segmentation import read_segmentation_parameters
@@ -83,8 +83,8 @@ def main() -> int:
             calibration_times_s=ours["calibration"].timestamps_s,
             validation_times_s=ours["validation"].timestamps_s,
         )
-        run_ours = nwire_from_files(CONFIG, xml)
-    run_plus = nwire_from_files(CONFIG, PLUS_FRAMES)
+        run_ours = calibrate_nwire_files(CONFIG, xml)
+    run_plus = calibrate_nwire_files(CONFIG, PLUS_FRAMES)
     for label, run in (("brachycal's segmentation", run_ours), ("PLUS's segmentation", run_plus)):
         for model, validation in run.models.items():
             best = validation.validation_best95

@@ -2,11 +2,11 @@
 
 Run: ``.venv/bin/python benchmarks/nwire_variants.py [--pluslibdata DIR]`` (a few seconds a recording).
 
-Each recording is calibrated by ``nwire_from_files`` (every model: PLUS's linear fit, brachycal's
+Each recording is calibrated by ``calibrate_nwire_files`` (every model: PLUS's linear fit, brachycal's
 rotation + u/v spacings, PLUS's four refinements) and every model is reported as PLUS reports its
 result: the mean (± SD) 3D error of the best 95 % of the validation middle-wire points, mm. PLUS's
 figure beside it is the ``ValidationMeanMm`` of PLUS's own results file for that recording and setting.
-The default model is the one with the lowest of these figures (``nwire_from_files``'s choice); the
+The default model is the one with the lowest of these figures (``calibrate_nwire_files``'s choice); the
 goal is that it is at or below PLUS's best setting, to PLUS's printed digits (6 significant: 5e-6 mm).
 
 Recordings: from ``../shared/reference`` (fCal 2.0; the 3-N-wire recording PLUS calibrated with its
@@ -26,7 +26,7 @@ from pathlib import Path
 
 from timing import record
 
-from brachycal.calibration.phantom.nwire_file import NWIRE_MODELS, nwire_from_files
+from brachycal.calibration.phantom.nwire_file import NWIRE_MODELS, calibrate_nwire_files
 from brachycal.calibration.phantom.nwire_refine import PLUS_NAMES
 from brachycal.data.formats.plus_files import parse_xml
 
@@ -109,7 +109,7 @@ def main() -> None:
     print("|---|---|" + "---|" * len(NWIRE_MODELS) + "---|")
     for rec in found:
         start = time.perf_counter()
-        run = nwire_from_files(rec.config, rec.frames)
+        run = calibrate_nwire_files(rec.config, rec.frames)
         seconds = time.perf_counter() - start
         best = {name: v.validation_best95 for name, v in run.models.items()}
         cells = [

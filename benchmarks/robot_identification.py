@@ -109,7 +109,7 @@ def coverage(sessions: int, level: str = "real-arm") -> None:
         ):
             k = fit.block(name)
             tips[tool] += int(inside_ellipsoid(fit.x[k] - true, fit.covariance[k, k])[0])
-        hit = targeting_error(twin, fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image, 20, software=corrected)
+        hit = targeting_error(twin, fit.calibration(), 20, software=corrected)
         C = landing_covariance(fit, corrected, twin.session.spacing_m, hit.q_read, hit.uv_px)
         landed += int(inside_ellipsoid(hit.landed_m - hit.targets_m, C).sum())
         targets += len(C)

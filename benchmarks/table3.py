@@ -24,6 +24,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from brachycal.calibration import Calibration
 from brachycal.model import Robot
 from brachycal.simulation.twin import TwinConfig, simulate
 from brachycal.studies.demo import Table3, table3_text, table3_twin
@@ -74,7 +75,9 @@ def run(
         for label, change in VARIANTS.items() if variants else ():
             other = tracker_route(twin, change(sim))
             changed[label].append(
-                targeting_error(twin, result.T_ER_Ntip, other.T_EL_marker, other.image, targets).stats.mae_mm
+                targeting_error(
+                    twin, Calibration(result.T_ER_Ntip, other.T_EL_marker, other.image), targets
+                ).stats.mae_mm
             )
         print(f"  seed {seed} done in {time.perf_counter() - start:.1f} s", flush=True)
     return methods, changed, chosen

@@ -26,6 +26,7 @@ import time
 import numpy as np
 from timing import record
 
+from brachycal.calibration import Calibration
 from brachycal.calibration.phantom.wedge import calibrate_wedge
 from brachycal.calibration.result import ImageCalibration
 from brachycal.model import Robot
@@ -66,7 +67,7 @@ def main() -> None:
         frames += args.frames
         images = ImageCalibration("wedge-images", fit.T_marker_image, fit.spacing_m)
         for label, image in (("simulated", route.image), ("images", images)):
-            result = targeting_error(twin, truth.T_ER_Ntip, route.T_EL_marker, image, args.targets)
+            result = targeting_error(twin, Calibration(truth.T_ER_Ntip, route.T_EL_marker, image), args.targets)
             mae[label].append(result.stats.mae_mm)
         print(
             f"seed {seed}: line error {np.sqrt(np.mean(errors_px[-1] ** 2)):.3f} px RMS, "

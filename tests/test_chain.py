@@ -99,8 +99,8 @@ def test_chain_beats_the_papers_rigid_method_fourfold_under_a_4_percent_stretch(
     assert choice.model in ("scaled_uv", "sound_speed")
     fit = fit_chain(twin.session, robot, sequential, choice.model)
     assert abs(fit.sound_speed_m_s - 1482) < 15  # the speed of sound is measured, not assumed
-    chain = targeting_error(twin, fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image, 30).stats
-    paper = targeting_error(twin, sequential.T_ER_Ntip, sequential.T_EL_Ptip, sequential.image["kabsch"], 30).stats
+    chain = targeting_error(twin, fit.calibration(), 30).stats
+    paper = targeting_error(twin, sequential.calibration("kabsch"), 30).stats
     assert chain.mae_mm <= paper.mae_mm / 4
 
 
@@ -114,7 +114,7 @@ def test_gross_outliers_are_flagged_left_out_and_barely_matter(robot, seed):
     for twin in (clean, dirty):
         initial = calibrate(twin.session, robot, ("scaled_uv",))
         fit = fit_chain(twin.session, robot, initial, "sound_speed")
-        hits.append(targeting_error(twin, fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image, 30).stats.mae_mm)
+        hits.append(targeting_error(twin, fit.calibration(), 30).stats.mae_mm)
         assert np.array_equal(fit.outliers, twin.outlier)
     # Left out, not down-weighted: the fit equals the fit without those samples (to its solver's tolerance).
     without = fit_chain(dirty.session, robot, initial, "sound_speed", samples=~dirty.outlier)
@@ -235,7 +235,7 @@ def test_stated_uncertainty_is_calibrated_on_both_sides(robot):
         parameter_d2 += error @ np.linalg.solve(C, error)
         parameter_dof += len(error)
         exact_reading = replace(twin, config=replace(twin.config, encoder_noise=False))  # the calibration's part
-        hit = targeting_error(exact_reading, fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image, 1)
+        hit = targeting_error(exact_reading, fit.calibration(), 1)
         C_land = landing_covariance(fit, robot, twin.session.spacing_m, hit.q_read, hit.uv_px)[0]
         e = hit.landed_m[0] - hit.targets_m[0]
         landing_d2 += e @ np.linalg.solve(C_land, e)
@@ -266,7 +266,7 @@ def test_stated_uncertainty_with_robot_error_is_calibrated(robot):
         noise_only = fit_chain(twin.session, robot, initial, "sound_speed", robot_accuracy=None)  # image noise only
         noise_only_d2 += error @ np.linalg.solve(_parameter_errors(noise_only, twin.truth)[1], error)
         parameter_dof += len(error)
-        hit = targeting_error(twin, fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image, 1)  # encoder noise when aiming
+        hit = targeting_error(twin, fit.calibration(), 1)  # encoder noise when aiming
         C_land = landing_covariance(fit, robot, twin.session.spacing_m, hit.q_read, hit.uv_px)[0]
         e = hit.landed_m[0] - hit.targets_m[0]
         landing_d2 += e @ np.linalg.solve(C_land, e)

@@ -14,7 +14,7 @@ import pytest
 from conftest import ROOT, assert_same_files
 from hostile import Case, check_refusal
 
-from brachycal.calibration import nwire_from_files, pivot_from_file
+from brachycal.calibration import calibrate_nwire_files, calibrate_pivot_files
 from brachycal.calibration.phantom.phantom_file import read_observations
 from brachycal.calibration.phantom.wedge import calibrate_wedge_files, read_wedge_phantom
 from brachycal.calibration.phantom.wire import calibrate_wire_files, read_wire_phantom
@@ -61,7 +61,7 @@ def test_pivot_example_reads_back_and_calibrates_to_its_truth():
     names, T, _ = read_pose_list(EXAMPLES / PIVOT_NAME)
     assert len(names) == len(T) == 200 and names[0].isdigit()  # keyed by timestamp_ns, like the real file
     truth = json.loads((EXAMPLES / "pivot/truth.json").read_text())
-    calibration = pivot_from_file(EXAMPLES / PIVOT_NAME, "algebraic", "mm")
+    calibration = calibrate_pivot_files(EXAMPLES / PIVOT_NAME, "algebraic", "mm")
     result = calibration.result
     # The fit's own predicted 3D SD (from its residuals) sets the bound: 3 SD in 3D is exceeded with
     # ~3 % chance by a 3D Gaussian error, 4 SD (~0.1 %) leaves no flakiness for this fixed seed.
@@ -88,7 +88,7 @@ def test_nwire_example_reads_back_and_calibrates_to_its_truth():
     assert len(config.patterns) == 3 and ("Phantom", "Reference") in config.transforms
     assert len(calibration) == 40 and len(validation) == 20 and all(f.ok for f in calibration + validation)
     truth = json.loads((EXAMPLES / "nwire/truth.json").read_text())
-    run = nwire_from_files(EXAMPLES / NWIRE_CONFIG_NAME, EXAMPLES / NWIRE_FRAMES_NAME)
+    run = calibrate_nwire_files(EXAMPLES / NWIRE_CONFIG_NAME, EXAMPLES / NWIRE_FRAMES_NAME)
     estimate = run.calibration
     T_true, spacing_true = np.array(truth["T_probe_image"]), np.array(truth["spacing_mm"]) * 1e-3
     # Where the estimate puts the wires' pixels in the probe frame, against the truth. What does not

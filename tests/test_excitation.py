@@ -187,7 +187,7 @@ def test_excitation_lowers_the_landing_error_as_predicted(robot, worn):
 
     def landing_mae(ident) -> float:
         fit = ident.fit
-        hit = targeting_error(twin, fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image, 30, software=ident.robot(robot))
+        hit = targeting_error(twin, fit.calibration(), 30, software=ident.robot(robot))
         return hit.stats.mae_mm
 
     assert landing_mae(again) < 0.5 * landing_mae(identified)

@@ -28,8 +28,9 @@ def calibrated(robot):
 
 def test_every_export_loads_back(robot, calibrated, tmp_path):
     _, result = calibrated
-    image = result.image["scaled_uv"]
-    files = write_exports(robot, result.T_ER_Ntip, result.T_EL_Ptip, image, tmp_path)
+    calibration = result.calibration("scaled_uv")
+    image = calibration.image
+    files = write_exports(robot, calibration, tmp_path)
     # The URDF's meshes are copied beside it (tests/test_exports_handoff.py: the folder is self-contained).
     assert all(f.parent == tmp_path / "meshes" for f in files if f.suffix == ".stl")
     assert {f.name for f in files if f.parent == tmp_path} == {
@@ -95,3 +96,16 @@ def test_scene_has_the_robot_tools_and_image(robot, tmp_path):
     image_corner = robot.fk("us_image", q)[:3, 3]
     assert np.min(np.linalg.norm(plane.vertices - image_corner, axis=1)) < 1e-6
     assert render_png(scene, tmp_path / "s.png").stat().st_size > 10_000
+
+
+def test_the_loose_write_exports_form_still_writes_the_same_files_and_warns(robot, calibrated, tmp_path):
+    _, result = calibrated
+    calibration = result.calibration("kabsch")
+    new = write_exports(robot, calibration, tmp_path / "new")
+    with pytest.warns(DeprecationWarning, match="pass one Calibration"):
+        old = write_exports(robot, result.T_ER_Ntip, result.T_EL_Ptip, result.image["kabsch"], tmp_path / "old")
+    assert [p.relative_to(tmp_path / "old") for p in old] == [p.relative_to(tmp_path / "new") for p in new]
+    # The PLUS file carries the time it was written; every other file is the same bytes.
+    for a, b in zip(old, new, strict=True):
+        if a.name != "PlusCoordinateDefinitions.xml":
+            assert a.read_bytes() == b.read_bytes(), a.name

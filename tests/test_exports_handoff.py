@@ -23,7 +23,7 @@ import yourdfpy
 from conftest import ROOT, reference
 from hostile import Case, check_refusal
 
-from brachycal.calibration import ImageCalibration, read_result
+from brachycal.calibration import Calibration, ImageCalibration, read_result
 from brachycal.cli.main import main
 from brachycal.data.formats.plus_files import read_coordinate_definitions
 from brachycal.export import read_itk_transform, write_exports
@@ -117,7 +117,7 @@ def test_robots_from_descriptions_export_self_contained(name, tmp_path):
     _, T_probe = robot.tool_transform("probe_tip")
     _, T_image = robot.tool_transform("us_image")
     image = ImageCalibration("kabsch", T_image, np.array([0.19e-3, 0.19e-3]))
-    write_exports(robot, T_needle, T_probe, image, tmp_path / "x")
+    write_exports(robot, Calibration(T_needle, T_probe, image), tmp_path / "x")
     copy = tmp_path / "copy"
     shutil.copytree(tmp_path / "x", copy)
     shutil.rmtree(tmp_path / "x")

@@ -135,7 +135,7 @@ def test_real_recording_reproduces_plus_baseline(real):
     for name, errors in wire_errors_2d(result, config, validation, "affine").items():
         assert np.abs(errors.mean(axis=0) - PLUS_WIRE_2D_MEAN_PX[name]).max() < 0.01, name
     # The constrained model (rotation + two spacings) lands within PLUS's own test tolerances of its matrix.
-    rigid_mm = result.T_probe_image @ np.diag([*result.spacing_m, 1.0, 1.0])
+    rigid_mm = result.T_Ptip_I @ np.diag([*result.spacing_m, 1.0, 1.0])
     rigid_mm[:3] *= 1e3
     assert rotation_difference_deg(rigid_mm, PLUS_IMAGE_TO_PROBE_MM) < 0.5
     assert np.linalg.norm(rigid_mm[:3, 3] - PLUS_IMAGE_TO_PROBE_MM[:3, 3]) < 1.0
@@ -151,7 +151,7 @@ def test_exact_synthetic_nwire_is_recovered():
     config, frames, validation = simulate_nwire(T_marker_image, spacing, (1080, 720), NWireSimConfig().without_noise())
     uv, p, _ = wire_point_pairs(config, frames)
     result = calibrate_nwire(uv, p, 0.19e-3)
-    assert np.abs(result.T_probe_image - T_marker_image).max() < 1e-9
+    assert np.abs(result.T_Ptip_I - T_marker_image).max() < 1e-9
     assert np.abs(result.spacing_m - spacing).max() < 1e-15
     assert np.abs(result.affine[:3, :2] - T_marker_image[:3, :2] * spacing).max() < 1e-12
     uv_v, p_v, _ = wire_point_pairs(config, validation)

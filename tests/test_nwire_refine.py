@@ -18,7 +18,7 @@ from scipy.spatial.transform import Rotation
 
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.phantom.nwire import best_fraction, calibrate_nwire, fit_affine, wire_point_pairs
-from brachycal.calibration.phantom.nwire_file import NWIRE_MODELS, nwire_from_files, read_nwire
+from brachycal.calibration.phantom.nwire_file import NWIRE_MODELS, calibrate_nwire_files, read_nwire
 from brachycal.calibration.phantom.nwire_refine import (
     PLUS_NAMES,
     REFINEMENTS,
@@ -52,12 +52,12 @@ def twin():
     return {False: session(SPACING_M), True: session(np.array([0.19e-3, 0.19e-3]))}
 
 
-def _perturbed(T_probe_image, spacing_m, angle_rad=0.02, shift_m=0.002, scale=1.03):
+def _perturbed(T_Ptip_I, spacing_m, angle_rad=0.02, shift_m=0.002, scale=1.03):
     """A start matrix some way off the truth (rotated, shifted, pixels scaled)."""
     M = np.eye(4)
-    R = Rotation.from_rotvec([angle_rad, -angle_rad, angle_rad / 2]).as_matrix() @ T_probe_image[:3, :3]
+    R = Rotation.from_rotvec([angle_rad, -angle_rad, angle_rad / 2]).as_matrix() @ T_Ptip_I[:3, :3]
     M[:3, :3] = R * np.array([spacing_m[0], spacing_m[1], spacing_m.mean()]) * scale
-    M[:3, 3] = T_probe_image[:3, 3] + shift_m
+    M[:3, 3] = T_Ptip_I[:3, 3] + shift_m
     return M
 
 
@@ -76,7 +76,7 @@ def test_each_refinement_recovers_the_exact_twin(twin, name, start):
     }[start]
     result = refine(observations(config, frames), M0, name, start_name=start)
     # 1e-9 m: the solver's stopping point on exact data (pixels of ~0.2 mm, points within 0.1 m).
-    assert np.abs(result.T_probe_image - T_MARKER_IMAGE).max() < 1e-9
+    assert np.abs(result.T_Ptip_I - T_MARKER_IMAGE).max() < 1e-9
     assert np.abs(result.spacing_m - truth).max() < 1e-12
     data = observations(config, validation)
     assert np.abs(errors_3d(result.matrix, data)).max() < 1e-9
@@ -192,20 +192,20 @@ def test_both_starts_reach_the_same_minimum(recording):
         b = refine(subset, fitted.matrix("rigid"), name)
         # Same minimum: costs equal to 1e-9 relative, parameters to 1e-7 m and 1e-10 m/px.
         assert abs(a.cost_rms - b.cost_rms) <= 1e-9 * a.cost_rms
-        assert np.abs(a.T_probe_image - b.T_probe_image).max() < 1e-7
+        assert np.abs(a.T_Ptip_I - b.T_Ptip_I).max() < 1e-7
         assert np.abs(a.spacing_m - b.spacing_m).max() < 1e-10
 
 
 def test_default_model_is_the_lowest_validation_error_and_model_chooses(recording):
     config_path = reference(VARIANTS_FOLDER, "PlusDeviceSet_OPEA_OptimizationMethod.xml")
     frames_path = reference(VARIANTS_FOLDER, "OPEA_OptimizationMethod_Calibration.results.xml")
-    run = nwire_from_files(config_path, frames_path)
+    run = calibrate_nwire_files(config_path, frames_path)
     assert set(run.models) == set(NWIRE_MODELS)
     best = {name: v.validation_best95.mae_mm for name, v in run.models.items()}
     assert run.model == min(best, key=best.__getitem__) == "2d-aniso"
     # At or below PLUS's best setting on this recording (IPEA, 1.19028 mm), to its printed digits.
     assert best[run.model] <= min(PLUS_VALIDATION_MEAN_MM.values()) + 5e-6
-    chosen = nwire_from_files(config_path, frames_path, model="3d-iso")
+    chosen = calibrate_nwire_files(config_path, frames_path, model="3d-iso")
     assert chosen.model == "3d-iso" and chosen.chosen_by == "--model"
 
 
@@ -221,19 +221,19 @@ def test_cli_prints_every_model_writes_them_and_model_chooses(tmp_path, capsys):
     assert stored.model == "3d-aniso" and set(stored.models) == set(NWIRE_MODELS)
     assert stored.raw["models"]["3d-aniso"]["plus_name"] == "OPEA"
     # The chosen model's matrix is the one the file names; mm in the file, metres read (1e-15 m: an ulp).
-    run = nwire_from_files(config, frames, model="3d-aniso")
+    run = calibrate_nwire_files(config, frames, model="3d-aniso")
     assert np.abs(stored.image_to_probe - run.matrix()).max() < 1e-15
 
 
 def test_a_file_written_before_models_were_stored_reads_as_rigid(tmp_path):
     config = reference(VARIANTS_FOLDER, "PlusDeviceSet_OPEA_OptimizationMethod.xml")
     frames = reference(VARIANTS_FOLDER, "OPEA_OptimizationMethod_Calibration.results.xml")
-    payload = nwire_from_files(config, frames).to_json()
+    payload = calibrate_nwire_files(config, frames).to_json()
     for key in ("model", "model_chosen_by", "models"):
         del payload[key]
     path = tmp_path / "old.json"
     path.write_text(json.dumps(payload))
     stored = read_nwire(path)
     assert stored.model == "rigid" and stored.models == {}
-    expected = stored.T_probe_image @ np.diag([*stored.spacing_m, stored.spacing_m.mean(), 1.0])
+    expected = stored.T_Ptip_I @ np.diag([*stored.spacing_m, stored.spacing_m.mean(), 1.0])
     assert np.array_equal(stored.image_to_probe, expected)

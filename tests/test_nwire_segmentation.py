@@ -286,7 +286,7 @@ def test_nwire_from_rendered_sequences_matches_nwire_from_their_points(tmp_path)
     from_images, from_points = read_nwire(out), read_nwire(tmp_path / "from_points.json")
     # Rendered dots are found to < 0.1 px (test above), 0.02 mm at 0.19 mm/px; over the middle-wire
     # points (45 here) that moves the fitted image pose by well under 0.05 mm and 0.05° (the image spans ~0.1 m).
-    T_a, T_b = from_images.T_probe_image, from_points.T_probe_image
+    T_a, T_b = from_images.T_Ptip_I, from_points.T_Ptip_I
     np.testing.assert_allclose(T_a[:3, 3], T_b[:3, 3], atol=5e-5)
     angle = np.degrees(np.arccos(np.clip((np.trace(T_a[:3, :3].T @ T_b[:3, :3]) - 1) / 2, -1, 1)))
     assert angle < 0.05

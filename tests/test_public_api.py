@@ -172,3 +172,112 @@ def test_the_readme_python_examples_run(tmp_path, monkeypatch):
 def test_the_top_level_package_offers_the_first_steps():
     # The README's first lines of Python: the robot and a joint log, from ``brachycal`` itself.
     assert {"Robot", "read_joint_log", "JointLog", "InputError", "__version__"} <= set(brachycal.__all__)
+
+
+#: The main path, from ``brachycal`` itself: robot, session reader, calibrations, result files, the
+#: value every consumer takes, plan, check, export, the twin, the errors.
+MAIN_PATH = {
+    "Robot",
+    "load_description",
+    "read_session",
+    "calibrate",
+    "calibrate_chain",
+    "calibrate_folder",
+    "read_result",
+    "write_result",
+    "Calibration",
+    "locate",
+    "plan_poses",
+    "check_calibration",
+    "write_exports",
+    "simulate",
+    "BrachycalError",
+    "InputError",
+    "DegenerateDataError",
+    "SolverError",
+    "OutputError",
+}
+
+
+def test_the_main_path_is_importable_from_brachycal_itself():
+    assert MAIN_PATH <= set(brachycal.__all__)
+
+
+@pytest.mark.parametrize("name", sorted(brachycal.__all__))
+def test_every_top_level_name_imports_and_is_its_homes_object(name):
+    namespace: dict[str, object] = {}
+    exec(f"from brachycal import {name}", namespace)
+    value = namespace[name]
+    home = getattr(value, "__module__", None)
+    if isinstance(home, str) and home.startswith("brachycal.") and hasattr(importlib.import_module(home), name):
+        assert getattr(importlib.import_module(home), name) is value  # an alias, not a copy
+
+
+def test_the_readme_python_uses_only_import_brachycal():
+    for block in readme_python_blocks():
+        imports = [n for n in ast.walk(ast.parse(block)) if isinstance(n, ast.Import | ast.ImportFrom)]
+        assert all(isinstance(n, ast.Import) and [a.name for a in n.names] == ["brachycal"] for n in imports), (
+            "the README's Python reaches the API through `import brachycal` alone"
+        )
+        used = {
+            n.attr
+            for n in ast.walk(ast.parse(block))
+            if isinstance(n, ast.Attribute) and isinstance(n.value, ast.Name) and n.value.id == "brachycal"
+        }
+        assert used and used <= set(brachycal.__all__)
+
+
+#: Names that moved from ``brachycal.simulation`` to ``brachycal.studies``.
+MOVED_TO_STUDIES = ["run_demo", "run_study", "targeting_error", "TargetingResult", "sweep", "evaluate_design"]
+
+
+@pytest.mark.parametrize("name", MOVED_TO_STUDIES)
+def test_a_study_name_that_left_simulation_is_a_deprecated_top_level_alias(name):
+    studies = importlib.import_module("brachycal.studies")
+    with pytest.warns(DeprecationWarning, match=rf"use brachycal\.studies\.{name}"):
+        value = getattr(brachycal, name)
+    assert value is getattr(studies, name)
+    assert name not in brachycal.__all__  # deprecated: offered, not advertised
+
+
+@pytest.mark.parametrize("name", MOVED_TO_STUDIES)
+def test_the_old_simulation_path_says_where_a_study_name_went(name):
+    with pytest.raises(ImportError, match=rf"moved: use brachycal\.studies\.{name}"):
+        exec(f"from brachycal.simulation import {name}", {})
+
+
+def test_every_name_brachycal_simulation_lost_is_covered():
+    simulation = importlib.import_module("brachycal.simulation")
+    studies = importlib.import_module("brachycal.studies")
+    assert set(simulation._MOVED_TO_STUDIES) == set(studies.__all__) == set(brachycal._MOVED_TO_STUDIES)
+
+
+def test_an_unknown_top_level_name_is_an_attribute_error():
+    with pytest.raises(AttributeError, match="no attribute 'not_a_name'"):
+        brachycal.not_a_name  # noqa: B018
+
+
+def renamed_names() -> list[tuple[str, str]]:
+    return sorted(importlib.import_module("brachycal.calibration")._RENAMED.items())
+
+
+@pytest.mark.parametrize(("old", "new"), renamed_names())
+def test_a_former_result_or_entry_point_name_still_works_for_one_release_and_warns(old, new):
+    calibration = importlib.import_module("brachycal.calibration")
+    assert new in calibration.__all__ and old not in calibration.__all__
+    with pytest.warns(
+        DeprecationWarning, match=rf"calibration\.{old} is deprecated: use brachycal\.calibration\.{new}"
+    ):
+        value = getattr(calibration, old)
+    assert value is getattr(calibration, new)
+    home = importlib.import_module(value.__module__)  # the defining module gives the old name too
+    with pytest.warns(DeprecationWarning, match=rf"{old} is deprecated: use {re.escape(value.__module__)}\.{new}"):
+        assert getattr(home, old) is value
+
+
+def test_results_and_file_entry_points_follow_one_naming_pattern():
+    # Results end in ``Result``, what a file gives back in ``File``, and a method from files is
+    # ``calibrate_<method>_files``.
+    calibration = importlib.import_module("brachycal.calibration")
+    for new in calibration._RENAMED.values():
+        assert new.endswith(("Result", "File")) or re.fullmatch(r"calibrate_\w+_files", new), new

@@ -15,7 +15,14 @@ import pytest
 from conftest import reference
 from scipy.spatial.transform import Rotation
 
-from brachycal.calibration import nwire_from_files, pivot_from_file, read_nwire, read_pivot, write_nwire, write_pivot
+from brachycal.calibration import (
+    calibrate_nwire_files,
+    calibrate_pivot_files,
+    read_nwire,
+    read_pivot,
+    write_nwire,
+    write_pivot,
+)
 from brachycal.data.pose_list import COLUMNS
 from brachycal.errors import InputError
 from brachycal.se3 import make_transform
@@ -37,7 +44,7 @@ def pose_list(path, n: int = 12) -> None:
 def test_pivot_file_round_trip(tmp_path):
     poses = tmp_path / "poses.csv"
     pose_list(poses)
-    calibration = pivot_from_file(poses, "algebraic", "m")
+    calibration = calibrate_pivot_files(poses, "algebraic", "m")
     # Noise-free poses: the estimate is the truth up to the least-squares solve's rounding (1e-12 m
     # is a thousand times that, and a million times below any real tip error).
     assert np.abs(calibration.result.p_marker_tip - P_TOOL_TIP).max() < 1e-12
@@ -62,7 +69,7 @@ def test_pivot_reader_refuses_other_files(tmp_path):
         read_pivot(wrong)
     poses = tmp_path / "poses.csv"
     pose_list(poses)
-    payload = pivot_from_file(poses).to_json()
+    payload = calibrate_pivot_files(poses).to_json()
     payload["tip_in_tool"] = [0.0, None, 1.0]
     broken = tmp_path / "broken.json"
     broken.write_text(json.dumps(payload))
@@ -74,7 +81,7 @@ def test_nwire_file_round_trip(tmp_path):
     folder = reference("plus_fcal_nwire")
     config = folder / "PlusDeviceSet_fCal_Sim_SpatialCalibration_2.0.xml"
     frames = folder / "fCal_3NWires_segmented_frames.xml"
-    run = nwire_from_files(config, frames)
+    run = calibrate_nwire_files(config, frames)
     # PLUS's own figure for this recording (its regression baseline, best 95 %), to its 3 decimals.
     assert round(run.models["affine"].validation_best95.mae_mm, 3) == 0.540
     assert set(run.inputs) == {config.name, frames.name}
@@ -84,7 +91,7 @@ def test_nwire_file_round_trip(tmp_path):
     stored = read_nwire(out)
     # JSON keeps every float exactly; the spacing and the affine matrix are stored in millimetres,
     # so reading them back may differ by an ulp (1e-19 m/px and 1e-15 m guard that, nothing coarser).
-    np.testing.assert_array_equal(stored.T_probe_image, run.calibration.T_probe_image)
+    np.testing.assert_array_equal(stored.T_Ptip_I, run.calibration.T_Ptip_I)
     assert np.abs(stored.spacing_m - run.calibration.spacing_m).max() < 1e-19
     assert np.abs(stored.affine - run.calibration.affine).max() < 1e-15
     assert stored.raw == run.to_json() and stored.raw["format"] == "brachycal-nwire/1"

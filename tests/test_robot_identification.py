@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from brachycal.calibration import calibrate
+from brachycal.calibration import Calibration, calibrate
 from brachycal.calibration.chain import ChainData, RobotAccuracy, fit_chain, joint_twists
 from brachycal.calibration.result import ImageCalibration
 from brachycal.calibration.robot.identification import (
@@ -18,7 +18,7 @@ from brachycal.calibration.robot.identification import (
     cross_validate_identification,
     identify_robot,
 )
-from brachycal.calibration.session.result_file import StoredCalibration
+from brachycal.calibration.session.result_file import ResultFile
 from brachycal.errors import InputError
 from brachycal.model.names import LEFT_FLANGE, RIGHT_FLANGE
 from brachycal.model.robot import Robot
@@ -83,10 +83,14 @@ def test_identified_robot_lands_the_needle_better_where_the_calibration_never_wa
     twin, sequential, _, identified = worn
     chain = fit_chain(twin.session, robot, sequential, "sound_speed", robot_accuracy=None)
     turn = np.radians(3.0)
-    before = targeting_error(twin, chain.T_ER_Ntip, chain.T_EL_Ptip, chain.image, 20, torso_turn_rad=turn).stats
+    before = targeting_error(twin, chain.calibration(), 20, torso_turn_rad=turn).stats
     fit = identified.fit
     after = targeting_error(
-        twin, fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image, 20, software=identified.robot(robot), torso_turn_rad=turn
+        twin,
+        fit.calibration(),
+        20,
+        software=identified.robot(robot),
+        torso_turn_rad=turn,
     ).stats
     assert after.mae_mm < 0.5 * before.mae_mm
 
@@ -178,10 +182,10 @@ def test_identified_noise_levels_count_the_priors_share_of_the_leverage(robot, w
     assert fit.noise["touch"].source == "residuals"
 
 
-def _stored(robot: Robot, corrected: Robot) -> StoredCalibration:
+def _stored(robot: Robot, corrected: Robot) -> ResultFile:
     eye = np.eye(4)
     origins = {n: (robot.joint_origin(n), corrected.joint_origin(n)) for n in robot.joint_names}
-    return StoredCalibration(eye, eye, {}, {}, joint_origins=origins, source="result.json")
+    return ResultFile(eye, eye, {}, {}, joint_origins=origins, source="result.json")
 
 
 def test_a_result_applies_its_robot_corrections_exactly_once(robot, tmp_path):
@@ -216,11 +220,11 @@ def test_targeting_at_held_out_configurations_turns_the_torso(robot):
     twin = simulate(robot, TwinConfig(seed=0).without_noise())
     truth = twin.truth
     image = ImageCalibration("truth", truth.T_Ptip_I, truth.spacing_m)
-    plain = targeting_error(twin, truth.T_ER_Ntip, truth.T_EL_Ptip, image, 5, software=twin.physical)
+    plain = targeting_error(twin, Calibration(truth.T_ER_Ntip, truth.T_EL_Ptip, image), 5, software=twin.physical)
     turned = targeting_error(
-        twin, truth.T_ER_Ntip, truth.T_EL_Ptip, image, 5, software=twin.physical, torso_turn_rad=0.05
+        twin, Calibration(truth.T_ER_Ntip, truth.T_EL_Ptip, image), 5, software=twin.physical, torso_turn_rad=0.05
     )
     assert plain.stats.max_mm < 1e-6 and turned.stats.max_mm < 1e-6  # the truth lands exactly either way
     assert np.abs(turned.q_read[:, 0] - plain.q_read[:, 0]).min() > 0.04  # from other postures: torso turned
     with pytest.raises(InputError, match="torso turn"):
-        targeting_error(twin, truth.T_ER_Ntip, truth.T_EL_Ptip, image, 5, torso_turn_rad=1.0)
+        targeting_error(twin, Calibration(truth.T_ER_Ntip, truth.T_EL_Ptip, image), 5, torso_turn_rad=1.0)

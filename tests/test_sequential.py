@@ -64,7 +64,7 @@ def test_targeting_maps_image_points_to_the_truth(robot, truth, exact, result):
     q = exact.samples_q[10]
     uv = np.array([[100.0, 50.0], [900.0, 700.0]])
     p_true = transform_points(physical.fk("us_image", q), np.column_stack([uv * truth.spacing_m, [0, 0]]))
-    p = locate(robot, q, uv, result.T_EL_Ptip, result.image["kabsch"])
+    p = locate(robot, q, uv, result.calibration("kabsch"))
     assert np.abs(p - p_true).max() < 1e-9
 
 

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import qpsolvers
 
+from brachycal.calibration import Calibration
 from brachycal.errors import InputError, SolverError
 from brachycal.model.ik import solve_ik
 from brachycal.model.names import NEEDLE_TIP, US_IMAGE
@@ -80,7 +81,7 @@ def _axes(robot, twin):
 
 
 def _targeting(robot, twin):
-    targeting.targeting_error(twin, twin.truth.T_ER_Ntip, twin.truth.T_EL_Ptip, _true_image(twin), 1)
+    targeting.targeting_error(twin, Calibration(twin.truth.T_ER_Ntip, twin.truth.T_EL_Ptip, _true_image(twin)), 1)
 
 
 def _hand_eye(robot, twin):

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from conftest import ROOT, assert_same_files, assert_same_numbers
 
-from brachycal.calibration import METHODS, calibrate
+from brachycal.calibration import METHODS, Calibration, calibrate
 from brachycal.cli.main import main
 from brachycal.simulation.twin import TwinConfig, simulate
 from brachycal.simulation.twin_files import read_twin, write_twin
@@ -31,7 +31,7 @@ def test_zero_noise_twin_calibrates_exactly_and_targets_exactly(robot):
     assert np.abs(result.T_EL_Ptip - twin.truth.T_EL_Ptip).max() < 1e-9
     for method in METHODS:
         assert np.abs(result.image[method].T_Ptip_I - twin.truth.T_Ptip_I).max() < 1e-9, method
-    hit = targeting_error(twin, result.T_ER_Ntip, result.T_EL_Ptip, result.image["icp"], n_targets=10)
+    hit = targeting_error(twin, result.calibration("icp"), n_targets=10)
     assert hit.stats.max_mm < 1e-6
 
 
@@ -73,10 +73,7 @@ def test_default_twin_reproduces_the_papers_figures(robot, default_twin):
     result = calibrate(default_twin.session, robot)
     assert 0.1 < result.needle.validation.mae_mm < 0.4 and 0.1 < result.probe.validation.mae_mm < 0.4  # paper 0.19
     assert 0.5 < result.loocv["kabsch"].mae_mm < 0.8  # paper 0.65
-    hits = {
-        m: targeting_error(default_twin, result.T_ER_Ntip, result.T_EL_Ptip, result.image[m], 30).stats
-        for m in ("kabsch", "scaled_uv")
-    }
+    hits = {m: targeting_error(default_twin, result.calibration(m), 30).stats for m in ("kabsch", "scaled_uv")}
     assert hits["scaled_uv"].mae_mm < hits["kabsch"].mae_mm / 3  # the stretch is what hurts the rigid fit
     assert hits["kabsch"].mae_mm < result.loocv["kabsch"].mae_mm  # LOO also carries the left-out noise
 
@@ -195,7 +192,7 @@ def test_tracker_route_is_exact_without_noise(robot):
     assert np.abs(route.T_EL_marker - twin.truth.T_EL_Ptip @ T_PTIP_MARKER).max() < 1e-9
     assert np.abs(route.image.T_Ptip_I - np.linalg.inv(T_PTIP_MARKER) @ twin.truth.T_Ptip_I).max() < 1e-9
     result = calibrate(twin.session, robot, ("kabsch",))
-    assert targeting_error(twin, result.T_ER_Ntip, route.T_EL_marker, route.image, 10).stats.max_mm < 1e-6
+    assert targeting_error(twin, Calibration(result.T_ER_Ntip, route.T_EL_marker, route.image), 10).stats.max_mm < 1e-6
 
 
 def test_each_tracker_route_error_source_has_its_own_switch_and_stream():
@@ -254,9 +251,11 @@ def test_tracker_route_lands_where_the_benchmark_says_and_behind_the_scale_aware
         twin = simulate(robot, TwinConfig(seed=seed))
         result = calibrate(twin.session, robot, ("scaled_uv",))
         route = tracker_route(twin, NWireSimConfig(seed=seed))
-        tracker.append(targeting_error(twin, result.T_ER_Ntip, route.T_EL_marker, route.image, 50).stats.mae_mm)
+        tracker.append(
+            targeting_error(twin, Calibration(result.T_ER_Ntip, route.T_EL_marker, route.image), 50).stats.mae_mm
+        )
         image = result.image["scaled_uv"]
-        fused.append(targeting_error(twin, result.T_ER_Ntip, result.T_EL_Ptip, image, 50).stats.mae_mm)
+        fused.append(targeting_error(twin, Calibration(result.T_ER_Ntip, result.T_EL_Ptip, image), 50).stats.mae_mm)
     mean, sd = TRACKER_ROUTE_MAE_MM
     # Two-sided: three seeds' mean lies within 3 standard errors (3 SD / sqrt(3)) of the benchmark's
     # ten-seed mean; outside it, the tracker route's model has changed and the README's Table III with it.

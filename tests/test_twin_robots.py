@@ -63,18 +63,18 @@ def test_noise_free_twin_of_each_robot_calibrates_to_its_truth_and_lands_on_targ
     assert np.abs(result.T_EL_Ptip - twin.truth.T_EL_Ptip).max() < EXACT_TOLERANCE
     for method in METHODS:
         assert np.abs(result.image[method].T_Ptip_I - twin.truth.T_Ptip_I).max() < EXACT_TOLERANCE, method
-    hit = targeting_error(twin, result.T_ER_Ntip, result.T_EL_Ptip, result.image["scaled_uv"], n_targets=10)
+    hit = targeting_error(twin, result.calibration("scaled_uv"), n_targets=10)
     assert hit.stats.max_mm < EXACT_LANDING_MM
     if not robot.rig.shared_joints:  # Baxter's torso is fixed, the UR5 cell has none: no held-out turn
         with pytest.raises(InputError, match="no joint shared by both arms"):
-            targeting_error(twin, result.T_ER_Ntip, result.T_EL_Ptip, result.image["scaled_uv"], 1, torso_turn_rad=0.05)
+            targeting_error(twin, result.calibration("scaled_uv"), 1, torso_turn_rad=0.05)
 
 
 def _landing_ratio(twin, robot) -> float:
     """The default twin's RMS landing error over the chain fit's predicted RMS (see PREDICTED_RMS_FACTOR)."""
     result = calibrate(twin.session, robot)
     fit = fit_chain(twin.session, robot, result, "scaled_uv")
-    hit = targeting_error(twin, fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image, 20)
+    hit = targeting_error(twin, fit.calibration(), 20)
     C = landing_covariance(fit, robot, twin.session.spacing_m, hit.q_read, hit.uv_px)
     predicted_rms_mm = np.sqrt(np.mean(np.trace(C, axis1=1, axis2=2))) * 1e3
     return hit.stats.rmse_mm / predicted_rms_mm

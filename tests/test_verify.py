@@ -225,18 +225,10 @@ def test_the_default_check_takes_under_two_minutes_and_both_touches_more(calibra
     from brachycal.planning.check_poses import SECONDS_PER_SAMPLE, plan_check
 
     full = calibrated.check_plan.plan  # the default check's eight poses: the pick keeps them all
-    image = calibrated.stored.image[calibrated.method]
+    calibration = calibrated.stored.calibration(calibrated.method)
 
     def plan(touches: str):
-        return plan_check(
-            full,
-            calibrated.robot,
-            calibrated.stored.T_ER_Ntip,
-            calibrated.stored.T_EL_Ptip,
-            image.T_Ptip_I,
-            image.spacing_m,
-            touches=touches,
-        )
+        return plan_check(full, calibrated.robot, calibration, touches=touches)
 
     probe = plan("probe")
     assert probe.touches == 1 and probe.touch_tools == ("probe",)

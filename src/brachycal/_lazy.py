@@ -11,7 +11,8 @@ from __future__ import annotations
 import ast
 import importlib
 import sys
-from collections.abc import Callable
+import warnings
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -47,12 +48,16 @@ class _LazyPackage(ModuleType):
         super().__setattr__(name, value)
 
 
-def attach(package: str, init_file: str) -> tuple[Callable[[str], Any], Callable[[], list[str]]]:
+def attach(
+    package: str, init_file: str, deprecated: Mapping[str, str] | None = None
+) -> tuple[Callable[[str], Any], Callable[[], list[str]]]:
     """A module ``__getattr__`` and ``__dir__`` that import the ``TYPE_CHECKING`` names on first use.
 
     Args:
         package: the package's ``__name__``.
         init_file: its ``__file__`` (the ``__init__.py`` holding the ``if TYPE_CHECKING:`` imports).
+        deprecated: ``{old name: exported name}``: old spellings still given for one release, with
+            a :class:`DeprecationWarning` (not stored: each use warns).
 
     Returns:
         ``(__getattr__, __dir__)`` to assign at the package's top level. A resolved name is stored
@@ -68,6 +73,10 @@ def attach(package: str, init_file: str) -> tuple[Callable[[str], Any], Callable
 
     def __getattr__(name: str) -> Any:
         where = names().get(name)
+        if where is None and deprecated and name in deprecated:
+            new = deprecated[name]
+            warnings.warn(f"{package}.{name} is deprecated: use {package}.{new}", DeprecationWarning, stacklevel=2)
+            return __getattr__(new)
         if where is None:
             raise AttributeError(f"module {package!r} has no attribute {name!r}")
         module, attribute = where
@@ -82,3 +91,17 @@ def attach(package: str, init_file: str) -> tuple[Callable[[str], Any], Callable
     vars(module)["_lazy_names"] = names
     module.__class__ = _LazyPackage
     return __getattr__, __dir__
+
+
+def renamed(module: str, names: Mapping[str, str]) -> Callable[[str], Any]:
+    """A module ``__getattr__`` that gives each old name of ``names`` (``{old: new}``) as the new
+    one's value, with a :class:`DeprecationWarning` naming the new spelling (kept one release)."""
+
+    def __getattr__(name: str) -> Any:
+        new = names.get(name)
+        if new is None:
+            raise AttributeError(f"module {module!r} has no attribute {name!r}")
+        warnings.warn(f"{module}.{name} is deprecated: use {module}.{new}", DeprecationWarning, stacklevel=2)
+        return getattr(sys.modules[module], new)
+
+    return __getattr__

@@ -20,13 +20,13 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
     )
     from brachycal.calibration.labels import ALL_LABELS, METHOD_LABELS, METHODS, PAPER_METHODS
     from brachycal.calibration.metrics import ErrorStats
-    from brachycal.calibration.phantom.features import PhantomCalibration
+    from brachycal.calibration.phantom.features import PhantomResult
     from brachycal.calibration.phantom.hand_eye import hand_eye
-    from brachycal.calibration.phantom.nwire import NWireCalibration, calibrate_nwire, wire_point_pairs
+    from brachycal.calibration.phantom.nwire import NWireResult, calibrate_nwire, wire_point_pairs
     from brachycal.calibration.phantom.nwire_file import (
-        NWireRun,
-        StoredNWire,
-        nwire_from_files,
+        NWireFile,
+        NWireFileResult,
+        calibrate_nwire_files,
         read_nwire,
         write_nwire,
     )
@@ -36,9 +36,9 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
     from brachycal.calibration.phantom.pivot import PivotResult, pivot_algebraic, pivot_robust
     from brachycal.calibration.phantom.pivot_file import (
         PIVOT_METHODS,
-        PivotCalibration,
-        StoredPivot,
-        pivot_from_file,
+        PivotFile,
+        PivotFileResult,
+        calibrate_pivot_files,
         read_pivot,
         write_pivot,
     )
@@ -50,28 +50,28 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
         read_wedge_phantom,
     )
     from brachycal.calibration.phantom.wire import WirePhantom, calibrate_wire, calibrate_wire_files, read_wire_phantom
-    from brachycal.calibration.result import ImageCalibration, PredictedUncertainty
+    from brachycal.calibration.result import Calibration, ImageCalibration, PredictedUncertainty, Provenance
     from brachycal.calibration.robot.identification import (
-        RobotIdentification,
+        IdentificationResult,
         corrected_robot,
         cross_validate_identification,
         identify_robot,
     )
     from brachycal.calibration.robot.observability import Criterion, Observation, base_criterion, observation_rows
     from brachycal.calibration.sequential.method import (
-        CalibrationResult,
+        SequentialResult,
         ToolCalibration,
         calibrate,
         locate,
         loo_points,
     )
-    from brachycal.calibration.session.calibrate import SessionCalibration, calibrate_folder
-    from brachycal.calibration.session.chain_report import ChainReport, calibrate_chain
-    from brachycal.calibration.session.result_file import RobotRecord, StoredCalibration, read_result, write_result
+    from brachycal.calibration.session.calibrate import SessionResult, calibrate_folder
+    from brachycal.calibration.session.chain_report import ChainResult, calibrate_chain
+    from brachycal.calibration.session.result_file import ResultFile, RobotRecord, read_result, write_result
     from brachycal.calibration.session.result_schema import validate_result_document
     from brachycal.calibration.temporal import (
         LagEstimate,
-        TemporalCalibration,
+        TemporalResult,
         estimate_lag,
         lag_from_plus_files,
         lag_from_signals,
@@ -79,7 +79,25 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
     )
     from brachycal.calibration.verify.folder import FolderCheck, verify_folder
 
-__getattr__, __dir__ = attach(__name__, __file__)
+#: Former names of results and file entry points, given for one release with a DeprecationWarning.
+_RENAMED = {
+    "CalibrationResult": "SequentialResult",
+    "ChainReport": "ChainResult",
+    "PivotCalibration": "PivotFileResult",
+    "StoredPivot": "PivotFile",
+    "pivot_from_file": "calibrate_pivot_files",
+    "NWireCalibration": "NWireResult",
+    "NWireRun": "NWireFileResult",
+    "StoredNWire": "NWireFile",
+    "nwire_from_files": "calibrate_nwire_files",
+    "PhantomCalibration": "PhantomResult",
+    "TemporalCalibration": "TemporalResult",
+    "SessionCalibration": "SessionResult",
+    "RobotIdentification": "IdentificationResult",
+    "StoredCalibration": "ResultFile",
+}
+
+__getattr__, __dir__ = attach(__name__, __file__, deprecated=_RENAMED)
 
 __all__ = [
     "ALL_LABELS",
@@ -88,29 +106,31 @@ __all__ = [
     "MODELS",
     "PAPER_METHODS",
     "PIVOT_METHODS",
-    "CalibrationResult",
+    "Calibration",
     "ChainFit",
-    "ChainReport",
+    "ChainResult",
     "Criterion",
     "ErrorStats",
     "FolderCheck",
+    "IdentificationResult",
     "ImageCalibration",
     "LagEstimate",
-    "NWireCalibration",
-    "NWireRun",
+    "NWireFile",
+    "NWireFileResult",
+    "NWireResult",
     "Observation",
-    "PhantomCalibration",
     "PhantomObservations",
-    "PivotCalibration",
+    "PhantomResult",
+    "PivotFile",
+    "PivotFileResult",
     "PivotResult",
     "PredictedUncertainty",
-    "RobotIdentification",
+    "Provenance",
+    "ResultFile",
     "RobotRecord",
-    "SessionCalibration",
-    "StoredCalibration",
-    "StoredNWire",
-    "StoredPivot",
-    "TemporalCalibration",
+    "SequentialResult",
+    "SessionResult",
+    "TemporalResult",
     "ToolCalibration",
     "WedgePhantom",
     "WirePhantom",
@@ -119,6 +139,8 @@ __all__ = [
     "calibrate_chain",
     "calibrate_folder",
     "calibrate_nwire",
+    "calibrate_nwire_files",
+    "calibrate_pivot_files",
     "calibrate_wedge",
     "calibrate_wedge_files",
     "calibrate_wire",
@@ -137,10 +159,8 @@ __all__ = [
     "landing_jacobian",
     "locate",
     "loo_points",
-    "nwire_from_files",
     "observation_rows",
     "pivot_algebraic",
-    "pivot_from_file",
     "pivot_robust",
     "predicted_rms_mm",
     "principal_motion",

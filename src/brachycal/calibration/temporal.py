@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike
 
+from brachycal._lazy import renamed
 from brachycal.data.formats.metaimage import read_image_sequence, read_sequence_header
 from brachycal.data.formats.plus_files import sequence_transform
 from brachycal.data.formats.plus_temporal import PlusTemporalSettings, read_plus_temporal_settings
@@ -319,7 +320,7 @@ def tracker_positions(
 
 
 @dataclass(frozen=True)
-class TemporalCalibration:
+class TemporalResult:
     """A temporal calibration: the lag and the two signals it aligned.
 
     Attributes:
@@ -353,7 +354,7 @@ def lag_from_signals(
     resolution_s: float = DEFAULT_RESOLUTION_S,
     names: tuple[str, str] = ("video", "pose stream"),
     sources: tuple[str | os.PathLike[str] | None, str | os.PathLike[str] | None] = (None, None),
-) -> TemporalCalibration:
+) -> TemporalResult:
     """Lag of a pose stream behind a video of the tank bottom (both routes end here).
 
     The poses within the video's span (widened by twice the search) are projected on their principal
@@ -408,7 +409,7 @@ def lag_from_signals(
     estimate = estimate_lag(
         t_a, x_a, t_pose[near], x_b, max_lag_s=max_lag_s, resolution_s=resolution_s, allow_inverted=True, names=names
     )
-    return TemporalCalibration(estimate, t_video, line, t_pose[near], x_b, axis, swing_m, swing_px)
+    return TemporalResult(estimate, t_video, line, t_pose[near], x_b, axis, swing_m, swing_px)
 
 
 def lag_from_plus_files(
@@ -421,7 +422,7 @@ def lag_from_plus_files(
     max_lag_s: float | None = None,
     resolution_s: float = DEFAULT_RESOLUTION_S,
     clip: tuple[int, int, int, int] | None = None,
-) -> TemporalCalibration:
+) -> TemporalResult:
     """PLUS's temporal calibration from its two recordings: the tracker's lag behind the video.
 
     Args:
@@ -434,7 +435,7 @@ def lag_from_plus_files(
         max_lag_s: search range (default: the device set's, or :data:`DEFAULT_MAX_LAG_S`).
 
     Returns:
-        The :class:`TemporalCalibration`; ``estimate.lag_s`` is PLUS's ``TrackerLagSec``.
+        The :class:`TemporalResult`; ``estimate.lag_s`` is PLUS's ``TrackerLagSec``.
     """
     settings = read_plus_temporal_settings(config) if config is not None else PlusTemporalSettings()
     if clip is not None:
@@ -462,3 +463,8 @@ def lag_from_plus_files(
         names=("video", "tracker"),
         sources=(video, tracker),
     )
+
+
+#: Former names, given for one release with a DeprecationWarning.
+if not TYPE_CHECKING:  # type checkers see only the new names
+    __getattr__ = renamed(__name__, {"TemporalCalibration": "TemporalResult"})

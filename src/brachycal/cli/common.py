@@ -169,8 +169,8 @@ def robot_accuracy(args: argparse.Namespace) -> RobotAccuracy:
 
 
 def add_method_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup, of: str) -> None:
-    """``--method``: which image calibration of a result (:meth:`StoredCalibration.method
-    <brachycal.calibration.session.result_file.StoredCalibration.method>`; default the result's best)."""
+    """``--method``: which image calibration of a result (:meth:`ResultFile.method
+    <brachycal.calibration.session.result_file.ResultFile.method>`; default the result's best)."""
     from brachycal.calibration.labels import ALL_LABELS  # lazy: start-up (the command's run only)
 
     parser.add_argument(

@@ -84,12 +84,11 @@ def _run(args: argparse.Namespace, robot: Robot, outputs: OutputSet) -> None:
     from brachycal.export import write_exports, write_ros_package  # lazy: start-up (the command's run only)
 
     stored = read_result(args.result)
-    method = stored.method(args.method)
+    calibration = stored.calibration(args.method)
     software = stored.software_robot(robot)  # refuses another robot; corrections applied once
-    calibration = (stored.T_ER_Ntip, stored.T_EL_Ptip, stored.image[method])
-    record = stored.export_record(method)
-    write_exports(software, *calibration, args.out, force=args.force, outputs=outputs, record=record)
+    record = stored.export_record(calibration.method)
+    write_exports(software, calibration, args.out, force=args.force, outputs=outputs, record=record)
     if args.ros_package is not None:
         write_ros_package(
-            software, *calibration, args.out, args.ros_package, force=args.force, outputs=outputs, record=record
+            software, calibration, args.out, args.ros_package, force=args.force, outputs=outputs, record=record
         )

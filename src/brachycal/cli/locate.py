@@ -45,19 +45,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from brachycal.calibration import locate, read_result  # lazy: start-up (the command's run only)
+    from brachycal.calibration import read_result  # lazy: start-up (the command's run only)
+    from brachycal.calibration.result import locate  # lazy: start-up (the command's run only)
     from brachycal.data.formats.csv_log import configuration_blocks  # lazy: start-up (the command's run only)
 
     stored = read_result(args.result)
     # The result knows its images' size (older result files do not: then argparse's bound stands).
     uv = check_pixel(args.uv, "--uv", size_px=stored.image_size_px)[None]
-    method = stored.method(args.method)
+    calibration = stored.calibration(args.method)
     robot = stored.software_robot(load_robot(args))
     # Streamed: one block of rows read, located and printed at a time (a joint log may be long).
     # The header is printed with the first block, so a file refused at once prints nothing.
     header = "row,x,y,z\n"
     for rows, Q in configuration_blocks(args.joints, robot):
-        P = locate(robot, Q, uv, stored.T_EL_Ptip, stored.image[method])
+        P = locate(robot, Q, uv, calibration)
         sys.stdout.write(
             header + "".join(f"{r},{p[0]:.9f},{p[1]:.9f},{p[2]:.9f}\n" for r, p in zip(rows, P.tolist(), strict=True))
         )

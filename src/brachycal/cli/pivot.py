@@ -40,12 +40,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from brachycal.calibration import pivot_from_file, write_pivot  # lazy: start-up (the command's run only)
+    from brachycal.calibration import calibrate_pivot_files, write_pivot  # lazy: start-up (the command's run only)
     from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
 
     with OutputSet(force=args.force, inputs=command_inputs(args, "poses")) as outputs:
         staged = outputs.claim(args.out, label="--out")
-        calibration = pivot_from_file(args.poses, args.method, args.units)
+        calibration = calibrate_pivot_files(args.poses, args.method, args.units)
         write_pivot(calibration, staged, force=args.force)
     result, u = calibration.result, calibration.units
     fmt = lambda v: "(" + ", ".join(f"{x:.3f}" for x in v) + ")"  # noqa: E731

@@ -9,7 +9,7 @@ from brachycal.cli.common import add_robot_option, command_inputs, load_robot, o
 from brachycal.cli.option_types import finite_float
 
 if TYPE_CHECKING:
-    from brachycal.calibration.temporal import TemporalCalibration
+    from brachycal.calibration.temporal import TemporalResult
 
 HELP = "temporal calibration: lag of the tracker (or joint log) behind the ultrasound frames"
 DESCRIPTION = """\
@@ -83,7 +83,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser.set_defaults(run=run)
 
 
-def _robot_route(args: argparse.Namespace) -> TemporalCalibration:
+def _robot_route(args: argparse.Namespace) -> TemporalResult:
     import numpy as np  # lazy: start-up (the command's run only)
 
     # lazy: start-up (the command's run only)

@@ -14,9 +14,9 @@ from typing import TYPE_CHECKING
 from brachycal._lazy import attach
 
 if TYPE_CHECKING:  # imported on first use (the formats need Pinocchio)
+    from brachycal.calibration.result import calibrated_robot
     from brachycal.export.formats import (
         EXPORT_FILES,
-        calibrated_robot,
         check_ros_package_name,
         export_files,
         flange_labels,

@@ -12,12 +12,12 @@ import shutil
 from collections.abc import Mapping
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, cast
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from brachycal.calibration.result import ImageCalibration, calibrated_robot
+from brachycal.calibration.result import Calibration, ImageCalibration, calibration_args
 from brachycal.errors import InputError, OutputError
 from brachycal.inputs import MAX_DOCUMENT_BYTES, MAX_MESH_BYTES, open_input, read_input_text
 from brachycal.io import OutputSet, atomic_open, output_set
@@ -95,6 +95,13 @@ def image_to_probe_mm(image: ImageCalibration) -> FloatArray:
     return M
 
 
+def _one(function: str, rest: tuple[Any, ...], default: Any) -> Any:
+    """The one optional positional argument left in ``rest`` (``default`` if none)."""
+    if len(rest) > 1:
+        raise TypeError(f"{function}() takes at most one more positional argument")
+    return rest[0] if rest else default
+
+
 def _mm(T: ArrayLike) -> FloatArray:
     T = np.array(T, dtype=float)
     T[:3, 3] *= 1e3
@@ -134,16 +141,16 @@ def _matrix_text(M: FloatArray) -> str:
     return "\n        ".join(" ".join(f"{v:.9g}" for v in row) for row in M)
 
 
-def plus_coordinate_definitions(
-    T_ER_Ntip: ArrayLike,
-    T_EL_Ptip: ArrayLike,
-    image: ImageCalibration,
-    labels: tuple[str, str] = ("RightFlange", "LeftFlange"),
-) -> str:
-    """A PLUS ``<CoordinateDefinitions>`` element (text) with the calibrated transforms.
+def plus_coordinate_definitions(calibration: Calibration, *args: Any) -> str:
+    """A PLUS ``<CoordinateDefinitions>`` element (text) with ``calibration``'s transforms.
 
-    ``labels``: the needle and probe flanges' PLUS names (:func:`flange_labels`; default the SDA10F's).
+    ``plus_coordinate_definitions(calibration, labels=("RightFlange", "LeftFlange"))``: ``labels``
+    are the needle and probe flanges' PLUS names (:func:`flange_labels`; default the SDA10F's). The
+    loose form ``(T_ER_Ntip, T_EL_Ptip, image, labels)`` works for one release (deprecated).
     """
+    calibration, rest = calibration_args("plus_coordinate_definitions", calibration, args)
+    labels: tuple[str, str] = _one("plus_coordinate_definitions", rest, ("RightFlange", "LeftFlange"))
+    T_ER_Ntip, T_EL_Ptip, image = calibration.T_ER_Ntip, calibration.T_EL_Ptip, calibration.image
     date = datetime.now(UTC).strftime("%Y.%m.%d %H:%M:%S")
     needle, probe = labels
     items = [
@@ -182,14 +189,13 @@ def _yaml_text(data: object, header: str) -> str:
 
 
 def static_transforms(
-    T_ER_Ntip: ArrayLike,
-    T_EL_Ptip: ArrayLike,
-    image: ImageCalibration,
+    calibration: Calibration,
     flanges: tuple[str, str] = ("arm_right_link_tool0", "arm_left_link_tool0"),
 ) -> list[tuple[str, str, FloatArray, FloatArray]]:
     """``[(parent, child, translation (3,) m, quaternion (x, y, z, w))]`` of the calibrated joints:
     needle tip on its flange, probe tip on its flange, image on the probe tip."""
     needle_flange, probe_flange = flanges
+    T_ER_Ntip, T_EL_Ptip, image = calibration.T_ER_Ntip, calibration.T_EL_Ptip, calibration.image
     out = []
     for parent, child, T in (
         (needle_flange, NEEDLE_TIP, T_ER_Ntip),
@@ -220,12 +226,7 @@ def ros1_arguments(parent: str, child: str, p: ArrayLike, q: ArrayLike) -> list[
     return [*_numbers(p), *_numbers(q), parent, child]
 
 
-def ros_static_transforms(
-    T_ER_Ntip: ArrayLike,
-    T_EL_Ptip: ArrayLike,
-    image: ImageCalibration,
-    flanges: tuple[str, str] = ("arm_right_link_tool0", "arm_left_link_tool0"),
-) -> str:
+def ros_static_transforms(calibration: Calibration, *args: Any) -> str:
     """ROS static transforms as YAML (metres, quaternion x, y, z, w) with publisher commands.
 
     Per transform: ``parent``, ``child``, ``translation``, ``rotation``, and the
@@ -233,9 +234,14 @@ def ros_static_transforms(
     (``ros1``, positional x y z qx qy qz qw frame_id child_frame_id). ``flanges``: the needle and
     probe flange links, the tools' parents (``rig.needle_flange``, ``rig.probe_flange``; default
     the SDA10F's). Numbers are written in full (``repr``) precision.
+
+    ``ros_static_transforms(calibration, flanges=...)``; the loose form ``(T_ER_Ntip, T_EL_Ptip,
+    image, flanges)`` works for one release (deprecated).
     """
+    calibration, rest = calibration_args("ros_static_transforms", calibration, args)
+    flanges: tuple[str, str] = _one("ros_static_transforms", rest, ("arm_right_link_tool0", "arm_left_link_tool0"))
     transforms = []
-    for parent, child, p, q in static_transforms(T_ER_Ntip, T_EL_Ptip, image, flanges):
+    for parent, child, p, q in static_transforms(calibration, flanges):
         transforms.append(
             {
                 "parent": parent,
@@ -250,7 +256,7 @@ def ros_static_transforms(
         "# brachycal calibration: static transforms (metres; quaternion x, y, z, w).\n"
         "# The image's pixel spacing (not a transform) is given as us_image_spacing_m.\n"
     )
-    data = {"us_image_spacing_m": [float(v) for v in image.spacing_m], "transforms": transforms}
+    data = {"us_image_spacing_m": [float(v) for v in calibration.spacing_m], "transforms": transforms}
     return _yaml_text(data, header)
 
 
@@ -300,11 +306,8 @@ def _write_urdf_folder(
 
 def write_exports(
     robot: Robot,
-    T_ER_Ntip: ArrayLike,
-    T_EL_Ptip: ArrayLike,
-    image: ImageCalibration,
-    folder: str | os.PathLike[str],
-    *,
+    calibration: Calibration,
+    *args: Any,
     force: bool = False,
     outputs: OutputSet | None = None,
     record: Mapping[str, str] | None = None,
@@ -313,20 +316,27 @@ def write_exports(
     needed), with a ``meshes/`` folder holding a copy of each mesh the URDF names, all or nothing.
 
     ``robot`` is the model to write: for a result that corrects the robot, the corrected one
-    (:meth:`~brachycal.calibration.StoredCalibration.software_robot`); only its tool joints are
+    (:meth:`~brachycal.calibration.ResultFile.software_robot`); only its tool joints are
     replaced here. ``record``: the ``<brachycal_export>`` attributes the URDF carries
-    (:meth:`~brachycal.calibration.StoredCalibration.export_record`). With ``outputs`` (a command's
+    (:meth:`~brachycal.calibration.ResultFile.export_record`). With ``outputs`` (a command's
     :class:`~brachycal.io.OutputSet`) the files join that set and are committed with it; without,
     they are committed together on return. Returns the files' final paths (the meshes last).
+
+    ``write_exports(robot, calibration, folder, ...)``; the loose form ``(robot, T_ER_Ntip,
+    T_EL_Ptip, image, folder, ...)`` works for one release (deprecated).
     """
-    folder = Path(folder)
+    calibration, rest = calibration_args("write_exports", calibration, args)
+    if len(rest) != 1:
+        raise TypeError("write_exports() takes (robot, calibration, folder)")
+    folder = Path(rest[0])
+    T_ER_Ntip, T_EL_Ptip, image = calibration.T_ER_Ntip, calibration.T_EL_Ptip, calibration.image
     rig = robot.rig
     names = export_files(rig)
     urdf, image_tfm, probe_tfm, needle_tfm, plus, ros = names
     labels = flange_labels(rig)
     with output_set(outputs, force=force) as out:
         staged = {name: out.path(folder / name, make_parents=True) for name in names}
-        calibrated = calibrated_robot(robot, T_ER_Ntip, T_EL_Ptip, image)
+        calibrated = calibration.robot(robot)
         meshes = _write_urdf_folder(calibrated, staged[urdf], folder / "meshes", "meshes", record, out)
         for name, M in (
             (image_tfm, image_to_probe_mm(image)),
@@ -335,8 +345,8 @@ def write_exports(
         ):
             write_itk_transform(M, staged[name], force=force)
         for name, text in (
-            (plus, plus_coordinate_definitions(T_ER_Ntip, T_EL_Ptip, image, labels)),
-            (ros, ros_static_transforms(T_ER_Ntip, T_EL_Ptip, image, (rig.needle_flange, rig.probe_flange))),
+            (plus, plus_coordinate_definitions(calibration, labels)),
+            (ros, ros_static_transforms(calibration, (rig.needle_flange, rig.probe_flange))),
         ):
             with atomic_open(staged[name], force=force) as f:
                 f.write(text)
@@ -462,12 +472,8 @@ def _launch_file(name: str, rig: Rig, urdf: str, transforms: list[tuple[str, str
 
 def write_ros_package(
     robot: Robot,
-    T_ER_Ntip: ArrayLike,
-    T_EL_Ptip: ArrayLike,
-    image: ImageCalibration,
-    folder: str | os.PathLike[str],
-    name: str,
-    *,
+    calibration: Calibration,
+    *args: Any,
     force: bool = False,
     outputs: OutputSet | None = None,
     record: Mapping[str, str] | None = None,
@@ -484,7 +490,14 @@ def write_ros_package(
 
     Raises:
         InputError: ``name`` is not a ROS package name (:func:`check_ros_package_name`).
+
+    ``write_ros_package(robot, calibration, folder, name, ...)``; the loose form ``(robot,
+    T_ER_Ntip, T_EL_Ptip, image, folder, name, ...)`` works for one release (deprecated).
     """
+    calibration, rest = calibration_args("write_ros_package", calibration, args)
+    if len(rest) != 2:
+        raise TypeError("write_ros_package() takes (robot, calibration, folder, name)")
+    folder, name = rest
     name = check_ros_package_name(name)
     package = Path(folder) / name
     rig = robot.rig
@@ -493,17 +506,17 @@ def write_ros_package(
     flanges = (rig.needle_flange, rig.probe_flange)
     with output_set(outputs, force=force) as out:
         staged = {file: out.path(package / file, make_parents=True) for file in files}
-        calibrated = calibrated_robot(robot, T_ER_Ntip, T_EL_Ptip, image)
+        calibrated = calibration.robot(robot)
         meshes = _write_urdf_folder(
             calibrated, staged[urdf], package / "meshes", f"package://{name}/meshes", record, out
         )
         folders = " ".join(["urdf", *(["meshes"] if meshes else []), "launch", "config"])
-        transforms = static_transforms(T_ER_Ntip, T_EL_Ptip, image, flanges)
+        transforms = static_transforms(calibration, flanges)
         for file, text in (
             (xml, _PACKAGE_XML.format(name=name, robot=rig.name)),
             (cmake, _CMAKE_LISTS.format(name=name, folders=folders)),
             (launch, _launch_file(name, rig, Path(urdf).name, transforms)),
-            (config, ros_static_transforms(T_ER_Ntip, T_EL_Ptip, image, flanges)),
+            (config, ros_static_transforms(calibration, flanges)),
         ):
             with atomic_open(staged[file], force=force) as f:
                 f.write(text)

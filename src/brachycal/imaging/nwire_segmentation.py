@@ -4,7 +4,7 @@ Each frame: dot candidates (:mod:`brachycal.imaging.nwire_dots`), then the phant
 (:mod:`brachycal.imaging.nwire_patterns`); with the frame's tracker readings (``ProbeToTracker``,
 ``ReferenceToTracker`` from the sequence's frame fields, millimetres → metres) it becomes a
 :class:`~brachycal.data.formats.plus_files.SegmentedFrame`, which is what :func:`brachycal.calibration.
-nwire_file.nwire_from_files` calibrates from. A frame without a pattern, or without both tracker
+nwire_file.calibrate_nwire_files` calibrates from. A frame without a pattern, or without both tracker
 readings, is kept with ``ok=False`` and its reason, and counted.
 """
 

@@ -31,6 +31,7 @@ from brachycal.se3 import FloatArray
 from brachycal.validate import check_int
 
 if TYPE_CHECKING:
+    from brachycal.calibration.result import Calibration
     from brachycal.model.robot import Robot
     from brachycal.planning.plan import Plan
 
@@ -84,18 +85,17 @@ def sensitivities(
     robot: Robot,
     q: FloatArray,
     uv_px: FloatArray,
-    T_ER_Ntip: FloatArray,
-    T_EL_Ptip: FloatArray,
-    T_Ptip_I: FloatArray,
-    spacing_m: FloatArray,
+    calibration: Calibration,
 ) -> FloatArray:
     """``(N, 3, 11)``: each pose's check residual (metres) per unit change of needle tip (3, m),
-    probe mount (3 m, 3 rad) and image scale (2, relative), by central differences."""
+    probe mount (3 m, 3 rad) and image scale (2, relative), by central differences, about
+    ``calibration`` (its tool transforms, ``T_Ptip_I`` and pixel spacing)."""
     # lazy: start-up (calibration.verify.check is loaded on first use)
     from brachycal.calibration.verify.check import ChainModel, CheckSession, NullModel
 
     null = NullModel(1.0, "", {"needle": 1.0, "probe": 1.0}, {"rtip1": np.zeros(3), "rtip2": np.zeros(3)})
-    model = ChainModel(robot, T_ER_Ntip, T_EL_Ptip, T_Ptip_I, np.asarray(spacing_m, float), null)
+    spacing_m = np.asarray(calibration.spacing_m, float)
+    model = ChainModel(robot, calibration.T_ER_Ntip, calibration.T_EL_Ptip, calibration.T_Ptip_I, spacing_m, null)
     session = CheckSession("", np.asarray(spacing_m, float), np.zeros(2), [], np.asarray(q), np.asarray(uv_px))
     columns = [*range(0, 9), 15, 16]
     h = 1e-6  # 1 µm, 1 µrad, 1 ppm: central differences, truncation ~h², far below any noise
@@ -132,10 +132,7 @@ def choose_check_poses(J: FloatArray, count: int) -> tuple[list[int], list[float
 def plan_check(
     full: Plan,
     robot: Robot,
-    T_ER_Ntip: FloatArray,
-    T_EL_Ptip: FloatArray,
-    T_Ptip_I: FloatArray,
-    spacing_m: FloatArray,
+    calibration: Calibration,
     *,
     count: int = DEFAULT_CHECK_POSES,
     touches: str = DEFAULT_TOUCHES,
@@ -143,14 +140,14 @@ def plan_check(
     """Choose ``count`` of ``full``'s poses for the check and order them (module docstring);
     ``touches`` (a :data:`TOUCH_CHOICES` key) says which tools touch ``rtip1`` once.
 
-    The tools (``T_…``) are a calibration's, or the robot's nominal ones: the choice depends on them
-    only through the chain's geometry, which a few millimetres do not change.
+    ``calibration`` is a result's, or the robot's nominal tools: the choice depends on it only
+    through the chain's geometry, which a few millimetres do not change.
     """
     check_int(count, "check poses", low=CHECK_POSES_RANGE[0], high=CHECK_POSES_RANGE[1])
     tools = touch_choice(touches)
     q = np.array([p.q for p in full.poses])
     uv = np.array([p.point.uv_px for p in full.poses])
-    J = sensitivities(robot, q, uv, T_ER_Ntip, T_EL_Ptip, T_Ptip_I, spacing_m)
+    J = sensitivities(robot, q, uv, calibration)
     chosen, values = choose_check_poses(J, count)
     poses = [full.poses[i] for i in chosen]
     Q = np.array([full.start_q, *(p.q for p in poses)])

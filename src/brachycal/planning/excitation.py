@@ -33,7 +33,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from brachycal.calibration.chain import ChainFit
-from brachycal.calibration.robot.identification import RobotIdentification
+from brachycal.calibration.robot.identification import IdentificationResult
 from brachycal.calibration.robot.observability import (
     SAMPLE,
     TOUCH,
@@ -348,7 +348,7 @@ class ExcitationPlan:
 
 
 def plan_excitation(
-    identified: RobotIdentification,
+    identified: IdentificationResult,
     session: Session,
     nominal: Robot,
     budget_minutes: float = DEFAULT_BUDGET_MINUTES,

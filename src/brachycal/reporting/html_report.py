@@ -15,7 +15,7 @@ import numpy as np
 
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.sequential.image_to_probe import METHOD_LABELS
-from brachycal.calibration.sequential.method import CalibrationResult, loo_points
+from brachycal.calibration.sequential.method import SequentialResult, loo_points
 from brachycal.data.session import Session
 from brachycal.io import OutputSet, atomic_open, output_set, staged_destination
 from brachycal.model.robot import Robot
@@ -37,7 +37,7 @@ def _img(path: Path) -> str:
 
 def write_report(
     folder: str | os.PathLike[str],
-    result: CalibrationResult,
+    result: SequentialResult,
     session: Session,
     robot: Robot,
     session_path: str = "",
@@ -61,7 +61,7 @@ def write_report(
 
 def _write_report(
     staged: dict[str, Path],
-    result: CalibrationResult,
+    result: SequentialResult,
     session: Session,
     robot: Robot,
     session_path: str,

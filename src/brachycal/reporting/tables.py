@@ -17,7 +17,7 @@ from brachycal.imaging.pixels import SCANNER_SOUND_SPEED_M_S
 from brachycal.planning.robot_time import MECHANICAL_MINUTES, SECONDS_PER_SAMPLE
 
 if TYPE_CHECKING:  # types only: `brachycal plan` prints plan_text without loading the calibration
-    from brachycal.calibration.sequential.method import CalibrationResult
+    from brachycal.calibration.sequential.method import SequentialResult
     from brachycal.planning.plan import Plan
 
 
@@ -29,7 +29,7 @@ def _header(first: str, width: int) -> str:
     return f"{first:<{width}} {'MAE (mm)':>9} {'RMSE (mm)':>10} {'SD (mm)':>8} {'max (mm)':>9}"
 
 
-def table_i(result: CalibrationResult) -> str:
+def table_i(result: SequentialResult) -> str:
     """TABLE I. The accuracy of mechanical calibration (validation at the second reference tip)."""
     width = 26
     n = result.needle.validation.n
@@ -44,7 +44,7 @@ def table_i(result: CalibrationResult) -> str:
     return "\n".join(lines)
 
 
-def table_ii(result: CalibrationResult, chain_loocv: ErrorStats | None = None) -> str:
+def table_ii(result: SequentialResult, chain_loocv: ErrorStats | None = None) -> str:
     """TABLE II. The accuracy of US probe calibration (leave-one-out over the samples).
 
     ``chain_loocv`` adds the whole-chain method's row (its own leave-one-out figures); a method
@@ -68,8 +68,8 @@ def table_ii(result: CalibrationResult, chain_loocv: ErrorStats | None = None) -
     return "\n".join(lines)
 
 
-def refused_rows(result: CalibrationResult, width: int) -> list[str]:
-    """One row per method that refused the samples (:attr:`CalibrationResult.refused`): its label
+def refused_rows(result: SequentialResult, width: int) -> list[str]:
+    """One row per method that refused the samples (:attr:`SequentialResult.refused`): its label
     and the reason, in Table II's order."""
     return [f"{METHOD_LABELS[m]:<{width}} refused: {result.refused[m]}" for m in METHOD_LABELS if m in result.refused]
 
@@ -159,7 +159,7 @@ def table_iii(stats: dict[str, ErrorStats], n_targets: int) -> str:
     return "\n".join(lines)
 
 
-def uncertainty_table(result: CalibrationResult) -> str:
+def uncertainty_table(result: SequentialResult) -> str:
     """Predicted uncertainties (1 SD) of the sequential estimates, as the conditioning checks computed them."""
     lines = [
         "PREDICTED UNCERTAINTY (1 SD; tips from the trials' spread, rotations from the moves' lengths at "

@@ -25,8 +25,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from brachycal.calibration.result import calibrated_robot
-from brachycal.calibration.sequential.method import locate
+from brachycal.calibration.result import locate
 from brachycal.errors import InputError
 from brachycal.imaging.pixels import image_points
 from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
@@ -37,7 +36,7 @@ from brachycal.studies.targeting import targeting_error
 if TYPE_CHECKING:
     import viser
 
-    from brachycal.calibration.session.result_file import StoredCalibration
+    from brachycal.calibration.session.result_file import ResultFile
     from brachycal.data.session import Session
     from brachycal.simulation.twin import Twin
 
@@ -261,7 +260,7 @@ def poses_content(
 
 def calibration_content(
     robot: Robot,
-    stored: StoredCalibration,
+    stored: ResultFile,
     session: Session,
     method: str,
     *,
@@ -278,13 +277,13 @@ def calibration_content(
     Raises:
         InputError: ``method`` is not in the result.
     """
-    method = stored.method(method)
+    calibration = stored.calibration(method)
+    image = calibration.image
     software = stored.software_robot(robot)
-    image = stored.image[method]
-    shown = calibrated_robot(software, stored.T_ER_Ntip, stored.T_EL_Ptip, image)
+    shown = calibration.robot(software)
     q = session.samples_q
     real = transform_points(software.fk(robot.rig.needle_flange, q), stored.T_ER_Ntip[:3, 3])
-    calibrated = locate(software, q, session.uv_px, stored.T_EL_Ptip, image)
+    calibrated = locate(software, q, session.uv_px, calibration)
     points = {"real": real, "calibrated": calibrated}
     vectors = {"residual": (real, calibrated)}
     # The planner aligns the cube with the image at the first pose: its axes are the image's.
@@ -293,7 +292,7 @@ def calibration_content(
     extent = np.ptp((real - T_cube[:3, 3]) @ T_cube[:3, :3], axis=0)
     cube = (T_cube, float(max(extent.max(), 1e-3)))
     if twin is not None:
-        hit = targeting_error(twin, stored.T_ER_Ntip, stored.T_EL_Ptip, image, n_targets, software=software)
+        hit = targeting_error(twin, calibration, n_targets, software=software)
         points["target"], points["landed"] = hit.targets_m, hit.landed_m
         vectors["landed"] = (hit.targets_m, hit.landed_m)
     size = (int(session.size_px[0]), int(session.size_px[1]))

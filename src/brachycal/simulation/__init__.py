@@ -15,7 +15,7 @@
 What runs calibrations on the twin (targeting, studies, designs, the demo) is :mod:`brachycal.studies`.
 """
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from brachycal._lazy import attach
 
@@ -26,7 +26,23 @@ if TYPE_CHECKING:  # imported on first use (each simulation loads the robot, Sci
     from brachycal.simulation.twin import Twin, TwinConfig, simulate
     from brachycal.simulation.twin_files import TWIN_FILES, read_twin, write_twin
 
-__getattr__, __dir__ = attach(__name__, __file__)
+_lazy_getattr, __dir__ = attach(__name__, __file__)
+
+#: Names that moved to :mod:`brachycal.studies` (the studies sit above the twin, and this package
+#: may not import them): asking for one here says where it went.
+_MOVED_TO_STUDIES = (
+    "DESIGNS DemoRun NWireSimConfig PhantomSession RunParams STUDY_METHODS Table3 TargetingResult TrackerRoute "
+    "compare_designs compare_excitation evaluate_design evaluate_excitation extended_twin_session phantom_route "
+    "run_demo run_study simulate_phantom summarise sweep table3 targeting_error tracker_route"
+).split()
+
+
+def __getattr__(name: str) -> Any:
+    if name in _MOVED_TO_STUDIES:
+        # ImportError, not AttributeError: ``from brachycal.simulation import x`` keeps this message.
+        raise ImportError(f"brachycal.simulation.{name} moved: use brachycal.studies.{name}", name=name)
+    return _lazy_getattr(name)
+
 
 __all__ = [
     "RECORDING_FILES",

@@ -43,7 +43,7 @@ from brachycal.simulation.exact import touch, touch_tools
 from brachycal.simulation.twin import Twin, TwinConfig, simulate
 
 if TYPE_CHECKING:
-    from brachycal.calibration.session.result_file import StoredCalibration
+    from brachycal.calibration.session.result_file import ResultFile
 
 
 @dataclass(frozen=True)
@@ -265,7 +265,7 @@ def _turned_touch(robot: Robot, frame: str, arm: list[int], q: FloatArray, rotve
 
 
 def noise_free_residuals_mm(
-    stored: StoredCalibration,
+    stored: ResultFile,
     method: str,
     robot: Robot,
     twin: Twin,
@@ -359,17 +359,7 @@ class CalibratedTwin:
         self.method = self.stored.method(None)
         self.robot = self.stored.software_robot(robot)
         full = plan_poses(robot, twin.config.spec)
-        image = self.stored.image[self.method]
-        self.check_plan = plan_check(
-            full,
-            robot,
-            self.stored.T_ER_Ntip,
-            self.stored.T_EL_Ptip,
-            image.T_Ptip_I,
-            image.spacing_m,
-            count=count,
-            touches=touches,
-        )
+        self.check_plan = plan_check(full, robot, self.stored.calibration(self.method), count=count, touches=touches)
         self.touches = touches
         self.pose_nulls = pose_nulls
         self.q_planned = np.array([p.q for p in self.check_plan.plan.poses])

@@ -25,8 +25,9 @@ import numpy as np
 
 from brachycal.calibration.chain import fit_chain, select_model
 from brachycal.calibration.metrics import ErrorStats
+from brachycal.calibration.result import Calibration
 from brachycal.calibration.sequential.image_to_probe import METHODS
-from brachycal.calibration.sequential.method import CalibrationResult, calibrate, loo_points
+from brachycal.calibration.sequential.method import SequentialResult, calibrate, loo_points
 from brachycal.calibration.session.result_file import write_result
 from brachycal.data.session import FILES as SESSION_FILES
 from brachycal.data.session import Session, read_session
@@ -68,7 +69,7 @@ class DemoRun:
     origin: str
     twin: Twin
     session: Session
-    result: CalibrationResult
+    result: SequentialResult
     n_targets: int
     targeting: dict[str, TargetingResult]
     tracking: NWireSimConfig
@@ -170,14 +171,10 @@ def run_demo(
         result = calibrate(session, robot)
         write_result(result, out.path(folder / "result.json", make_parents=True), force=force, robot=robot)
     # A method that refused the session has no calibration to judge (Table II says why).
-    targeting = {
-        m: targeting_error(twin, result.T_ER_Ntip, result.T_EL_Ptip, result.image[m], n_targets)
-        for m in METHODS
-        if m in result.image
-    }
+    targeting = {m: targeting_error(twin, result.calibration(m), n_targets) for m in METHODS if m in result.image}
     tracking = NWireSimConfig(seed=twin.config.seed)
     route = tracker_route(twin, tracking)
-    tracker = targeting_error(twin, result.T_ER_Ntip, route.T_EL_marker, route.image, n_targets)
+    tracker = targeting_error(twin, Calibration(result.T_ER_Ntip, route.T_EL_marker, route.image), n_targets)
     figure = FIGURE_METHOD if FIGURE_METHOD in result.image else next(iter(result.image))
     p_real, p_cal = loo_points(session, robot, result, figure)
     return DemoRun(origin, twin, session, result, n_targets, targeting, tracking, tracker, p_real, p_cal, figure)
@@ -252,7 +249,7 @@ def table3_seed(
 
 def table3_twin(
     robot: Robot, twin: Twin, n_targets: int = 50, chain: bool = True
-) -> tuple[dict[str, float], str | None, CalibrationResult]:
+) -> tuple[dict[str, float], str | None, SequentialResult]:
     """Table III's row values on one twin: MAEs (mm) by :data:`TABLE3_PAPER` label and the phantom
     routes' image errors alone (mm, :data:`TABLE3_IMAGE` labels), the chain's image model (None
     without the chain), and the fusion calibration (its needle tip serves the tracker routes too).
@@ -266,7 +263,7 @@ def table3_twin(
     result = calibrate(twin.session, robot, ("icp", "kabsch", "horn"))
 
     def mae(T_ER_Ntip: FloatArray, T_EL_probe: FloatArray, image) -> float:
-        return targeting_error(twin, T_ER_Ntip, T_EL_probe, image, n_targets).stats.mae_mm
+        return targeting_error(twin, Calibration(T_ER_Ntip, T_EL_probe, image), n_targets).stats.mae_mm
 
     # A fusion method that refused this seed's session has no targeting error: NaN, left out of the means.
     row = {
@@ -286,7 +283,7 @@ def table3_twin(
     truth = twin.truth
     T_marker_image = inverse(T_PTIP_MARKER) @ truth.T_Ptip_I
     for label, other in routes.items():
-        landing = targeting_error(twin, result.T_ER_Ntip, other.T_EL_marker, other.image, n_targets)
+        landing = targeting_error(twin, Calibration(result.T_ER_Ntip, other.T_EL_marker, other.image), n_targets)
         row[label] = landing.stats.mae_mm
         true_points = transform_points(T_marker_image, image_points(landing.uv_px, truth.spacing_m))
         row[TABLE3_IMAGE[label]] = ErrorStats.between(true_points, other.image.probe_points(landing.uv_px)).mae_mm

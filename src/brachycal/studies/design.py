@@ -102,7 +102,7 @@ def evaluate_design(robot: Robot, name: str, seed: int, targets: int = 30) -> di
     predicted = predicted_rms_mm(
         landing_covariance(fit, robot, twin.session.spacing_m, reference.samples_q, reference.uv_px)
     )
-    actual = targeting_error(twin, fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image, targets).stats
+    actual = targeting_error(twin, fit.calibration(), targets).stats
     minutes = MECHANICAL_MINUTES + (len(offsets) * SECONDS_PER_SAMPLE + plan.motion_time_s["optimised"]) / 60
     rms = float(np.sqrt(np.mean(predicted**2)))
     return {

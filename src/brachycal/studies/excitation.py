@@ -33,7 +33,7 @@ import numpy as np
 
 from brachycal.calibration import calibrate
 from brachycal.calibration.chain import RobotAccuracy
-from brachycal.calibration.robot.identification import RobotIdentification, choose_and_identify, identify_robot
+from brachycal.calibration.robot.identification import IdentificationResult, choose_and_identify, identify_robot
 from brachycal.calibration.robot.observability import SAMPLE, Observation, extended_session
 from brachycal.data.session import Session
 from brachycal.imaging.pixels import image_points
@@ -113,14 +113,12 @@ def evaluate_excitation(
     extended = extended_twin_session(twin, plan.observations)
     again = identify_robot(extended, robot, initial, choice.model, accuracy) if plan.chosen else identified
 
-    def targeting(ident: RobotIdentification) -> tuple[float, float]:
+    def targeting(ident: IdentificationResult) -> tuple[float, float]:
         fit, software = ident.fit, ident.robot(robot)
-        hit = targeting_error(twin, fit.T_ER_Ntip, fit.T_EL_Ptip, fit.image, targets, software=software)
+        hit = targeting_error(twin, fit.calibration(), targets, software=software)
         held = targeting_error(
             twin,
-            fit.T_ER_Ntip,
-            fit.T_EL_Ptip,
-            fit.image,
+            fit.calibration(),
             targets,
             software=software,
             torso_turn_rad=HELD_OUT_TORSO_TURN_RAD,

@@ -300,7 +300,7 @@ def tracker_route(
     result = calibrate_nwire(uv, p_marker, nominal_spacing_m)
     return TrackerRoute(
         _hand_eye_session(twin, sim, tracker, rng["encoder"]),
-        ImageCalibration("nwire", result.T_probe_image, result.spacing_m),
+        ImageCalibration("nwire", result.T_Ptip_I, result.spacing_m),
     )
 
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from brachycal.calibration.phantom.features import PhantomCalibration
+from brachycal.calibration.phantom.features import PhantomResult
 from brachycal.calibration.phantom.phantom_file import PhantomObservations
 from brachycal.calibration.phantom.wedge import Face, WedgePhantom, calibrate_wedge, read_wedge_phantom
 from brachycal.calibration.phantom.wire import WirePhantom, calibrate_wire, read_wire_phantom
@@ -229,7 +229,7 @@ def _crossing(T_image_phantom: FloatArray, wire: Wire, z: float) -> FloatArray:
     return a + ((z - a[2]) / (b[2] - a[2])) * (b - a)
 
 
-def calibrate_session(session: PhantomSession) -> PhantomCalibration:
+def calibrate_session(session: PhantomSession) -> PhantomResult:
     """The phantom method's fit of a simulated session."""
     if isinstance(session.phantom, WedgePhantom):
         return calibrate_wedge(session.phantom, session.observations)

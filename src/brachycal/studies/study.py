@@ -25,13 +25,14 @@ import numpy as np
 
 from brachycal.calibration import calibrate
 from brachycal.calibration.chain import RobotAccuracy, cross_validate, fit_chain, select_model
+from brachycal.calibration.result import Calibration
 from brachycal.calibration.robot.identification import (
     IDENTIFICATION_FOLDS,
     choose_and_identify,
     cross_validate_identification,
 )
 from brachycal.calibration.sequential.image_to_probe import METHODS
-from brachycal.calibration.sequential.method import CalibrationResult
+from brachycal.calibration.sequential.method import SequentialResult
 from brachycal.errors import DegenerateDataError, InputError
 from brachycal.model.description import load_description
 from brachycal.model.robot import Robot
@@ -174,7 +175,7 @@ def run_one(params: RunParams) -> list[dict[str, object]]:
     )
     twin = simulate(robot, config)
     sequential = tuple(m for m in params.methods if m in METHODS)
-    result: CalibrationResult | None = None
+    result: SequentialResult | None = None
     refusal = ""
     try:
         result = calibrate(twin.session, robot, sequential or ("scaled_uv",))
@@ -221,7 +222,7 @@ FIGURES = (
 )
 
 
-def _judge(twin: Twin, robot: Robot, result: CalibrationResult, method: str, targets: int) -> dict[str, object]:
+def _judge(twin: Twin, robot: Robot, result: SequentialResult, method: str, targets: int) -> dict[str, object]:
     """One method's calibration of the twin's session and its figures (:data:`FIGURES`)."""
     session, software = twin.session, robot
     n, chosen = len(session.uv_px), ""
@@ -241,12 +242,16 @@ def _judge(twin: Twin, robot: Robot, result: CalibrationResult, method: str, tar
     else:
         T_ER_Ntip, T_EL_Ptip, image = result.T_ER_Ntip, result.T_EL_Ptip, result.image[method]
         loo = result.loocv[method]
-    hit = targeting_error(twin, T_ER_Ntip, T_EL_Ptip, image, targets, software=software).stats
+    hit = targeting_error(twin, Calibration(T_ER_Ntip, T_EL_Ptip, image), targets, software=software).stats
     if torso_index(robot) is None:  # no torso to turn: no held-out configurations (NaN, module docstring)
         held_out_mae_mm = held_out_max_mm = float("nan")
     else:
         held_out = targeting_error(
-            twin, T_ER_Ntip, T_EL_Ptip, image, targets, software=software, torso_turn_rad=HELD_OUT_TORSO_TURN_RAD
+            twin,
+            Calibration(T_ER_Ntip, T_EL_Ptip, image),
+            targets,
+            software=software,
+            torso_turn_rad=HELD_OUT_TORSO_TURN_RAD,
         ).stats
         held_out_mae_mm, held_out_max_mm = held_out.mae_mm, held_out.max_mm
     return {

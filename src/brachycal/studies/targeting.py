@@ -26,12 +26,13 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from brachycal.calibration.metrics import ErrorStats
-from brachycal.calibration.result import ImageCalibration
+from brachycal.calibration.result import Calibration, calibration_args
 from brachycal.calibration.sequential.image_to_probe import predict_base
 from brachycal.errors import InputError, SolverError
 from brachycal.imaging.pixels import image_points, pixels
@@ -78,14 +79,17 @@ def random_targets(twin: Twin, n: int) -> FloatArray:
 
 def targeting_error(
     twin: Twin,
-    T_ER_Ntip: FloatArray,
-    T_EL_Ptip: FloatArray,
-    image: ImageCalibration,
+    calibration: Calibration,
+    *args: Any,
     n_targets: int = 50,
     software: Robot | None = None,
     torso_turn_rad: float = 0.0,
 ) -> TargetingResult:
-    """Needle landing error over ``n_targets`` targets for one calibration (see the module docstring).
+    """Needle landing error over ``n_targets`` targets for one ``calibration`` (see the module docstring).
+
+    ``targeting_error(twin, calibration, n_targets=50, *, software=None, torso_turn_rad=0.0)``; the
+    loose form ``(twin, T_ER_Ntip, T_EL_Ptip, image, n_targets, ...)`` works for one release
+    (deprecated). ``n_targets`` may also come positionally after the calibration.
 
     ``software`` is the robot model the software computes and commands with (default: the
     nominal URDF; a calibration that corrects the robot passes its corrected model).
@@ -96,6 +100,10 @@ def targeting_error(
         SolverError: a target is out of reach from all five nearest sample poses.
         InputError: a non-zero torso turn on a robot without a shared joint.
     """
+    calibration, rest = calibration_args("targeting_error", calibration, args)
+    if len(rest) > 1:
+        raise TypeError("targeting_error() takes (twin, calibration, n_targets)")
+    n_targets = rest[0] if rest else n_targets
     check_int(n_targets, "number of targets", low=1, high=MAX_TARGETS)
     check_range(torso_turn_rad, "torso turn", low=-MAX_TORSO_TURN_RAD, high=MAX_TORSO_TURN_RAD, unit="rad")
     torso = torso_index(twin.nominal)
@@ -104,7 +112,7 @@ def targeting_error(
             f"robot {twin.nominal.rig.name!r} has no joint shared by both arms (no torso): held-out "
             "configurations by a torso turn need one"
         )
-    aim = _Aim(twin, software or twin.nominal, T_ER_Ntip, T_EL_Ptip, image)
+    aim = _Aim(twin, software or twin.nominal, calibration)
     targets = random_targets(twin, n_targets)
     landed = np.empty_like(targets)
     uv = np.empty((n_targets, 2))
@@ -129,11 +137,10 @@ def targeting_error(
 class _Aim:
     """One calibration used to image a target, compute it, and send the needle there."""
 
-    def __init__(
-        self, twin: Twin, software: Robot, T_ER_Ntip: FloatArray, T_EL_Ptip: FloatArray, image: ImageCalibration
-    ) -> None:
-        self.twin, self.software, self.T_EL_Ptip, self.image = twin, software, T_EL_Ptip, image
-        self.nominal_cal = software.with_tool_transform(NEEDLE_TIP, T_ER_Ntip)
+    def __init__(self, twin: Twin, software: Robot, calibration: Calibration) -> None:
+        self.twin, self.software = twin, software
+        self.T_EL_Ptip, self.image = calibration.T_EL_Ptip, calibration.image
+        self.nominal_cal = software.with_tool_transform(NEEDLE_TIP, calibration.T_ER_Ntip)
         rig = twin.nominal.rig
         self.needle_arm, self.probe_arm = rig.needle_arm_indices, rig.probe_arm_indices
         self.probe_flange = rig.probe_flange

@@ -36,7 +36,7 @@ from brachycal.calibration.chain.result import ChainFit
 from brachycal.calibration.chain.robot_terms import DEFAULT_ROBOT_ACCURACY, RobotAccuracy, robot_jacobian_at
 from brachycal.calibration.least_squares import MAX_ITERATIONS
 from brachycal.calibration.sequential.image_to_probe import ImageCalibration
-from brachycal.calibration.sequential.method import CalibrationResult
+from brachycal.calibration.sequential.method import SequentialResult
 from brachycal.data.session import Session
 from brachycal.errors import SolverError
 from brachycal.model.robot import Robot
@@ -90,7 +90,7 @@ class CovarianceTerms:
 
 
 def offset_joints(
-    session: Session, robot: Robot, initial: CalibrationResult, model: str, samples: np.ndarray | None, rounds: int
+    session: Session, robot: Robot, initial: SequentialResult, model: str, samples: np.ndarray | None, rounds: int
 ) -> tuple[int, ...]:
     """Indices of the joints whose zero offsets this session identifies (:func:`identifiable_joint_offsets`
     of a fit without them)."""
@@ -253,7 +253,7 @@ def assemble(
 def fit_chain(
     session: Session,
     robot: Robot,
-    initial: CalibrationResult,
+    initial: SequentialResult,
     model: str = "scaled_uv",
     *,
     samples: np.ndarray | None = None,

@@ -15,7 +15,7 @@ from functools import cached_property
 import numpy as np
 
 from brachycal.calibration.chain.image_models import ImageModel, image_model
-from brachycal.calibration.sequential.method import CalibrationResult
+from brachycal.calibration.sequential.method import SequentialResult
 from brachycal.se3 import FloatArray, rotation
 
 #: The fixed blocks of the parameter vector, in order: name → length.
@@ -123,9 +123,7 @@ class ParameterLayout:
         rtips = x[b["p_R_Rtip1"].start : b["p_R_Rtip2"].stop].reshape(2, 3).copy()  # adjacent blocks
         return T_ER_Ntip, T_EL_Ptip, T_Ptip_I, rtips, self.image.spacing(nominal_spacing, x[b["scale"]])
 
-    def start(
-        self, initial: CalibrationResult, nominal_spacing: FloatArray
-    ) -> tuple[FloatArray, dict[str, FloatArray]]:
+    def start(self, initial: SequentialResult, nominal_spacing: FloatArray) -> tuple[FloatArray, dict[str, FloatArray]]:
         """``(x (P,), base)``: the starting point from the sequential result (its ``scaled_uv`` image
         calibration, else its first) and the starting rotations ``base`` that ``x``'s rotations are about."""
         image = initial.image.get("scaled_uv") or next(iter(initial.image.values()))

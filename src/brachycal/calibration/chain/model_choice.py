@@ -15,7 +15,7 @@ from brachycal.calibration.chain.problem import ChainProblem
 from brachycal.calibration.chain.result import ChainFit
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.parallel import parallel_calls
-from brachycal.calibration.sequential.method import CalibrationResult
+from brachycal.calibration.sequential.method import SequentialResult
 from brachycal.data.session import Session
 from brachycal.errors import DegenerateDataError
 from brachycal.model.robot import Robot
@@ -33,7 +33,7 @@ FOLDS_PER_RUN = 32
 def cross_validate(
     session: Session,
     robot: Robot,
-    initial: CalibrationResult,
+    initial: SequentialResult,
     model: str,
     folds: int = 8,
     seed: int = 0,
@@ -70,7 +70,7 @@ def cross_validate(
 def fold_errors(
     session: Session,
     robot: Robot,
-    initial: CalibrationResult,
+    initial: SequentialResult,
     model: str,
     folds: int = 8,
     seed: int = 0,
@@ -110,7 +110,7 @@ class FoldRuns:
         cls,
         session: Session,
         robot: Robot,
-        initial: CalibrationResult,
+        initial: SequentialResult,
         model: str,
         folds: int = 8,
         seed: int = 0,
@@ -209,7 +209,7 @@ class ModelSelection:
 
     session: Session
     robot: Robot
-    initial: CalibrationResult
+    initial: SequentialResult
     models: tuple[str, ...]
     folds: int = 8
 
@@ -281,7 +281,7 @@ class ModelSelection:
 def select_model(
     session: Session,
     robot: Robot,
-    initial: CalibrationResult,
+    initial: SequentialResult,
     models: tuple[str, ...] = MODELS,
     folds: int = 8,
     *,

@@ -17,7 +17,7 @@ from brachycal.calibration.chain.jacobian import chain_jacobian
 from brachycal.calibration.chain.layout import ParameterLayout, Unpacked
 from brachycal.calibration.chain.residuals import chain_residuals, image_residuals
 from brachycal.calibration.least_squares import Solution, solve_least_squares
-from brachycal.calibration.sequential.method import CalibrationResult
+from brachycal.calibration.sequential.method import SequentialResult
 from brachycal.data.session import Session
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray
@@ -59,7 +59,7 @@ class ChainProblem:
 
     @classmethod
     def start(
-        cls, session: Session, robot: Robot, initial: CalibrationResult, layout: ParameterLayout
+        cls, session: Session, robot: Robot, initial: SequentialResult, layout: ParameterLayout
     ) -> tuple[ChainProblem, FloatArray]:
         """The problem and its starting point ``x (P,)`` from the sequential result ``initial``."""
         data = ChainData.of(session, robot)

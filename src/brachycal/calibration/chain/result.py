@@ -10,7 +10,7 @@ from brachycal.calibration.chain.conditioning import Conditioning
 from brachycal.calibration.chain.layout import ParameterLayout
 from brachycal.calibration.chain.noise import NoiseLevel
 from brachycal.calibration.chain.robot_terms import robot_jacobian_at
-from brachycal.calibration.result import ImageCalibration
+from brachycal.calibration.result import Calibration, ImageCalibration
 from brachycal.calibration.robot_accuracy import RobotAccuracy
 from brachycal.data.session import Session
 from brachycal.model.robot import Robot
@@ -74,6 +74,11 @@ class ChainFit:
     noise_share: dict[str, float] = field(default_factory=dict)
     robust_x: FloatArray | None = field(default=None, repr=False)
     image_axes_noise: dict[str, NoiseLevel] = field(default_factory=dict)
+
+    def calibration(self) -> Calibration:
+        """The fit as a :class:`~brachycal.calibration.result.Calibration` (method ``image.method``,
+        its joint offsets as robot corrections; no provenance: the caller knows the session)."""
+        return Calibration(self.T_ER_Ntip, self.T_EL_Ptip, self.image, joint_offsets_rad=self.joint_offsets_rad)
 
     def offsets(self, joint_names: tuple[str, ...]) -> FloatArray:
         """``(nq,)`` estimated joint zero offsets (zeros unless estimated), radians."""

@@ -10,11 +10,13 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
+from brachycal._lazy import renamed
 from brachycal.calibration.result import ImageCalibration
 from brachycal.calibration.sequential.image_to_probe import MAX_REACH_SD_M, REACH_M, WARN_REACH_SD_M
 from brachycal.errors import ConditioningWarning, DegenerateDataError, SolverError
@@ -61,7 +63,7 @@ class FeatureRows:
 
 
 @dataclass(frozen=True)
-class PhantomCalibration:
+class PhantomResult:
     """A phantom fit: ``T_marker_image`` (rigid) with pixel spacings, its residuals and conditioning.
 
     Attributes:
@@ -243,7 +245,7 @@ def conditioning(
     return reach_sd, reach_sd_fit, noise_sd
 
 
-def fit_phantom(method: str, rows: FeatureRows, T_phantom_marker: FloatArray) -> PhantomCalibration:
+def fit_phantom(method: str, rows: FeatureRows, T_phantom_marker: FloatArray) -> PhantomResult:
     """Closed-form start, refinement and conditioning check: the whole fit (module docstring).
 
     Args:
@@ -271,7 +273,7 @@ def fit_phantom(method: str, rows: FeatureRows, T_phantom_marker: FloatArray) ->
             ConditioningWarning,
             stacklevel=2,
         )
-    return PhantomCalibration(
+    return PhantomResult(
         method,
         T,
         s,
@@ -325,3 +327,8 @@ def check_layout(rows: FeatureRows, what: str, source: str | None = None) -> Non
         f"{where}{what}: one image cannot fix the image plane's {', '.join(free)} in the phantom "
         f"({rank} independent equations per image, 6 needed)"
     )
+
+
+#: Former names, given for one release with a DeprecationWarning.
+if not TYPE_CHECKING:  # type checkers see only the new names
+    __getattr__ = renamed(__name__, {"PhantomCalibration": "PhantomResult"})

@@ -22,12 +22,14 @@ u/v pixel spacings (the constrained model), with 3D outlier rejection.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
-from typing import cast
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from brachycal._lazy import renamed
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.sequential import registration
 from brachycal.data.formats.plus_files import PlusConfig, SegmentedFrame, Wire
@@ -176,36 +178,42 @@ def wire_point_pairs(config: PlusConfig, frames: list[SegmentedFrame]) -> tuple[
 
 
 @dataclass(frozen=True)
-class NWireCalibration:
-    """``T_Probe_Image`` as a rigid transform with pixel spacings, and as PLUS's affine matrix.
+class NWireResult:
+    """``T_Ptip_I`` as a rigid transform with pixel spacings, and as PLUS's affine matrix.
 
     Attributes:
-        T_probe_image: ``(4, 4)`` rigid.
+        T_Ptip_I: ``(4, 4)`` rigid.
         spacing_m: ``(2,)`` pixel spacing (s_u, s_v), metres.
         affine: ``(4, 4)`` unconstrained affine image→probe (columns 0, 1 carry the scales; metres).
         inliers: ``(K,)`` which calibration points were kept.
         residuals_m: ``(K,)`` 3D residuals of the rigid+scales fit at all points.
     """
 
-    T_probe_image: FloatArray
+    T_Ptip_I: FloatArray
     spacing_m: FloatArray
     affine: FloatArray
     inliers: np.ndarray
     residuals_m: FloatArray
+
+    @property
+    def T_probe_image(self) -> FloatArray:
+        """Deprecated spelling of :attr:`T_Ptip_I` (kept one release)."""
+        warnings.warn("T_probe_image is deprecated: use T_Ptip_I", DeprecationWarning, stacklevel=2)
+        return self.T_Ptip_I
 
     def to_probe(self, uv_px: ArrayLike, model: str = "rigid") -> FloatArray:
         """Pixels ``(N, 2)`` mapped into the probe frame by ``model`` (``"affine"``, ``"rigid"``), metres ``(N, 3)``."""
         uv = np.atleast_2d(np.asarray(uv_px, dtype=float))
         if model == "affine":
             return uv @ self.affine[:3, :2].T + self.affine[:3, 3]
-        return transform_points(self.T_probe_image, image_points(uv, self.spacing_m))
+        return transform_points(self.T_Ptip_I, image_points(uv, self.spacing_m))
 
     def matrix(self, model: str = "rigid") -> FloatArray:
         """``model``'s Image→Probe ``(4, 4)`` as PLUS writes it (pixels → metres; the rigid model's
         columns scaled by ``(s_u, s_v, (s_u + s_v)/2)``)."""
         if model == "affine":
             return self.affine.copy()
-        M = self.T_probe_image.copy()
+        M = self.T_Ptip_I.copy()
         M[:3, :3] = M[:3, :3] * np.array([*self.spacing_m, self.spacing_m.mean()])
         return M
 
@@ -247,7 +255,7 @@ def fit_affine(uv_px: ArrayLike, p_probe: ArrayLike, reject_sd: float = 3.0) -> 
 
 def calibrate_nwire(
     uv_px: ArrayLike, p_probe: ArrayLike, nominal_spacing_m: float, *, reject_sd: float = 3.0, max_rounds: int = 5
-) -> NWireCalibration:
+) -> NWireResult:
     """Fit rigid + pixel spacings (and an affine) with iterative outlier rejection.
 
     Each round fits on the inliers and drops points whose 3D residual exceeds the mean plus
@@ -272,18 +280,18 @@ def calibrate_nwire(
             break
         inliers = keep
     affine = fit_affine(uv, p)[0]
-    for name, value in (("T_Probe_Image", T), ("pixel spacing", spacing), ("affine Image->Probe", affine)):
+    for name, value in (("T_Ptip_I", T), ("pixel spacing", spacing), ("affine Image->Probe", affine)):
         if not np.all(np.isfinite(value)):
             raise DegenerateDataError(
                 f"the N-wire fit's {name} is not finite: the {len(uv)} middle-wire points do not determine it"
             )
     if np.any(spacing <= 0):
         raise DegenerateDataError(f"the N-wire fit's pixel spacing {spacing.tolist()} is not positive")
-    return NWireCalibration(T, spacing, affine, inliers, residuals)
+    return NWireResult(T, spacing, affine, inliers, residuals)
 
 
 def reprojection_errors(
-    calibration: NWireCalibration, uv_px: ArrayLike, p_probe: ArrayLike, model: str = "rigid"
+    calibration: NWireResult, uv_px: ArrayLike, p_probe: ArrayLike, model: str = "rigid"
 ) -> ErrorStats:
     """3D distances between the image points mapped into the probe and the wire points."""
     return ErrorStats.between(p_probe, calibration.to_probe(uv_px, model))
@@ -297,7 +305,7 @@ def best_fraction(stats: ErrorStats, fraction: float = 0.95) -> ErrorStats:
 
 
 def wire_errors_2d(
-    calibration: NWireCalibration, config: PlusConfig, frames: list[SegmentedFrame], model: str = "rigid"
+    calibration: NWireResult, config: PlusConfig, frames: list[SegmentedFrame], model: str = "rigid"
 ) -> dict[str, FloatArray]:
     """Per wire: signed pixel error ``segmented − projected`` ``(F, 2)``, as PLUS reports it.
 
@@ -349,3 +357,8 @@ def rotation_difference_deg(A: FloatArray, B: FloatArray) -> float:
     """Angle between the rotations of two (possibly scaled) 4×4 matrices, degrees (via SVD)."""
     R = nearest_rotation(A[:3, :3]).T @ nearest_rotation(B[:3, :3])
     return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0))))
+
+
+#: Former names, given for one release with a DeprecationWarning.
+if not TYPE_CHECKING:  # type checkers see only the new names
+    __getattr__ = renamed(__name__, {"NWireCalibration": "NWireResult"})

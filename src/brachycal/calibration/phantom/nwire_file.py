@@ -1,6 +1,6 @@
 """N-wire calibration of PLUS files, and its result file ``brachycal-nwire/1`` (JSON).
 
-:func:`nwire_from_files` reads a PLUS device-set configuration and a segmented-frames file
+:func:`calibrate_nwire_files` reads a PLUS device-set configuration and a segmented-frames file
 (:mod:`brachycal.data.formats.plus_files`), fits the image models of :mod:`brachycal.calibration.phantom.nwire`
 (PLUS's linear ``affine`` fit and brachycal's ``rigid`` rotation + u/v spacings) and PLUS fCal's four
 refinements (:mod:`brachycal.calibration.phantom.nwire_refine`) on the calibration frames, validates every
@@ -19,14 +19,17 @@ chosen ``model`` and why, and ``models``: every model's Image→Probe matrix (PL
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from brachycal._lazy import renamed
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.phantom.nwire import (
-    NWireCalibration,
+    NWireResult,
     best_fraction,
     calibrate_nwire,
     fit_affine,
@@ -77,11 +80,11 @@ class ModelValidation:
 
 
 @dataclass(frozen=True)
-class NWireRun:
+class NWireFileResult:
     """An N-wire calibration of PLUS files and its validation.
 
     Attributes:
-        calibration: the fitted models (rigid ``T_probe_image`` with spacings, and PLUS's affine).
+        calibration: the fitted models (rigid ``T_Ptip_I`` with spacings, and PLUS's affine).
         models: model (:data:`NWIRE_MODELS`) → its validation.
         calibration_points, validation_points: middle-wire points used to fit and to validate.
         frames_used, frames_total: calibration frames whose segmentation is usable, and all of them.
@@ -92,7 +95,7 @@ class NWireRun:
         model: the chosen model (:data:`NWIRE_MODELS`), and ``chosen_by`` how it was chosen.
     """
 
-    calibration: NWireCalibration
+    calibration: NWireResult
     models: dict[str, ModelValidation]
     calibration_points: int
     validation_points: int
@@ -120,7 +123,7 @@ class NWireRun:
     @property
     def rigid_vs_affine_deg(self) -> float:
         """Angle between the rigid and the affine models' rotations, degrees."""
-        return rotation_difference_deg(self.calibration.T_probe_image, self.calibration.affine)
+        return rotation_difference_deg(self.calibration.T_Ptip_I, self.calibration.affine)
 
     def to_json(self) -> dict[str, object]:
         """The ``brachycal-nwire/1`` payload (metres; ``*_mm`` and ``*_px`` where the key says)."""
@@ -129,7 +132,7 @@ class NWireRun:
         affine_mm[:3, :] *= 1e3
         return {
             "format": FORMAT,
-            "T_Probe_Image": c.T_probe_image.tolist(),
+            "T_Probe_Image": c.T_Ptip_I.tolist(),
             "spacing_mm": (c.spacing_m * 1e3).tolist(),
             "affine_mm": affine_mm.tolist(),
             "affine_spacing_mm": (self.affine_spacing_m * 1e3).tolist(),
@@ -190,9 +193,9 @@ def _stats_json(stats: ErrorStats) -> dict[str, float | int]:
     }
 
 
-def nwire_from_files(
+def calibrate_nwire_files(
     config_path: str | os.PathLike[str], frames_path: str | os.PathLike[str], *, model: str | None = None
-) -> NWireRun:
+) -> NWireFileResult:
     """Calibrate Image → Probe from a PLUS configuration and segmented frames, and validate every model.
 
     Fits PLUS's linear model, brachycal's rigid + u/v spacings model and PLUS fCal's four refinements
@@ -232,7 +235,7 @@ def nwire_from_files(
             wires_2d={name: WireErrors(e.mean(axis=0), e.std(axis=0), len(e)) for name, e in wires.items()},
         )
     chosen = model or min(models, key=lambda name: models[name].validation_best95.mae_mm)
-    return NWireRun(
+    return NWireFileResult(
         calibration=calibration,
         models=models,
         calibration_points=len(uv),
@@ -253,7 +256,7 @@ def _to_probe(image_to_probe: FloatArray, uv_px: FloatArray) -> FloatArray:
     return uv_px @ image_to_probe[:3, :2].T + image_to_probe[:3, 3]
 
 
-def write_nwire(run: NWireRun, path: str | os.PathLike[str], *, force: bool = False) -> Path:
+def write_nwire(run: NWireFileResult, path: str | os.PathLike[str], *, force: bool = False) -> Path:
     """Write ``run`` as ``brachycal-nwire/1`` JSON, all or nothing (never NaN).
 
     Raises:
@@ -263,11 +266,11 @@ def write_nwire(run: NWireRun, path: str | os.PathLike[str], *, force: bool = Fa
 
 
 @dataclass(frozen=True)
-class StoredNWire:
+class NWireFile:
     """What a ``brachycal-nwire/1`` file holds.
 
     Attributes:
-        T_probe_image: ``(4, 4)`` rigid Image → Probe, metres.
+        T_Ptip_I: ``(4, 4)`` rigid Image → Probe, metres.
         spacing_m: ``(2,)`` its pixel spacing, metres per pixel.
         affine: ``(4, 4)`` PLUS's affine Image → Probe, metres (pixels in, metres out).
         raw: the whole payload (errors, counts, input hashes).
@@ -275,7 +278,7 @@ class StoredNWire:
         models: model → its Image→Probe ``(4, 4)``, pixels → metres (empty in those files).
     """
 
-    T_probe_image: FloatArray
+    T_Ptip_I: FloatArray
     spacing_m: FloatArray
     affine: FloatArray
     raw: dict
@@ -283,16 +286,22 @@ class StoredNWire:
     models: dict[str, FloatArray] = field(default_factory=dict)
 
     @property
+    def T_probe_image(self) -> FloatArray:
+        """Deprecated spelling of :attr:`T_Ptip_I` (kept one release)."""
+        warnings.warn("T_probe_image is deprecated: use T_Ptip_I", DeprecationWarning, stacklevel=2)
+        return self.T_Ptip_I
+
+    @property
     def image_to_probe(self) -> FloatArray:
         """The chosen model's Image→Probe ``(4, 4)``, pixels → metres (PLUS's form)."""
         if self.model in self.models:
             return self.models[self.model]
-        M = self.T_probe_image.copy()
+        M = self.T_Ptip_I.copy()
         M[:3, :3] = M[:3, :3] * np.array([*self.spacing_m, self.spacing_m.mean()])
         return M
 
 
-def read_nwire(path: str | os.PathLike[str]) -> StoredNWire:
+def read_nwire(path: str | os.PathLike[str]) -> NWireFile:
     """Read a ``brachycal-nwire/1`` file back.
 
     Raises:
@@ -339,4 +348,12 @@ def read_nwire(path: str | os.PathLike[str]) -> StoredNWire:
     model = raw.get("model", "rigid")
     if not isinstance(model, str) or (models and model not in models):
         raise InputError(f"must name one of the file's models, got {model!r}", file=path, column="model")
-    return StoredNWire(T, spacing_m, affine, raw, model, models)
+    return NWireFile(T, spacing_m, affine, raw, model, models)
+
+
+#: Former names, given for one release with a DeprecationWarning.
+if not TYPE_CHECKING:  # type checkers see only the new names
+    __getattr__ = renamed(
+        __name__,
+        {"NWireRun": "NWireFileResult", "StoredNWire": "NWireFile", "nwire_from_files": "calibrate_nwire_files"},
+    )

@@ -8,13 +8,14 @@ Design: ``docs/nwire.md``, "How the refinements are computed".
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from brachycal.calibration.phantom.nwire import NWireCalibration, phantom_to_probe, wire_point_pairs
+from brachycal.calibration.phantom.nwire import NWireResult, phantom_to_probe, wire_point_pairs
 from brachycal.data.formats.plus_files import PlusConfig, SegmentedFrame
 from brachycal.errors import DegenerateDataError
 from brachycal.se3 import FloatArray, nearest_rotation
@@ -131,7 +132,7 @@ class Refinement:
     Attributes:
         name: :data:`REFINEMENTS` key.
         start: ``"affine"`` (PLUS's linear fit) or ``"rigid"`` (brachycal's rotation + spacings).
-        T_probe_image: ``(4, 4)`` rigid, metres.
+        T_Ptip_I: ``(4, 4)`` rigid, metres.
         spacing_m: ``(2,)`` pixel spacing (equal for ``iso``), metres per pixel.
         cost_rms: RMS of the minimised error at the solution: pixels (``2d``) or metres (``3d``).
         frames: calibration frames used (PLUS's non-outlier frames).
@@ -140,16 +141,22 @@ class Refinement:
 
     name: str
     start: str
-    T_probe_image: FloatArray
+    T_Ptip_I: FloatArray
     spacing_m: FloatArray
     cost_rms: float
     frames: int
     evaluations: int
 
     @property
+    def T_probe_image(self) -> FloatArray:
+        """Deprecated spelling of :attr:`T_Ptip_I` (kept one release)."""
+        warnings.warn("T_probe_image is deprecated: use T_Ptip_I", DeprecationWarning, stacklevel=2)
+        return self.T_Ptip_I
+
+    @property
     def matrix(self) -> FloatArray:
         """PLUS's ``(4, 4)`` Image→Probe of this model (pixels → metres)."""
-        return model_matrix(self.T_probe_image[:3, :3], self.T_probe_image[:3, 3], self.spacing_m)
+        return model_matrix(self.T_Ptip_I[:3, :3], self.T_Ptip_I[:3, 3], self.spacing_m)
 
 
 def _parameters(x: FloatArray, R0: FloatArray, isotropic: bool) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -231,7 +238,7 @@ def linear_fit_frames(data: WireObservations, kept_points: np.ndarray) -> np.nda
     return np.all(kept, axis=1, keepdims=False).reshape(len(data.frame))
 
 
-def refine_all(data: WireObservations, calibration: NWireCalibration, kept_points: np.ndarray) -> dict[str, Refinement]:
+def refine_all(data: WireObservations, calibration: NWireResult, kept_points: np.ndarray) -> dict[str, Refinement]:
     """Every refinement, from both starts, on PLUS's non-outlier frames; per name the start whose
     solution has the lower calibration cost (the validation frames are never looked at).
 
@@ -241,7 +248,7 @@ def refine_all(data: WireObservations, calibration: NWireCalibration, kept_point
         kept_points: the middle-wire points the linear fit kept, frame-major (:func:`linear_fit_frames`).
     """
     subset = data.subset(linear_fit_frames(data, kept_points))
-    rigid = model_matrix(calibration.T_probe_image[:3, :3], calibration.T_probe_image[:3, 3], calibration.spacing_m)
+    rigid = model_matrix(calibration.T_Ptip_I[:3, :3], calibration.T_Ptip_I[:3, 3], calibration.spacing_m)
     starts = {"affine": calibration.affine, "rigid": rigid}
     out = {}
     for name in REFINEMENTS:

@@ -291,7 +291,7 @@ def write_observations(
 
 def result_payload(calibration, inputs: dict[str, str]) -> dict:
     """The ``brachycal-phantom-result/1`` JSON of a
-    :class:`~brachycal.calibration.phantom.features.PhantomCalibration`."""
+    :class:`~brachycal.calibration.phantom.features.PhantomResult`."""
     return {
         "format": RESULT_FORMAT,
         "method": calibration.method,

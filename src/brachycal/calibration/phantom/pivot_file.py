@@ -1,6 +1,6 @@
 """Pivot calibration of a pose-list file, and its result file ``brachycal-pivot/1`` (JSON).
 
-:func:`pivot_from_file` reads a pose list (:mod:`brachycal.data.pose_list`), runs the estimator
+:func:`calibrate_pivot_files` reads a pose list (:mod:`brachycal.data.pose_list`), runs the estimator
 of :mod:`brachycal.calibration.phantom.pivot` and hashes the input; :func:`write_pivot` writes the result
 and :func:`read_pivot` reads it back. Lengths are in the units of the poses, which the file
 records (``units``: ``"m"`` or ``"mm"``); ``tip_in_tool`` is the tip in the tool's (marker's or
@@ -12,9 +12,11 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from brachycal._lazy import renamed
 from brachycal.calibration.labels import PIVOT_METHODS as PIVOT_METHOD_NAMES
 from brachycal.calibration.labels import POSE_UNITS
 from brachycal.calibration.phantom.pivot import PivotResult, pivot_algebraic, pivot_robust
@@ -33,7 +35,7 @@ UNITS = POSE_UNITS
 
 
 @dataclass(frozen=True)
-class PivotCalibration:
+class PivotFileResult:
     """A pivot calibration of one pose list: the estimate, the poses' names, the units, the input hash.
 
     Attributes:
@@ -94,7 +96,7 @@ def check_tool_length(result: PivotResult, units: str, path: str | os.PathLike[s
     )
 
 
-def pivot_from_file(path: str | os.PathLike[str], method: str = "algebraic", units: str = "m") -> PivotCalibration:
+def calibrate_pivot_files(path: str | os.PathLike[str], method: str = "algebraic", units: str = "m") -> PivotFileResult:
     """Pivot calibration of the pose list at ``path`` with ``method`` (:data:`PIVOT_METHODS`).
 
     Args:
@@ -119,10 +121,10 @@ def pivot_from_file(path: str | os.PathLike[str], method: str = "algebraic", uni
         kind = DegenerateDataError if isinstance(exc, DegenerateDataError) else InputError
         raise kind(exc.problem, file=path) from None
     check_tool_length(result, units, path)
-    return PivotCalibration(result, names, units, {Path(path).name: sha256_file(path)})
+    return PivotFileResult(result, names, units, {Path(path).name: sha256_file(path)})
 
 
-def write_pivot(calibration: PivotCalibration, path: str | os.PathLike[str], *, force: bool = False) -> Path:
+def write_pivot(calibration: PivotFileResult, path: str | os.PathLike[str], *, force: bool = False) -> Path:
     """Write ``calibration`` as ``brachycal-pivot/1`` JSON, all or nothing (never NaN).
 
     Raises:
@@ -132,7 +134,7 @@ def write_pivot(calibration: PivotCalibration, path: str | os.PathLike[str], *, 
 
 
 @dataclass(frozen=True)
-class StoredPivot:
+class PivotFile:
     """What a ``brachycal-pivot/1`` file holds (lengths in ``units``).
 
     Attributes:
@@ -148,7 +150,7 @@ class StoredPivot:
     raw: dict
 
 
-def read_pivot(path: str | os.PathLike[str]) -> StoredPivot:
+def read_pivot(path: str | os.PathLike[str]) -> PivotFile:
     """Read a ``brachycal-pivot/1`` file back.
 
     Raises:
@@ -171,4 +173,12 @@ def read_pivot(path: str | os.PathLike[str]) -> StoredPivot:
             raise InputError("must be three finite numbers", file=path, column=key)
         return p
 
-    return StoredPivot(point("tip_in_tool"), point("pivot_in_reference"), raw["units"], raw)
+    return PivotFile(point("tip_in_tool"), point("pivot_in_reference"), raw["units"], raw)
+
+
+#: Former names, given for one release with a DeprecationWarning.
+if not TYPE_CHECKING:  # type checkers see only the new names
+    __getattr__ = renamed(
+        __name__,
+        {"PivotCalibration": "PivotFileResult", "StoredPivot": "PivotFile", "pivot_from_file": "calibrate_pivot_files"},
+    )

@@ -14,7 +14,7 @@ from numpy.typing import ArrayLike
 
 from brachycal.calibration.phantom.features import (
     FeatureRows,
-    PhantomCalibration,
+    PhantomResult,
     check_layout,
     fit_phantom,
     linear_start,
@@ -155,7 +155,7 @@ def check_lines(observations: PhantomObservations) -> None:
         )
 
 
-def calibrate_wedge(phantom: WedgePhantom, observations: PhantomObservations) -> PhantomCalibration:
+def calibrate_wedge(phantom: WedgePhantom, observations: PhantomObservations) -> PhantomResult:
     """``T_marker_image`` with pixel spacings from a tracked multi-wedge session (module docstring).
 
     Raises:
@@ -170,7 +170,7 @@ def calibrate_wedge(phantom: WedgePhantom, observations: PhantomObservations) ->
 
 def calibrate_wedge_files(
     geometry: str | os.PathLike[str], observations: str | os.PathLike[str]
-) -> tuple[PhantomCalibration, WedgePhantom, PhantomObservations]:
+) -> tuple[PhantomResult, WedgePhantom, PhantomObservations]:
     """Read a geometry and an observations file and calibrate (the ``brachycal phantom --method wedge`` job)."""
     phantom = read_wedge_phantom(geometry)
     seen = read_observations(observations, KIND, phantom.names)

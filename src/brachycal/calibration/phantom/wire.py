@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from brachycal.calibration.phantom.features import FeatureRows, PhantomCalibration, check_layout, fit_phantom
+from brachycal.calibration.phantom.features import FeatureRows, PhantomResult, check_layout, fit_phantom
 from brachycal.calibration.phantom.phantom_file import (
     MM,
     PhantomGeometry,
@@ -131,7 +131,7 @@ def wire_rows(phantom: WirePhantom, observations: PhantomObservations) -> tuple[
     return rows, observations.T_phantom_marker(phantom.geometry.registration())
 
 
-def calibrate_wire(phantom: WirePhantom, observations: PhantomObservations) -> PhantomCalibration:
+def calibrate_wire(phantom: WirePhantom, observations: PhantomObservations) -> PhantomResult:
     """``T_marker_image`` with pixel spacings from a tracked arbitrary-wire session (module docstring).
 
     Raises:
@@ -144,7 +144,7 @@ def calibrate_wire(phantom: WirePhantom, observations: PhantomObservations) -> P
 
 def calibrate_wire_files(
     geometry: str | os.PathLike[str], observations: str | os.PathLike[str]
-) -> tuple[PhantomCalibration, WirePhantom, PhantomObservations]:
+) -> tuple[PhantomResult, WirePhantom, PhantomObservations]:
     """Read a geometry and an observations file and calibrate (the ``brachycal phantom --method wire`` job)."""
     phantom = read_wire_phantom(geometry)
     seen = read_observations(observations, KIND, phantom.names)

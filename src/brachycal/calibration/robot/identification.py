@@ -10,10 +10,12 @@ Design: ``docs/design/robot_identification.md``.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from brachycal._lazy import renamed
 from brachycal.calibration.chain import (
     INITIAL_SIGMA,
     MODELS,
@@ -40,7 +42,7 @@ from brachycal.calibration.chain import (
 )
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.robot.identifiability import COMPONENTS, Identifiability, identifiability
-from brachycal.calibration.sequential.method import CalibrationResult
+from brachycal.calibration.sequential.method import SequentialResult
 from brachycal.data.session import Session
 from brachycal.errors import DegenerateDataError, InputError
 from brachycal.model.robot import Robot
@@ -77,7 +79,7 @@ def corrected_robot(nominal: Robot, corrections: FloatArray) -> Robot:
 
 
 @dataclass(frozen=True)
-class RobotIdentification:
+class IdentificationResult:
     """The identified robot and the chain fit on it.
 
     Attributes:
@@ -124,13 +126,13 @@ def prior_sd(robot: Robot, accuracy: RobotAccuracy) -> FloatArray:
 def identify_robot(
     session: Session,
     robot: Robot,
-    initial: CalibrationResult,
+    initial: SequentialResult,
     model: str,
     accuracy: RobotAccuracy,
     *,
     samples: np.ndarray | None = None,
     rounds: int = 2,
-) -> RobotIdentification:
+) -> IdentificationResult:
     """Identify the robot's geometry jointly with the whole chain (module docstring).
 
     Args:
@@ -165,7 +167,7 @@ def identify_robot(
     posterior = _posterior(A)
     fit = _with_posterior(fit, posterior, accuracy, len(fit.x), scale)
     corrections = solved.c.reshape(robot.nq, 6)
-    return RobotIdentification(
+    return IdentificationResult(
         corrections,
         tuple(robot.joint_names),
         accuracy,
@@ -195,7 +197,7 @@ class ChainStart:
 
 
 def chain_start(
-    session: Session, robot: Robot, initial: CalibrationResult, model: str, use: np.ndarray, rounds: int
+    session: Session, robot: Robot, initial: SequentialResult, model: str, use: np.ndarray, rounds: int
 ) -> ChainStart:
     """:func:`fit_chain`'s robust and final stages on ``robot`` (samples ``use``), unchecked."""
     problem, x = ChainProblem.start(session, robot, initial, ParameterLayout(model))
@@ -321,8 +323,8 @@ def _with_posterior(
 
 
 def choose_and_identify(
-    session: Session, robot: Robot, initial: CalibrationResult, accuracy: RobotAccuracy
-) -> tuple[ModelChoice, RobotIdentification]:
+    session: Session, robot: Robot, initial: SequentialResult, accuracy: RobotAccuracy
+) -> tuple[ModelChoice, IdentificationResult]:
     """The image model chosen by cross-validation (:func:`select_model`) and the robot identified
     with it. When the chain alone cannot choose on the URDF's robot (a worn robot's scatter leaves
     every model's rotations undetermined), the robot is first identified with the most flexible
@@ -348,7 +350,7 @@ IDENTIFICATION_FOLDS = 8
 def cross_validate_identification(
     session: Session,
     robot: Robot,
-    initial: CalibrationResult,
+    initial: SequentialResult,
     model: str,
     accuracy: RobotAccuracy,
     folds: int = IDENTIFICATION_FOLDS,
@@ -379,3 +381,8 @@ def cross_validate_identification(
         )
         errors[1, held] = np.linalg.norm(residuals[held], axis=1)
     return ErrorStats(errors[0]), ErrorStats(errors[1])
+
+
+#: Former names, given for one release with a DeprecationWarning.
+if not TYPE_CHECKING:  # type checkers see only the new names
+    __getattr__ = renamed(__name__, {"RobotIdentification": "IdentificationResult"})

@@ -12,7 +12,7 @@ import numpy as np
 
 from brachycal.calibration.chain import ChainData, chain_jacobian, robot_jacobian_at
 from brachycal.calibration.chain.uncertainty import landing_jacobian, landing_robot_jacobians
-from brachycal.calibration.robot.identification import RobotIdentification, prior_sd
+from brachycal.calibration.robot.identification import IdentificationResult, prior_sd
 from brachycal.data.session import Session, Touches
 from brachycal.errors import InputError
 from brachycal.model.robot import Robot
@@ -69,7 +69,7 @@ def extended_session(session: Session, extra: Sequence[Observation], prefix: str
 
 
 def observation_rows(
-    identified: RobotIdentification, session: Session, nominal: Robot, extra: Sequence[Observation]
+    identified: IdentificationResult, session: Session, nominal: Robot, extra: Sequence[Observation]
 ) -> list[FloatArray]:
     """Each observation's normalised rows ``(3, n)`` over ``δ = (θ, c/s)`` (module docstring), at the
     identification's estimate, with its noise levels (``touch`` or ``image``)."""
@@ -106,7 +106,7 @@ def observation_rows(
 
 
 def landing_weights(
-    identified: RobotIdentification, nominal: Robot, spacing_m: FloatArray, q: FloatArray, uv_px: FloatArray
+    identified: IdentificationResult, nominal: Robot, spacing_m: FloatArray, q: FloatArray, uv_px: FloatArray
 ) -> tuple[FloatArray, float]:
     """``H (n, n) = mean_t W_tᵀ W_t`` over targeting poses ``q (M, nq)``, ``uv_px (M, 2)``, and the
     encoder noise's constant mean squared landing error (m²) there (module docstring)."""
@@ -159,7 +159,7 @@ class Criterion:
         self.posterior = 0.5 * (self.posterior + self.posterior.T)
 
 
-def session_rows(identified: RobotIdentification, session: Session, nominal: Robot) -> dict[str, FloatArray]:
+def session_rows(identified: IdentificationResult, session: Session, nominal: Robot) -> dict[str, FloatArray]:
     """The session's own normalised rows over ``δ = (θ, c/s)`` at the estimate, per residual group
     (``touch``, ``axes``, ``image``; the samples the fit used): ``AᵀA`` is their sum plus the prior's."""
     fit = identified.fit
@@ -173,7 +173,7 @@ def session_rows(identified: RobotIdentification, session: Session, nominal: Rob
     return {g: J[rows] for g, rows in data.group_rows(int(keep.sum())).items()}
 
 
-def resolution(identified: RobotIdentification, session: Session, nominal: Robot, criterion: Criterion) -> float:
+def resolution(identified: IdentificationResult, session: Session, nominal: Robot, criterion: Criterion) -> float:
     """Relative SD of the predicted RMS landing error from the noise levels' own uncertainty.
 
     Each group's variance ``σ_g²`` was estimated from ``ν_g`` residual degrees of freedom, so
@@ -259,7 +259,7 @@ def greedy(
 
 
 def base_criterion(
-    identified: RobotIdentification,
+    identified: IdentificationResult,
     session: Session,
     nominal: Robot,
     targets: tuple[FloatArray, FloatArray] | None = None,

@@ -12,23 +12,27 @@ from (``touches.csv``, ``axes.csv``, ``samples.csv``); grey-zone estimates warn
 (:class:`~brachycal.errors.ConditioningWarning`). Each estimate carries its predicted uncertainty.
 
 The image-to-probe methods are alternatives, compared side by side: one method's refusal is that
-method's finding (:attr:`CalibrationResult.refused`, with its reason), and the others proceed. Only
+method's finding (:attr:`SequentialResult.refused`, with its reason), and the others proceed. Only
 when every method asked for refuses is the calibration refused (the first refusal, in the methods'
 order): a tool step's refusal refuses it at once, since every method needs the tools.
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from functools import partial
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from brachycal._lazy import renamed
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.parallel import parallel_calls
-from brachycal.calibration.result import ImageCalibration
+from brachycal.calibration.result import Calibration, ImageCalibration, Provenance, best_method
+from brachycal.calibration.result import locate as result_locate
 from brachycal.calibration.sequential import image_to_probe
 from brachycal.calibration.sequential.image_to_probe import METHODS
 from brachycal.calibration.sequential.tool_rotation import ToolRotation, tool_rotation
@@ -73,7 +77,7 @@ class ToolCalibration:
 
 
 @dataclass(frozen=True)
-class CalibrationResult:
+class SequentialResult:
     """Everything the sequential method estimates and measures (SI units).
 
     Attributes:
@@ -111,6 +115,25 @@ class CalibrationResult:
     @property
     def T_EL_Ptip(self) -> FloatArray:
         return self.probe.T_E_tool
+
+    def calibration(self, method: str | None = None) -> Calibration:
+        """The :class:`~brachycal.calibration.result.Calibration` of image method ``method`` (None:
+        the lowest leave-one-out RMSE, :func:`~brachycal.calibration.result.best_method`), with the
+        session's inputs as provenance.
+
+        Raises:
+            KeyError: no image calibration of that method.
+        """
+        if method is None:
+            order = list(dict.fromkeys(m for m in (*METHODS, *self.image) if m in self.image))
+            method = best_method(order, {m: s.rmse_mm for m, s in self.loocv.items()})
+        return Calibration(
+            self.T_ER_Ntip,
+            self.T_EL_Ptip,
+            self.image[method],
+            image_size_px=self.image_size_px,
+            provenance=Provenance(inputs=self.inputs),
+        )
 
 
 @contextmanager
@@ -292,7 +315,7 @@ class SequentialPlan:
         ]
         return calls, costs
 
-    def start_result(self) -> CalibrationResult:
+    def start_result(self) -> SequentialResult:
         """What the chain starts from (:meth:`ParameterLayout.start`): the tools, the reference tips
         and :attr:`start`'s image calibration, before any leave-one-out figure (those stay empty).
 
@@ -304,9 +327,9 @@ class SequentialPlan:
         method, full = self.start
         return self._result({method: full}, {}, {})
 
-    def result(self, outcomes: list[MethodOutcome]) -> CalibrationResult:
-        """The :class:`CalibrationResult` from :meth:`calls`' outcomes (methods' order); a refused
-        method is recorded in :attr:`CalibrationResult.refused` and the others proceed.
+    def result(self, outcomes: list[MethodOutcome]) -> SequentialResult:
+        """The :class:`SequentialResult` from :meth:`calls`' outcomes (methods' order); a refused
+        method is recorded in :attr:`SequentialResult.refused` and the others proceed.
 
         Raises:
             DegenerateDataError: every method refused: the first refusal, in the methods' order.
@@ -329,9 +352,9 @@ class SequentialPlan:
         residuals: dict[str, ErrorStats],
         loocv: dict[str, ErrorStats],
         refused: dict[str, str] | None = None,
-    ) -> CalibrationResult:
+    ) -> SequentialResult:
         session = self.session
-        return CalibrationResult(
+        return SequentialResult(
             p_R_Rtip={ref: tip.p for ref, tip in self.reference_tips.items()},
             needle=self.needle,
             probe=self.probe,
@@ -351,7 +374,7 @@ def calibrate(
     robot: Robot,
     methods: tuple[str, ...] = METHODS,
     T_Ptip_I_init: FloatArray | None = None,
-) -> CalibrationResult:
+) -> SequentialResult:
     """Run the sequential calibration on a validated session.
 
     Args:
@@ -374,10 +397,10 @@ def calibrate(
     return plan.result(parallel_calls(*plan.calls()))
 
 
-def loo_points(session: Session, robot: Robot, result: CalibrationResult, method: str) -> tuple[FloatArray, FloatArray]:
+def loo_points(session: Session, robot: Robot, result: SequentialResult, method: str) -> tuple[FloatArray, FloatArray]:
     """``(P_real (N, 3), P_cal (N, 3))`` of one method's leave-one-out, for figures (Fig. 10).
 
-    The same folds as :attr:`CalibrationResult.loocv`, ICP started from the model's ``us_image``.
+    The same folds as :attr:`SequentialResult.loocv`, ICP started from the model's ``us_image``.
     """
     return image_to_probe.leave_one_out_points(
         method,
@@ -392,12 +415,36 @@ def loo_points(session: Session, robot: Robot, result: CalibrationResult, method
 
 
 def locate(
-    robot: Robot, q: FloatArray, uv_px: FloatArray, T_EL_Ptip: FloatArray, calibration: ImageCalibration
+    robot: Robot,
+    q: FloatArray,
+    uv_px: FloatArray,
+    calibration: Calibration | FloatArray,
+    image: ImageCalibration | None = None,
 ) -> FloatArray:
-    """Targeting: image pixels ``(N, 2)`` → ``p_R (N, 3)`` in the robot's base frame at configuration(s) ``q``
-    (``T_R_EL`` is the rig's probe flange).
+    """Targeting: image pixels ``(N, 2)`` → ``p_R (N, 3)`` in the robot's base frame at configuration(s)
+    ``q`` with ``calibration`` (:func:`brachycal.calibration.result.locate`).
 
     ``p_R = T_R_EL(q) @ T_EL_Ptip @ T_Ptip_I @ p_I`` with ``p_I = (u·s_u, v·s_v, 0)``.
+
+    The loose form ``locate(robot, q, uv_px, T_EL_Ptip, image)`` still works for one release, with a
+    :class:`DeprecationWarning`.
     """
+    if isinstance(calibration, Calibration):
+        if image is not None:
+            raise TypeError("locate() takes a Calibration alone, or the deprecated (T_EL_Ptip, image)")
+        return result_locate(robot, q, uv_px, calibration)
+    if image is None:
+        raise TypeError("locate() needs a Calibration")
+    warnings.warn(
+        "locate(robot, q, uv_px, T_EL_Ptip, image) is deprecated: pass one Calibration "
+        "(locate(robot, q, uv_px, calibration))",
+        DeprecationWarning,
+        stacklevel=2,
+    )
     q = np.asarray(q, dtype=float)
-    return image_to_probe.predict_base(calibration, robot.fk(robot.rig.probe_flange, q), T_EL_Ptip, uv_px)
+    return image_to_probe.predict_base(image, robot.fk(robot.rig.probe_flange, q), calibration, uv_px)
+
+
+#: Former names, given for one release with a DeprecationWarning.
+if not TYPE_CHECKING:  # type checkers see only the new names
+    __getattr__ = renamed(__name__, {"CalibrationResult": "SequentialResult"})

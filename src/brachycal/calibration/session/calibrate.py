@@ -10,22 +10,24 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from brachycal._lazy import renamed
 from brachycal.calibration.chain import DEFAULT_ROBOT_ACCURACY, MODELS, ModelChoice, ModelSelection, RobotAccuracy
 from brachycal.calibration.parallel import parallel_calls
+from brachycal.calibration.result import Calibration, Provenance
 from brachycal.calibration.sequential.image_to_probe import METHODS
-from brachycal.calibration.sequential.method import CalibrationResult, SequentialPlan, calibrate
-from brachycal.calibration.session.chain_report import ChainReport, calibrate_chain
+from brachycal.calibration.sequential.method import SequentialPlan, SequentialResult, calibrate
+from brachycal.calibration.session.chain_report import ChainResult, calibrate_chain
 from brachycal.data.session import Session, read_session
 from brachycal.errors import DegenerateDataError
 from brachycal.model.robot import Robot
 
 
 @dataclass(frozen=True)
-class SessionCalibration:
+class SessionResult:
     """A calibrated session folder (SI units throughout).
 
     Attributes:
@@ -35,8 +37,25 @@ class SessionCalibration:
     """
 
     session: Session
-    result: CalibrationResult
-    chain: ChainReport | None = None
+    result: SequentialResult
+    chain: ChainResult | None = None
+
+    def calibration(self, method: str | None = None) -> Calibration:
+        """The :class:`~brachycal.calibration.result.Calibration` of ``method``: the whole chain's
+        for ``"chain"`` (and for None when the chain was asked for, as the result file's best
+        method), else the sequential method's (None: the lowest leave-one-out RMSE).
+
+        Raises:
+            KeyError: no calibration of that method.
+        """
+        if self.chain is not None and method in (None, "chain"):
+            chain = self.chain.calibration()
+            return replace(
+                chain, image_size_px=self.result.image_size_px, provenance=Provenance(inputs=self.result.inputs)
+            )
+        if method == "chain":
+            raise KeyError("chain")
+        return self.result.calibration(method)
 
 
 def calibrate_folder(
@@ -50,7 +69,7 @@ def calibrate_folder(
     progress: Callable[[int], None] | None = None,
     robot_accuracy: RobotAccuracy | None = DEFAULT_ROBOT_ACCURACY,
     identify_robot: bool = False,
-) -> SessionCalibration:
+) -> SessionResult:
     """Read the session in ``folder`` and calibrate it.
 
     Args:
@@ -95,12 +114,12 @@ def calibrate_folder(
             identify=identify_robot,
             choice=choice,
         )
-    return SessionCalibration(session, result, report)
+    return SessionResult(session, result, report)
 
 
 def _sequential_and_model_choice(
     session: Session, robot: Robot, methods: tuple[str, ...]
-) -> tuple[CalibrationResult, ModelChoice | None]:
+) -> tuple[SequentialResult, ModelChoice | None]:
     """The sequential method (:func:`~brachycal.calibration.sequential.method.calibrate`) and the chain's
     model choice (:func:`~brachycal.calibration.chain.select_model`), their refits sharing the cores.
 
@@ -128,3 +147,8 @@ def _sequential_and_model_choice(
     if plan.start[0] not in result.image:  # its leave-one-out refused: the chain starts from another fit
         return result, None
     return result, selection.choose(outcomes[len(calls) :])
+
+
+#: Former names, given for one release with a DeprecationWarning.
+if not TYPE_CHECKING:  # type checkers see only the new names
+    __getattr__ = renamed(__name__, {"SessionCalibration": "SessionResult"})

@@ -19,13 +19,14 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from statistics import NormalDist
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from brachycal._lazy import renamed
 from brachycal.calibration.chain import (
     DEFAULT_ROBOT_ACCURACY,
     OUTLIER_THRESHOLD,
@@ -43,13 +44,14 @@ from brachycal.calibration.chain.model_choice import FoldRuns
 from brachycal.calibration.chain.uncertainty import Bootstrap, bootstrap, landing_covariance, predicted_rms_mm
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.parallel import parallel_calls
+from brachycal.calibration.result import Calibration
 from brachycal.calibration.robot.identification import (
     IDENTIFICATION_FOLDS,
-    RobotIdentification,
+    IdentificationResult,
     choose_and_identify,
     cross_validate_identification,
 )
-from brachycal.calibration.sequential.method import CalibrationResult
+from brachycal.calibration.sequential.method import SequentialResult
 from brachycal.data.session import Session
 from brachycal.errors import ConditioningWarning, InputError
 from brachycal.model.robot import Robot
@@ -67,7 +69,7 @@ LANDING_COST_MS = 30.0
 
 
 @dataclass(frozen=True)
-class ChainReport:
+class ChainResult:
     """Everything the chain method measured on a session.
 
     Attributes:
@@ -93,9 +95,15 @@ class ChainReport:
     fov_px: FloatArray
     predicted_fov_mm: FloatArray
     bootstrap: Bootstrap | None
-    identification: RobotIdentification | None = None
+    identification: IdentificationResult | None = None
     identification_cv: tuple[ErrorStats, ErrorStats] | None = None
     joint_origins: dict[str, dict[str, FloatArray]] | None = None
+
+    def calibration(self) -> Calibration:
+        """The chain's :class:`~brachycal.calibration.result.Calibration`, with its robot corrections
+        (joint offsets and the corrected joint origins, as the result file stores them)."""
+        origins = {k: (v["urdf"], v["corrected"]) for k, v in (self.joint_origins or {}).items()}
+        return replace(self.fit.calibration(), joint_origins=origins)
 
     def intervals(self, level: float = 0.95) -> dict[str, dict[str, object]]:
         """Intervals at ``level`` of the quantities a user asks about.
@@ -141,7 +149,7 @@ def _bounds(value: FloatArray, half: FloatArray) -> dict[str, object]:
 def calibrate_chain(
     session: Session,
     robot: Robot,
-    initial: CalibrationResult,
+    initial: SequentialResult,
     *,
     bootstrap_replicates: int = 0,
     joint_offsets: bool = False,
@@ -150,7 +158,7 @@ def calibrate_chain(
     progress: Callable[[int], None] | None = None,
     identify: bool = False,
     choice: ModelChoice | None = None,
-) -> ChainReport:
+) -> ChainResult:
     """Run the whole-chain method on a session (see the module docstring).
 
     ``robot_accuracy``: the robot's stated kinematic accuracy, included in the intervals and the
@@ -219,7 +227,7 @@ def calibrate_chain(
     boot = None
     if bootstrap_replicates:
         boot = bootstrap(session, robot, fit, bootstrap_replicates, progress=progress)
-    return ChainReport(choice, fit, loocv, cube, grid, fov, boot, identification, identification_cv, joint_origins)
+    return ChainResult(choice, fit, loocv, cube, grid, fov, boot, identification, identification_cv, joint_origins)
 
 
 def _origins(nominal: Robot, corrected: Robot) -> dict[str, dict[str, FloatArray]]:
@@ -229,7 +237,7 @@ def _origins(nominal: Robot, corrected: Robot) -> dict[str, dict[str, FloatArray
     }
 
 
-def chain_json(report: ChainReport, sample_ids: list[str]) -> dict:
+def chain_json(report: ChainResult, sample_ids: list[str]) -> dict:
     """The ``chain`` section of a result file (every number finite)."""
     fit = report.fit
     conditioning = fit.conditioning
@@ -281,7 +289,7 @@ def chain_json(report: ChainReport, sample_ids: list[str]) -> dict:
     }
 
 
-def _robot_json(report: ChainReport) -> dict[str, object]:
+def _robot_json(report: ChainResult) -> dict[str, object]:
     out: dict[str, object] = {}
     if report.identification is not None:
         identified = report.identification.as_json()
@@ -298,3 +306,8 @@ def _robot_json(report: ChainReport) -> dict[str, object]:
             name: {kind: T.tolist() for kind, T in pair.items()} for name, pair in report.joint_origins.items()
         }
     return out
+
+
+#: Former names, given for one release with a DeprecationWarning.
+if not TYPE_CHECKING:  # type checkers see only the new names
+    __getattr__ = renamed(__name__, {"ChainReport": "ChainResult"})

@@ -7,20 +7,20 @@ names, the tool-axes angles, and the software versions that produced it.
 
 ``refused`` (added the same way; only in a result where a method refused) maps each registration
 method the samples could not determine to the reason, one line: that method has no transform, and
-asking for it (:meth:`StoredCalibration.method`) is refused with that reason.
+asking for it (:meth:`ResultFile.method`) is refused with that reason.
 
 ``robot`` (a key added with robot descriptions; the format stays ``brachycal-result/1``, as the
 conventions allow added keys) records which robot the result was calibrated with: the
 description's ``name`` (``--robot``), its file and SHA-256, the SHA-256 of the URDF text the model
-was built from and the configuration's joint names. :meth:`StoredCalibration.software_robot`
+was built from and the configuration's joint names. :meth:`ResultFile.software_robot`
 refuses a robot of another name or other joints (its flanges are other links: the transforms would
 be applied to the wrong arm), and warns when the description file changed since. Files written
 before it (no ``robot`` key; ``robot_model`` only) are read as they are: the SDA10F was then the
 only robot, and nothing is checked.
 
 A URDF written by ``brachycal export`` records the result it came from (the file's SHA-256) and
-which of its corrections the joints carry (:meth:`StoredCalibration.export_record`);
-:meth:`StoredCalibration.software_robot` reads that record, so that corrections are applied once
+which of its corrections the joints carry (:meth:`ResultFile.export_record`);
+:meth:`ResultFile.software_robot` reads that record, so that corrections are applied once
 even for files that store joint offsets without the corrected joint origins.
 """
 
@@ -30,13 +30,15 @@ import os
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from brachycal._lazy import renamed
 from brachycal._version import __version__
-from brachycal.calibration.result import ImageCalibration
+from brachycal.calibration.result import Calibration, ImageCalibration, Provenance, best_method
 from brachycal.calibration.sequential.image_to_probe import METHODS
-from brachycal.calibration.sequential.method import CalibrationResult
+from brachycal.calibration.sequential.method import SequentialResult
 from brachycal.calibration.session.chain_report import chain_json
 from brachycal.calibration.session.result_schema import FORMAT, validate_result_document
 from brachycal.data.json_files import parse_json, read_json_bytes
@@ -93,7 +95,7 @@ class RobotRecord:
 
 
 def to_json(
-    result: CalibrationResult,
+    result: SequentialResult,
     *,
     robot_source: str = "",
     robot_sha256: str = "",
@@ -106,7 +108,7 @@ def to_json(
     SHA-256 (``robot_source`` and ``robot_sha256`` are then ignored) and ``robot`` its
     :class:`RobotRecord`.
 
-    With ``chain`` (a :class:`~brachycal.calibration.session.chain_report.ChainReport`), the transforms
+    With ``chain`` (a :class:`~brachycal.calibration.session.chain_report.ChainResult`), the transforms
     are the whole-chain method's (``Ptip_T_I`` and ``spacing_mm`` under ``"chain"``), its section
     ``chain`` is added, and the sequential method's transforms and figures stay under
     ``sequential`` for comparison (they go with its own ``EL_T_Ptip``).
@@ -170,7 +172,7 @@ def to_json(
 
 
 def write_result(
-    result: CalibrationResult,
+    result: SequentialResult,
     path: str | os.PathLike[str],
     *,
     force: bool = False,
@@ -193,7 +195,7 @@ def write_result(
 
 
 @dataclass(frozen=True)
-class StoredCalibration:
+class ResultFile:
     """What targeting needs from a result file."""
 
     T_ER_Ntip: FloatArray
@@ -226,20 +228,33 @@ class StoredCalibration:
         without a leave-one-out RMSE come last. A method refused at calibration (:attr:`refused`)
         has no transform, so it is never chosen.
         """
-        for chain in ("chain+robot", "chain"):
-            if chain in self.image:
-                return chain
         loocv = self.raw.get("loocv", {}) if isinstance(self.raw.get("loocv"), dict) else {}
-
-        def rmse(method: str) -> float:
-            entry = loocv.get(method)
-            value = entry.get("rmse_mm") if isinstance(entry, dict) else None
-            return float(value) if isinstance(value, int | float) and np.isfinite(value) else np.inf
-
+        rmse = {m: e.get("rmse_mm") for m, e in loocv.items() if isinstance(e, dict)}
         order = list(dict.fromkeys(m for m in (*METHODS, *self.image) if m in self.image))
-        best = min(rmse(m) for m in order)
-        # The first in Table II's order within the tie tolerance of the best (all inf: the first).
-        return next(m for m in order if rmse(m) <= best * (1 + TIE_RELATIVE))
+        return best_method(order, rmse)
+
+    def calibration(self, method: str | None = None) -> Calibration:
+        """The :class:`~brachycal.calibration.result.Calibration` of image method ``method``
+        (:meth:`best_method` for None), with the result's robot corrections and provenance.
+
+        Raises:
+            InputError: as :meth:`method` (no such method, or refused at calibration).
+        """
+        chosen = self.method(method)
+        inputs = self.raw.get("inputs", {})
+        return Calibration(
+            T_ER_Ntip=self.T_ER_Ntip,
+            T_EL_Ptip=self.T_EL_Ptip,
+            image=self.image[chosen],
+            joint_offsets_rad=self.joint_offsets_rad,
+            joint_origins=self.joint_origins,
+            image_size_px=self.image_size_px,
+            provenance=Provenance(
+                source=self.source,
+                sha256=self.sha256,
+                inputs={str(k): str(v) for k, v in inputs.items()} if isinstance(inputs, dict) else {},
+            ),
+        )
 
     def method(self, asked: str | None) -> str:
         """The image calibration ``asked`` for (an option's value), or :meth:`best_method` for None.
@@ -395,12 +410,6 @@ def _carries_joints(record: dict[str, str]) -> bool:
     return bool({"joint_origins", "joint_offsets"} & set(record.get("carries", "").split()))
 
 
-#: Leave-one-out RMSEs closer than this (relative) are a tie in :meth:`StoredCalibration.best_method`:
-#: far above rounding (two methods that solve the same least squares agree to ~1e-14), far below
-#: any difference between methods that matters (a nanometre in a millimetre).
-TIE_RELATIVE = 1e-9
-
-
 #: Two joint origins are the same when no entry differs by more than this (metres, and unitless
 #: rotation entries): far above the round trip through a URDF's text (~1e-15), far below any
 #: correction worth making (a robot correction of 1e-9 m or 1e-9 rad changes nothing measurable).
@@ -416,7 +425,7 @@ def _matrix(value: object) -> FloatArray:
     return np.array(value, dtype=float)
 
 
-def read_result(path: str | os.PathLike[str]) -> StoredCalibration:
+def read_result(path: str | os.PathLike[str]) -> ResultFile:
     """Read a result file back; refuses anything that is not a valid ``brachycal-result/1``.
 
     The whole document is checked first (:func:`~brachycal.calibration.session.result_schema.validate_result_document`:
@@ -436,7 +445,7 @@ def read_result(path: str | os.PathLike[str]) -> StoredCalibration:
     }
     chain = raw.get("chain", {})
     size = raw.get("image", {}).get("size_px")
-    return StoredCalibration(
+    return ResultFile(
         T_ER_Ntip=_matrix(transforms["ER_T_Ntip"]),
         T_EL_Ptip=_matrix(transforms["EL_T_Ptip"]),
         image=image,
@@ -484,3 +493,8 @@ def _robot_record(raw: dict) -> RobotRecord | None:
         urdf_sha256=block["urdf_sha256"],
         joint_names=tuple(block["joint_names"]),
     )
+
+
+#: Former names, given for one release with a DeprecationWarning.
+if not TYPE_CHECKING:  # type checkers see only the new names
+    __getattr__ = renamed(__name__, {"StoredCalibration": "ResultFile"})

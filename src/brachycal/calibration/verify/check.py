@@ -29,7 +29,7 @@ from brachycal.se3 import FloatArray, make_transform, transform_points
 from brachycal.validate import check_range
 
 if TYPE_CHECKING:
-    from brachycal.calibration.session.result_file import StoredCalibration
+    from brachycal.calibration.session.result_file import ResultFile
     from brachycal.data.session import Session
     from brachycal.model.robot import Robot
 
@@ -176,7 +176,7 @@ class NullModel:
         return np.full(n, self.sample_sd_m)
 
 
-def null_model(stored: StoredCalibration, method: str) -> NullModel:
+def null_model(stored: ResultFile, method: str) -> NullModel:
     """The null model from the result's own leave-one-out (``loocv.<method>.rmse_mm``) and Table I
     (``mechanical.<tool>.rmse_mm``) errors, and its reference tips.
 
@@ -232,7 +232,7 @@ def null_model(stored: StoredCalibration, method: str) -> NullModel:
     )
 
 
-def _chain_section(stored: StoredCalibration) -> dict:
+def _chain_section(stored: ResultFile) -> dict:
     chain = stored.raw.get("chain")
     return chain if isinstance(chain, dict) else {}
 
@@ -242,7 +242,7 @@ def _positive(value: object) -> float | None:
     return float(value) if ok else None  # type: ignore[arg-type]
 
 
-def image_axis_noise_m(stored: StoredCalibration) -> FloatArray | None:
+def image_axis_noise_m(stored: ResultFile) -> FloatArray | None:
     """``(3,)`` the whole chain's image noise along the image's lateral, depth and normal axes,
     metres (``chain.image_noise_along_axes``), or None if the result does not state all three."""
     levels = _chain_section(stored).get("image_noise_along_axes")
@@ -254,7 +254,7 @@ def image_axis_noise_m(stored: StoredCalibration) -> FloatArray | None:
     return np.array(values, dtype=float) * 1e-3
 
 
-def image_axis_scale(stored: StoredCalibration) -> FloatArray | None:
+def image_axis_scale(stored: ResultFile) -> FloatArray | None:
     """``(3,)`` factors of a sample's null SD along the image's axes: the chain's image noise along
     each (:func:`image_axis_noise_m`) over their root mean square (the per-coordinate SD keeps the
     same total, spread as the noise is: the annotation noise lies in the plane, so a part that moves
@@ -280,7 +280,7 @@ SAME_PROBE_FLANGE_M = 5e-3
 
 def with_calibration_poses(
     null: NullModel,
-    stored: StoredCalibration,
+    stored: ResultFile,
     method: str,
     robot: Robot,
     calibration: Session,
@@ -359,7 +359,7 @@ def with_calibration_poses(
     return replace(null, pose_sd_m=sd, pose_match=tuple(match), sample_source=source)
 
 
-def stated_robot_accuracy(stored: StoredCalibration) -> RobotAccuracy | None:
+def stated_robot_accuracy(stored: ResultFile) -> RobotAccuracy | None:
     """The robot accuracy the calibration was stated with (``chain.robot_accuracy``), or None."""
     stated = _chain_section(stored).get("robot_accuracy")
     if not isinstance(stated, dict):
@@ -428,7 +428,7 @@ def _part_columns(model: ChainModel, session: CheckSession, scaled: tuple[int, .
 
 def with_robot_accuracy(
     null: NullModel,
-    stored: StoredCalibration,
+    stored: ResultFile,
     method: str,
     robot: Robot,
     calibration: Session,
@@ -657,9 +657,9 @@ class ChainModel:
         return np.column_stack(columns)
 
 
-def chain_model(stored: StoredCalibration, method: str, robot: Robot) -> ChainModel:
+def chain_model(stored: ResultFile, method: str, robot: Robot) -> ChainModel:
     """The model of the stored calibration (``method``'s image transform) on ``robot`` (the software
-    robot: :meth:`StoredCalibration.software_robot`)."""
+    robot: :meth:`ResultFile.software_robot`)."""
     image = stored.image[method]
     return ChainModel(
         robot, stored.T_ER_Ntip, stored.T_EL_Ptip, image.T_Ptip_I, image.spacing_m, null_model(stored, method)
@@ -911,7 +911,7 @@ def union_test(
 
 
 def check_calibration(
-    stored: StoredCalibration,
+    stored: ResultFile,
     method: str,
     robot: Robot,
     session: CheckSession,
@@ -1003,7 +1003,7 @@ def _mm(spacing_m: FloatArray) -> str:
     return ",".join(f"{v * 1e3:g}" for v in spacing_m)
 
 
-def calibrated_nominal_spacing(stored: StoredCalibration) -> FloatArray | None:
+def calibrated_nominal_spacing(stored: ResultFile) -> FloatArray | None:
     """``(2,)`` the nominal spacing (m per pixel) of the session the result was calibrated on, if it
     says: a result updated from a check records it (``nominal_spacing_mm``: its image may no longer
     be the rigid methods'); else the rigid methods' spacing is the nominal one (the scaled methods
@@ -1033,7 +1033,7 @@ def calibrated_nominal_spacing(stored: StoredCalibration) -> FloatArray | None:
     return None
 
 
-def outcome_json(outcome: CheckOutcome, stored: StoredCalibration, session: CheckSession, robot: Robot) -> dict:
+def outcome_json(outcome: CheckOutcome, stored: ResultFile, session: CheckSession, robot: Robot) -> dict:
     """The verification record (format ``brachycal-verification/1``): every number finite."""
     part = outcome.part
     return {

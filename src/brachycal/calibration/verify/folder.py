@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 
-from brachycal.calibration.session.result_file import StoredCalibration, read_result
+from brachycal.calibration.session.result_file import ResultFile, read_result
 from brachycal.calibration.verify.check import (
     DEFAULT_FALSE_ALARM,
     CheckOutcome,
@@ -39,7 +39,7 @@ class FolderCheck:
 
     outcome: CheckOutcome
     record: dict
-    stored: StoredCalibration
+    stored: ResultFile
     session: CheckSession
     robot: Robot
     calibration_session: bool

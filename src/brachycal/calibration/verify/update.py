@@ -33,7 +33,7 @@ from brachycal._version import __version__
 from brachycal.calibration.verify.check import GROSS_PRIOR_MULTIPLES, calibrated_nominal_spacing, small_motion
 
 if TYPE_CHECKING:
-    from brachycal.calibration.session.result_file import StoredCalibration
+    from brachycal.calibration.session.result_file import ResultFile
     from brachycal.calibration.verify.check import CheckOutcome, CheckSession
 
 #: The parts an update can change (the robot's joints need a whole session).
@@ -81,7 +81,7 @@ def update_refusal(outcome: CheckOutcome) -> str | None:
     return None
 
 
-def updated_result(stored: StoredCalibration, outcome: CheckOutcome, session: CheckSession) -> dict[str, object]:
+def updated_result(stored: ResultFile, outcome: CheckOutcome, session: CheckSession) -> dict[str, object]:
     """The stored result's file contents with the named part changed by its fitted change.
 
     Call only when :func:`update_refusal` gives None. Image updates apply to the checked method,

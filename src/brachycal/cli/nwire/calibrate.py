@@ -65,13 +65,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import numpy as np  # lazy: start-up (the command's run only)
 
-    from brachycal.calibration import nwire_from_files, write_nwire  # lazy: start-up (the command's run only)
+    from brachycal.calibration import calibrate_nwire_files, write_nwire  # lazy: start-up (the command's run only)
     from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
 
     with OutputSet(force=args.force, inputs=command_inputs(args, "config", "frames")) as outputs:
         staged = outputs.claim(args.out, label="--out")
         with nwire_segment.frames_file(args) as frames:
-            run = nwire_from_files(args.config, frames, model=args.model)
+            run = calibrate_nwire_files(args.config, frames, model=args.model)
         write_nwire(run, staged, force=args.force)
     c = run.calibration
     spacing_affine = run.affine_spacing_m

@@ -78,6 +78,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Plan the grid, pick the check's poses, print and write them."""
+    from brachycal.calibration.result import (  # lazy: start-up (the command's run only)
+        Calibration,
+        ImageCalibration,
+    )
     from brachycal.cli.common import progress_bar  # lazy: start-up (the command's run only)
     from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
     from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE  # lazy: start-up (the command's run only)
@@ -105,11 +109,11 @@ def run(args: argparse.Namespace) -> int:
                 f"only {len(full.poses)} of {args.points**3} grid points have a verified pose, fewer than the "
                 f"{count} the check needs: move or shrink the cube"
             )
-        T_ER_Ntip = robot.tool_transform(NEEDLE_TIP)[1]
-        T_EL_Ptip = robot.tool_transform(PROBE_TIP)[1]
-        T_Ptip_I = robot.tool_transform(US_IMAGE)[1]
+        # The robot's tool frames (the result's with --result) and the plan's spacing (--spacing-mm's).
+        frames = [robot.tool_transform(frame)[1] for frame in (NEEDLE_TIP, PROBE_TIP, US_IMAGE)]
+        calibration = Calibration(frames[0], frames[1], ImageCalibration("robot", frames[2], spec.spacing_m))
         touches = args.touches or DEFAULT_TOUCHES
-        check = plan_check(full, robot, T_ER_Ntip, T_EL_Ptip, T_Ptip_I, spec.spacing_m, count=count, touches=touches)
+        check = plan_check(full, robot, calibration, count=count, touches=touches)
         write_plan(check.plan, robot, staged, force=args.force)
     names = ", ".join(p.point.name for p in check.plan.poses)
     print(

@@ -163,13 +163,12 @@ def planning_robot(args: argparse.Namespace, spec: PlanSpec) -> tuple[Robot, Pla
     if not args.result:
         return robot, spec
     from brachycal.calibration import read_result  # lazy: start-up (the command's run only)
-    from brachycal.calibration.result import calibrated_robot  # lazy: start-up (the command's run only)
 
     stored = read_result(args.result)
-    image = stored.image[stored.method(args.method)]
-    robot = calibrated_robot(stored.software_robot(robot), stored.T_ER_Ntip, stored.T_EL_Ptip, image)
+    calibration = stored.calibration(args.method)
+    robot = calibration.robot(stored.software_robot(robot))
     if args.spacing_mm is None:
-        spec = replace(spec, spacing_m=image.spacing_m)
+        spec = replace(spec, spacing_m=calibration.spacing_m)
     return robot, spec
 
 
