@@ -95,7 +95,7 @@ def sensitivities(
 
     null = NullModel(1.0, "", {"needle": 1.0, "probe": 1.0}, {"rtip1": np.zeros(3), "rtip2": np.zeros(3)})
     spacing_m = np.asarray(calibration.spacing_m, float)
-    model = ChainModel(robot, calibration.T_ER_Ntip, calibration.T_EL_Ptip, calibration.T_Ptip_I, spacing_m, null)
+    model = ChainModel(robot, calibration, null)
     session = CheckSession("", np.asarray(spacing_m, float), np.zeros(2), [], np.asarray(q), np.asarray(uv_px))
     columns = [*range(0, 9), 15, 16]
     h = 1e-6  # 1 µm, 1 µrad, 1 ppm: central differences, truncation ~h², far below any noise

@@ -20,6 +20,7 @@ import numpy as np
 from brachycal._version import __version__
 from brachycal.calibration.chain.image_models import image_model
 from brachycal.calibration.chain.robot_terms import joint_twists, motion_rows, point_motion
+from brachycal.calibration.result import Calibration
 from brachycal.calibration.robot_accuracy import RobotAccuracy
 from brachycal.data.formats.csv_log import read_table, table_configurations, to_float
 from brachycal.data.session import FILES, REFERENCES, check_robot_columns, read_sample_table, read_session_toml
@@ -549,12 +550,29 @@ class ChainModel:
     """
 
     robot: Robot
-    T_ER_Ntip: FloatArray
-    T_EL_Ptip: FloatArray
-    T_Ptip_I: FloatArray
-    spacing_m: FloatArray
+    calibration: Calibration
     null: NullModel
     _axes_cache: dict = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def T_ER_Ntip(self) -> FloatArray:
+        """``(4, 4)`` the calibrated needle tip in the needle flange, metres."""
+        return self.calibration.T_ER_Ntip
+
+    @property
+    def T_EL_Ptip(self) -> FloatArray:
+        """``(4, 4)`` the calibrated probe tip in the probe flange, metres."""
+        return self.calibration.T_EL_Ptip
+
+    @property
+    def T_Ptip_I(self) -> FloatArray:
+        """``(4, 4)`` the calibrated image frame in the probe tip, metres."""
+        return self.calibration.T_Ptip_I
+
+    @property
+    def spacing_m(self) -> FloatArray:
+        """``(2,)`` the calibrated pixel spacing ``(s_u, s_v)``, metres."""
+        return np.asarray(self.calibration.spacing_m, dtype=float)
 
     @property
     def blocks(self) -> dict[str, slice]:
@@ -660,10 +678,7 @@ class ChainModel:
 def chain_model(stored: ResultFile, method: str, robot: Robot) -> ChainModel:
     """The model of the stored calibration (``method``'s image transform) on ``robot`` (the software
     robot: :meth:`ResultFile.software_robot`)."""
-    image = stored.image[method]
-    return ChainModel(
-        robot, stored.T_ER_Ntip, stored.T_EL_Ptip, image.T_Ptip_I, image.spacing_m, null_model(stored, method)
-    )
+    return ChainModel(robot, stored.calibration(method), null_model(stored, method))
 
 
 @dataclass(frozen=True)
