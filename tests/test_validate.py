@@ -15,6 +15,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from brachycal.calibration.result import Calibration, ImageCalibration
 from brachycal.cli.option_types import (
     bounded_int,
     direction,
@@ -392,7 +393,8 @@ def test_study_parameters_are_checked_before_any_run():
 
 def test_targeting_and_planning_check_their_counts_first(robot):
     # The checks come before any use of the other arguments (None here would fail later).
-    assert "number of targets" in refused(targeting_error, None, None, None, None, 0)
+    calibration = Calibration(np.eye(4), np.eye(4), ImageCalibration("kabsch", np.eye(4), np.full(2, 1.9e-4)))
+    assert "number of targets" in refused(targeting_error, None, calibration, 0)
     assert "speed scale" in refused(plan_poses, robot, PlanSpec(), speed_scale=math.nan)
 
 
