@@ -12,6 +12,7 @@ STAMP := $(VENV)/.installed
 
 demo: $(STAMP)
 	$(BIN)/brachycal demo --force  # demo_output is make's own: a second run replaces it
+	@echo "brachycal is installed in $(BIN): 'source $(BIN)/activate' puts it on your PATH"
 
 test: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks examples urdf docs

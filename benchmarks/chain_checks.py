@@ -1,4 +1,4 @@
-"""Every figure the README claims about the whole-chain method, measured on the twin over seeds.
+"""Every figure docs/validation.md states about the whole-chain method, measured on the twin over seeds.
 
 Run: ``.venv/bin/python benchmarks/chain_checks.py [RUNS] [OUTLIER_SEEDS] [--coverage-only]``
 (defaults 40 and 20; ``--coverage-only``: section 1 without the bootstrap, about 15 minutes on a

@@ -36,7 +36,7 @@ def best_wall(argv: list[str], repeats: int = 3) -> float:
 
 
 def machine() -> dict[str, object]:
-    """What the figures were measured on (quoted beside them in the README)."""
+    """What the figures were measured on (quoted beside them in docs/validation.md)."""
     return {
         "cpu": platform.processor() or platform.machine(),
         "cores": os.cpu_count(),

@@ -48,7 +48,7 @@ import numpy as np
 from brachycal.planning.check_poses import DEFAULT_CHECK_POSES as DEFAULT_POSES  # the figures recorded are for it
 from brachycal.planning.check_poses import DEFAULT_TOUCHES, TOUCH_CHOICES
 
-#: The seeds the README's table is measured on: 80 and up, seeds no choice of the check was made on.
+#: The seeds docs/validation.md's table is measured on: 80 and up, seeds no choice of the check was made on.
 #: Seeds 0–19 were used to choose the touches' null SD, 20–39 to find the corner poses' excess (each
 #: pose's own null SD) and to try the per-part tests, 40–79 to measure the check before the per-part
 #: tests (the 0.5 mm remount found in 93 and 95 of 100 on the real arm): figures on them would
@@ -56,7 +56,7 @@ from brachycal.planning.check_poses import DEFAULT_TOUCHES, TOUCH_CHOICES
 #: used to reproduce the false alarms on other settings, 100–109 found the every-trial check's
 #: false alarms that the robot-accuracy null first had (its noise share) and checked the fix.
 FIRST_SEED = 80
-#: The first seed of the README's settings table (``--grid``).
+#: The first seed of docs/validation.md's settings table (``--grid``).
 GRID_FIRST_SEED = 110
 #: The part each change should be named as (probe mount: a remount moves the probe with its image).
 EXPECTED_PART = {
@@ -258,7 +258,7 @@ def main(argv: list[str]) -> None:
                         continue
                     means = [f"{np.mean([r[k] for r in made]):.2f} mm" if made else "–" for k in range(3)]
                     print(f"| {name} | {len(made)}/{len(rows)} | {' | '.join(means)} |")
-            # the README's run: only the default check's figures are recorded
+            # the validation page's run: only the default check's figures are recorded
             default = touches == DEFAULT_TOUCHES and poses == DEFAULT_POSES and pose_nulls and first == FIRST_SEED
             default = default and settings == TwinSettings()
             if default and seeds >= 20:

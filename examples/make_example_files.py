@@ -1,4 +1,4 @@
-"""Regenerate the examples the README's commands use besides the sessions and the joint log.
+"""Regenerate the examples the documented commands use besides the sessions and the joint log.
 
 Run from the repository root: ``python examples/make_example_files.py``. Deterministic. Writes:
 

@@ -1,6 +1,6 @@
 """Whole-chain calibration: exactness, robustness, model choice, calibrated uncertainty, conditioning, designs.
 
-The coverage figures over many sessions (the README's) come from ``benchmarks/chain_checks.py``;
+The coverage figures over many sessions (docs/validation.md's) come from ``benchmarks/chain_checks.py``;
 the tests here are the smaller, two-sided checks that run in CI.
 """
 
@@ -120,7 +120,7 @@ def test_gross_outliers_are_flagged_left_out_and_barely_matter(robot, seed):
     without = fit_chain(dirty.session, robot, initial, "sound_speed", samples=~dirty.outlier)
     assert np.abs(without.x - fit.x).max() < 1e-9
     # Over seeds 0-19 the ratio runs 0.89-1.17, median 1.03 (benchmarks/chain_checks.py, section 2):
-    # 1.2 is the README's bound, which a fit that kept the mistakes broke on 3 of 10 seeds (up to 1.86).
+    # 1.2 is docs/validation.md's bound, which a fit that kept the mistakes broke on 3 of 10 seeds (up to 1.86).
     # Here (sound-speed model) seeds 2, 5, 9 run 1.16, 1.15, 0.89: 2 and 5 among the highest, where the bound is tight.
     assert hits[1] <= 1.2 * hits[0]
 

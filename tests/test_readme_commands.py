@@ -1,10 +1,10 @@
 """Every command the documentation shows runs as written.
 
 The commands are read from the documents themselves: every ``brachycal …`` line of the ```sh
-blocks of README.md and docs/procedure.md (``\\`` continuations joined, ``# comments`` dropped) and
+blocks of README.md, docs/procedure.md and docs/guide.md (``\\`` continuations joined, ``# comments`` dropped) and
 every line of the ``example:``/``examples:`` section of each sub-command's ``--help``. They run
-in-process (``brachycal.cli.main.main``), in document order, README first, then the procedure, then
-the ``--help`` examples, all in one empty folder that holds nothing but what they make: the first
+in-process (``brachycal.cli.main.main``), in document order, README first, then the procedure and the
+guide, then the ``--help`` examples, all in one empty folder that holds nothing but what they make: the first
 README command is ``brachycal examples examples``, which copies the bundled example files there, as
 a user outside a clone does. A command that an earlier document already ran (the same words) is not
 run again: the documents repeat a prerequisite (``brachycal demo`` before ``brachycal view``) as a
@@ -12,7 +12,7 @@ reminder, and its outputs are already there (running it again would refuse to re
 
 Not run here, each for its stated reason (:data:`NOT_RUN`): long jobs that their own tests run
 (``study``, ``design``, robot identification, excitation poses) and the commands on outside
-recordings (``../shared/reference``), which :func:`test_commands_on_outside_recordings_run` runs
+recordings (the reference data, ``$BRACHYCAL_REFERENCE/…``), which :func:`test_commands_on_outside_recordings_run` runs
 where that data is. ``brachycal view`` serves until stopped: the walk starts each in a process of
 its own (on a free port, ``--port 0`` added), waits for its address and stops it with SIGTERM.
 """
@@ -36,11 +36,10 @@ from conftest import REFERENCE, ROOT, reference
 
 from brachycal.cli.main import COMMANDS, build_parser, joined_command, main
 
-DOCUMENTS = [ROOT / "README.md", ROOT / "docs" / "procedure.md"]
-#: Commands on outside data: the documents' path to the team's copy, replaced by :data:`REFERENCE`.
-OUTSIDE = "../shared/reference/"
-#: The same in the ``--help`` examples: the folder ``BRACHYCAL_REFERENCE`` names.
-HELP_OUTSIDE = "$BRACHYCAL_REFERENCE/"
+DOCUMENTS = [ROOT / "README.md", ROOT / "docs" / "procedure.md", ROOT / "docs" / "guide.md"]
+#: Commands on outside data, in the documents and the ``--help`` examples: the folder
+#: ``BRACHYCAL_REFERENCE`` names, replaced by :data:`REFERENCE`.
+OUTSIDE = "$BRACHYCAL_REFERENCE/"
 #: Commands not run by the ordered walk: the sub-command and words it contains, and why. Each is
 #: a job of several seconds to minutes of CPU that its own tests run; the walk stays within
 #: :data:`CPU_BUDGET_S`.
@@ -131,7 +130,7 @@ def _examples(text: str) -> list[list[str]]:
 
 
 def _not_run(argv: list[str]) -> str | None:
-    if any(marker in word for word in argv for marker in (OUTSIDE, HELP_OUTSIDE)):
+    if any(OUTSIDE in word for word in argv):
         return "outside data: test_commands_on_outside_recordings_run"
     return next((why for words, why in NOT_RUN.items() if argv[0] == words[0] and set(words) <= set(argv)), None)
 
@@ -147,11 +146,11 @@ def test_the_documents_show_the_commands_this_test_runs():
     """The extraction finds what the documents show (a broken parser must not pass by finding nothing)."""
     readme = document_commands(ROOT / "README.md")
     assert readme[0] == ["examples", "examples"]  # the walk starts in an empty folder
-    every = readme + document_commands(DOCUMENTS[1]) + help_commands()
+    every = [argv for path in DOCUMENTS for argv in document_commands(path)] + help_commands()
     shown = {joined_command(argv)[0] for argv in every} & set(COMMANDS)  # `nwire segment` is nwire-segment
     # Every sub-command is shown somewhere (model has no --help example: the README shows it).
     assert shown == set(COMMANDS)
-    # Continuations joined: the session build of the "Using it" block is one command with all its options.
+    # Continuations joined: the session build of the tour is one command with all its options.
     build = next(argv for argv in readme if argv[:2] == ["session", "build"])
     assert "--template" in build and "--out" in build
 
@@ -163,7 +162,7 @@ HELP_ORDER = ["examples", "demo", "model", "fk", "session", "calibrate", "locate
 
 @pytest.mark.slow
 def test_every_documented_command_runs_as_written(tmp_path, monkeypatch):
-    """README, then the procedure, then the --help examples (HELP_ORDER), in one folder."""
+    """README, then the procedure and the guide, then the --help examples (HELP_ORDER), in one folder."""
     monkeypatch.chdir(tmp_path)
     commands = [(path.name, argv) for path in DOCUMENTS for argv in document_commands(path)]
     shown = sorted(help_commands(), key=lambda argv: HELP_ORDER.index(argv[0]) if argv[0] in HELP_ORDER else 99)
@@ -190,7 +189,7 @@ def test_every_documented_command_runs_as_written(tmp_path, monkeypatch):
 
 @pytest.mark.slow
 def test_commands_on_outside_recordings_run(tmp_path, monkeypatch):
-    """The README's commands on PLUS's and SciKit-Surgery's real recordings, where that data is."""
+    """The documents' commands on PLUS's and SciKit-Surgery's real recordings, where that data is."""
     reference("sksurgery_pivot", "tracked_pointer_pivot.csv")
     reference("plus_fcal_nwire", "fCal_3NWires_segmented_frames.xml")
     monkeypatch.chdir(tmp_path)

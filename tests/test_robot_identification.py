@@ -1,6 +1,6 @@
 """Robot identification: the robot's own geometry estimated with the whole chain.
 
-The figures over many seeds and robot-error levels (the README's) come from
+The figures over many seeds and robot-error levels (docs/validation.md's) come from
 ``benchmarks/robot_identification.py``; the tests here are the two-sided checks that run in CI.
 """
 

@@ -326,7 +326,7 @@ def test_frames_pair_with_their_marks_in_memory(rec):
 
 
 def test_two_commands_from_the_recording_to_a_result(short, tmp_path, capsys):
-    """The README's path: ``brachycal session build`` then ``brachycal calibrate``."""
+    """The tour's path (README and the procedure): ``brachycal session build`` then ``brachycal calibrate``."""
     from brachycal.cli.main import main
 
     rec = write_recording(short, tmp_path / "rec")

@@ -258,7 +258,7 @@ def test_tracker_route_lands_where_the_benchmark_says_and_behind_the_scale_aware
         fused.append(targeting_error(twin, Calibration(result.T_ER_Ntip, result.T_EL_Ptip, image), 50).stats.mae_mm)
     mean, sd = TRACKER_ROUTE_MAE_MM
     # Two-sided: three seeds' mean lies within 3 standard errors (3 SD / sqrt(3)) of the benchmark's
-    # ten-seed mean; outside it, the tracker route's model has changed and the README's Table III with it.
+    # ten-seed mean; outside it, the tracker route's model has changed and docs/validation.md's Table III with it.
     assert abs(np.mean(tracker) - mean) < 3 * sd / np.sqrt(3)
     # The tracker route calibrates the probe against the tracker, not against the needle arm, so it
     # cannot absorb the robot's own geometry error between the arms (about 0.25 mm with every tracker

@@ -35,7 +35,7 @@ With --method chain, the whole chain is also solved as one least-squares problem
 data (touches, axes moves, images; gross image outliers flagged and left out), the image model
 (rigid, similarity, scaled u/v, or speed of sound) chosen by cross-validation, with 95% intervals
 of the session's noise and the robot's stated kinematic accuracy (--robot-accuracy-mm/-deg;
-coverage on the twin: benchmarks/chain_checks.py, see the README) and the predicted landing error
+coverage on the twin: the documentation's Validation page) and the predicted landing error
 over the sample poses and the image; data that cannot determine the chain
 are refused. The result then carries the chain's transforms.
 

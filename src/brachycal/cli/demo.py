@@ -29,11 +29,11 @@ calibration of the probe's marker with an optical tracker (NDI Polaris Spectra a
 echoes from the beam's thickness, phantom print tolerance, landmark registration). One seed varies:
 over seeds 0-9 the tracker route lands 0.49 +/- 0.13 mm (MAE, mean +/- SD over seeds), the paper's
 Kabsch fusion 0.40 +/- 0.02 mm, the scaled u/v fusion 0.07 +/- 0.01 mm
-(python benchmarks/table3.py).
+(the documentation's Validation page, Table III).
 
 Any robot with a description (--robot baxter, --robot ur5_pair, --robot FILE; docs/robots.md):
 the twin plans in that robot's workspace and calibrates as on the SDA10F. The accuracy each
-bundled robot reaches is in the README (Robots).
+bundled robot reaches is in the documentation (Validation, Other robots).
 
 The files are written together when the demo succeeded; an earlier demo's files in DIR are
 replaced only with --force.

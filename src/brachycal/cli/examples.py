@@ -90,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     for name in to_copy:
         print(f"  {folder / name}")
     d = folder.as_posix()
-    print("try (from this folder; the README shows more):")
+    print("try (from this folder; the documentation shows more):")
     for line in (
         f"brachycal fk {d}/joint_log.csv --frames needle_tip,probe_tip --out poses.csv",
         f"brachycal calibrate {d}/twin_session --out result.json",

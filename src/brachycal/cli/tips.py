@@ -62,7 +62,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=None,
         metavar="C",
         help="frames below this confidence are left for a person, in [0, 1] (default: the detector's "
-        "MIN_CONFIDENCE, see the README)",
+        "MIN_CONFIDENCE, see the documentation's Validation page)",
     )
     parser.add_argument(
         "--direction",

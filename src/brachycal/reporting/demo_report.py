@@ -69,7 +69,7 @@ def demo_text(run: DemoRun) -> str:
         f"  tracker route: {tracking.tracker_accuracy_m * 1e3:.2f} mm RMS per marker "
         f"({tracking.tracker_jitter_m * 1e3:.2f} mm of it jitter), {tracking.tracker_frames} frames averaged per "
         f"still pose,\n  {tracking.calibration_frames} N-wire images, {tracking.hand_eye_poses} hand-eye poses; "
-        "one seed: the spread over seeds is in benchmarks/table3.py"
+        "one seed: the spread over seeds is in the documentation (Validation, Table III)"
     )
     truth = twin.truth
     needle, probe = run.tip_errors_m()

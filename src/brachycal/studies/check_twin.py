@@ -73,7 +73,7 @@ class Change:
     image_tilt_rad: float = 0.0
 
 
-#: The changes the README's table measures.
+#: The changes the validation page's table measures.
 CHANGES: dict[str, Change] = {
     c.name: c
     for c in (

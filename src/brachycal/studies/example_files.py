@@ -5,7 +5,7 @@ list from a tracker (SciKit-Surgery's CSV form: ``timestamp_ns,m00,…,m33``, mi
 PLUS device-set configuration with the segmented frames of an fCal session. This module writes
 the same formats from simulated data with a known truth, so that the commands can be shown on
 files that ship with brachycal (``examples/pivot``, ``examples/nwire``; the real recordings stay
-outside, README "Credits"). ``examples/phantom`` holds a multi-wedge and an arbitrary-wire session
+outside, the documentation's reference data). ``examples/phantom`` holds a multi-wedge and an arbitrary-wire session
 of the twin in brachycal's own phantom formats (:mod:`brachycal.calibration.phantom.phantom_file`), for
 ``brachycal phantom``. Every file here is read back by the real readers
 (:func:`~brachycal.data.pose_list.read_pose_list`, :func:`~brachycal.data.formats.plus_files.read_plus_config`,

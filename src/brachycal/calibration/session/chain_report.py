@@ -261,9 +261,9 @@ def chain_json(report: ChainResult, sample_ids: list[str]) -> dict:
         "flagged samples are left out of the final fit",
         "fitted_samples": int((~fit.outliers).sum()),
         "intervals_95": report.intervals(),
-        "intervals_contain": "the session's noise and the stated robot accuracy (robot_accuracy; see the README)"
+        "intervals_contain": "the session's noise and the stated robot accuracy (robot_accuracy; see the documentation)"
         if fit.robot_accuracy is not None
-        else "the session's noise, not the robot model's own error (see the README)",
+        else "the session's noise, not the robot model's own error (see the documentation)",
         "robot_accuracy": None if fit.robot_accuracy is None else fit.robot_accuracy.as_json(),
         "noise_share_after_robot": fit.noise_share,
         "conditioning": {

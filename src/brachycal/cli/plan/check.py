@@ -31,7 +31,7 @@ ordered to shorten the motion. Writes them as a plan CSV (for 'brachycal session
 prints the robot minutes at the paper's 10 s per sample, plus 30 s for each optional single touch
 on rtip1 (--touches: probe, the probe's alone, default: it tells a probe remount from an image
 change, needle changes showing in the samples; both, the needle's too; none). The default, 8
-samples and the probe's touch, takes 1.9 minutes. The README's section "Before each procedure"
+samples and the probe's touch, takes 1.9 minutes. The documentation (The commands in detail, "Before each procedure")
 shows the check end to end.
 
 example:
