@@ -394,3 +394,48 @@ def test_a_sample_name_that_is_not_a_plain_token_is_never_written(rec, robot, pa
     with pytest.raises(InputError, match="not a plain token"):
         write_session(session, tmp_path / "s")
     assert not (tmp_path / "s").exists()
+
+
+def test_a_filled_in_template_builds_the_recordings_session(short, robot, tmp_path, capsys):
+    """``brachycal session template``: its session.toml is refused, naming the key, until its empty
+    lists are filled in; its CSV headers take the rows of a recording as they are and build the
+    same session as the recording's own files."""
+    from brachycal.cli.main import main
+    from brachycal.data.session_template import TEMPLATE_FILES
+
+    rec = write_recording(short, tmp_path / "rec")
+    blank = tmp_path / "blank"
+    assert main(["session", "template", str(blank)]) == 0
+    assert sorted(p.name for p in blank.iterdir()) == sorted(TEMPLATE_FILES)
+    with pytest.raises(InputError, match=r"column 'image.spacing_mm': expected a list of 2 numbers"):
+        session_settings(blank / "session.toml")
+    # The documented edit: fill in the three lists (here with the recording's own values).
+    known = session_settings(rec / "session.toml")
+    toml = (blank / "session.toml").read_text()
+    for key, values in (
+        ("spacing_mm", known.spacing_m * 1e3),
+        ("size_px", known.size_px),
+        ("tip_in_flange_mm", known.p_ER_Mtip * 1e3),
+    ):
+        assert toml.count(f"\n{key} = []\n") == 1
+        toml = toml.replace(f"\n{key} = []\n", f"\n{key} = [{', '.join(repr(float(v)) for v in values)}]\n")
+    (blank / "session.toml").write_text(toml)
+    for name in ("marks.csv", "images.csv"):  # the recording's rows under the template's header
+        rows = (rec / name).read_text().splitlines(keepends=True)[1:]
+        with (blank / name).open("a") as f:
+            f.writelines(rows)
+    settings = session_settings(blank / "session.toml")
+    np.testing.assert_array_equal(settings.size_px, known.size_px)
+    built = build_session_from_files(
+        rec / "joint_log.csv", robot=robot, images=blank / "images.csv", marks=blank / "marks.csv", settings=settings
+    )
+    direct = build_session_from_files(
+        rec / "joint_log.csv", robot=robot, images=rec / "images.csv", marks=rec / "marks.csv", settings=known
+    )
+    np.testing.assert_array_equal(entries_q(built.session), entries_q(direct.session))
+    np.testing.assert_allclose(built.session.spacing_m, known.spacing_m, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(built.session.p_ER_Mtip, known.p_ER_Mtip, rtol=1e-12, atol=0)
+    capsys.readouterr()
+    assert main(["session", "template", str(blank)]) == 2  # a filled-in template is never overwritten silently
+    assert "already exists; pass --force" in capsys.readouterr().err
+    assert (blank / "session.toml").read_text() == toml

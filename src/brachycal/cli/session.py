@@ -10,7 +10,24 @@ from brachycal.cli.option_types import finite_float, number_list, spacing_mm
 from brachycal.errors import InputError
 from brachycal.validate import MAX_IMAGE_PX
 
-HELP = "session folders: build one from a lab's recording (joint log, marks, frames)"
+HELP = "session folders: build one from a lab's recording (joint log, marks, frames), or write blank templates"
+TEMPLATE_HELP = "write blank templates of a lab's session.toml, marks.csv and images.csv, with a README"
+TEMPLATE_DESCRIPTION = """\
+Writes into DIR the blanks a lab fills in for its own session:
+
+  session.toml  the set-up's pixel spacing, frame size and top-model tip, a comment on every key;
+                the values are empty lists to fill in (an empty one is refused, naming its key)
+  marks.csv     the header time,kind,tool,name: add one row per mark
+  images.csv    the header time,u_px,v_px: add one row per captured frame
+  README.txt    every file and column explained, with an example row
+
+then `brachycal session build JOINT_LOG --marks DIR/marks.csv --images DIR/images.csv
+--template DIR/session.toml --out SESSION` turns the joint log and these into a session folder.
+All files are written or none; existing files are replaced only with --force.
+
+example:
+  brachycal session template my_session
+"""
 BUILD_HELP = "build a session folder from a joint log, the operator's marks and the annotated frames"
 BUILD_DESCRIPTION = """\
 Turns what a lab records during a calibration into a session folder (brachycal-session/1) that
@@ -144,6 +161,34 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     build.add_argument("--out", required=True, metavar="SESSION", help="session folder to write (created if needed)")
     build.add_argument("--force", action="store_true", help="replace the files of an existing session in SESSION")
     build.set_defaults(run=run_build)
+    template = actions.add_parser(
+        "template",
+        help=TEMPLATE_HELP,
+        description=TEMPLATE_DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    template.add_argument("folder", metavar="DIR", help="folder to write the templates into (created if needed)")
+    template.add_argument("--force", action="store_true", help="replace existing template files in DIR")
+    template.set_defaults(run=run_template)
+
+
+def run_template(args: argparse.Namespace) -> int:
+    # lazy: start-up (the command's run only)
+    from brachycal.data.session_template import TEMPLATE_FILES, write_session_template
+    from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
+
+    folder = Path(args.folder)
+    with OutputSet(force=args.force) as outputs:
+        for name in TEMPLATE_FILES:
+            outputs.claim(folder / name, make_parents=True, label="DIR")
+        write_session_template(folder, force=args.force, outputs=outputs)
+    print(f"wrote {folder}: {', '.join(TEMPLATE_FILES)}")
+    print(f"next: fill in {folder / 'session.toml'}, record, add the rows (see {folder / 'README.txt'}), then")
+    print(
+        f"  brachycal session build JOINT_LOG --marks {folder / 'marks.csv'} --images {folder / 'images.csv'} "
+        f"--template {folder / 'session.toml'} --out SESSION"
+    )
+    return 0
 
 
 def run_build(args: argparse.Namespace) -> int:
