@@ -13,6 +13,8 @@ Run from the repository root: ``python examples/make_example_files.py``. Determi
 - ``phantom/``: a multi-wedge and an arbitrary-wire session of the same tracked probe (observations
   CSV and each phantom's geometry TOML with the session's landmark registration) and their truth
   (:func:`brachycal.studies.phantom_twin.simulate_phantom`), for ``brachycal phantom``.
+- ``temporal/``: a PLUS water-tank video and tracker sequence pair with a known lag and its truth
+  (:func:`brachycal.studies.tank_recording.write_tank_files`), for ``brachycal temporal``.
 """
 
 from __future__ import annotations

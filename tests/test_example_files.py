@@ -20,6 +20,7 @@ from brachycal.calibration.phantom.wedge import calibrate_wedge_files, read_wedg
 from brachycal.calibration.phantom.wire import calibrate_wire_files, read_wire_phantom
 from brachycal.cli.examples import bundled_example_files
 from brachycal.cli.main import main
+from brachycal.data.formats.metaimage import read_image_sequence, read_sequence_header
 from brachycal.data.formats.plus_files import read_plus_config, read_segmented_frames
 from brachycal.data.pose_list import read_pose_list
 from brachycal.se3 import inverse
@@ -30,6 +31,8 @@ from brachycal.studies.example_files import (
     PHANTOM_FRAMES,
     PHANTOM_TRUTH_NAME,
     PIVOT_NAME,
+    TEMPORAL_LAG_S,
+    TEMPORAL_NAMES,
     simulate_pivot_recording,
     write_example_files,
 )
@@ -38,17 +41,46 @@ from brachycal.studies.nwire_twin import FCAL2_LANDMARKS_MM, NWireSimConfig
 EXAMPLES = ROOT / "examples"
 MADE = ["joints.csv", PIVOT_NAME, "pivot/truth.json", NWIRE_CONFIG_NAME, NWIRE_FRAMES_NAME, "nwire/truth.json"]
 MADE += [name for files in PHANTOM_FILES.values() for name in files[:2]] + [PHANTOM_TRUTH_NAME]
+#: The MetaImage sequences among the made files, compared by :func:`assert_same_sequences`.
+SEQUENCES = [name for name in TEMPORAL_NAMES if name.endswith(".mha")]
+MADE += [name for name in TEMPORAL_NAMES if name not in SEQUENCES]
+
+
+def _numbers_or_text(text: str) -> list[float] | str:
+    try:
+        return [float(v) for v in text.split()]
+    except ValueError:
+        return text
+
+
+def assert_same_sequences(got: Path, want: Path) -> None:
+    """Two MetaImage sequences hold the same frames: pixels within 1 (uint8 cut from rendered
+    floats), per-frame numeric fields within 2e-6 (written with 6 decimals), other fields equal."""
+    got_seq, want_seq = read_image_sequence(got), read_image_sequence(want)
+    assert got_seq.pixels.shape == want_seq.pixels.shape, want.name
+    assert np.abs(got_seq.pixels.astype(int) - want_seq.pixels.astype(int)).max() <= 1, want.name
+    (_, got_frames), (_, want_frames) = read_sequence_header(got), read_sequence_header(want)
+    assert [sorted(f) for f in got_frames] == [sorted(f) for f in want_frames], want.name
+    for k, (a, b) in enumerate(zip(got_frames, want_frames, strict=True)):
+        for key in b:
+            x, y = _numbers_or_text(a[key]), _numbers_or_text(b[key])
+            if isinstance(y, str):
+                assert x == y, f"{want.name} frame {k} {key}"
+            else:
+                assert not isinstance(x, str) and np.allclose(x, y, rtol=0, atol=2e-6), f"{want.name} frame {k} {key}"
 
 
 def test_committed_example_files_are_what_the_script_makes(tmp_path):
     copy = tmp_path / "examples"
     shutil.copytree(EXAMPLES, copy)
-    for name in MADE:
+    for name in MADE + SEQUENCES:
         (copy / name).unlink()
     subprocess.run([sys.executable, str(copy / "make_example_files.py")], check=True, capture_output=True)
     # Numbers within conftest's TOLERANCE_* (1e-9 SI and mm-valued matrix entries, 1e-6 px): the
     # files are written with full precision, so another machine differs in the last bits only.
     assert_same_files(copy, EXAMPLES, MADE)
+    for name in SEQUENCES:
+        assert_same_sequences(copy / name, EXAMPLES / name)
 
 
 def test_example_files_are_small():
@@ -73,6 +105,21 @@ def test_pivot_example_reads_back_and_calibrates_to_its_truth():
     lever_mm = np.radians(truth["noise_sd_deg"]) * np.linalg.norm(truth["p_marker_tip_mm"])
     expected = np.hypot(truth["noise_sd_mm"], lever_mm)
     assert abs(result.rms_per_axis / expected - 1) < 0.3
+
+
+def test_temporal_example_gives_its_known_lag(tmp_path, capsys):
+    """``brachycal temporal`` on the bundled water-tank pair finds the lag it was made with: the
+    pair has no noise, so the only error is the search's (1 ms steps, refined) and the
+    interpolation of the 20 Hz tracker; within 1 ms, and within 3 of its stated SDs."""
+    video, tracker, truth_name = (EXAMPLES / name for name in TEMPORAL_NAMES)
+    truth = json.loads(truth_name.read_text())
+    assert truth["lag_s"] == TEMPORAL_LAG_S
+    out = tmp_path / "lag.json"
+    assert main(["temporal", str(video), str(tracker), "--out", str(out)]) == 0
+    result = json.loads(out.read_text())
+    error = abs(result["lag_s"] - truth["lag_s"])
+    assert error < 1e-3 and error <= 3 * result["sd_s"], result
+    assert "lag of the tracker behind the video: +137" in capsys.readouterr().out
 
 
 def test_pivot_recording_without_noise_is_exact():

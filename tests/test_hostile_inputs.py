@@ -19,10 +19,10 @@ from pathlib import Path
 import pytest
 from conftest import ROOT
 from hostile import Case, check_refusal, run_cli
-from tank_recording import write_tank_recording
 
 from brachycal.model import Robot
 from brachycal.simulation import RecordingConfig, TwinConfig, record, write_recording
+from brachycal.studies.tank_recording import write_tank_recording
 
 EXAMPLES = ROOT / "examples"
 SESSION = EXAMPLES / "session_exact"

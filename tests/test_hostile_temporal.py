@@ -1,7 +1,7 @@
 """Hostile input to ``brachycal temporal``: each refused in one line naming the option, file, frame
 or element, exit code 2, nothing written.
 
-The inputs are the small synthetic water-tank recording of :mod:`tank_recording`, spoiled one way
+The inputs are the small synthetic water-tank recording of :mod:`brachycal.studies.tank_recording`, spoiled one way
 per row: no line in the frames, a probe that does not move, a tracker reading that is not rigid,
 a device set with a malformed clip rectangle, options out of range.
 """
@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from hostile import Case, check_refusal
-from tank_recording import write_tank_recording
+
+from brachycal.studies.tank_recording import write_tank_recording
 
 RUN = ["temporal", "{tmp}/video.mha", "{tmp}/tracker.mha", "--out", "{tmp}/lag.json"]
 

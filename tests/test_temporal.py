@@ -13,13 +13,13 @@ import pytest
 from bands import assert_calibrated, assert_unbiased_variance
 from conftest import reference
 from hostile import run_cli
-from tank_recording import write_tank_recording
 
 from brachycal.calibration import estimate_lag, lag_from_plus_files, principal_motion
 from brachycal.calibration.temporal import DEFAULT_RESOLUTION_S, LagEstimate
 from brachycal.data.formats.metaimage import write_image_sequence
 from brachycal.errors import DegenerateDataError
 from brachycal.imaging import find_tank_line
+from brachycal.studies.tank_recording import write_tank_recording
 
 #: PLUS's TrackerLagSec on its water-tank recording (TemporalCalibrationResultsBaseline.xml).
 PLUS_TRACKER_LAG_S = -0.0648266

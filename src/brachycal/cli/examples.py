@@ -6,14 +6,14 @@ import argparse
 import filecmp
 from pathlib import Path
 
-HELP = "copy the bundled example files (joint log, sessions, pivot, N-wire and phantom files) into a folder"
+HELP = "copy the bundled example files (joint log, sessions, pivot, N-wire, phantom and temporal files) into a folder"
 DESCRIPTION = """\
 Copies the example files that ship with brachycal into DIR: a joint log and a few configurations,
 a noise-free session and the digital twin's session (each with its truth), a tracked-pointer pivot
-recording, PLUS N-wire files and multi-wedge and arbitrary-wire phantom sessions made by the twin
-(each with its truth), and the scripts that made them. The README's and the documentation's
-commands refer to them as examples/...: run them in the folder where DIR is examples (in a clone
-of the repository they are there already).
+recording, PLUS N-wire files, multi-wedge and arbitrary-wire phantom sessions and a water-tank
+video and tracker pair with a known lag, made by the twin (each with its truth), and the scripts
+that made them. The README's and the documentation's commands refer to them as examples/...: run
+them in the folder where DIR is examples (in a clone of the repository they are there already).
 
 Files already in DIR with the same content are left as they are; a file with other content is
 refused (nothing is copied) unless --force replaces it. Other files in DIR are not touched.
@@ -99,6 +99,7 @@ def run(args: argparse.Namespace) -> int:
         f"brachycal nwire {d}/nwire/PlusDeviceSet_twin_fCal2.xml {d}/nwire/twin_segmented_frames.xml --out nwire.json",
         f"brachycal phantom --method wedge {d}/phantom/multi_wedge.toml {d}/phantom/wedge_observations.csv "
         "--out phantom_wedge.json",
+        f"brachycal temporal {d}/temporal/tank_video.mha {d}/temporal/tank_tracker.mha --out lag.json",
     ):
         print(f"  {line}")
     return 0

@@ -29,7 +29,12 @@ routes:
   robot: VIDEO.mha with --joints LOG (the joint log on the robot's clock) and --robot; the
     position of --frame (default us_image) in base_link by forward kinematics.
 
-example (PLUS's public test data, PlusToolkit/PlusLibData TestImages/):
+On the bundled water-tank pair (`brachycal examples examples`), made with a lag of 137 ms:
+
+example:
+  brachycal temporal examples/temporal/tank_video.mha examples/temporal/tank_tracker.mha --out tank_lag.json
+
+On PLUS's public test data (PlusToolkit/PlusLibData TestImages/):
   brachycal temporal WaterTankBottomTranslationVideoBuffer.igs.mha \\
       WaterTankBottomTranslationTrackerBuffer.igs.mha --out lag.json
 """

@@ -7,7 +7,8 @@ the same formats from simulated data with a known truth, so that the commands ca
 files that ship with brachycal (``examples/pivot``, ``examples/nwire``; the real recordings stay
 outside, the documentation's reference data). ``examples/phantom`` holds a multi-wedge and an arbitrary-wire session
 of the twin in brachycal's own phantom formats (:mod:`brachycal.calibration.phantom.phantom_file`), for
-``brachycal phantom``. Every file here is read back by the real readers
+``brachycal phantom``; ``examples/temporal`` a PLUS water-tank video and tracker pair with a known lag,
+for ``brachycal temporal``. Every file here is read back by the real readers
 (:func:`~brachycal.data.pose_list.read_pose_list`, :func:`~brachycal.data.formats.plus_files.read_plus_config`,
 :func:`~brachycal.data.formats.plus_files.read_segmented_frames`,
 :func:`~brachycal.calibration.phantom.phantom_file.read_observations`) in the tests and calibrated to its truth.
@@ -36,6 +37,7 @@ from brachycal.io import OutputSet, atomic_open, bundled, json_text, output_set
 from brachycal.se3 import FloatArray, inverse, make_transform
 from brachycal.studies.nwire_twin import FCAL2_LANDMARKS_MM, NWireSimConfig, simulate_nwire
 from brachycal.studies.phantom_twin import simulate_phantom
+from brachycal.studies.tank_recording import write_tank_files
 
 __all__ = [
     "NWIRE_CONFIG_NAME",
@@ -44,6 +46,8 @@ __all__ = [
     "PHANTOM_FRAMES",
     "PHANTOM_TRUTH_NAME",
     "PIVOT_NAME",
+    "TEMPORAL_LAG_S",
+    "TEMPORAL_NAMES",
     "PivotRecording",
     "phantom_geometry_text",
     "simulate_pivot_recording",
@@ -64,6 +68,11 @@ PHANTOM_FILES = {
     "wire": ("phantom/arbitrary_wire.toml", "phantom/wire_observations.csv", "wire"),
 }
 PHANTOM_TRUTH_NAME = "phantom/truth.json"
+#: The water-tank pair for ``brachycal temporal`` (video, tracker, truth) and its known lag, seconds.
+TEMPORAL_NAMES = ("temporal/tank_video.mha", "temporal/tank_tracker.mha", "temporal/truth.json")
+TEMPORAL_LAG_S = 0.137
+#: The pair's length and sampling, seconds: 80 frames at 10 Hz, the tracker at 20 Hz (~140 kB together).
+_TEMPORAL_DURATION_S, _TEMPORAL_VIDEO_PERIOD_S, _TEMPORAL_TRACKER_PERIOD_S = 8.0, 0.1, 0.05
 #: Frames of the phantom examples: small files (~100 kB together), and enough that neither fit draws
 #: the conditioning warning (predicted SD 50 mm from the image centre above 0.5 mm with the fit's
 #: residual level): with seed 0 the multi-wedge's is 0.57 mm at 30 frames, 0.44 mm at 50.
@@ -335,8 +344,9 @@ def write_example_files(
     (:data:`PHANTOM_FILES`) a multi-wedge and an arbitrary-wire session on the same probe
     (:func:`~brachycal.studies.phantom_twin.simulate_phantom`, its default error sources,
     :data:`PHANTOM_FRAMES` frames), each phantom's geometry with the session's landmark
-    registration, and ``phantom/truth.json``. All or nothing; existing files are replaced only
-    with ``force``.
+    registration, and ``phantom/truth.json``; and for ``brachycal temporal`` a water-tank video and
+    tracker pair with a known lag (:data:`TEMPORAL_NAMES`, :data:`TEMPORAL_LAG_S`). All or nothing;
+    existing files are replaced only with ``force``.
 
     Returns:
         The paths written.
@@ -376,8 +386,17 @@ def write_example_files(
         "spacing_mm": (NWIRE_SPACING_M / MM).tolist(),
         "size_px": list(NWIRE_SIZE_PX),
     }
+    temporal_truth = {
+        "what": "truth of the water-tank pair (brachycal.studies.tank_recording.write_tank_files, no noise): "
+        "the tracker's lag behind the video, PLUS's TrackerLagSec",
+        "lag_s": TEMPORAL_LAG_S,
+        "duration_s": _TEMPORAL_DURATION_S,
+        "video_period_s": _TEMPORAL_VIDEO_PERIOD_S,
+        "tracker_period_s": _TEMPORAL_TRACKER_PERIOD_S,
+    }
     names = [PIVOT_NAME, "pivot/truth.json", NWIRE_CONFIG_NAME, NWIRE_FRAMES_NAME, "nwire/truth.json"]
     names += [name for files in PHANTOM_FILES.values() for name in files[:2]] + [PHANTOM_TRUTH_NAME]
+    names += list(TEMPORAL_NAMES)
     with output_set(outputs, force=force) as out:
         staged = {name: out.claim(folder / name, make_parents=True) for name in names}
         write_pose_list(staged[PIVOT_NAME], pivot.timestamps_ns.tolist(), pivot.T_tracker_marker_mm, key="timestamp_ns")
@@ -391,4 +410,14 @@ def write_example_files(
             staged[geometry_name].write_text(phantom_geometry_text(method, T_reference_phantom, seed=seed))
             write_observations(staged[observations_name], kind, session.observations)
         staged[PHANTOM_TRUTH_NAME].write_text(json_text(phantom_truth))
+        video, tracker, truth = TEMPORAL_NAMES
+        write_tank_files(
+            staged[video],
+            staged[tracker],
+            lag_s=TEMPORAL_LAG_S,
+            duration_s=_TEMPORAL_DURATION_S,
+            video_period_s=_TEMPORAL_VIDEO_PERIOD_S,
+            tracker_period_s=_TEMPORAL_TRACKER_PERIOD_S,
+        )
+        staged[truth].write_text(json_text(temporal_truth))
     return [folder / name for name in names]
