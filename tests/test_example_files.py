@@ -27,6 +27,8 @@ from brachycal.se3 import inverse
 from brachycal.studies.example_files import (
     NWIRE_CONFIG_NAME,
     NWIRE_FRAMES_NAME,
+    NWIRE_SEQUENCE_FRAMES,
+    NWIRE_SEQUENCE_NAMES,
     PHANTOM_FILES,
     PHANTOM_FRAMES,
     PHANTOM_TRUTH_NAME,
@@ -42,7 +44,7 @@ EXAMPLES = ROOT / "examples"
 MADE = ["joints.csv", PIVOT_NAME, "pivot/truth.json", NWIRE_CONFIG_NAME, NWIRE_FRAMES_NAME, "nwire/truth.json"]
 MADE += [name for files in PHANTOM_FILES.values() for name in files[:2]] + [PHANTOM_TRUTH_NAME]
 #: The MetaImage sequences among the made files, compared by :func:`assert_same_sequences`.
-SEQUENCES = [name for name in TEMPORAL_NAMES if name.endswith(".mha")]
+SEQUENCES = [name for name in TEMPORAL_NAMES if name.endswith(".mha")] + list(NWIRE_SEQUENCE_NAMES)
 MADE += [name for name in TEMPORAL_NAMES if name not in SEQUENCES]
 
 
@@ -120,6 +122,25 @@ def test_temporal_example_gives_its_known_lag(tmp_path, capsys):
     error = abs(result["lag_s"] - truth["lag_s"])
     assert error < 1e-3 and error <= 3 * result["sd_s"], result
     assert "lag of the tracker behind the video: +137" in capsys.readouterr().out
+
+
+def test_nwire_sequences_segment_to_the_examples_points(tmp_path, capsys):
+    """``brachycal nwire segment`` on the bundled sequences (the N-wire example's first frames,
+    rendered) finds every frame's wire points within 0.1 px of the points they were rendered from
+    (the segmentation's goal on rendered frames, tests/test_nwire_segmentation.py)."""
+    out = tmp_path / "segmented.xml"
+    sequences = [str(EXAMPLES / name) for name in NWIRE_SEQUENCE_NAMES]
+    argv = ["nwire", "segment", *sequences, "--config", str(EXAMPLES / NWIRE_CONFIG_NAME), "--orientation", "UF"]
+    assert main([*argv, "--out", str(out), "--quiet"]) == 0
+    assert "twin_calibration.mha: 20 of 20 frames segmented" in capsys.readouterr().out
+    found = read_segmented_frames(out)
+    rendered = read_segmented_frames(EXAMPLES / NWIRE_FRAMES_NAME)
+    for got, want, count in zip(found, rendered, NWIRE_SEQUENCE_FRAMES, strict=True):
+        assert len(got) == count and all(f.ok for f in got)
+        for g, w in zip(got, want[:count], strict=True):
+            assert set(g.points_px) == set(w.points_px)
+            assert max(np.linalg.norm(g.points_px[n] - w.points_px[n]) for n in w.points_px) < 0.1
+            np.testing.assert_allclose(g.T_tracker_probe, w.T_tracker_probe, rtol=0, atol=1e-9)
 
 
 def test_pivot_recording_without_noise_is_exact():

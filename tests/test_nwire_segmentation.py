@@ -32,6 +32,7 @@ from brachycal.imaging import (
 )
 from brachycal.imaging.nwire_patterns import NO_LINES, NO_PATTERN, TOO_FEW_DOTS
 from brachycal.imaging.nwire_segmentation import NO_TRACKING
+from brachycal.studies.example_files import render_wire_frame as render
 
 FCAL = "plus_fcal_nwire"
 CONFIG = "PlusDeviceSet_fCal_Sim_SpatialCalibration_2.0.xml"
@@ -61,18 +62,6 @@ FCAL2_PATTERNS = [
         ),
     )
 ]
-
-
-def render(points_uv: np.ndarray, rng: np.random.Generator, *, shape=(616, 820), sigma_px=3.0, noise=1.0) -> np.ndarray:
-    """A B-mode-like uint8 frame: dim noisy background, a bright horizontal wall, Gaussian dots."""
-    image = 25.0 + rng.normal(0.0, noise, shape)
-    image[560:566, 60:760] += 150.0  # a wall: long, removed by the bar top-hats
-    reach = int(np.ceil(6 * sigma_px))  # the Gaussian is below 1e-7 of its peak beyond 6 σ
-    for pu, pv in points_uv:
-        v0, u0 = max(int(pv) - reach, 0), max(int(pu) - reach, 0)
-        v, u = np.mgrid[v0 : int(pv) + reach + 1, u0 : int(pu) + reach + 1]
-        image[v, u] += 200.0 * np.exp(-((u - pu) ** 2 + (v - pv) ** 2) / (2 * sigma_px**2))
-    return np.clip(np.rint(image), 0, 255).astype(np.uint8)
 
 
 def fcal2_points(offset_u: float = 0.0) -> dict[str, np.ndarray]:

@@ -10,10 +10,11 @@ HELP = "copy the bundled example files (joint log, sessions, pivot, N-wire, phan
 DESCRIPTION = """\
 Copies the example files that ship with brachycal into DIR: a joint log and a few configurations,
 a noise-free session and the digital twin's session (each with its truth), a tracked-pointer pivot
-recording, PLUS N-wire files, multi-wedge and arbitrary-wire phantom sessions and a water-tank
-video and tracker pair with a known lag, made by the twin (each with its truth), and the scripts
-that made them. The README's and the documentation's commands refer to them as examples/...: run
-them in the folder where DIR is examples (in a clone of the repository they are there already).
+recording, PLUS N-wire files (segmented frames and tracked B-mode sequences), multi-wedge and
+arbitrary-wire phantom sessions and a water-tank video and tracker pair with a known lag, made by
+the twin (each with its truth), and the scripts that made them. The README's and the
+documentation's commands refer to them as examples/...: run them in the folder where DIR is
+examples (in a clone of the repository they are there already).
 
 Files already in DIR with the same content are left as they are; a file with other content is
 refused (nothing is copied) unless --force replaces it. Other files in DIR are not touched.
@@ -100,6 +101,8 @@ def run(args: argparse.Namespace) -> int:
         f"brachycal phantom --method wedge {d}/phantom/multi_wedge.toml {d}/phantom/wedge_observations.csv "
         "--out phantom_wedge.json",
         f"brachycal temporal {d}/temporal/tank_video.mha {d}/temporal/tank_tracker.mha --out lag.json",
+        f"brachycal nwire segment {d}/nwire/twin_calibration.mha {d}/nwire/twin_validation.mha "
+        f"--config {d}/nwire/PlusDeviceSet_twin_fCal2.xml --orientation UF --out twin_frames.xml",
     ):
         print(f"  {line}")
     return 0

@@ -31,6 +31,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from brachycal.calibration.phantom.phantom_file import write_observations
+from brachycal.data.formats.metaimage import write_image_sequence
 from brachycal.data.formats.plus_files import PlusConfig, SegmentedFrame
 from brachycal.data.pose_list import COLUMNS
 from brachycal.io import OutputSet, atomic_open, bundled, json_text, output_set
@@ -42,6 +43,7 @@ from brachycal.studies.tank_recording import write_tank_files
 __all__ = [
     "NWIRE_CONFIG_NAME",
     "NWIRE_FRAMES_NAME",
+    "NWIRE_SEQUENCE_NAMES",
     "PHANTOM_FILES",
     "PHANTOM_FRAMES",
     "PHANTOM_TRUTH_NAME",
@@ -50,6 +52,7 @@ __all__ = [
     "TEMPORAL_NAMES",
     "PivotRecording",
     "phantom_geometry_text",
+    "render_wire_frame",
     "simulate_pivot_recording",
     "write_example_files",
     "write_plus_config",
@@ -68,6 +71,12 @@ PHANTOM_FILES = {
     "wire": ("phantom/arbitrary_wire.toml", "phantom/wire_observations.csv", "wire"),
 }
 PHANTOM_TRUTH_NAME = "phantom/truth.json"
+#: The N-wire example's frames rendered as tracked B-mode sequences (calibration, validation), for
+#: ``brachycal nwire segment``; how many of the example's frames each holds (~3 kB a frame, compressed).
+NWIRE_SEQUENCE_NAMES = ("nwire/twin_calibration.mha", "nwire/twin_validation.mha")
+NWIRE_SEQUENCE_FRAMES = (20, 10)
+#: Width of a rendered wire echo (Gaussian σ, pixels): a 0.5 mm wire is ~3 px across at 0.19 mm/px.
+NWIRE_ECHO_SIGMA_PX = 1.2
 #: The water-tank pair for ``brachycal temporal`` (video, tracker, truth) and its known lag, seconds.
 TEMPORAL_NAMES = ("temporal/tank_video.mha", "temporal/tank_tracker.mha", "temporal/truth.json")
 TEMPORAL_LAG_S = 0.137
@@ -167,6 +176,57 @@ def write_pose_list(path: str | os.PathLike[str], names: Sequence[object], T: Fl
         for name, matrix in zip(names, np.asarray(T, dtype=float), strict=True):
             writer.writerow([name, *(repr(float(v)) for v in matrix.ravel())])
     return Path(path)
+
+
+def render_wire_frame(
+    points_uv: FloatArray,
+    rng: np.random.Generator,
+    *,
+    shape: tuple[int, int] = (616, 820),
+    sigma_px: float = 3.0,
+    noise: float = 1.0,
+) -> np.ndarray:
+    """A B-mode-like uint8 frame ``shape`` (rows, columns): dim background with Gaussian noise of SD
+    ``noise``, a bright horizontal wall, and a Gaussian dot of σ ``sigma_px`` at each ``(u, v)`` of
+    ``points_uv (N, 2)`` pixels. Without noise the frame compresses to a few kB."""
+    image = 25.0 + rng.normal(0.0, noise, shape)
+    image[560:566, 60:760] += 150.0  # a wall: long, removed by the bar top-hats
+    reach = int(np.ceil(6 * sigma_px))  # the Gaussian is below 1e-7 of its peak beyond 6 σ
+    for pu, pv in points_uv:
+        v0, u0 = max(int(pv) - reach, 0), max(int(pu) - reach, 0)
+        v, u = np.mgrid[v0 : int(pv) + reach + 1, u0 : int(pu) + reach + 1]
+        image[v, u] += 200.0 * np.exp(-((u - pu) ** 2 + (v - pv) ** 2) / (2 * sigma_px**2))
+    return np.clip(np.rint(image), 0, 255).astype(np.uint8)
+
+
+def write_wire_sequence(path: str | os.PathLike[str], frames: Sequence[SegmentedFrame], seed: int) -> None:
+    """The wire points of ``frames`` rendered as a tracked B-mode sequence (PLUS .mha, tracker readings
+    in mm) at :data:`NWIRE_SIZE_PX`, without background noise."""
+    rng = np.random.default_rng(seed)
+    width, height = NWIRE_SIZE_PX
+    pixels = np.stack(
+        [
+            render_wire_frame(
+                np.array(list(f.points_px.values())),
+                rng,
+                shape=(height, width),
+                sigma_px=NWIRE_ECHO_SIGMA_PX,
+                noise=0.0,
+            )
+            for f in frames
+        ]
+    )
+    fields = []
+    for f in frames:
+        if f.T_tracker_probe is None or f.T_tracker_reference is None:
+            raise ValueError(f"frame {f.index}: no tracker readings to write")
+        fields.append(
+            {
+                "ProbeToTrackerTransform": _numbers(_mm(f.T_tracker_probe)),
+                "ReferenceToTrackerTransform": _numbers(_mm(f.T_tracker_reference)),
+            }
+        )
+    write_image_sequence(path, pixels, frame_fields=fields)
 
 
 def _numbers(values: FloatArray) -> str:
@@ -344,8 +404,10 @@ def write_example_files(
     (:data:`PHANTOM_FILES`) a multi-wedge and an arbitrary-wire session on the same probe
     (:func:`~brachycal.studies.phantom_twin.simulate_phantom`, its default error sources,
     :data:`PHANTOM_FRAMES` frames), each phantom's geometry with the session's landmark
-    registration, and ``phantom/truth.json``; and for ``brachycal temporal`` a water-tank video and
-    tracker pair with a known lag (:data:`TEMPORAL_NAMES`, :data:`TEMPORAL_LAG_S`). All or nothing;
+    registration, and ``phantom/truth.json``; for ``brachycal temporal`` a water-tank video and
+    tracker pair with a known lag (:data:`TEMPORAL_NAMES`, :data:`TEMPORAL_LAG_S`); and for
+    ``brachycal nwire segment`` the first of the N-wire frames rendered as tracked B-mode sequences
+    (:data:`NWIRE_SEQUENCE_NAMES`, :func:`write_wire_sequence`). All or nothing;
     existing files are replaced only with ``force``.
 
     Returns:
@@ -396,7 +458,7 @@ def write_example_files(
     }
     names = [PIVOT_NAME, "pivot/truth.json", NWIRE_CONFIG_NAME, NWIRE_FRAMES_NAME, "nwire/truth.json"]
     names += [name for files in PHANTOM_FILES.values() for name in files[:2]] + [PHANTOM_TRUTH_NAME]
-    names += list(TEMPORAL_NAMES)
+    names += list(TEMPORAL_NAMES) + list(NWIRE_SEQUENCE_NAMES)
     with output_set(outputs, force=force) as out:
         staged = {name: out.claim(folder / name, make_parents=True) for name in names}
         write_pose_list(staged[PIVOT_NAME], pivot.timestamps_ns.tolist(), pivot.T_tracker_marker_mm, key="timestamp_ns")
@@ -420,4 +482,8 @@ def write_example_files(
             tracker_period_s=_TEMPORAL_TRACKER_PERIOD_S,
         )
         staged[truth].write_text(json_text(temporal_truth))
+        for name, frames, count in zip(
+            NWIRE_SEQUENCE_NAMES, (calibration, validation), NWIRE_SEQUENCE_FRAMES, strict=True
+        ):
+            write_wire_sequence(staged[name], frames[:count], seed)
     return [folder / name for name in names]

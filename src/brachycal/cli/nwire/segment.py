@@ -25,7 +25,15 @@ Frames where the pattern is not found are written as Failed and counted by reaso
 The first sequence gives the calibration frames, the second (optional) the validation frames;
 `brachycal nwire` needs both.
 
-example (PLUS's fCal 2.0 recording, from PlusLibData, in $BRACHYCAL_REFERENCE/plus_fcal_nwire):
+example:
+  brachycal nwire segment examples/nwire/twin_calibration.mha examples/nwire/twin_validation.mha \\
+      --config examples/nwire/PlusDeviceSet_twin_fCal2.xml --orientation UF --out twin_frames.xml
+
+(the twin's N-wire frames of `brachycal examples examples`, rendered; its image is PLUS's MF
+mirrored left to right, UF). On PLUS's fCal 2.0 recording, from PlusLibData, in
+$BRACHYCAL_REFERENCE/plus_fcal_nwire:
+
+example:
   brachycal nwire segment $BRACHYCAL_REFERENCE/plus_fcal_nwire/fCal_Test_Calibration_3NWires_fCal2.0.igs.mha \\
       $BRACHYCAL_REFERENCE/plus_fcal_nwire/fCal_Test_Validation_3NWires_fCal2.0.igs.mha \\
       --config $BRACHYCAL_REFERENCE/plus_fcal_nwire/PlusDeviceSet_fCal_Sim_SpatialCalibration_2.0.xml \\
