@@ -9,7 +9,8 @@ Run from the repository root: ``python examples/make_example_files.py``. Determi
   (:func:`brachycal.studies.example_files.simulate_pivot_recording`).
 - ``nwire/``: a PLUS device-set configuration (fCal 2.0 phantom) and a segmented-frames file of a
   tracked probe over it, in PLUS's formats, and their truth (the twin's tracker route,
-  :func:`brachycal.studies.nwire_twin.simulate_nwire`).
+  :func:`brachycal.studies.nwire_twin.simulate_nwire`); and the first of those frames rendered as
+  tracked B-mode sequences (``twin_calibration.mha``, ``twin_validation.mha``) for ``brachycal nwire segment``.
 - ``phantom/``: a multi-wedge and an arbitrary-wire session of the same tracked probe (observations
   CSV and each phantom's geometry TOML with the session's landmark registration) and their truth
   (:func:`brachycal.studies.phantom_twin.simulate_phantom`), for ``brachycal phantom``.

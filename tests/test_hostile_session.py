@@ -428,3 +428,45 @@ CASES = [
 @pytest.mark.parametrize("case", CASES, ids=lambda c: c.id)
 def test_session_build_refusals(case, tmp_path):
     check_refusal(case, tmp_path)
+
+
+def _blank(tmp: Path) -> None:
+    from brachycal.data.session_template import write_session_template
+
+    write_session_template(tmp / "blank")
+
+
+TEMPLATE = ["session", "template", "{tmp}/blank"]
+TEMPLATE_CASES = [
+    Case(
+        "template-over-a-filled-one",
+        TEMPLATE,
+        ("blank/session.toml", "already exists", "--force"),
+        write("blank/session.toml", "a lab's filled-in session.toml\n"),
+    ),
+    Case("template-dir-is-a-file", TEMPLATE, ("blank",), write("blank", "not a folder\n")),
+    Case(
+        "build-from-an-unfilled-template",
+        [
+            "session",
+            "build",
+            "{tmp}/joint_log.csv",
+            "--marks",
+            "{tmp}/blank/marks.csv",
+            "--images",
+            "{tmp}/blank/images.csv",
+            "--template",
+            "{tmp}/blank/session.toml",
+            "--out",
+            "{tmp}/session",
+        ],
+        ("blank/session.toml", "column 'image.spacing_mm'", "expected a list of 2 numbers"),
+        _blank,
+    ),
+]
+
+
+@pytest.mark.parametrize("case", TEMPLATE_CASES, ids=lambda c: c.id)
+def test_session_template_refusals(case, tmp_path):
+    """``session template`` never replaces a lab's files unasked; an unfilled template is refused by the build."""
+    check_refusal(case, tmp_path)
