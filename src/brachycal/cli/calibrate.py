@@ -11,6 +11,7 @@ from brachycal.cli.common import (
     add_robot_accuracy_options,
     add_robot_option,
     load_robot,
+    method_said,
     output_file,
     progress_bar,
     robot_accuracy,
@@ -131,7 +132,11 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace, collecting: bool) -> int:
-    from brachycal.calibration import calibrate_folder, write_result  # lazy: start-up (the command's run only)
+    from brachycal.calibration import (
+        calibrate_folder,
+        read_result,
+        write_result,
+    )  # lazy: start-up (the command's run only)
     from brachycal.calibration.parallel import forking_workers, frozen_heap  # lazy: start-up (the command's run only)
     from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
 
@@ -196,4 +201,6 @@ def _run(args: argparse.Namespace, collecting: bool) -> int:
     if args.report:
         print(f"report: {Path(args.report) / 'report.html'}")
     print(f"\nwrote {args.out}")
+    # Read back: the rule is the result file's own (locate, export, view, plan use it the same way).
+    print(f"next commands use: {method_said(read_result(args.out), None)}")
     return 0
