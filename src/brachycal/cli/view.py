@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from brachycal.cli.common import add_method_option, add_robot_option, load_robot
+from brachycal.cli.common import add_method_option, add_robot_option, load_robot, method_said
 from brachycal.cli.option_types import bounded_int
 from brachycal.errors import InputError
 
@@ -87,7 +87,9 @@ def _content(args: argparse.Namespace):  # -> ViewContent (imported lazily)
             from brachycal.simulation.twin_files import read_twin  # lazy: start-up (the command's run only)
 
             twin = read_twin(args.session, robot)
-        return calibration_content(robot, stored, session, method, twin=twin, n_targets=args.targets)
+        content = calibration_content(robot, stored, session, method, twin=twin, n_targets=args.targets)
+        print(f"brachycal view: method {method_said(stored, args.method)}")
+        return content
     if args.method is not None:
         raise InputError("--method needs a RESULT")
     if args.session is not None:
