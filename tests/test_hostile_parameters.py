@@ -201,7 +201,7 @@ CASES = [
     Case("plan-unknown-method", [*PLAN, "--method", "icpp"], ("--method", "invalid choice")),
     # --- calibrate ----------------------------------------------------------------------------------
     *numeric(
-        [*CALIBRATE, "--method", "chain"],
+        [*CALIBRATE, "--solve", "chain"],
         "--bootstrap",
         {
             "nan": ("nan", ("whole number",)),
@@ -210,19 +210,33 @@ CASES = [
             "many": ("10001", ("[0, 10000]",)),
         },
     ),
-    Case("calibrate-bootstrap-without-chain", [*CALIBRATE, "--bootstrap", "100"], ("--bootstrap", "--method chain")),
+    Case("calibrate-bootstrap-without-chain", [*CALIBRATE, "--bootstrap", "100"], ("--bootstrap", "--solve chain")),
     Case(
-        "calibrate-joint-offsets-without-chain", [*CALIBRATE, "--joint-offsets"], ("--joint-offsets", "--method chain")
+        "calibrate-joint-offsets-without-chain", [*CALIBRATE, "--joint-offsets"], ("--joint-offsets", "--solve chain")
     ),
     Case(
         "calibrate-identify-robot-without-chain",
         [*CALIBRATE, "--identify-robot"],
-        ("--identify-robot", "--method chain"),
+        ("--identify-robot", "--solve chain"),
     ),
     Case(
         "calibrate-identify-robot-and-joint-offsets",
-        [*CALIBRATE, "--method", "chain", "--identify-robot", "--joint-offsets"],
+        [*CALIBRATE, "--solve", "chain", "--identify-robot", "--joint-offsets"],
         ("--identify-robot", "--joint-offsets"),
+    ),
+    # --method is an image method's name (locate, export); calibrate's earlier --method chain is --solve.
+    Case("calibrate-method-an-image-method", [*CALIBRATE, "--method", "kabsch"], ("--method", "--methods kabsch")),
+    Case(
+        "calibrate-method-chain-robot",
+        [*CALIBRATE, "--method", "chain+robot"],
+        ("--method", "--solve chain --identify-robot"),
+    ),
+    Case("calibrate-method-unknown", [*CALIBRATE, "--method", "magic"], ("--method", "'magic'", "icp")),
+    Case("calibrate-solve-unknown", [*CALIBRATE, "--solve", "kabsch"], ("--solve", "invalid choice")),
+    Case(
+        "calibrate-solve-and-old-method-disagree",
+        [*CALIBRATE, "--solve", "sequential", "--method", "chain"],
+        ("--solve sequential", "--method chain"),
     ),
     Case("calibrate-unknown-method", [*CALIBRATE, "--methods", "kabsch,icpp"], ("--methods", "'icpp'")),
     Case("calibrate-empty-method", [*CALIBRATE, "--methods", "kabsch,,horn"], ("--methods", "empty")),

@@ -117,7 +117,7 @@ def add_robot_accuracy_options(
 
     Args:
         parser: where to add them.
-        when: the option they go with, for the help (``"with --method chain"``).
+        when: the option they go with, for the help (``"with --solve chain"``).
         zero: whether 0 (a perfect robot) is allowed; a prior of identification must be positive.
         note: what the accuracy is used for, appended to the millimetres' help.
     """
