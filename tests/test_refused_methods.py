@@ -285,7 +285,9 @@ def test_refusal(case, tmp_path, folder):
 def test_locate_without_method_uses_a_method_that_was_not_refused(tmp_path):
     _both(_result_with(_unchanged), _joints)(tmp_path)
     outcome = run_cli([a.format(tmp=tmp_path) for a in LOCATE])
-    assert outcome.code == 0 and outcome.err == "", outcome.err
+    # No warning: stderr is the one line naming the method used, never the refused ICP.
+    assert outcome.code == 0 and len(outcome.err.splitlines()) == 1, outcome.err
+    assert outcome.err.startswith("brachycal locate: method ") and "icp" not in outcome.err
 
 
 # --- study and demo ---------------------------------------------------------------------------------
