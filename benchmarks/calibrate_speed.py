@@ -2,7 +2,7 @@
 
 Run: ``.venv/bin/python benchmarks/calibrate_speed.py``. Figures:
 
-- end to end, what a user waits for: ``brachycal calibrate examples/twin_session --method chain``
+- end to end, what a user waits for: ``brachycal calibrate examples/twin_session --solve chain``
   in a new process (start-up, imports, the sequential method, model choice by 8-fold
   cross-validation over 4 image models, the final fit with the robot term, leave-one-out over 64
   samples, predicted landing error, result file), no bootstrap, best of 3; recorded in
@@ -43,7 +43,7 @@ from brachycal.data.session import read_session
 from brachycal.model import Robot
 
 SESSION = Path(__file__).resolve().parents[1] / "examples" / "twin_session"
-#: Issue 13's goal for ``calibrate --method chain`` end to end without bootstrap, seconds.
+#: Issue 13's goal for ``calibrate --solve chain`` end to end without bootstrap, seconds.
 GOAL_S = 2.0
 
 
@@ -51,11 +51,11 @@ def end_to_end(method: str, repeats: int = 3) -> float:
     """Best wall time of ``brachycal calibrate`` on the example session with ``--method``, in a new
     process, seconds."""
     with tempfile.TemporaryDirectory() as tmp:
-        argv = ["calibrate", str(SESSION), "--out", str(Path(tmp) / "r.json"), "--method", method, "--force", "--quiet"]
+        argv = ["calibrate", str(SESSION), "--out", str(Path(tmp) / "r.json"), "--solve", method, "--force", "--quiet"]
         return best_wall([*brachycal_command(), *argv], repeats)
 
 
-#: What ``calibrate --method chain`` imports before it computes (the command line, the robot model, the
+#: What ``calibrate --solve chain`` imports before it computes (the command line, the robot model, the
 #: sequential method and the chain, the tables): timed in a new process as the start-up part of the end-to-end figure.
 STARTUP_IMPORTS = (
     "import brachycal.cli.main, brachycal.cli.calibrate, brachycal.model, "
@@ -111,12 +111,12 @@ def main() -> None:
     sequential = end_to_end("sequential")
     chain = end_to_end("chain")
     record(
-        "calibrate: brachycal calibrate --method chain (64 samples) end to end",
+        "calibrate: brachycal calibrate --solve chain (64 samples) end to end",
         chain,
         "s",
         goal=f"<= {GOAL_S} s",
         met=chain <= GOAL_S,
-        peer="the sequential method alone (same command, --method sequential)",
+        peer="the sequential method alone (same command, --solve sequential)",
         peer_value=sequential,
     )
 

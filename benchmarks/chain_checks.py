@@ -18,7 +18,7 @@ busy 2-core machine). Prints:
 2. **Outliers**: 10 % gross annotation mistakes against the clean session of the same seed
    (seeds 0…OUTLIER_SEEDS−1): the targeting-error ratio's distribution, and whether the flagged
    images are exactly the mistakes.
-3. **Targeting**: the chain (model chosen by cross-validation, as ``calibrate --method chain``)
+3. **Targeting**: the chain (model chosen by cross-validation, as ``calibrate --solve chain``)
    against the paper's rigid method (Kabsch) on the clean sessions of section 2: mean ± SD.
 4. **Conditioning** figures of those fits (the ranges quoted in the thresholds' docstrings).
 5. The targeting error with and without the optional joint-offset corrections on seeds 0–2.

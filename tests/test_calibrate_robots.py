@@ -3,7 +3,7 @@
 On each robot, a noise-free session built from that robot's own kinematics with known tools
 (:func:`~brachycal.simulation.exact_session`: the configurations are where the robot's forward
 kinematics puts the true tools, the pixels are the true ones) must give back the truth through the
-command line — ``calibrate`` (sequential and ``--method chain``), ``locate`` and ``export`` with
+command line — ``calibrate`` (sequential and ``--solve chain``), ``locate`` and ``export`` with
 ``--robot NAME`` — and a result or a session of one robot must be refused on another. The UR5
 cell has 6-axis arms and no shared joint (no torso): nothing may assume 7 axes or a torso.
 
@@ -191,7 +191,7 @@ REFUSALS = [
     ),
     Case(
         "calibrate-a-ur5-session-on-baxter",
-        ["calibrate", "{session}", "--robot", "baxter", "--method", "chain", "--out", "{tmp}/r.json", "--quiet"],
+        ["calibrate", "{session}", "--robot", "baxter", "--solve", "chain", "--out", "{tmp}/r.json", "--quiet"],
         ("touches.csv", "'baxter'", "missing left_s0", "(14 of 14)", "left_shoulder_pan_joint"),
     ),
 ]

@@ -414,7 +414,7 @@ def test_samples_in_part_of_the_image_warn_with_the_honest_figure(robot, tmp_pat
     full = read_session(ROOT / "examples" / "twin_session", robot)
     write_session(_subset(full, np.arange(16)), tmp_path / "session")  # 16 images: determined, not across the image
     out = tmp_path / "result.json"
-    assert main(["calibrate", str(tmp_path / "session"), "--out", str(out), "--method", "chain", "--quiet"]) == 0
+    assert main(["calibrate", str(tmp_path / "session"), "--out", str(out), "--solve", "chain", "--quiet"]) == 0
     warned = [line for line in capsys.readouterr().err.splitlines() if "whole chain" in line]
     assert len(warned) == 1 and warned[0].startswith("brachycal: warning: whole chain: predicted landing error up to")
     image_map = json.loads(out.read_text())["chain"]["predicted_landing_rms_mm"]["image_map"]["rms_mm"]
@@ -434,7 +434,7 @@ def test_calibrate_chain_cli_and_locate_with_joint_offsets(tmp_path, capsys):
                 session,
                 "--out",
                 str(out),
-                "--method",
+                "--solve",
                 "chain",
                 "--joint-offsets",
                 "--bootstrap",

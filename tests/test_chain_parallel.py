@@ -181,7 +181,7 @@ def test_parallel_calls_give_what_calls_in_turn_give_and_the_lowest_failure():
 
 
 def test_calibrating_a_folder_on_two_cores_is_the_same_as_in_turn(robot, monkeypatch):
-    """``calibrate --method chain``'s path: the sequential method's leave-one-out and the chain's model
+    """``calibrate --solve chain``'s path: the sequential method's leave-one-out and the chain's model
     choice share the cores, then the chain's leave-one-out and predicted landing errors do; every
     figure is the same arithmetic as in turn, bit for bit."""
     from pathlib import Path

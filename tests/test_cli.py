@@ -11,6 +11,7 @@ from conftest import ROOT
 from hostile import run_cli
 from test_joint_log import write_log
 
+from brachycal.calibration import read_result
 from brachycal.cli.main import build_parser, joined_command, main
 from brachycal.data import read_csv_log, read_pose_table
 
@@ -139,5 +140,18 @@ def test_output_into_a_closed_pipe_ends_quietly(tmp_path, robot):
     joints.write_text(",".join(robot.joint_names) + "\n" + ("0," * 14 + "0\n") * 20000)
     command = f"'{CONSOLE}' locate '{result_file}' '{joints}' --uv 1,2 | head -1"
     result = subprocess.run(command, shell=True, capture_output=True, text=True, check=False)
-    assert result.stdout == "row,x,y,z\n"
-    assert result.stderr == ""
+    assert result.stdout == "row,x_m,y_m,z_m\n"
+    # Only the line naming the calibration used: no traceback, no broken-pipe message.
+    assert len(result.stderr.splitlines()) == 1 and result.stderr.startswith("brachycal locate: method ")
+
+
+def test_the_earlier_spelling_calibrate_method_chain_solves_the_chain_with_a_note(tmp_path):
+    session = str(ROOT / "examples" / "session_exact")
+    old = run_cli(["calibrate", session, "--out", str(tmp_path / "old.json"), "--method", "chain", "--quiet"])
+    new = run_cli(["calibrate", session, "--out", str(tmp_path / "new.json"), "--solve", "chain", "--quiet"])
+    note = "brachycal: note: 'calibrate --method chain' is now 'calibrate --solve chain'"
+    assert old.code == new.code == 0 and old.err.splitlines()[0].startswith(note) and note not in new.err
+    # The same calibration: the chain solved, and the next commands told they use it.
+    assert "chain" in read_result(tmp_path / "old.json").image and "chain" in read_result(tmp_path / "new.json").image
+    assert old.out.splitlines()[-1] == new.out.splitlines()[-1]
+    assert new.out.splitlines()[-1].startswith("next commands use: chain (the result's best: the whole chain")

@@ -79,7 +79,9 @@ def test_export_and_report_cli(tmp_path, capsys):
     assert "TABLE I." in html and "TABLE II." in html and html.count("data:image/png;base64,") == 3
     assert "http://" not in html and "https://" not in html  # self-contained
     assert "samples.csv" in html and "session.toml" in html  # input hashes
-    assert main(["export", str(result), "--out", str(tmp_path / "x")]) == 0
+    capsys.readouterr()
+    assert main(["export", str(result), "--out", str(tmp_path / "x"), "--method", "kabsch"]) == 0
+    assert capsys.readouterr().out.splitlines()[0] == "exported method: kabsch (--method)"
     assert (tmp_path / "x" / "static_transforms.yaml").exists()
     assert main(["export", str(result), "--out", str(tmp_path / "x")]) == 2  # never replaces without --force
     assert "already exists" in capsys.readouterr().err

@@ -49,7 +49,7 @@ def results(tmp_path_factory) -> dict[str, Path]:
     one configuration of the probe arm (the joint log's last row)."""
     folder = tmp_path_factory.mktemp("results")
     run(["calibrate", TWIN, "--out", folder / "sequential.json", "--quiet"])
-    run(["calibrate", TWIN, "--method", "chain", "--joint-offsets", "--out", folder / "offsets.json", "--quiet"])
+    run(["calibrate", TWIN, "--solve", "chain", "--joint-offsets", "--out", folder / "offsets.json", "--quiet"])
     rows = list(csv.reader((ROOT / "examples" / "joint_log.csv").open()))
     with (folder / "joints.csv").open("w", newline="") as f:
         csv.writer(f).writerows([rows[0], rows[-1]])

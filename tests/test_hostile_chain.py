@@ -1,5 +1,5 @@
 """Hostile input to the whole-chain method: well-formed sessions whose image samples cannot determine
-the chain. ``brachycal calibrate --method chain`` refuses each with one line naming ``samples.csv``,
+the chain. ``brachycal calibrate --solve chain`` refuses each with one line naming ``samples.csv``,
 exit code 2, nothing written — before this, samples at one robot pose gave a predicted landing error
 of 0.000 mm.
 
@@ -24,7 +24,7 @@ from hostile import Case, check_refusal
 from brachycal.data.session import Session, read_session, write_session
 from brachycal.model import Robot
 
-CHAIN = ["calibrate", "{tmp}/session", "--out", "{tmp}/result.json", "--method", "chain", "--quiet"]
+CHAIN = ["calibrate", "{tmp}/session", "--out", "{tmp}/result.json", "--solve", "chain", "--quiet"]
 
 
 @cache
@@ -102,7 +102,7 @@ CASES += [
     Case(
         "robot-accuracy-without-chain",
         [*SEQUENTIAL, "--robot-accuracy-mm", "0.1"],
-        ("--robot-accuracy-mm", "--method chain"),
+        ("--robot-accuracy-mm", "--solve chain"),
         copied,
     ),
 ]

@@ -201,7 +201,7 @@ CASES = [
     Case("plan-unknown-method", [*PLAN, "--method", "icpp"], ("--method", "invalid choice")),
     # --- calibrate ----------------------------------------------------------------------------------
     *numeric(
-        [*CALIBRATE, "--method", "chain"],
+        [*CALIBRATE, "--solve", "chain"],
         "--bootstrap",
         {
             "nan": ("nan", ("whole number",)),
@@ -210,19 +210,33 @@ CASES = [
             "many": ("10001", ("[0, 10000]",)),
         },
     ),
-    Case("calibrate-bootstrap-without-chain", [*CALIBRATE, "--bootstrap", "100"], ("--bootstrap", "--method chain")),
+    Case("calibrate-bootstrap-without-chain", [*CALIBRATE, "--bootstrap", "100"], ("--bootstrap", "--solve chain")),
     Case(
-        "calibrate-joint-offsets-without-chain", [*CALIBRATE, "--joint-offsets"], ("--joint-offsets", "--method chain")
+        "calibrate-joint-offsets-without-chain", [*CALIBRATE, "--joint-offsets"], ("--joint-offsets", "--solve chain")
     ),
     Case(
         "calibrate-identify-robot-without-chain",
         [*CALIBRATE, "--identify-robot"],
-        ("--identify-robot", "--method chain"),
+        ("--identify-robot", "--solve chain"),
     ),
     Case(
         "calibrate-identify-robot-and-joint-offsets",
-        [*CALIBRATE, "--method", "chain", "--identify-robot", "--joint-offsets"],
+        [*CALIBRATE, "--solve", "chain", "--identify-robot", "--joint-offsets"],
         ("--identify-robot", "--joint-offsets"),
+    ),
+    # --method is an image method's name (locate, export); calibrate's earlier --method chain is --solve.
+    Case("calibrate-method-an-image-method", [*CALIBRATE, "--method", "kabsch"], ("--method", "--methods kabsch")),
+    Case(
+        "calibrate-method-chain-robot",
+        [*CALIBRATE, "--method", "chain+robot"],
+        ("--method", "--solve chain --identify-robot"),
+    ),
+    Case("calibrate-method-unknown", [*CALIBRATE, "--method", "magic"], ("--method", "'magic'", "icp")),
+    Case("calibrate-solve-unknown", [*CALIBRATE, "--solve", "kabsch"], ("--solve", "invalid choice")),
+    Case(
+        "calibrate-solve-and-old-method-disagree",
+        [*CALIBRATE, "--solve", "sequential", "--method", "chain"],
+        ("--solve sequential", "--method chain"),
     ),
     Case("calibrate-unknown-method", [*CALIBRATE, "--methods", "kabsch,icpp"], ("--methods", "'icpp'")),
     Case("calibrate-empty-method", [*CALIBRATE, "--methods", "kabsch,,horn"], ("--methods", "empty")),
@@ -335,7 +349,7 @@ def test_locate_accepts_the_edges_of_the_image(result):
     # The bounds refused above are the image's own: its last pixel's far half is still inside.
     outcome = run_cli([*[str(a).format(result=result) for a in LOCATE], "--uv", "1079.5,719.5"])
     assert outcome.code == 0, outcome.err
-    assert outcome.out.splitlines()[0] == "row,x,y,z"
+    assert outcome.out.splitlines()[0] == "row,x_m,y_m,z_m"
 
 
 def edited_result(result: Path, edit) -> Case:

@@ -203,7 +203,7 @@ def base(tmp_path_factory) -> dict[str, Path]:
     """A whole-chain result with joint offsets (and so corrected joint origins), outside the cases'
     folders: it holds every block the edits above change."""
     result = tmp_path_factory.mktemp("inputs") / "result.json"
-    argv = ["calibrate", str(SESSION), "--method", "chain", "--joint-offsets", "--out", str(result), "--quiet"]
+    argv = ["calibrate", str(SESSION), "--solve", "chain", "--joint-offsets", "--out", str(result), "--quiet"]
     outcome = run_cli(argv)
     assert outcome.code == 0, outcome.err
     document = json.loads(result.read_text())

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from conftest import random_configurations
 
+from brachycal.calibration import read_result
 from brachycal.cli.main import main
 from brachycal.model.collision import ClearanceChecker, collision_link_pairs
 from brachycal.model.names import CONTROLLER_JOINT_NAMES
@@ -152,7 +153,10 @@ def test_plan_with_a_calibration_result(tmp_path, capsys):
     assert main(["calibrate", str(ROOT / "examples" / "session_exact"), "--out", str(result)]) == 0
     out = tmp_path / "plan.csv"
     assert main(["plan", "--out", str(out), "--points", "2", "--result", str(result), "--quiet"]) == 0
-    assert "planned 8 of 8 poses" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "planned 8 of 8 poses" in printed
+    best = read_result(result).best_method()
+    assert f"planning with method: {best} (the result's best: " in printed
 
 
 def test_a_point_whose_qp_fails_is_listed_as_solver_and_the_plan_is_refused(tmp_path, robot, monkeypatch, capsys):

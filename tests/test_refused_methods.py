@@ -6,7 +6,7 @@ truth, a CAD-far mount): the grid's pattern of needle positions maps onto itself
 the URDF's nominal image frame is too far off to choose among those fits, and ICP refuses. Kabsch,
 Horn, the similarity and scaled u/v fits use the recorded pairs and calibrate it. The rule:
 
-- ``calibrate`` (sequential or ``--method chain``) exits 0 with one warning line naming ICP and
+- ``calibrate`` (sequential or ``--solve chain``) exits 0 with one warning line naming ICP and
   why; Table II has a row saying why; the result records ``refused: {icp: reason}``; the other
   methods and the chain are exactly what they are without ICP;
 - only when every method asked for refuses (``--methods icp`` alone) is the command refused;
@@ -73,9 +73,9 @@ def folder(twin, tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def calibrated(folder, tmp_path_factory):
-    """``calibrate --method chain --report`` on the twin: its outcome and its folder."""
+    """``calibrate --solve chain --report`` on the twin: its outcome and its folder."""
     out = tmp_path_factory.mktemp("calibrated")
-    argv = ["calibrate", str(folder), "--out", str(out / "result.json"), "--method", "chain", "--quiet"]
+    argv = ["calibrate", str(folder), "--out", str(out / "result.json"), "--solve", "chain", "--quiet"]
     return run_cli([*argv, "--report", str(out / "report")]), out
 
 
@@ -205,7 +205,7 @@ CASES = [
     ),
     Case(
         "calibrate-chain-methods-icp-alone-refused",
-        ["calibrate", "{session}", "--out", "{tmp}/result.json", "--methods", "icp", "--method", "chain", "--quiet"],
+        ["calibrate", "{session}", "--out", "{tmp}/result.json", "--methods", "icp", "--solve", "chain", "--quiet"],
         ("samples.csv", "icp:", "fits match the samples equally well"),
     ),
     Case(
@@ -216,7 +216,7 @@ CASES = [
     ),
     Case(
         "calibrate-chain-every-method-refused",
-        ["calibrate", "{tmp}/session", "--out", "{tmp}/result.json", "--method", "chain", "--quiet"],
+        ["calibrate", "{tmp}/session", "--out", "{tmp}/result.json", "--solve", "chain", "--quiet"],
         ("session", "samples.csv", "collinear"),
         _samples_on_one_image_row,
     ),
@@ -285,7 +285,9 @@ def test_refusal(case, tmp_path, folder):
 def test_locate_without_method_uses_a_method_that_was_not_refused(tmp_path):
     _both(_result_with(_unchanged), _joints)(tmp_path)
     outcome = run_cli([a.format(tmp=tmp_path) for a in LOCATE])
-    assert outcome.code == 0 and outcome.err == "", outcome.err
+    # No warning: stderr is the one line naming the method used, never the refused ICP.
+    assert outcome.code == 0 and len(outcome.err.splitlines()) == 1, outcome.err
+    assert outcome.err.startswith("brachycal locate: method ") and "icp" not in outcome.err
 
 
 # --- study and demo ---------------------------------------------------------------------------------

@@ -27,9 +27,9 @@ SESSION = ROOT / "examples" / "twin_session"
 #: Each kind of result ``brachycal calibrate`` writes: the options that make it.
 KINDS = {
     "sequential": [],
-    "chain": ["--method", "chain"],
-    "chain-joint-offsets": ["--method", "chain", "--joint-offsets"],
-    "chain-identify-robot": ["--method", "chain", "--identify-robot"],
+    "chain": ["--solve", "chain"],
+    "chain-joint-offsets": ["--solve", "chain", "--joint-offsets"],
+    "chain-identify-robot": ["--solve", "chain", "--identify-robot"],
 }
 
 

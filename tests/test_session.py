@@ -10,6 +10,7 @@ import pytest
 from test_joint_log import edit
 
 from brachycal import InputError
+from brachycal.calibration import read_result
 from brachycal.cli.main import main
 from brachycal.data.session import read_session
 
@@ -166,6 +167,10 @@ def test_calibrate_cli_refusal_is_one_line_and_writes_nothing(session_dir, tmp_p
 def test_locate_cli(session_dir, tmp_path, capsys, robot, truth, exact):
     out = tmp_path / "result.json"
     main(["calibrate", str(session_dir), "--out", str(out)])
+    best = read_result(out).best_method()
+    # calibrate ends by naming the calibration the next commands use: the result file's rule.
+    last = capsys.readouterr().out.splitlines()[-1]
+    assert last.startswith(f"next commands use: {best} (the result's best: lowest leave-one-out RMSE, ")
     joints = tmp_path / "q.csv"
     q = exact.samples_q[:2]
     joints.write_text(
@@ -173,8 +178,13 @@ def test_locate_cli(session_dir, tmp_path, capsys, robot, truth, exact):
     )
     capsys.readouterr()
     assert main(["locate", str(out), str(joints), "--uv", "540,300", "--method", "scaled_uv"]) == 0
-    lines = capsys.readouterr().out.splitlines()
-    assert lines[0] == "row,x,y,z" and len(lines) == 3
+    printed = capsys.readouterr()
+    lines = printed.out.splitlines()
+    assert lines[0] == "row,x_m,y_m,z_m" and len(lines) == 3
+    # Method, frame and unit in one stderr line (stdout stays a plain CSV with the unit in its columns).
+    assert printed.err == f"brachycal locate: method scaled_uv (--method); frame base_link; unit m; result {out}\n"
+    assert main(["locate", str(out), str(joints), "--uv", "540,300"]) == 0
+    assert capsys.readouterr().err.startswith(f"brachycal locate: method {best} (the result's best: ")
     p = np.array([float(x) for x in lines[2].split(",")[1:]])
     physical = truth.robot(robot)
     expected = physical.fk("us_image", q[1]) @ [540 * 0.19e-3, 300 * 0.19e-3, 0, 1]

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from hostile import run_cli
 
-from brachycal.calibration import verify_folder
+from brachycal.calibration import read_result, verify_folder
 from brachycal.calibration.verify.check import (
     DEFAULT_FALSE_ALARM,
     GROSS_PRIOR_MULTIPLES,
@@ -335,6 +335,9 @@ def test_verify_folder_is_the_commands_check_as_a_library_call(check_folders, tm
     assert not check.passed and check.outcome.part is not None and check.outcome.part.part == written["part"]
     assert check.record["test"] == written["test"] and check.record["verdict"] == written["verdict"]
     assert outcome.out.startswith(check.verdict_text())
+    # It names the calibration it checked: the result's best, as locate and export use it.
+    best = read_result(check_folders["result"]).best_method()
+    assert f"\nchecked method: {best} (the result's best: " in outcome.out
     assert not check.calibration_session and check.updated is None and check.update_refusal is None
     # With update asked: the updated result, or why not, never both.
     asked = verify_folder(check_folders["result"], check_folders["remounted"], update=True)

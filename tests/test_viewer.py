@@ -218,3 +218,17 @@ def test_the_command_serves_a_page_without_a_browser_and_stops_on_sigterm(calibr
     with _served(calibrated[2].source) as (view, url), urlopen(url, timeout=30) as page:
         assert page.status == 200 and b"<html" in page.read().lower()
     assert view.returncode == 143
+
+
+def test_view_of_a_result_names_the_method_it_shows(calibrated) -> None:
+    from brachycal.cli.main import build_parser
+    from brachycal.cli.view import _content
+
+    _, _, stored = calibrated
+    parser = build_parser()
+    args = parser.parse_args(["view", stored.source, "--session", str(EXAMPLE)])
+    assert _content(args)[1].startswith("kabsch (the result's best: lowest leave-one-out RMSE, ")
+    args = parser.parse_args(["view", stored.source, "--session", str(EXAMPLE), "--method", "kabsch"])
+    assert _content(args)[1] == "kabsch (--method)"
+    # Without a result there is no calibration to name.
+    assert _content(parser.parse_args(["view", "--session", str(EXAMPLE)]))[1] is None

@@ -1,7 +1,7 @@
 """The chain's least-squares solver: Levenberg–Marquardt on a small dense problem.
 
 The chain's problems are small (about 30 unknowns, a few hundred residuals) and solved about 600
-times per ``calibrate --method chain`` (model choice by cross-validation, leave-one-out). SciPy's
+times per ``calibrate --solve chain`` (model choice by cross-validation, leave-one-out). SciPy's
 :func:`~scipy.optimize.least_squares` spends several milliseconds per call in its own set-up and
 checks, more than the solve itself; this solver does the same job for this problem's size:
 

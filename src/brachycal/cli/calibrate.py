@@ -11,9 +11,11 @@ from brachycal.cli.common import (
     add_robot_accuracy_options,
     add_robot_option,
     load_robot,
+    method_said,
     output_file,
     progress_bar,
     robot_accuracy,
+    spelling_note,
     warn_refused,
 )
 from brachycal.cli.option_types import bounded_int, name_list
@@ -31,7 +33,7 @@ and probe tips (Table I, validated at rtip2), the tool rotations from three poin
 image-to-probe transform by ICP, Kabsch, Horn ("Landmark"), a similarity fit and a fit with
 separate u/v pixel spacings, each evaluated by leave-one-out cross-validation (Table II).
 
-With --method chain, the whole chain is also solved as one least-squares problem over all the
+With --solve chain, the whole chain is also solved as one least-squares problem over all the
 data (touches, axes moves, images; gross image outliers flagged and left out), the image model
 (rigid, similarity, scaled u/v, or speed of sound) chosen by cross-validation, with 95% intervals
 of the session's noise and the robot's stated kinematic accuracy (--robot-accuracy-mm/-deg;
@@ -39,7 +41,7 @@ coverage on the twin: the documentation's Validation page) and the predicted lan
 over the sample poses and the image; data that cannot determine the chain
 are refused. The result then carries the chain's transforms.
 
-With --method chain --identify-robot, the robot's own geometry (every joint origin's small
+With --solve chain --identify-robot, the robot's own geometry (every joint origin's small
 translation and rotation, zero offsets included) is identified jointly with the chain from the
 same session, the stated accuracy (--robot-accuracy-mm/-deg: state the arm's real figures) as its
 prior; the result carries the corrections, which 'brachycal export' writes into the calibrated
@@ -63,6 +65,28 @@ example:
 """
 
 
+#: The values of --solve: the paper's steps one after another, or the whole chain at once as well.
+SOLVES = ("sequential", "chain")
+
+
+def _old_solve(text: str) -> str:
+    """argparse type of calibrate's earlier ``--method sequential|chain`` (now ``--solve``): an image
+    method there (kabsch, chain+robot, ...) is refused saying which option does what was meant."""
+    if text in SOLVES:
+        return text
+    from brachycal.calibration.labels import ALL_LABELS, METHODS  # lazy: start-up (the command's run only)
+
+    if text == "chain+robot":
+        hint = "to solve the chain with the robot's geometry use --solve chain --identify-robot"
+    elif text in ALL_LABELS:
+        hint = f"to fit only {text} use --methods {text}" if text in METHODS else f"to solve it use --solve {text}"
+    else:
+        hint = f"{text!r} is none of them (methods: {', '.join(METHODS)})"
+    raise argparse.ArgumentTypeError(
+        f"calibrate fits every method of --methods and --solve sequential|chain says how; {hint}"
+    )
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from brachycal.calibration.labels import METHODS  # lazy: start-up (the command's run only)
 
@@ -76,30 +100,31 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=name_list(METHODS),
         default=",".join(METHODS),
         metavar="A,B",
-        help=f"registration methods, each once (default all: {','.join(METHODS)})",
+        help=f"image methods to fit (registrations), each once (default all: {','.join(METHODS)})",
     )
     parser.add_argument(
-        "--method",
-        choices=("sequential", "chain"),
-        default="sequential",
-        help="sequential: the paper's steps (default); chain: one least-squares problem over all data, "
-        "image model chosen by cross-validation, with uncertainty",
+        "--solve",
+        choices=SOLVES,
+        help="sequential: the paper's steps, one part after another (default); chain: also one least-squares "
+        "problem over all the data, image model chosen by cross-validation, with uncertainty",
     )
+    # The earlier spelling of --solve (a "method" is an image transform's: docs/glossary.md).
+    parser.add_argument("--method", dest="old_solve", type=_old_solve, help=argparse.SUPPRESS)
     parser.add_argument(
         "--joint-offsets",
         action="store_true",
-        help="with --method chain: also estimate the joint zero offsets this session identifies",
+        help="with --solve chain: also estimate the joint zero offsets this session identifies",
     )
     add_robot_accuracy_options(
         parser,
-        "with --method chain",
+        "with --solve chain",
         zero=True,
         note="; included in the intervals and the predicted landing error",
     )
     parser.add_argument(
         "--identify-robot",
         action="store_true",
-        help="with --method chain: also identify the robot's geometry from the session (the stated "
+        help="with --solve chain: also identify the robot's geometry from the session (the stated "
         "accuracy is its prior); replaces --joint-offsets",
     )
     replicates = bounded_int(low=0, high=MAX_BOOTSTRAP)
@@ -108,7 +133,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=replicates,
         default=0,
         metavar="N",
-        help=f"with --method chain: N bootstrap refits for percentile intervals, {replicates.rule} (default 0)",
+        help=f"with --solve chain: N bootstrap refits for percentile intervals, {replicates.rule} (default 0)",
     )
     add_robot_option(parser)
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
@@ -130,22 +155,37 @@ def run(args: argparse.Namespace) -> int:
             gc.enable()
 
 
+def _solve(args: argparse.Namespace) -> str:
+    """--solve's value, or the earlier spelling --method's (with a note on stderr); sequential if neither."""
+    if args.old_solve is None:
+        return args.solve or "sequential"
+    if args.solve is not None and args.solve != args.old_solve:
+        raise InputError(f"--solve {args.solve} and --method {args.old_solve} disagree: give --solve alone")
+    spelling_note(f"calibrate --method {args.old_solve}", f"calibrate --solve {args.old_solve}")
+    return args.old_solve
+
+
 def _run(args: argparse.Namespace, collecting: bool) -> int:
-    from brachycal.calibration import calibrate_folder, write_result  # lazy: start-up (the command's run only)
+    from brachycal.calibration import (
+        calibrate_folder,
+        read_result,
+        write_result,
+    )  # lazy: start-up (the command's run only)
     from brachycal.calibration.parallel import forking_workers, frozen_heap  # lazy: start-up (the command's run only)
     from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
 
     # lazy: start-up (the command's run only)
     from brachycal.reporting import chain_summary, table_i, table_ii, uncertainty_table
 
-    if args.method != "chain" and (args.bootstrap or args.joint_offsets or args.identify_robot):
+    solve = _solve(args)
+    if solve != "chain" and (args.bootstrap or args.joint_offsets or args.identify_robot):
         option = "--bootstrap" if args.bootstrap else "--joint-offsets" if args.joint_offsets else "--identify-robot"
-        raise InputError(f"{option} needs --method chain (the sequential method has no bootstrap or robot terms)")
+        raise InputError(f"{option} needs --solve chain (the sequential method has no bootstrap or robot terms)")
     if args.identify_robot and args.joint_offsets:
         raise InputError("--identify-robot replaces --joint-offsets (it identifies the zero offsets too): pass one")
-    if args.method != "chain" and (args.robot_accuracy_mm is not None or args.robot_accuracy_deg is not None):
+    if solve != "chain" and (args.robot_accuracy_mm is not None or args.robot_accuracy_deg is not None):
         option = "--robot-accuracy-mm" if args.robot_accuracy_mm is not None else "--robot-accuracy-deg"
-        raise InputError(f"{option} needs --method chain (the sequential method states no robot term)")
+        raise InputError(f"{option} needs --solve chain (the sequential method states no robot term)")
     with OutputSet(force=args.force, inputs=[args.session]) as outputs:
         staged_result = outputs.claim(args.out, label="--out")
         if args.report:
@@ -165,7 +205,7 @@ def _run(args: argparse.Namespace, collecting: bool) -> int:
                 args.session,
                 robot,
                 tuple(args.methods),  # checked by argparse: known, none empty, no repeats
-                chain=args.method == "chain",
+                chain=solve == "chain",
                 bootstrap_replicates=args.bootstrap,
                 joint_offsets=args.joint_offsets,
                 progress=None if bar is None else bar.update,
@@ -196,4 +236,6 @@ def _run(args: argparse.Namespace, collecting: bool) -> int:
     if args.report:
         print(f"report: {Path(args.report) / 'report.html'}")
     print(f"\nwrote {args.out}")
+    # Read back: the rule is the result file's own (locate, export, view, plan use it the same way).
+    print(f"next commands use: {method_said(read_result(args.out), None)}")
     return 0

@@ -15,6 +15,7 @@ if TYPE_CHECKING:
     from tqdm import tqdm
 
     from brachycal.calibration.robot_accuracy import RobotAccuracy
+    from brachycal.calibration.session.result_file import ResultFile
     from brachycal.model import Robot
 
 
@@ -116,7 +117,7 @@ def add_robot_accuracy_options(
 
     Args:
         parser: where to add them.
-        when: the option they go with, for the help (``"with --method chain"``).
+        when: the option they go with, for the help (``"with --solve chain"``).
         zero: whether 0 (a perfect robot) is allowed; a prior of identification must be positive.
         note: what the accuracy is used for, appended to the millimetres' help.
     """
@@ -179,6 +180,25 @@ def add_method_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup,
         help=f"which image calibration of {of} (default: the result's best: chain+robot, then chain, else the "
         "lowest leave-one-out RMSE)",
     )
+
+
+def method_said(stored: ResultFile, asked: str | None) -> str:
+    """Which image calibration of ``stored`` a command uses, and why, in words: ``asked`` (the
+    --method value) or, for None, the result's best (:meth:`ResultFile.best_method
+    <brachycal.calibration.session.result_file.ResultFile.best_method>`) with the rule that chose it."""
+    method = stored.method(asked)
+    if asked is not None:
+        return f"{method} (--method)"
+    if method == "chain+robot":
+        why = "the whole chain with the robot's geometry, solved over all the data"
+    elif method == "chain":
+        why = "the whole chain, solved over all the data"
+    else:
+        loocv = stored.raw.get("loocv")
+        entry = loocv.get(method) if isinstance(loocv, dict) else None
+        rmse = entry.get("rmse_mm") if isinstance(entry, dict) else None
+        why = "lowest leave-one-out RMSE" + (f", {rmse:.3f} mm" if isinstance(rmse, int | float) else "")
+    return f"{method} (the result's best: {why}; another with --method)"
 
 
 def warn_refused(refused: dict[str, str]) -> None:

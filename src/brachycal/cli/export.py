@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from brachycal.cli.common import add_method_option, add_robot_option, command_inputs, load_robot
+from brachycal.cli.common import add_method_option, add_robot_option, command_inputs, load_robot, method_said
 
 if TYPE_CHECKING:
     from brachycal.io import OutputSet
@@ -72,14 +72,16 @@ def run(args: argparse.Namespace) -> int:
         if args.ros_package is not None:
             for name in ros_package_files(robot.rig, args.ros_package):
                 outputs.claim(Path(args.out) / args.ros_package / name, make_parents=True)
-        _run(args, robot, outputs)
+        said = _run(args, robot, outputs)
+    print(f"exported method: {said}")
     for path in outputs.written:
         print(f"wrote {path}")
     return 0
 
 
-def _run(args: argparse.Namespace, robot: Robot, outputs: OutputSet) -> None:
-    """Write every export of the result into ``outputs`` (``robot``: the one of --robot/--urdf)."""
+def _run(args: argparse.Namespace, robot: Robot, outputs: OutputSet) -> str:
+    """Write every export of the result into ``outputs`` (``robot``: the one of --robot/--urdf);
+    returns which image calibration it exported, in words (:func:`method_said`)."""
     from brachycal.calibration import read_result  # lazy: start-up (the command's run only)
     from brachycal.export import write_exports, write_ros_package  # lazy: start-up (the command's run only)
 
@@ -92,3 +94,4 @@ def _run(args: argparse.Namespace, robot: Robot, outputs: OutputSet) -> None:
         write_ros_package(
             software, calibration, args.out, args.ros_package, force=args.force, outputs=outputs, record=record
         )
+    return method_said(stored, args.method)

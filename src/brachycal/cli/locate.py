@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from brachycal.cli.common import add_method_option, add_robot_option, load_robot
+from brachycal.cli.common import add_method_option, add_robot_option, load_robot, method_said
 from brachycal.cli.option_types import number_list
 from brachycal.validate import MAX_IMAGE_PX, check_pixel
 
@@ -15,9 +15,11 @@ Computes p_R = T_R_EL(q) @ T_EL_Ptip @ T_Ptip_I @ (u*s_u, v*s_v, 0): the point o
 base frame that pixel (u, v) shows, with the robot at configuration q (EL: the probe arm's flange).
 RESULT is a calibration result file (brachycal calibrate); JOINTS is a CSV file whose header names
 the robot's joints (radians; the SDA10F's 15), one configuration per row (a joint log works; its
-time column is ignored). Prints one line per row: row,x,y,z in metres. --method defaults to the
-best image calibration in the result: the whole chain's if present (chain+robot, then chain), else
-the registration with the lowest leave-one-out RMSE (ties in Table II's order), as for export.
+time column is ignored). Prints the header row,x_m,y_m,z_m, then one line per row: the point in
+the robot's base frame, metres; one line on stderr names the method, the frame and the unit.
+--method defaults to the best image calibration in the result: the whole chain's if present
+(chain+robot, then chain), else the registration with the lowest leave-one-out RMSE (ties in
+Table II's order), as for export.
 --robot must be the robot the result was calibrated with (the result records it).
 
 example:
@@ -55,10 +57,17 @@ def run(args: argparse.Namespace) -> int:
     calibration = stored.calibration(args.method)
     robot = stored.software_robot(load_robot(args))
     # Streamed: one block of rows read, located and printed at a time (a joint log may be long).
-    # The header is printed with the first block, so a file refused at once prints nothing.
-    header = "row,x,y,z\n"
+    # The header is printed with the first block, so a file refused at once prints nothing. The
+    # unit is in the column names (a plain CSV header); the method and frame on stderr, one line.
+    header = "row,x_m,y_m,z_m\n"
     for rows, Q in configuration_blocks(args.joints, robot):
         P = locate(robot, Q, uv, calibration)
+        if header:
+            said = method_said(stored, args.method)
+            print(
+                f"brachycal locate: method {said}; frame {robot.rig.base}; unit m; result {args.result}",
+                file=sys.stderr,
+            )
         sys.stdout.write(
             header + "".join(f"{r},{p[0]:.9f},{p[1]:.9f},{p[2]:.9f}\n" for r, p in zip(rows, P.tolist(), strict=True))
         )

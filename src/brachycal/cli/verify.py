@@ -5,7 +5,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from brachycal.cli.common import add_method_option, add_robot_option, command_inputs, load_robot, output_file
+from brachycal.cli.common import (
+    add_method_option,
+    add_robot_option,
+    command_inputs,
+    load_robot,
+    method_said,
+    output_file,
+)
 from brachycal.cli.option_types import finite_float
 from brachycal.errors import InputError
 
@@ -101,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("give RESULT and CHECK_SESSION (or --demo DIR)")
     if not args.out:
         raise InputError("--out is required: the verification record a lab files")
-    from brachycal.calibration import verify_folder  # lazy: start-up (the command's run only)
+    from brachycal.calibration import read_result, verify_folder  # lazy: start-up (the command's run only)
     from brachycal.io import OutputSet, write_json  # lazy: start-up (the command's run only)
 
     out = Path(args.out)
@@ -141,6 +148,7 @@ def run(args: argparse.Namespace) -> int:
             stacklevel=1,
         )
     print(check.verdict_text())
+    print(f"checked method: {method_said(read_result(args.result), args.method)}")
     if args.update and check.update_refusal is not None:
         print(f"no update written to {args.update}: {check.update_refusal}")
     elif args.update:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from brachycal.cli.common import add_method_option, add_robot_option, load_robot
+from brachycal.cli.common import add_method_option, add_robot_option, load_robot, method_said
 from brachycal.cli.option_types import bounded_int
 from brachycal.errors import InputError
 
@@ -53,12 +53,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from brachycal.reporting.viewer import Viewer  # lazy: start-up (the command's run only)
 
-    content = _content(args)
+    content, said = _content(args)
     try:
         viewer = Viewer(content, host=args.host, port=args.port)
     except OSError as exc:  # the port is taken, or the host is not this machine's
         raise InputError(f"cannot serve on {args.host}:{args.port}: {exc.strerror or exc}") from None
     print(f"brachycal view: {viewer.url}  ({len(content.poses_q)} poses; Ctrl-C to stop)", flush=True)
+    if said is not None:
+        print(f"shown method: {said}", flush=True)
     try:
         while True:
             time.sleep(3600)
@@ -66,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
         viewer.close()
 
 
-def _content(args: argparse.Namespace):  # -> ViewContent (imported lazily)
+def _content(args: argparse.Namespace):  # -> (ViewContent (imported lazily), the method in words or None)
     from brachycal.imaging.pixels import DEFAULT_IMAGE_SIZE_PX  # lazy: start-up (the command's run only)
     from brachycal.reporting.viewer import calibration_content, poses_content  # lazy: start-up (the command's run only)
 
@@ -87,7 +89,8 @@ def _content(args: argparse.Namespace):  # -> ViewContent (imported lazily)
             from brachycal.simulation.twin_files import read_twin  # lazy: start-up (the command's run only)
 
             twin = read_twin(args.session, robot)
-        return calibration_content(robot, stored, session, method, twin=twin, n_targets=args.targets)
+        shown = calibration_content(robot, stored, session, method, twin=twin, n_targets=args.targets)
+        return shown, method_said(stored, args.method)
     if args.method is not None:
         raise InputError("--method needs a RESULT")
     if args.session is not None:
@@ -97,10 +100,10 @@ def _content(args: argparse.Namespace):  # -> ViewContent (imported lazily)
         size = (int(session.size_px[0]), int(session.size_px[1]))
         return poses_content(
             robot, session.samples_q, session.sample_ids, image_size_px=size, spacing_m=session.spacing_m
-        )
+        ), None
     if args.plan is not None:
         from brachycal.data.session_build import read_plan  # lazy: start-up (the command's run only)
 
         plan = read_plan(args.plan, robot)
-        return poses_content(robot, plan.q, plan.names, image_size_px=DEFAULT_IMAGE_SIZE_PX)
-    return poses_content(robot, robot.rig.ready[None], ["ready"], image_size_px=DEFAULT_IMAGE_SIZE_PX)
+        return poses_content(robot, plan.q, plan.names, image_size_px=DEFAULT_IMAGE_SIZE_PX), None
+    return poses_content(robot, robot.rig.ready[None], ["ready"], image_size_px=DEFAULT_IMAGE_SIZE_PX), None

@@ -127,7 +127,7 @@ def landing_jacobian(
 def _forward_differences(f: Callable[[FloatArray], FloatArray], x: FloatArray, h: FloatArray) -> FloatArray:
     """``(M, P)`` forward differences of ``f`` (``(M,)`` values) at ``x (P,)`` with steps ``h (P,)``, divided by
     the step as represented, ``(x + h) − x``: the arithmetic of SciPy's ``approx_fprime`` (``tests/test_chain.py``),
-    without importing ``scipy.optimize`` (~0.1 s of every ``calibrate --method chain``)."""
+    without importing ``scipy.optimize`` (~0.1 s of every ``calibrate --solve chain``)."""
     x = np.asarray(x, dtype=float)
     f0 = f(x)
     J = np.empty((f0.size, x.size))

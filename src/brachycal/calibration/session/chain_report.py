@@ -1,6 +1,6 @@
 """The whole-chain method end to end: model selection, fit, leave-one-out, uncertainty, JSON.
 
-``calibrate_chain`` is what ``brachycal calibrate --method chain`` runs: the sequential result as
+``calibrate_chain`` is what ``brachycal calibrate --solve chain`` runs: the sequential result as
 the start, the image model chosen by 8-fold cross-validation, the chain fitted with it (gross
 outliers flagged and left out), its leave-one-out image error (comparable with Table II), 95 %
 intervals from the covariance (and, if asked, from a bootstrap that resamples the images and the

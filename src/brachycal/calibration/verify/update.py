@@ -15,7 +15,7 @@ determined (rank = its parameter count), told apart from every other part (no ti
 factor of at least :data:`MIN_BAYES_FACTOR` over the runner-up), explains the whole check (what it
 leaves is noise at the test's level), and is a small change (not a gross error). A robot change
 is not updated from a check: identifying joint errors needs a whole session
-(``calibrate --method chain --identify-robot``). The updated result keeps the calibration's
+(``calibrate --solve chain --identify-robot``). The updated result keeps the calibration's
 leave-one-out figures and inputs (the next check's null) and records the update: the part, its
 change and SD, the check session's files and the result it came from. The change was fitted on the
 check's own samples: a new check with fresh samples confirms it.
@@ -52,7 +52,7 @@ def update_refusal(outcome: CheckOutcome) -> str | None:
     if part.part not in UPDATABLE:
         return (
             "a robot change is not updated from a check: recalibrate with a whole session "
-            "(calibrate --method chain --identify-robot)"
+            "(calibrate --solve chain --identify-robot)"
         )
     if part.prior_multiples > GROSS_PRIOR_MULTIPLES:
         return (

@@ -26,7 +26,7 @@ NAME = "plan-excitation"
 HELP = "plan extra poses that identify the robot where a recorded session does not"
 DESCRIPTION = """\
 Identifies the robot on the recorded SESSION (whole chain + robot geometry, the stated accuracy
---robot-accuracy-mm/-deg as the prior, as 'calibrate --method chain --identify-robot') and chooses
+--robot-accuracy-mm/-deg as the prior, as 'calibrate --solve chain --identify-robot') and chooses
 extra poses that lower the predicted RMS landing error most per robot minute: samples of the same
 pixels with the arms in other configurations (elbow swivels, torso turns), to append to the
 session's samples.csv (extra touches are not offered: a session's touches.csv cannot hold them

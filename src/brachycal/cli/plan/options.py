@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from brachycal.cli.common import add_method_option, add_robot_option, load_robot
+from brachycal.cli.common import add_method_option, add_robot_option, load_robot, method_said
 from brachycal.cli.option_types import bounded_int, direction, finite_float, number_list, spacing_mm
 from brachycal.errors import InputError
 from brachycal.planning.spec import EDGE_RANGE_M, MAX_CENTRE_M, MAX_SECTOR_DEPTH_M, PlanSpec, RectFOV, SectorFOV
@@ -167,6 +167,7 @@ def planning_robot(args: argparse.Namespace, spec: PlanSpec) -> tuple[Robot, Pla
     stored = read_result(args.result)
     calibration = stored.calibration(args.method)
     robot = calibration.robot(stored.software_robot(robot))
+    print(f"planning with method: {method_said(stored, args.method)}")
     if args.spacing_mm is None:
         spec = replace(spec, spacing_m=calibration.spacing_m)
     return robot, spec
