@@ -56,14 +56,15 @@ def comments_by_line(text: str) -> dict[int, str]:
 
 
 def unmarked_imports(text: str) -> list[int]:
-    """Lines of function-level imports with no ``# lazy: <why>`` on their first line or on a
-    comment line directly above."""
+    """Lines of function-level imports with no ``# lazy: <why>`` on one of their own lines (the
+    formatter moves a trailing comment to the closing parenthesis of a split import) or on a comment
+    line directly above."""
     comments = comments_by_line(text)
     lines = text.splitlines()
     unmarked = []
     for node in function_level_imports(ast.parse(text)):
         above = node.lineno - 1
-        own = MARK in comments.get(node.lineno, "")
+        own = any(MARK in comments.get(k, "") for k in range(node.lineno, (node.end_lineno or node.lineno) + 1))
         over = above >= 1 and lines[above - 1].lstrip().startswith(MARK)
         if not (own or over):
             unmarked.append(node.lineno)
@@ -100,6 +101,7 @@ def test_the_marking_rule_sees_what_it_should():
         "    from pathlib import Path\n"
         "    import sys\n"
         "    def g():\n        import re\n"
+        "    from json import (\n        dumps,\n        loads,\n    )  # lazy: start-up\n"
         "    return os, Path, sys\n"
     )
     assert unmarked_imports(text) == [8, 10]

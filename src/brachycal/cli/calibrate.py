@@ -166,11 +166,7 @@ def _solve(args: argparse.Namespace) -> str:
 
 
 def _run(args: argparse.Namespace, collecting: bool) -> int:
-    from brachycal.calibration import (
-        calibrate_folder,
-        read_result,
-        write_result,
-    )  # lazy: start-up (the command's run only)
+    from brachycal.calibration import calibrate_folder, read_result, write_result  # lazy: start-up (run only)
     from brachycal.calibration.parallel import forking_workers, frozen_heap  # lazy: start-up (the command's run only)
     from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
 
