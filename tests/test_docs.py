@@ -7,6 +7,7 @@ notebooks (mkdocs-jupyter, errors not allowed, no cache), so this is also the no
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -53,3 +54,10 @@ def test_the_site_builds_clean_with_every_page(tmp_path: Path) -> None:
     for symbol in ("brachycal.calibration.calibrate", "brachycal.calibration.identify_robot"):
         assert f'id="{symbol}"' in api, symbol
     assert not (tmp_path / ".cache").exists()  # no cached notebook pages: they would hide a failure
+    # No raw Sphinx role (":func:") or "~" path left on any page.
+    raw = {
+        str(path.relative_to(site)): hits
+        for path in site.rglob("*.html")
+        if (hits := len(re.findall(r":(?:func|class|mod|meth|data|attr|exc|obj):<code>|<code>~\w", path.read_text())))
+    }
+    assert raw == {}, raw
