@@ -439,3 +439,26 @@ def test_a_filled_in_template_builds_the_recordings_session(short, robot, tmp_pa
     assert main(["session", "template", str(blank)]) == 2  # a filled-in template is never overwritten silently
     assert "already exists; pass --force" in capsys.readouterr().err
     assert (blank / "session.toml").read_text() == toml
+
+
+def test_an_unfilled_template_takes_the_values_given_as_options(tmp_path):
+    """A blank of ``brachycal session template`` is allowed where the caller gives its value
+    (``session build --spacing-mm/--size-px/--top-model-tip-mm``); a blank left ungiven is refused
+    naming its key."""
+    from brachycal.data.session_template import write_session_template
+
+    write_session_template(tmp_path / "blank")
+    template = tmp_path / "blank" / "session.toml"
+    given = {"spacing_mm": [0.19, 0.2], "size_px": [1080, 720], "top_model_tip_mm": [0.0, 0.0, 150.0]}
+    settings = session_settings(template, **given)
+    np.testing.assert_allclose(settings.spacing_m, [0.19e-3, 0.2e-3], rtol=1e-12, atol=0)
+    np.testing.assert_array_equal(settings.size_px, [1080, 720])
+    np.testing.assert_allclose(settings.p_ER_Mtip, [0.0, 0.0, 0.15], rtol=1e-12, atol=0)
+    for left_out, key in (
+        ("spacing_mm", "image.spacing_mm"),
+        ("size_px", "image.size_px"),
+        ("top_model_tip_mm", "top_model.tip_in_flange_mm"),
+    ):
+        partial = {k: v for k, v in given.items() if k != left_out}
+        with pytest.raises(InputError, match=rf"column '{key}': expected a list of"):
+            session_settings(template, **partial)

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import os
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -84,7 +84,7 @@ class Session:
 MAX_TRIAL = 10_000
 
 
-def _read_toml(path: Path) -> tuple[FloatArray, np.ndarray, FloatArray]:
+def _read_toml(path: Path, blank_ok: Collection[str] = ()) -> tuple[FloatArray, np.ndarray, FloatArray]:
     try:
         config = tomllib.loads(read_input_text(path, max_bytes=MAX_DOCUMENT_BYTES))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError, RecursionError) as exc:
@@ -95,6 +95,8 @@ def _read_toml(path: Path) -> tuple[FloatArray, np.ndarray, FloatArray]:
     def numbers(table: str, key: str, count: int, positive: bool) -> FloatArray:
         value = config.get(table, {}).get(key) if isinstance(config.get(table), dict) else None
         name = f"{table}.{key}"
+        if value == [] and name in blank_ok:  # a template's blank, given by the caller instead
+            return np.full(count, np.nan)
         if not isinstance(value, list) or len(value) != count:
             raise InputError(f"expected a list of {count} numbers", file=path, column=name)
         if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value):
@@ -108,15 +110,23 @@ def _read_toml(path: Path) -> tuple[FloatArray, np.ndarray, FloatArray]:
 
     spacing_mm = numbers("image", "spacing_mm", 2, True)
     # Plausible for ultrasound (0.005..2 mm/px): a spacing in metres typed as mm is named so.
-    spacing_m = check_spacing_mm(spacing_mm, "pixel spacing", file=path, column="image.spacing_mm") * 1e-3
+    spacing_m = (
+        spacing_mm
+        if np.isnan(spacing_mm).all()
+        else check_spacing_mm(spacing_mm, "pixel spacing", file=path, column="image.spacing_mm") * 1e-3
+    )
     size = numbers("image", "size_px", 2, True)
-    if np.any(size != np.round(size)):
+    if np.isnan(size).all():
+        size = np.zeros(2)  # blank, given by the caller
+    elif np.any(size != np.round(size)):
         raise InputError("image size must be whole pixels", file=path, column="image.size_px")
     if np.any(size > MAX_IMAGE_PX):
         raise InputError(
             f"image size {size.tolist()!r} px: at most {MAX_IMAGE_PX} px a side", file=path, column="image.size_px"
         )
     tip_mm = numbers("top_model", "tip_in_flange_mm", 3, False)
+    if np.isnan(tip_mm).all():
+        return spacing_m, size.astype(int), tip_mm  # blank, given by the caller
     tip_m = check_positions(
         tip_mm * 1e-3,
         "the tip",
@@ -128,13 +138,20 @@ def _read_toml(path: Path) -> tuple[FloatArray, np.ndarray, FloatArray]:
     return spacing_m, size.astype(int), tip_m
 
 
-def read_session_toml(path: str | os.PathLike[str]) -> tuple[FloatArray, np.ndarray, FloatArray]:
+def read_session_toml(
+    path: str | os.PathLike[str], *, blank_ok: Collection[str] = ()
+) -> tuple[FloatArray, np.ndarray, FloatArray]:
     """Read and validate a ``session.toml`` alone (e.g. a template for ``brachycal session build``).
+
+    Args:
+        blank_ok: keys (``"image.spacing_mm"``, ``"image.size_px"``, ``"top_model.tip_in_flange_mm"``)
+            that may be left blank (``[]``, as ``brachycal session template`` writes them) because the
+            caller gives their values; a blank comes back as NaN (spacing, tip) or zeros (size).
 
     Returns:
         ``spacing_m (2,)`` metres per pixel, ``size_px (2,)`` whole pixels, ``p_ER_Mtip (3,)`` metres.
     """
-    return _read_toml(Path(path))
+    return _read_toml(Path(path), frozenset(blank_ok))
 
 
 def _labels(

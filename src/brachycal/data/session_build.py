@@ -169,7 +169,12 @@ def session_settings(
     size: np.ndarray | None
     tip_m: FloatArray | None
     if template is not None:
-        spacing_m, size, tip_m = read_session_toml(template)
+        given = {
+            "image.spacing_mm": spacing_mm,
+            "image.size_px": size_px,
+            "top_model.tip_in_flange_mm": top_model_tip_mm,
+        }
+        spacing_m, size, tip_m = read_session_toml(template, blank_ok=[k for k, v in given.items() if v is not None])
     else:
         missing = [
             option

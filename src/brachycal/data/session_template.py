@@ -49,7 +49,8 @@ A blank brachycal session: fill these files in during and after the calibration,
 
 session.toml
   The set-up's values: pixel spacing and size of the frames and the top-model's tip on the
-  needle arm's flange. Each key has a comment; fill in the three empty lists.
+  needle arm's flange. Each key has a comment; fill in the three empty lists (or give their
+  values to `session build` as --spacing-mm, --size-px and --top-model-tip-mm).
 
 JOINT_LOG (recorded by the robot's controller; not here)
   The joint states through the whole session: a CSV file with a column `time` (seconds) and one
