@@ -464,14 +464,13 @@ def read_result(path: str | os.PathLike[str]) -> ResultFile:
 
 
 def _refused(raw: dict, path: Path, image: dict[str, ImageCalibration]) -> dict[str, str]:
-    """The ``refused`` block: registration method → its reason (empty if the file has none)."""
+    """The ``refused`` block of a validated document (a map of strings, by the schema): registration
+    method → its reason (empty if the file has none)."""
     block = raw.get("refused", {})
-    if not isinstance(block, dict):
-        raise InputError("must map refused methods to their reasons", file=path, column="refused")
     for method, reason in block.items():
         if method not in METHODS:
             raise InputError(f"unknown method {method!r}", file=path, column="refused")
-        if not isinstance(reason, str) or not reason.strip():
+        if not reason.strip():
             raise InputError("must be the reason, a non-empty string", file=path, column=f"refused.{method}")
         if method in image:
             raise InputError(
