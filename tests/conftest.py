@@ -21,7 +21,7 @@ if os.environ.get("CI"):
 ROOT = Path(__file__).parents[1]
 #: Outside data (the vendor's SDA10F description, PLUS and SciKit-Surgery recordings) is not in the
 #: repository: it is read from wherever ``BRACHYCAL_REFERENCE`` points (default: ``shared/reference``
-#: beside the clone; CI has it). docs/guide.md ("Reference data") says where each part
+#: beside the clone; CI has it). docs/reference_data.md says where each part
 #: comes from.
 REFERENCE = Path(os.environ.get("BRACHYCAL_REFERENCE") or ROOT.parent / "shared" / "reference")
 
@@ -36,7 +36,7 @@ def reference(*parts: str) -> Path:
     if not path.exists():
         reason = (
             f"needs {path} (outside data: the PLUS toolkit's PlusLibData, SciKit-Surgery and ROS-Industrial "
-            "motoman files: set BRACHYCAL_REFERENCE to a copy of them; docs/guide.md, 'Reference data', says where "
+            "motoman files: set BRACHYCAL_REFERENCE to a copy of them; docs/reference_data.md says where "
             "each comes from)"
         )
         if os.environ.get("CI"):
