@@ -58,7 +58,7 @@ start here:
                                       tool poses from a joint log (CSV or ROS bag)
   brachycal plan --out plan.csv        plan the 4x4x4 calibration sample poses
   brachycal session template DIR     blank session.toml, marks.csv and images.csv for a lab's own session
-  brachycal session build LOG --marks marks.csv --images images.csv --out SESSION
+  brachycal session build LOG --marks marks.csv --images images.csv --template session.toml --out SESSION
                                       a session folder from a lab's recording (joint log, marks, frames)
   brachycal tips FRAMES.mha --out images.csv
                                       propose the needle tip in each B-mode frame (for session build)
