@@ -105,7 +105,12 @@ PARALLEL = 'format = "brachycal-phantom/1"\nkind = "wire"\n' + "".join(
 CASES = [
     Case("unknown phantom kind", ["phantom", "cube", *WIRE[2:]], ("invalid choice", "cube"), files()),
     Case("no phantom kind", ["phantom", *WIRE[2:]], ("KIND", "invalid choice", "wedge"), files()),
-    Case("earlier spelling, unknown kind", ["phantom", "--method", "cube", *WIRE[2:]], ("invalid choice", "cube"), files()),
+    Case(
+        "earlier spelling, unknown kind",
+        ["phantom", "--method", "cube", *WIRE[2:]],
+        ("invalid choice", "cube"),
+        files(),
+    ),
     Case("a kind and --method", [*WIRE, "--method", "wedge"], ("unrecognized arguments", "--method"), files()),
     Case("missing geometry", WIRE, ("geometry.toml", "no such file"), lambda tmp: None),
     Case("geometry not TOML", WIRE, ("geometry.toml", "TOML"), files(geometry=lambda t: t + "\n[[[")),
