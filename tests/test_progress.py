@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import ROOT, random_configurations
+from tqdm import tqdm
 
 from brachycal.calibration.session.calibrate import calibrate_folder
 from brachycal.data import write_bag_log
@@ -161,8 +162,8 @@ def test_fk_bar_counts_bytes_on_a_terminal(tmp_path):
         ["fk", str(JOINT_LOG), "--frames", "needle_tip", "--out", "poses.csv"], tmp_path
     )
     assert code == 0, terminal
-    size_kb = JOINT_LOG.stat().st_size / 1000
-    assert "reading log" in terminal and f"/{size_kb:.1f}k " in terminal, terminal  # its total: the file's size
+    total = tqdm.format_sizeof(JOINT_LOG.stat().st_size)  # "97.0k": bytes scaled as the bar shows them
+    assert "reading log" in terminal and f"/{total} [" in terminal, terminal  # its total: the file's size
     assert "B/s" in terminal and "sample" not in terminal
 
 
