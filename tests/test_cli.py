@@ -155,3 +155,17 @@ def test_the_earlier_spelling_calibrate_method_chain_solves_the_chain_with_a_not
     assert "chain" in read_result(tmp_path / "old.json").image and "chain" in read_result(tmp_path / "new.json").image
     assert old.out.splitlines()[-1] == new.out.splitlines()[-1]
     assert new.out.splitlines()[-1].startswith("next commands use: chain (the result's best: the whole chain")
+
+
+def test_the_phantom_kind_is_a_sub_command_and_the_earlier_method_option_runs_it_with_a_note(tmp_path):
+    files = [str(ROOT / "examples" / "phantom" / name) for name in ("multi_wedge.toml", "wedge_observations.csv")]
+    old = run_cli(["phantom", "--method", "wedge", *files, "--out", str(tmp_path / "old.json")])
+    new = run_cli(["phantom", "wedge", *files, "--out", str(tmp_path / "new.json")])
+    note = "brachycal: note: 'phantom --method wedge' is now 'phantom wedge'; the old spelling goes in the next release"
+    assert old.code == new.code == 0 and old.err.splitlines() == [note] and new.err == ""
+    assert old.out.replace("old.json", "new.json") == new.out  # the same calibration
+    assert (tmp_path / "old.json").read_text() == (tmp_path / "new.json").read_text()
+    # The note's form is the kind's own command, its --help among the kinds of `phantom --help`.
+    assert joined_command(["phantom", "--method=wire", "G", "O"]) == ["phantom", "wire", "G", "O"]
+    kinds = run_cli(["phantom", "--help"]).out
+    assert "KIND" in kinds and all(f"brachycal phantom {kind} " in kinds for kind in ("wedge", "wire", "nwire"))

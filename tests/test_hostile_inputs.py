@@ -48,8 +48,8 @@ USES = [
     ("fk-log", "fk {bad} --frames needle_tip --out {tmp}/p.csv --quiet"),
     ("fk-times", "fk {examples}/joint_log.csv --frames needle_tip --times {bad} --out {tmp}/p.csv --quiet"),
     ("pivot-poses", "pivot {bad} --out {tmp}/p.json"),
-    ("phantom-geometry", "phantom --method wedge {bad} {examples}/phantom/wedge_observations.csv --out {tmp}/p.json"),
-    ("phantom-observations", "phantom --method wedge {examples}/phantom/multi_wedge.toml {bad} --out {tmp}/p.json"),
+    ("phantom-geometry", "phantom wedge {bad} {examples}/phantom/wedge_observations.csv --out {tmp}/p.json"),
+    ("phantom-observations", "phantom wedge {examples}/phantom/multi_wedge.toml {bad} --out {tmp}/p.json"),
     (
         "session-build-log",
         BUILD.replace("{rec}/joint_log.csv", "{bad}") + " --template {rec}/session.toml --out {tmp}/s",

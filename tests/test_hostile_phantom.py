@@ -18,8 +18,8 @@ from test_wire_phantom import exact_session as wire_session
 from brachycal.calibration import read_wedge_phantom, read_wire_phantom, write_phantom_observations
 from brachycal.io import bundled
 
-WIRE = ["phantom", "--method", "wire", "{tmp}/geometry.toml", "{tmp}/obs.csv", "--out", "{tmp}/out.json"]
-WEDGE = ["phantom", "--method", "wedge", "{tmp}/geometry.toml", "{tmp}/obs.csv", "--out", "{tmp}/out.json"]
+WIRE = ["phantom", "wire", "{tmp}/geometry.toml", "{tmp}/obs.csv", "--out", "{tmp}/out.json"]
+WEDGE = ["phantom", "wedge", "{tmp}/geometry.toml", "{tmp}/obs.csv", "--out", "{tmp}/out.json"]
 
 
 @cache
@@ -103,13 +103,21 @@ PARALLEL = 'format = "brachycal-phantom/1"\nkind = "wire"\n' + "".join(
 )
 
 CASES = [
-    Case("unknown method", [*WIRE[:2], "cube", *WIRE[3:]], ("invalid choice", "cube"), files()),
+    Case("unknown phantom kind", ["phantom", "cube", *WIRE[2:]], ("invalid choice", "cube"), files()),
+    Case("no phantom kind", ["phantom", *WIRE[2:]], ("KIND", "invalid choice", "wedge"), files()),
+    Case(
+        "earlier spelling, unknown kind",
+        ["phantom", "--method", "cube", *WIRE[2:]],
+        ("invalid choice", "cube"),
+        files(),
+    ),
+    Case("a kind and --method", [*WIRE, "--method", "wedge"], ("unrecognized arguments", "--method"), files()),
     Case("missing geometry", WIRE, ("geometry.toml", "no such file"), lambda tmp: None),
     Case("geometry not TOML", WIRE, ("geometry.toml", "TOML"), files(geometry=lambda t: t + "\n[[[")),
     Case(
         "geometry of another format", WIRE, ("format",), files(geometry=lambda t: t.replace("phantom/1", "phantom/9"))
     ),
-    Case("wire geometry for the wedge method", WEDGE, ("not a 'multi-wedge'",), files()),
+    Case("wire geometry for the wedge phantom", WEDGE, ("not a 'multi-wedge'",), files()),
     Case(
         "geometry without the phantom's registration",
         WIRE,

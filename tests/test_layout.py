@@ -105,3 +105,22 @@ def test_the_marking_rule_sees_what_it_should():
         "    return os, Path, sys\n"
     )
     assert unmarked_imports(text) == [8, 10]
+
+
+def _imports_of(path: Path) -> set[str]:
+    """The top-level package of every module ``path`` imports (anywhere in the file)."""
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            names |= {alias.name.split(".")[0] for alias in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+            names.add(node.module.split(".")[0])
+    return names
+
+
+def test_only_the_command_line_draws_progress_bars():
+    # Library work reports progress to a `progress` callback (whole counts); the command line's
+    # progress_bar (cli/common.py) draws it, on stderr, and only there is tqdm imported.
+    importers = {str(p.relative_to(SOURCE)) for p in sorted(SOURCE.rglob("*.py")) if "tqdm" in _imports_of(p)}
+    assert "cli/common.py" in importers  # the rule sees the one that should
+    assert {name for name in importers if not name.startswith("cli/")} == set()

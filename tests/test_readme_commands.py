@@ -201,6 +201,154 @@ def test_commands_on_outside_recordings_run(tmp_path, monkeypatch):
         assert code == 0, f"brachycal {shlex.join(argv)}: {err}"
 
 
+def start_list() -> list[str]:
+    """The commands of the ``start here:`` list of ``brachycal --help``, as printed (placeholders kept;
+    a line's comment, after two spaces or on the next line, dropped)."""
+    text = build_parser(full=()).format_help()
+    section = re.search(r"^start here:\n((?:[ \t]+.*\n)+)", text, flags=re.MULTILINE)
+    assert section, "brachycal --help has no 'start here:' list"
+    lines = [line.strip() for line in section.group(1).splitlines()]
+    return [re.split(r"\s{2,}", line)[0] for line in lines if line.startswith("brachycal ")]
+
+
+def _variants(line: str) -> list[list[str]]:
+    """``argv`` of each form a start-list line shows: ``[word]`` with and without the word, each
+    alternative of ``a|b|c`` on its own."""
+    forms = [[]]
+    for word in shlex.split(line)[1:]:
+        if word.startswith("[") and word.endswith("]"):
+            forms = [*forms, *[[*form, word[1:-1]] for form in forms]]
+        elif "|" in word:
+            forms = [[*form, choice] for form in forms for choice in word.split("|")]
+        else:
+            forms = [[*form, word] for form in forms]
+    return forms
+
+
+def _placeholder(word: str) -> bool:
+    """A word the reader replaces: LOG, SESSION, FRAMES.mha, U,V."""
+    return re.fullmatch(r"[A-Z][A-Z_,]*(\.[a-z]+)?", word) is not None
+
+
+def _form_name(argv: list[str]) -> str:
+    """The literal words a start-list form begins with (``session build``, ``phantom wedge``)."""
+    words = []
+    for word in argv:
+        if word.startswith("-") or _placeholder(word):
+            break
+        words.append(word)
+    return " ".join(words)
+
+
+#: What each start-list form's placeholders (and its file names that must be an example's) stand for
+#: on the bundled data, in the folder :data:`START_SETUP` prepares; a value of several words adds the
+#: options the example needs.
+START_BINDINGS: dict[str, dict[str, str]] = {
+    "fk": {"LOG": "examples/joint_log.csv"},
+    "session template": {"DIR": "my_session"},
+    "session build": {
+        "LOG": "run/recording/joint_log.csv",
+        "marks.csv": "run/recording/marks.csv",
+        "images.csv": "run/recording/images.csv",
+        "session.toml": "run/recording/session.toml",
+        "SESSION": "built_session",
+    },
+    "tips": {"FRAMES.mha": "run/recording/frames.mha"},
+    "calibrate": {"SESSION": "examples/twin_session"},
+    "locate": {"RESULT": "result.json", "JOINTS": "examples/joints.csv", "U,V": "540,300"},
+    "export": {"RESULT": "result.json", "DIR": "exports"},
+    "verify": {"RESULT": "vdemo/result.json", "CHECK_SESSION": "vdemo/check_unchanged"},
+    "view": {"RESULT": "result.json", "SESSION": "examples/twin_session"},
+    "pivot": {"POSES.csv": "examples/pivot/pointer_pivot.csv --units mm"},  # the example's poses are in mm
+    "nwire": {
+        "CONFIG": "examples/nwire/PlusDeviceSet_twin_fCal2.xml",
+        "FRAMES": "examples/nwire/twin_segmented_frames.xml",
+    },
+    "nwire calibrate": {
+        "CONFIG": "examples/nwire/PlusDeviceSet_twin_fCal2.xml",
+        "FRAMES": "examples/nwire/twin_segmented_frames.xml",
+        "nwire.json": "nwire_calibrate.json",
+    },
+    "nwire segment": {
+        "CAL.mha": "examples/nwire/twin_calibration.mha",
+        "VAL.mha": "examples/nwire/twin_validation.mha",
+        "CONFIG": "examples/nwire/PlusDeviceSet_twin_fCal2.xml",
+    },
+    "phantom wedge": {
+        "GEOMETRY": "examples/phantom/multi_wedge.toml",
+        "OBSERVATIONS": "examples/phantom/wedge_observations.csv",
+        "result.json": "phantom_wedge.json",
+    },
+    "phantom wire": {
+        "GEOMETRY": "examples/phantom/arbitrary_wire.toml",
+        "OBSERVATIONS": "examples/phantom/wire_observations.csv",
+        "result.json": "phantom_wire.json",
+    },
+    "phantom nwire": {
+        "GEOMETRY": "examples/nwire/PlusDeviceSet_twin_fCal2.xml",
+        "OBSERVATIONS": "examples/nwire/twin_segmented_frames.xml",
+        "result.json": "phantom_nwire.json",
+    },
+    "temporal": {"VIDEO.mha": "examples/temporal/tank_video.mha", "TRACKER.mha": "examples/temporal/tank_tracker.mha"},
+}
+#: Run first, in the start list's folder: the example files, a recording with its frames (session
+#: build, tips) and a check session (verify).
+START_SETUP = [
+    ["examples", "examples"],
+    ["demo", "--recording", "--images", "--out", "run"],
+    ["verify", "--demo", "vdemo"],
+]
+
+
+def _bound(argv: list[str]) -> list[str]:
+    binding = START_BINDINGS.get(_form_name(argv), {})
+    words = [part for word in argv for part in binding.get(word, word).split()]
+    unbound = [word for word in words if _placeholder(word)]
+    assert not unbound, f"brachycal {shlex.join(argv)}: no example for {', '.join(unbound)} (START_BINDINGS)"
+    return words
+
+
+def test_the_start_list_names_every_command_group_in_its_current_spelling():
+    """Each start-list form parses (its placeholders bound to the examples, or as written where the slow
+    test below does not run it) with no note of an earlier spelling; together they name every command."""
+    forms = [argv for line in start_list() for argv in _variants(line)]
+    assert len(forms) >= 20  # a parser finding far fewer is broken
+    for form in forms:
+        argv = form if _not_run(form) else _bound(form)  # every placeholder of a form run has an example
+        err = io.StringIO()
+        with redirect_stderr(err), redirect_stdout(io.StringIO()):
+            joined = joined_command(argv)
+            try:
+                build_parser(full=(joined[0],)).parse_args(joined)
+            except SystemExit as exc:
+                err.write(f"exit {exc.code}")
+        assert err.getvalue() == "", f"brachycal {shlex.join(argv)}: {err.getvalue()}"
+    named = {joined_command(argv)[0].split("-")[0] for argv in forms}
+    assert named == {name.split("-")[0] for name in COMMANDS}
+
+
+@pytest.mark.slow
+def test_every_start_list_command_runs_on_the_bundled_data(tmp_path, monkeypatch):
+    """``brachycal --help``'s start list, each form with its placeholders bound to the example files
+    (:data:`START_BINDINGS`), in order in one folder after :data:`START_SETUP`."""
+    monkeypatch.chdir(tmp_path)
+    ran: list[list[str]] = []
+    failures: list[str] = []
+    forms = [form for line in start_list() for form in _variants(line) if not _not_run(form)]
+    for argv in [*START_SETUP, *map(_bound, forms)]:
+        if argv in ran:
+            continue
+        ran.append(argv)
+        if argv[0] == "view":
+            _serves(argv, tmp_path)
+            continue
+        code, err = _run(argv)
+        if code != 0:
+            failures.append(f"brachycal {shlex.join(argv)} -> exit {code}: {err.strip()}")
+    assert not failures, "\n".join(failures)
+    assert len(ran) >= 20
+
+
 def _serves(argv: list[str], cwd: Path) -> None:
     """Start ``brachycal view …`` (on a free port), wait for its address, stop it with SIGTERM."""
     process = subprocess.Popen(

@@ -193,7 +193,9 @@ def _run(args: argparse.Namespace, collecting: bool) -> int:
         robot = load_robot(args)
         # This command owns its process: its independent refits may share the cores (forked workers).
         # The bar only with --bootstrap: tqdm's monitor thread, started by any bar, rules out forking.
-        bar_context = progress_bar(args.bootstrap, "bootstrap", args.quiet) if args.bootstrap else nullcontext()
+        bar_context = (
+            progress_bar(args.bootstrap, "bootstrap", args.quiet, unit="resample") if args.bootstrap else nullcontext()
+        )
         with forking_workers(), frozen_heap(), bar_context as bar:
             if collecting:
                 gc.enable()

@@ -95,15 +95,16 @@ def tool_frame_parents(args: argparse.Namespace) -> dict[str, str]:
     return load_description(name).tool_frame_parents
 
 
-def progress_bar(total: int, desc: str, quiet: bool) -> tqdm:
-    """A progress bar on stderr; hidden with --quiet and when stderr is not a terminal."""
+def progress_bar(total: int, desc: str, quiet: bool, *, unit: str) -> tqdm:
+    """A progress bar on stderr counting ``total`` ``unit`` (whole counts: "3/10 twin"; bytes, unit
+    ``"B"``, in kB/MB); hidden with --quiet and when stderr is not a terminal."""
     from tqdm import tqdm  # lazy: start-up (the command's run only)
 
     return tqdm(
         total=total,
         desc=desc,
-        unit="sample",
-        unit_scale=True,
+        unit=unit,
+        unit_scale=unit == "B",
         leave=False,
         file=sys.stderr,
         disable=True if quiet else None,

@@ -11,7 +11,7 @@ import argparse
 import time
 from pathlib import Path
 
-from brachycal.cli.common import add_robot_option, warn_refused
+from brachycal.cli.common import add_robot_option, progress_bar, warn_refused
 from brachycal.cli.option_types import bounded_int, seed
 from brachycal.validate import MAX_TARGETS
 
@@ -70,6 +70,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--targets", type=targets, default=50, help=f"targets for the targeting error, {targets.rule} (default 50)"
     )
     parser.add_argument("--force", action="store_true", help="replace the outputs of an earlier demo in DIR")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
     seeds = bounded_int(low=1, high=100)
     parser.add_argument(
         "--table3",
@@ -105,6 +106,7 @@ def run(args: argparse.Namespace) -> int:
     # lazy: start-up (the command's run only)
     from brachycal.simulation import TWIN_FILES, TwinConfig, record, write_recording
     from brachycal.studies import run_demo  # lazy: start-up (the command's run only)
+    from brachycal.studies.demo import DEMO_STAGES  # lazy: start-up (the command's run only)
 
     start = time.perf_counter()
     from brachycal.studies.demo import check_example_robot  # lazy: start-up (the command's run only)
@@ -129,15 +131,27 @@ def run(args: argparse.Namespace) -> int:
         outputs.claim(out / "result.json", make_parents=True)
         for name in DEMO_REPORT_FILES:
             outputs.claim(out / "report" / name, make_parents=True)
-        demo = run_demo(robot, out, seed=args.seed, example=args.example, n_targets=args.targets, outputs=outputs)
-        warn_refused(demo.result.refused)
-        write_demo_report(demo, out / "report", outputs=outputs)
-        if args.recording:
-            rec = record(robot, TwinConfig(seed=args.seed))
-            from brachycal.simulation.bmode import BModeSettings  # lazy: start-up (the command's run only)
+        # The stages of run_demo, the report, and the recording if asked.
+        with progress_bar(len(DEMO_STAGES) + 1 + args.recording, "demo", args.quiet, unit="stage") as bar:
+            demo = run_demo(
+                robot,
+                out,
+                seed=args.seed,
+                example=args.example,
+                n_targets=args.targets,
+                outputs=outputs,
+                progress=bar.update,
+            )
+            write_demo_report(demo, out / "report", outputs=outputs)
+            bar.update(1)
+            if args.recording:
+                rec = record(robot, TwinConfig(seed=args.seed))
+                from brachycal.simulation.bmode import BModeSettings  # lazy: start-up (the command's run only)
 
-            images = BModeSettings(seed=args.seed) if args.images else None
-            write_recording(rec, out / "recording", bag="sqlite3", images=images, force=args.force, outputs=outputs)
+                images = BModeSettings(seed=args.seed) if args.images else None
+                write_recording(rec, out / "recording", bag="sqlite3", images=images, force=args.force, outputs=outputs)
+                bar.update(1)
+        warn_refused(demo.result.refused)
         print(demo_text(demo))
     report = out / "report"
     print(
@@ -163,10 +177,6 @@ def run(args: argparse.Namespace) -> int:
 
 def _table3(args: argparse.Namespace, robot, start: float) -> int:
     """``--table3``: Table III over seeds 0..N-1, with a progress bar on stderr; no files."""
-    import sys  # lazy: start-up (the command's run only)
-
-    from tqdm import tqdm  # lazy: start-up (the command's run only)
-
     from brachycal.errors import InputError  # lazy: start-up (the command's run only)
     from brachycal.studies.demo import table3, table3_text  # lazy: start-up (the command's run only)
 
@@ -174,7 +184,7 @@ def _table3(args: argparse.Namespace, robot, start: float) -> int:
         if getattr(args, option):
             raise InputError(f"--table3 writes nothing and simulates its own sessions: drop --{option}")
     seeds = TABLE3_SEEDS if args.seeds is None else args.seeds
-    with tqdm(total=seeds, desc="Table III", unit="seed", leave=False, file=sys.stderr, disable=None) as bar:
+    with progress_bar(seeds, "Table III", args.quiet, unit="seed") as bar:
         table = table3(robot, range(seeds), args.targets, progress=bar.update)
     print(table3_text(table))
     print(f"done in {time.perf_counter() - start:.1f} s")

@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
         return _run_excitation(args, out)
     with OutputSet(force=args.force) as outputs:
         staged = outputs.claim(out / "design.csv", make_parents=True)
-        with progress_bar(len(args.designs) * args.seeds, "designs", args.quiet) as bar:
+        with progress_bar(len(args.designs) * args.seeds, "designs", args.quiet, unit="twin") as bar:
             rows = compare_designs(load_robot(args), args.designs, args.seeds, progress=bar.update)
         write_csv(staged, rows)
     print(design_table(rows))
@@ -111,7 +111,7 @@ def _run_excitation(args: argparse.Namespace, out: Path) -> int:
     robot = load_robot(args)
     with OutputSet(force=args.force) as outputs:
         staged = outputs.claim(out / "design.csv", make_parents=True)
-        with progress_bar(args.seeds, "twins", args.quiet) as bar:
+        with progress_bar(args.seeds, "excitation", args.quiet, unit="twin") as bar:
             rows = compare_excitation(robot, args.robot_error, args.seeds, args.excitation_minutes, progress=bar.update)
         write_csv(staged, rows)
     widths = [max(len(h), 7) for _, h, _ in _EXCITATION_COLUMNS]

@@ -98,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
         f"brachycal locate result.json {d}/joints.csv --uv 540,300",
         f"brachycal pivot {d}/pivot/pointer_pivot.csv --units mm --out pivot.json",
         f"brachycal nwire {d}/nwire/PlusDeviceSet_twin_fCal2.xml {d}/nwire/twin_segmented_frames.xml --out nwire.json",
-        f"brachycal phantom --method wedge {d}/phantom/multi_wedge.toml {d}/phantom/wedge_observations.csv "
+        f"brachycal phantom wedge {d}/phantom/multi_wedge.toml {d}/phantom/wedge_observations.csv "
         "--out phantom_wedge.json",
         f"brachycal temporal {d}/temporal/tank_video.mha {d}/temporal/tank_tracker.mha --out lag.json",
         f"brachycal nwire segment {d}/nwire/twin_calibration.mha {d}/nwire/twin_validation.mha "

@@ -106,8 +106,7 @@ def log_blocks(path: Path, robot: Robot, topic: str, quiet: bool) -> Iterator[tu
             yield block.time, q
         return
     if is_bag(path):
-        with progress_bar(0, "reading bag", quiet) as bar:
-            bar.unit = "msg"
+        with progress_bar(0, "reading bag", quiet, unit="message") as bar:
 
             def total(n: int) -> None:
                 bar.total = n
@@ -116,8 +115,8 @@ def log_blocks(path: Path, robot: Robot, topic: str, quiet: bool) -> Iterator[tu
             for block, q in bag_log_blocks(path, robot, topic, progress=bar.update, total=total):
                 yield block.time, q
         return
-    with progress_bar(path.stat().st_size, "reading log", quiet) as bar:
-        bar.unit = "B"
+    # Bytes, not rows: the rows of a CSV file are known only once it is read.
+    with progress_bar(path.stat().st_size, "reading log", quiet, unit="B") as bar:
         for block, q in csv_log_blocks(path, robot, progress=bar.update):
             yield block.time, q
 

@@ -58,7 +58,7 @@ start here:
                                       tool poses from a joint log (CSV or ROS bag)
   brachycal plan --out plan.csv        plan the 4x4x4 calibration sample poses
   brachycal session template DIR     blank session.toml, marks.csv and images.csv for a lab's own session
-  brachycal session build LOG --marks marks.csv --images images.csv --out SESSION
+  brachycal session build LOG --marks marks.csv --images images.csv --template session.toml --out SESSION
                                       a session folder from a lab's recording (joint log, marks, frames)
   brachycal tips FRAMES.mha --out images.csv
                                       propose the needle tip in each B-mode frame (for session build)
@@ -77,7 +77,7 @@ start here:
                                       N-wire phantom calibration of a tracked probe (PLUS files)
   brachycal nwire segment CAL.mha VAL.mha --config CONFIG --out frames.xml
                                       the N-wire phantom's points in tracked B-mode sequences
-  brachycal phantom --method wedge|wire|nwire GEOMETRY OBSERVATIONS --out result.json
+  brachycal phantom wedge|wire|nwire GEOMETRY OBSERVATIONS --out result.json
                                       multi-wedge, arbitrary-wire or N-wire phantom calibration
   brachycal temporal VIDEO.mha TRACKER.mha --out lag.json
                                       lag of the tracker (or joint log) behind the ultrasound frames
@@ -206,8 +206,8 @@ def _command_environment() -> Iterator[None]:
 
 def joined_command(arguments: list[str]) -> list[str]:
     """``arguments`` with a two-word command (:data:`TWO_WORD_COMMANDS`) joined into its one name (and an
-    earlier release's spelling of one made current)."""
-    arguments = nwire_group.current_spelling(plan_group.current_spelling(arguments))
+    earlier release's spelling of one, or of a phantom kind, made current)."""
+    arguments = phantom.current_spelling(nwire_group.current_spelling(plan_group.current_spelling(arguments)))
     words = [k for k, word in enumerate(arguments) if not word.startswith("-")][:2]
     if len(words) == 2 and words[1] == words[0] + 1:
         name = TWO_WORD_COMMANDS.get((arguments[words[0]], arguments[words[1]]))

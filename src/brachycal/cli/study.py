@@ -168,10 +168,10 @@ def _run(args: argparse.Namespace, files: list[Path], runs: list[RunParams]) -> 
     from brachycal.studies.study import run_study, summarise  # lazy: start-up (the command's run only)
 
     print(
-        f"study: {len(runs)} simulated sessions ({args.seeds} seeds each), "
+        f"study: {len(runs)} runs (one simulated session each; {args.seeds} seeds per setting), "
         f"{'Dask at ' + args.scheduler if args.scheduler else str(args.workers) + ' local worker(s)'}"
     )
-    with progress_bar(len(runs), "sessions", args.quiet) as bar:
+    with progress_bar(len(runs), "study", args.quiet, unit="run") as bar:
         rows = run_study(runs, workers=args.workers, scheduler=args.scheduler, progress=bar.update)
     summary = summarise(rows)
     write_csv(files[0], rows, float_format=".6f")

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from brachycal.cli.common import command_inputs, output_file
+from brachycal.cli.common import command_inputs, output_file, progress_bar
 
 if TYPE_CHECKING:
     import numpy as np
@@ -72,6 +72,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--truth", metavar="CSV", help="true tips per frame (the twin's frames_truth.csv)")
     parser.add_argument("--force", action="store_true", help="replace existing outputs")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(run=run)
 
 
@@ -80,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
 
     from brachycal.data.formats.metaimage import read_image_sequence  # lazy: start-up (the command's run only)
     from brachycal.errors import InputError  # lazy: start-up (the command's run only)
-    from brachycal.imaging.needle_tip import MIN_CONFIDENCE, detect_tip  # lazy: start-up (the command's run only)
+    from brachycal.imaging.needle_tip import MIN_CONFIDENCE, detect_tips  # lazy: start-up (the command's run only)
     from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
 
     min_confidence = MIN_CONFIDENCE if args.min_confidence is None else args.min_confidence
@@ -108,7 +109,8 @@ def run(args: argparse.Namespace) -> int:
                 row_label="frame",
             )
         truth = _read_truth(args.truth, sequence.timestamps_s) if args.truth else None
-        detections = [detect_tip(frame, args.direction) for frame in sequence.pixels]
+        with progress_bar(len(sequence), "tips", args.quiet, unit="frame") as bar:
+            detections = detect_tips(sequence.pixels, args.direction, progress=bar.update)
         uv = np.array([d.uv_px for d in detections])
         confidence = np.array([d.confidence for d in detections])
         low = confidence < min_confidence

@@ -8,6 +8,7 @@ Design: ``docs/design/image_analysis.md``, "The needle tip in a B-mode frame".
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -268,9 +269,16 @@ def detect_tip(frame: ArrayLike, prior_direction: ArrayLike | None = None) -> Ti
     )
 
 
-def detect_tips(frames: ArrayLike, prior_direction: ArrayLike | None = None) -> list[TipDetection]:
-    """:func:`detect_tip` on each frame of ``(N, H, W)``."""
+def detect_tips(
+    frames: ArrayLike, prior_direction: ArrayLike | None = None, *, progress: Callable[[int], None] | None = None
+) -> list[TipDetection]:
+    """:func:`detect_tip` on each frame of ``(N, H, W)``; ``progress(1)`` after each frame."""
     stack = np.asarray(frames)
     if stack.ndim != 3:
         raise InputError(f"frames must be (N, H, W), got shape {stack.shape}")
-    return [detect_tip(frame, prior_direction) for frame in stack]
+    detections = []
+    for frame in stack:
+        detections.append(detect_tip(frame, prior_direction))
+        if progress is not None:
+            progress(1)
+    return detections

@@ -44,6 +44,9 @@ from brachycal.studies.targeting import TargetingResult, targeting_error
 
 #: The method whose leave-one-out points the demo's figures show (Figs. 10 and 11).
 FIGURE_METHOD = "icp"
+#: What :func:`run_demo` does in turn, each reported to its ``progress`` when done: the session
+#: simulated (or read) and written, calibrated from its files, judged against the truth.
+DEMO_STAGES = ("session", "calibration", "targeting")
 #: The methods whose calibrated image frame the demo compares with the truth.
 TRUTH_METHODS = ("kabsch", "scaled_uv")
 
@@ -128,6 +131,7 @@ def run_demo(
     n_targets: int = 50,
     force: bool = False,
     outputs: OutputSet | None = None,
+    progress: Callable[[int], object] | None = None,
 ) -> DemoRun:
     """Simulate (or read) a twin session, write it, calibrate it from its files, judge it.
 
@@ -143,6 +147,7 @@ def run_demo(
         example: calibrate the committed ``examples/twin_session`` (seed 0, the SDA10F's) instead.
         n_targets: targets of the targeting error.
         force: replace existing files.
+        progress: called with 1 after each of the :data:`DEMO_STAGES`.
 
     Raises:
         SolverError: a pose of the set-up is unreachable for the simulated robot.
@@ -163,13 +168,20 @@ def run_demo(
             else f"a simulated {rig.name} session (seed {seed})"
         )
     session_dir = folder / "session"
+
+    def done() -> None:
+        if progress is not None:
+            progress(1)
+
     with output_set(outputs, force=force) as out:
         write_twin(twin, session_dir, force=force, outputs=out)
+        done()
         # Calibrate from the files as written (the staged ones: the same bytes the folder will hold).
         with _as_written(out, session_dir) as written:
             session = read_session(written, robot)
         result = calibrate(session, robot)
         write_result(result, out.path(folder / "result.json", make_parents=True), force=force, robot=robot)
+        done()
     # A method that refused the session has no calibration to judge (Table II says why).
     targeting = {m: targeting_error(twin, result.calibration(m), n_targets) for m in METHODS if m in result.image}
     tracking = NWireSimConfig(seed=twin.config.seed)
@@ -177,6 +189,7 @@ def run_demo(
     tracker = targeting_error(twin, Calibration(result.T_ER_Ntip, route.T_EL_marker, route.image), n_targets)
     figure = FIGURE_METHOD if FIGURE_METHOD in result.image else next(iter(result.image))
     p_real, p_cal = loo_points(session, robot, result, figure)
+    done()
     return DemoRun(origin, twin, session, result, n_targets, targeting, tracking, tracker, p_real, p_cal, figure)
 
 

@@ -171,7 +171,7 @@ def calibrate_wedge(phantom: WedgePhantom, observations: PhantomObservations) ->
 def calibrate_wedge_files(
     geometry: str | os.PathLike[str], observations: str | os.PathLike[str]
 ) -> tuple[PhantomResult, WedgePhantom, PhantomObservations]:
-    """Read a geometry and an observations file and calibrate (the ``brachycal phantom --method wedge`` job)."""
+    """Read a geometry and an observations file and calibrate (the ``brachycal phantom wedge`` job)."""
     phantom = read_wedge_phantom(geometry)
     seen = read_observations(observations, KIND, phantom.names)
     return calibrate_wedge(phantom, seen), phantom, seen

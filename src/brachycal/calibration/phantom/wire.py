@@ -145,7 +145,7 @@ def calibrate_wire(phantom: WirePhantom, observations: PhantomObservations) -> P
 def calibrate_wire_files(
     geometry: str | os.PathLike[str], observations: str | os.PathLike[str]
 ) -> tuple[PhantomResult, WirePhantom, PhantomObservations]:
-    """Read a geometry and an observations file and calibrate (the ``brachycal phantom --method wire`` job)."""
+    """Read a geometry and an observations file and calibrate (the ``brachycal phantom wire`` job)."""
     phantom = read_wire_phantom(geometry)
     seen = read_observations(observations, KIND, phantom.names)
     return calibrate_wire(phantom, seen), phantom, seen

@@ -116,7 +116,7 @@ def segment_files(
     results = {}
     lines = []
     for label, path, sequence in sequences:
-        with progress_bar(len(sequence), Path(path).name, quiet) as bar:
+        with progress_bar(len(sequence), Path(path).name, quiet, unit="frame") as bar:
             bar.unit = "frame"
             result = segment_sequence(
                 sequence,

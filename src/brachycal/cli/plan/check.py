@@ -100,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
     with OutputSet(force=args.force, inputs=command_inputs(args, "result")) as outputs:
         staged = outputs.claim(out, label="--out")
         robot, spec = planning_robot(args, spec)
-        with progress_bar(args.points**3, "planning", args.quiet) as bar:
+        with progress_bar(args.points**3, "planning", args.quiet, unit="point") as bar:
             full = plan_poses(
                 robot, spec, settings=settings, thresholds=thresholds, speed_scale=args.speed_scale, progress=bar.update
             )

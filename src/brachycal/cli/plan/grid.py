@@ -106,7 +106,7 @@ def _run(args: argparse.Namespace, outputs: OutputSet, drawer: _FigureProcess) -
     drawer.start()  # loads matplotlib in a second process while this one plans
     robot, spec = planning_robot(args, spec)
     n = args.points**3
-    with progress_bar(n, "planning", args.quiet) as bar:
+    with progress_bar(n, "planning", args.quiet, unit="point") as bar:
         plan = plan_poses(
             robot, spec, settings=settings, thresholds=thresholds, speed_scale=args.speed_scale, progress=bar.update
         )
