@@ -125,7 +125,8 @@ def test_figures_leave_the_callers_backend_settings_and_pyplot_alone(tmp_path, c
     assert dict(matplotlib.rcParams) == rc_before
     assert plt.get_fignums() == open_before  # nothing registered with pyplot, nothing left open
     saved = sorted(p.name for p in tmp_path.iterdir())
-    assert saved == sorted(f"{n}.png" for n in ("hist", "points", "methods", "residuals", "study", "plan", "scene", "landing"))
+    names = ("hist", "points", "methods", "residuals", "study", "plan", "scene", "landing")
+    assert saved == sorted(f"{n}.png" for n in names)
     assert all((tmp_path / name).read_bytes().startswith(b"\x89PNG") for name in saved)
 
 

@@ -189,7 +189,9 @@ MISLED = [
             f"session-sector-{name}",
             ["calibrate", "{tmp}/s", "--out", "{tmp}/r.json", "--quiet"],
             ("session.toml", *words),
-            session_with("session.toml", lambda text, sector=sector: text.replace("[top_model]", f"{sector}\n[top_model]")),
+            session_with(
+                "session.toml", lambda text, lines=sector: text.replace("[top_model]", f"{lines}\n[top_model]")
+            ),
         )
         for name, sector, words in (
             ("not-a-table", "sector = 70", ("image.sector", "expected a table")),

@@ -101,7 +101,8 @@ def test_table_ii_is_an_html_table_with_units_in_its_head_and_the_results_figure
     table = page.table("TABLE II.")
     assert table.head() == ["Registration algorithms", *HEAD, "note"]
     assert [kind for kind, _, _ in table.rows[0]] == ["th"] * 6
-    for label, figures in (("Kabsch", result["sequential"]["loocv"]["kabsch"]), ("Whole chain", result["loocv"]["chain"])):
+    rows = {"Kabsch": result["sequential"]["loocv"]["kabsch"], "Whole chain": result["loocv"]["chain"]}
+    for label, figures in rows.items():
         cells = table.row(label)
         for cell, key in zip(cells[1:5], ("mae_mm", "rmse_mm", "sd_mm", "max_mm"), strict=True):
             assert float(cell) == pytest.approx(figures[key], abs=0.005 + 1e-12), (label, key)
@@ -123,7 +124,8 @@ def test_no_table_is_preformatted_text_and_the_page_is_self_contained(chain_repo
     assert len(page.images) == len(report_files(chain=True)) - 1  # every PNG, the landing map included
     assert all(src.startswith("data:image/png;base64,") for src in page.images)
     inputs = page.tables[-1]
-    assert inputs.head() == ["file", "SHA-256"] and {r[0][1] for r in inputs.rows[1:]} >= {"session.toml", "samples.csv"}
+    assert inputs.head() == ["file", "SHA-256"]
+    assert {r[0][1] for r in inputs.rows[1:]} >= {"session.toml", "samples.csv"}
 
 
 def test_a_sequential_report_has_no_landing_map():

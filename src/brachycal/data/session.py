@@ -185,12 +185,13 @@ def _read_sector(table: object, path: Path) -> ImageSector | None:
     for key, count in (("apex_px", 2), ("depth_mm", 1), ("angle_deg", 1)):
         value = table.get(key)
         items = value if isinstance(value, list) else [value]
-        if len(items) != count or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in items):
+        numbers = [float(v) for v in items if isinstance(v, int | float) and not isinstance(v, bool)]
+        if len(items) != count or len(numbers) != count:
             what = "a list of 2 numbers" if count == 2 else "a number"
             raise InputError(f"expected {what}, got {value!r}", file=path, column=f"image.sector.{key}")
-        if not all(np.isfinite(items)):
+        if not all(np.isfinite(numbers)):
             raise InputError(f"expected finite numbers, got {value!r}", file=path, column=f"image.sector.{key}")
-        values[key] = [float(v) for v in items]
+        values[key] = numbers
     rules = (
         ("apex_px", -MAX_IMAGE_PX, MAX_IMAGE_PX, False, "px"),
         ("depth_mm", 0.0, MAX_SECTOR_DEPTH_M * 1e3, True, "mm"),

@@ -116,18 +116,22 @@ def report_page(
     figures: list[Path],
 ) -> str:
     """The report's HTML text, the PNG ``figures`` embedded in their order."""
-    return _templates().get_template("report.html.j2").render(
-        style=STYLE,
-        session_path=session_path,
-        samples=len(session.sample_ids),
-        robot_source=robot.source,
-        columns=STATS_COLUMNS,
-        table_i=table_i_data(result),
-        table_ii=table_ii_data(result, chain.loocv if chain else None),
-        chain_lines=chain_summary(chain, session.sample_ids).splitlines() if chain is not None else [],
-        figures=[_figure(f) for f in figures],
-        transforms=[_matrix("ER_T_Ntip", result.T_ER_Ntip), _matrix("EL_T_Ptip", result.T_EL_Ptip)],
-        inputs=list(result.inputs.items()),
+    return (
+        _templates()
+        .get_template("report.html.j2")
+        .render(
+            style=STYLE,
+            session_path=session_path,
+            samples=len(session.sample_ids),
+            robot_source=robot.source,
+            columns=STATS_COLUMNS,
+            table_i=table_i_data(result),
+            table_ii=table_ii_data(result, chain.loocv if chain else None),
+            chain_lines=chain_summary(chain, session.sample_ids).splitlines() if chain is not None else [],
+            figures=[_figure(f) for f in figures],
+            transforms=[_matrix("ER_T_Ntip", result.T_ER_Ntip), _matrix("EL_T_Ptip", result.T_EL_Ptip)],
+            inputs=list(result.inputs.items()),
+        )
     )
 
 
