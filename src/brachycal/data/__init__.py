@@ -61,7 +61,15 @@ if TYPE_CHECKING:  # imported on first use: `brachycal <command> --help` and `fk
         read_slicer_markups,
         still_configuration,
     )
-    from brachycal.data.session import ImageSector, Session, Touches, read_session, read_session_toml, write_session
+    from brachycal.data.session import (
+        ImageSector,
+        Session,
+        Touches,
+        read_image_sector,
+        read_session,
+        read_session_toml,
+        write_session,
+    )
     from brachycal.data.session_build import (
         BuildReport,
         ImageSettings,
@@ -131,6 +139,7 @@ __all__ = [
     "read_configurations",
     "read_coordinate_definitions",
     "read_csv_log",
+    "read_image_sector",
     "read_image_sequence",
     "read_images",
     "read_joint_log",

@@ -222,6 +222,15 @@ def read_session_toml(
     return _read_toml(Path(path), frozenset(blank_ok))[:3]
 
 
+def read_image_sector(path: str | os.PathLike[str]) -> ImageSector | None:
+    """The imaging sector a ``session.toml`` states (``[image.sector]``), None if it states none.
+
+    The file is validated as :func:`read_session_toml` does, its blank lists allowed (a template's).
+    """
+    blanks = ("image.spacing_mm", "image.size_px", "top_model.tip_in_flange_mm")
+    return _read_toml(Path(path), frozenset(blanks))[3]
+
+
 def _labels(
     path: Path, header: list[str], rows: list[int], records: list[list[str]], column: str, allowed: tuple[str, ...]
 ) -> list[str]:
