@@ -47,6 +47,7 @@ class Page(HTMLParser):
 
     def __init__(self, text: str) -> None:
         super().__init__(convert_charrefs=True)
+        self.source = text
         self.tables: list[Table] = []
         self.images: list[str] = []
         self.tags: list[str] = []
@@ -126,6 +127,18 @@ def test_no_table_is_preformatted_text_and_the_page_is_self_contained(chain_repo
     inputs = page.tables[-1]
     assert inputs.head() == ["file", "SHA-256"]
     assert {r[0][1] for r in inputs.rows[1:]} >= {"session.toml", "samples.csv"}
+
+
+def test_the_chain_summary_states_the_landing_error_over_the_sector_the_map_shows(chain_report):
+    page, result, _ = chain_report
+    (line,) = [line for line in page.source.splitlines() if "over the imaging sector at the central pose" in line]
+    sector, whole = line.split("central pose: ")[1].split(" mm (")
+    low, high = (float(x) for x in sector.split(".."))
+    image_map = result["chain"]["predicted_landing_rms_mm"]["image_map"]["rms_mm"]
+    assert whole.startswith(f"{min(image_map):.3f}..{max(image_map):.3f} mm over the whole image")
+    # The twin's sector (70 mm deep from the top centre) leaves out the image's far corners, where
+    # the samples' pattern predicts the most.
+    assert min(image_map) - 0.0005 <= low <= high < max(image_map)
 
 
 def test_a_sequential_report_has_no_landing_map():

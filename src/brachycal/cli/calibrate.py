@@ -217,7 +217,7 @@ def _run(args: argparse.Namespace, collecting: bool) -> int:
         print(uncertainty_table(result))
         if chain is not None:
             print()
-            print(chain_summary(chain, session.sample_ids))
+            print(chain_summary(chain, session.sample_ids, sector=session.sector, spacing_m=session.spacing_m))
         write_result(
             result,
             staged_result,

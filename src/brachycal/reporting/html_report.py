@@ -127,7 +127,11 @@ def report_page(
             columns=STATS_COLUMNS,
             table_i=table_i_data(result),
             table_ii=table_ii_data(result, chain.loocv if chain else None),
-            chain_lines=chain_summary(chain, session.sample_ids).splitlines() if chain is not None else [],
+            chain_lines=[]
+            if chain is None
+            else chain_summary(
+                chain, session.sample_ids, sector=session.sector, spacing_m=session.spacing_m
+            ).splitlines(),
             figures=[_figure(f) for f in figures],
             transforms=[_matrix("ER_T_Ntip", result.T_ER_Ntip), _matrix("EL_T_Ptip", result.T_EL_Ptip)],
             inputs=list(result.inputs.items()),

@@ -11,11 +11,14 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from brachycal.calibration.labels import ALL_LABELS, METHOD_LABELS
 from brachycal.calibration.metrics import ErrorStats
+from brachycal.data.session import ImageSector
 from brachycal.imaging.pixels import SCANNER_SOUND_SPEED_M_S
 from brachycal.planning.robot_time import MECHANICAL_MINUTES, SECONDS_PER_SAMPLE
+from brachycal.planning.spec import SectorFOV
 
 if TYPE_CHECKING:  # types only: `brachycal plan` prints plan_text without loading the calibration
     from brachycal.calibration.sequential.method import SequentialResult
@@ -134,8 +137,14 @@ def refused_rows(result: SequentialResult, width: int) -> list[str]:
     return [f"{row.label:<{width}} refused: {row.note}" for row in _refused(result)]
 
 
-def chain_summary(report, sample_ids: list[str]) -> str:
-    """What the whole-chain method chose and how sure it is."""
+def chain_summary(
+    report, sample_ids: list[str], *, sector: ImageSector | None = None, spacing_m: ArrayLike | None = None
+) -> str:
+    """What the whole-chain method chose and how sure it is.
+
+    With the session's imaging ``sector`` (and its nominal ``spacing_m``, metres per pixel) the
+    predicted landing error across the image is given over the sector's map pixels, where a needle
+    can be seen, and over the whole image besides."""
     fit = report.fit
     evidence = report.choice.evidence()
     lines = [
@@ -166,10 +175,18 @@ def chain_summary(report, sample_ids: list[str]) -> str:
         )
     flagged = [s for s, f in zip(sample_ids, fit.outliers, strict=True) if f]
     lines.append(f"outlier images (left out of the fit): {', '.join(flagged) if flagged else 'none'}")
+    fov = report.predicted_fov_mm
+    across = f"over the image at the central pose: {fov.min():.3f}..{fov.max():.3f} mm"
+    if sector is not None and spacing_m is not None:
+        inside = fov[SectorFOV.of(sector).margin_to_edge(report.fov_px, spacing_m) >= 0]
+        if len(inside):
+            across = (
+                f"over the imaging sector at the central pose: {inside.min():.3f}..{inside.max():.3f} mm "
+                f"({fov.min():.3f}..{fov.max():.3f} mm over the whole image)"
+            )
     lines.append(
         f"predicted landing error (RMS) over the sample poses: mean {report.predicted_cube_mm.mean():.3f} mm, "
-        f"max {report.predicted_cube_mm.max():.3f} mm; over the image at the central pose: "
-        f"{report.predicted_fov_mm.min():.3f}..{report.predicted_fov_mm.max():.3f} mm"
+        f"max {report.predicted_cube_mm.max():.3f} mm; {across}"
     )
     lines += _identification_lines(report)
     return "\n".join(lines)
