@@ -184,6 +184,49 @@ MISLED = [
         ("session.toml", "image.size_px", "1e+30", "at most 10000 px"),
         session_with("session.toml", lambda text: text.replace("[1080, 720]", "[1e30, 720]")),
     ),
+    *(
+        Case(
+            f"session-sector-{name}",
+            ["calibrate", "{tmp}/s", "--out", "{tmp}/r.json", "--quiet"],
+            ("session.toml", *words),
+            session_with(
+                "session.toml", lambda text, lines=sector: text.replace("[top_model]", f"{lines}\n[top_model]")
+            ),
+        )
+        for name, sector, words in (
+            ("not-a-table", "sector = 70", ("image.sector", "expected a table")),
+            (
+                "apex-one-number",
+                "[image.sector]\napex_px = 540\ndepth_mm = 70\nangle_deg = 120",
+                ("image.sector.apex_px", "a list of 2 numbers"),
+            ),
+            (
+                "depth-missing",
+                "[image.sector]\napex_px = [540, 0]\nangle_deg = 120",
+                ("image.sector.depth_mm", "expected a number, got None"),
+            ),
+            (
+                "depth-in-metres-zero",
+                "[image.sector]\napex_px = [540, 0]\ndepth_mm = 0\nangle_deg = 120",
+                ("image.sector.depth_mm", "(0, 500] mm", "got 0 mm"),
+            ),
+            (
+                "depth-nan",
+                "[image.sector]\napex_px = [540, 0]\ndepth_mm = nan\nangle_deg = 120",
+                ("image.sector.depth_mm", "finite"),
+            ),
+            (
+                "angle-beyond-180",
+                "[image.sector]\napex_px = [540, 0]\ndepth_mm = 70\nangle_deg = 200",
+                ("image.sector.angle_deg", "(0, 180] deg", "got 200 deg"),
+            ),
+            (
+                "apex-1e30",
+                "[image.sector]\napex_px = [1e30, 0]\ndepth_mm = 70\nangle_deg = 120",
+                ("image.sector.apex_px", "[-10000, 10000] px"),
+            ),
+        )
+    ),
     Case("pivot-no-poses", ["pivot", "{tmp}/p.csv", "--out", "{tmp}/o.json"], ("p.csv", "0 poses"), poses(0)),
     Case("pivot-two-poses", ["pivot", "{tmp}/p.csv", "--out", "{tmp}/o.json"], ("p.csv", "2 poses"), poses(2)),
     Case(

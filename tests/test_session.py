@@ -23,6 +23,25 @@ def test_round_trip(session_dir, robot, exact):
     assert np.array_equal(session.touches["needle", "rtip2"].q, exact.touches["needle", "rtip2"].q)
     assert np.allclose(session.spacing_m, [0.19e-3, 0.19e-3]) and np.allclose(session.p_ER_Mtip, [0, 0, 0.15])
     assert set(session.inputs) == {"session.toml", "touches.csv", "axes.csv", "samples.csv"}
+    assert session.sector is None and "[image.sector]" not in (session_dir / "session.toml").read_text()
+
+
+def test_a_stated_imaging_sector_is_read_in_si_units_and_written_back_as_stated(session_dir, robot, exact, tmp_path):
+    from dataclasses import replace
+
+    from brachycal.data.session import write_session
+
+    toml = session_dir / "session.toml"
+    sector = "[image.sector]\napex_px = [540, -20.5]\ndepth_mm = 70\nangle_deg = 120\n\n"
+    toml.write_text(toml.read_text().replace("[top_model]", sector + "[top_model]"))
+    read = read_session(session_dir, robot).sector
+    assert read is not None
+    assert read.apex_px == (540.0, -20.5) and read.depth_m == pytest.approx(0.070, rel=1e-15)
+    assert read.angle_rad == pytest.approx(2 * np.pi / 3, rel=1e-15)
+    written = write_session(replace(exact, sector=read), tmp_path / "again")
+    text = (written / "session.toml").read_text()
+    assert "apex_px = [540, -20.5]" in text and "depth_mm = 70\n" in text and "angle_deg = 120 " in text
+    assert read_session(written, robot).sector == read
 
 
 def refused(folder: Path, robot) -> str:

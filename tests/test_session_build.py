@@ -73,6 +73,10 @@ def test_the_built_session_is_the_twins_session(rec, built):
     np.testing.assert_array_equal(session.uv_px, direct.uv_px)
     np.testing.assert_array_equal(session.spacing_m, direct.spacing_m)  # from the template session.toml
     np.testing.assert_array_equal(session.p_ER_Mtip, direct.p_ER_Mtip)
+    assert direct.sector is not None and session.sector is not None  # the template states the twin's sector
+    assert session.sector.apex_px == direct.sector.apex_px
+    assert session.sector.depth_m == pytest.approx(direct.sector.depth_m, rel=1e-12)
+    assert session.sector.angle_rad == pytest.approx(direct.sector.angle_rad, rel=1e-12)
     assert set(session.touches) == set(direct.touches)
     for key, touches in direct.touches.items():
         np.testing.assert_array_equal(session.touches[key].trials, touches.trials)
@@ -426,6 +430,7 @@ def test_a_filled_in_template_builds_the_recordings_session(short, robot, tmp_pa
             f.writelines(rows)
     settings = session_settings(blank / "session.toml")
     np.testing.assert_array_equal(settings.size_px, known.size_px)
+    assert settings.sector is None  # the template's sector is an example, commented out
     built = build_session_from_files(
         rec / "joint_log.csv", robot=robot, images=blank / "images.csv", marks=blank / "marks.csv", settings=settings
     )
@@ -439,6 +444,24 @@ def test_a_filled_in_template_builds_the_recordings_session(short, robot, tmp_pa
     assert main(["session", "template", str(blank)]) == 2  # a filled-in template is never overwritten silently
     assert "already exists; pass --force" in capsys.readouterr().err
     assert (blank / "session.toml").read_text() == toml
+
+
+def test_the_templates_sector_example_uncommented_is_the_sessions_sector(tmp_path):
+    """The template documents the optional ``[image.sector]`` as commented lines; uncommented,
+    they are the built session's sector (for the report's landing error map)."""
+    from brachycal.data.session_template import write_session_template
+
+    write_session_template(tmp_path / "blank")
+    template = tmp_path / "blank" / "session.toml"
+    lines = template.read_text().splitlines()
+    start = lines.index("# [image.sector]")
+    lines[start : start + 4] = [line.removeprefix("# ") for line in lines[start : start + 4]]
+    template.write_text("\n".join(lines) + "\n")
+    given = {"spacing_mm": [0.19, 0.19], "size_px": [1080, 720], "top_model_tip_mm": [0.0, 0.0, 150.0]}
+    sector = session_settings(template, **given).sector
+    assert sector is not None and sector.apex_px == (540.0, 0.0)
+    assert sector.depth_m == pytest.approx(0.070, rel=1e-12)
+    assert sector.angle_rad == pytest.approx(np.radians(120.0), rel=1e-12)
 
 
 def test_an_unfilled_template_takes_the_values_given_as_options(tmp_path):

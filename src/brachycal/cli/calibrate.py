@@ -186,9 +186,9 @@ def _run(args: argparse.Namespace, collecting: bool) -> int:
         staged_result = outputs.claim(args.out, label="--out")
         if args.report:
             # Here, not at the top: the report's figures load matplotlib (~0.5 s), for --report only.
-            from brachycal.reporting import REPORT_FILES, write_report  # lazy: start-up (the command's run only)
+            from brachycal.reporting import report_files, write_report  # lazy: start-up (the command's run only)
 
-            for name in REPORT_FILES:
+            for name in report_files(solve == "chain"):
                 outputs.claim(Path(args.report) / name, make_parents=True, label=f"--report's {name}")
         robot = load_robot(args)
         # This command owns its process: its independent refits may share the cores (forked workers).
@@ -219,7 +219,7 @@ def _run(args: argparse.Namespace, collecting: bool) -> int:
         print(uncertainty_table(result))
         if chain is not None:
             print()
-            print(chain_summary(chain, session.sample_ids))
+            print(chain_summary(chain, session.sample_ids, sector=session.sector, spacing_m=session.spacing_m))
         write_result(
             result,
             staged_result,

@@ -4,7 +4,8 @@ Joint logs (CSV, ROS 1 and ROS 2 bags: :func:`read_joint_log`, a :class:`JointLo
 seconds and configurations in radians, model joint order); tables of configurations and of times
 (:func:`read_configurations`, :func:`read_times`); pose tables (:func:`write_pose_table`,
 :func:`read_pose_table`: metres in ``base_link``, quaternions x, y, z, w); calibration sessions
-(:func:`read_session`, :func:`write_session`: a :class:`Session`); a lab's recording (marks, image
+(:func:`read_session`, :func:`write_session`: a :class:`Session`, its probe's imaging sector an
+:class:`ImageSector` when stated); a lab's recording (marks, image
 frames, Slicer markups) built into a session (:func:`build_session_from_files`); pose lists of tracked tools
 (:func:`read_pose_list`); PLUS files (:func:`read_plus_config`, :func:`read_segmented_frames`,
 :func:`read_coordinate_definitions`: millimetres in, metres out); MetaImage sequences of B-mode
@@ -60,7 +61,15 @@ if TYPE_CHECKING:  # imported on first use: `brachycal <command> --help` and `fk
         read_slicer_markups,
         still_configuration,
     )
-    from brachycal.data.session import Session, Touches, read_session, read_session_toml, write_session
+    from brachycal.data.session import (
+        ImageSector,
+        Session,
+        Touches,
+        read_image_sector,
+        read_session,
+        read_session_toml,
+        write_session,
+    )
     from brachycal.data.session_build import (
         BuildReport,
         ImageSettings,
@@ -100,6 +109,7 @@ __all__ = [
     "DEFAULT_TOPIC",
     "BuildReport",
     "Frame",
+    "ImageSector",
     "ImageSequence",
     "ImageSettings",
     "JointLog",
@@ -129,6 +139,7 @@ __all__ = [
     "read_configurations",
     "read_coordinate_definitions",
     "read_csv_log",
+    "read_image_sector",
     "read_image_sequence",
     "read_images",
     "read_joint_log",

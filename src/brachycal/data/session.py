@@ -1,6 +1,7 @@
 """Calibration sessions, format ``brachycal-session/1`` (a folder; ``docs/conventions.md``).
 
-- ``session.toml``: format, image spacing and size, the top-model tip on the needle flange (the SDA10F's right flange).
+- ``session.toml``: format, image spacing and size (and, optionally, the probe's imaging sector),
+  the top-model tip on the needle flange (the SDA10F's right flange).
 - ``touches.csv``: ``tool,reference,trial,<joints>``; tools ``top_model``, ``needle``,
   ``probe``; references ``rtip1`` (calibration) and ``rtip2`` (validation).
 - ``axes.csv``: ``tool,point,<joints>``; tools ``needle``, ``probe``; points ``p1``–``p3``.
@@ -29,7 +30,14 @@ from brachycal.errors import InputError
 from brachycal.inputs import MAX_DOCUMENT_BYTES, read_input_text
 from brachycal.io import OutputSet, atomic_open, output_set, sha256_file
 from brachycal.se3 import FloatArray
-from brachycal.validate import MAX_IMAGE_PX, TOOL_LENGTH_M_RANGE, check_positions, check_spacing_mm, check_token
+from brachycal.validate import (
+    MAX_IMAGE_PX,
+    TOOL_LENGTH_M_RANGE,
+    check_positions,
+    check_spacing_mm,
+    check_token,
+    interval_text,
+)
 
 if TYPE_CHECKING:  # annotations only: reading a file needs no Pinocchio
     from brachycal.model.robot import Robot
@@ -50,6 +58,29 @@ class Touches:
     q: FloatArray
 
 
+#: Deepest imaging sector, metres: ultrasound images reach about 0.3 m at most.
+MAX_SECTOR_DEPTH_M = 0.5
+
+
+@dataclass(frozen=True)
+class ImageSector:
+    """The imaging sector of a convex probe as ``session.toml`` states it (``[image.sector]``): the
+    pixels that show tissue; the rest of the image is the scanner's black.
+
+    Attributes:
+        apex_px: ``(u, v)`` pixel of the sector's apex, the transducer's centre (it may lie above
+            the image, ``v < 0``).
+        depth_m: the sector's radius from the apex, metres.
+        angle_rad: full opening angle, radians, symmetric about the image's +v (depth) direction.
+
+    Its geometry (distances to the edge, outline) is :class:`~brachycal.planning.SectorFOV`'s.
+    """
+
+    apex_px: tuple[float, float]
+    depth_m: float
+    angle_rad: float
+
+
 @dataclass(frozen=True)
 class Session:
     """A validated calibration session, SI units.
@@ -65,6 +96,7 @@ class Session:
         uv_px: ``(N, 2)`` annotated needle-tip pixels.
         joint_names: names of the configuration columns.
         inputs: file name → SHA-256 of its bytes (empty for an in-memory session).
+        sector: the probe's imaging sector, if ``session.toml`` states it (None: not stated).
     """
 
     spacing_m: FloatArray
@@ -77,6 +109,7 @@ class Session:
     uv_px: FloatArray
     joint_names: tuple[str, ...]
     inputs: dict[str, str] = field(default_factory=dict)
+    sector: ImageSector | None = None
 
 
 #: Largest trial number of a touch: a tip touched ten thousand times is a typo (and a trial near
@@ -84,7 +117,9 @@ class Session:
 MAX_TRIAL = 10_000
 
 
-def _read_toml(path: Path, blank_ok: Collection[str] = ()) -> tuple[FloatArray, np.ndarray, FloatArray]:
+def _read_toml(
+    path: Path, blank_ok: Collection[str] = ()
+) -> tuple[FloatArray, np.ndarray, FloatArray, ImageSector | None]:
     try:
         config = tomllib.loads(read_input_text(path, max_bytes=MAX_DOCUMENT_BYTES))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError, RecursionError) as exc:
@@ -124,9 +159,11 @@ def _read_toml(path: Path, blank_ok: Collection[str] = ()) -> tuple[FloatArray, 
         raise InputError(
             f"image size {size.tolist()!r} px: at most {MAX_IMAGE_PX} px a side", file=path, column="image.size_px"
         )
+    image = config.get("image")
+    sector = _read_sector(image.get("sector") if isinstance(image, dict) else None, path)
     tip_mm = numbers("top_model", "tip_in_flange_mm", 3, False)
     if np.isnan(tip_mm).all():
-        return spacing_m, size.astype(int), tip_mm  # blank, given by the caller
+        return spacing_m, size.astype(int), tip_mm, sector  # blank, given by the caller
     tip_m = check_positions(
         tip_mm * 1e-3,
         "the tip",
@@ -135,7 +172,38 @@ def _read_toml(path: Path, blank_ok: Collection[str] = ()) -> tuple[FloatArray, 
         file=path,
         columns=["top_model.tip_in_flange_mm"] * 3,
     )
-    return spacing_m, size.astype(int), tip_m
+    return spacing_m, size.astype(int), tip_m, sector
+
+
+def _read_sector(table: object, path: Path) -> ImageSector | None:
+    """``[image.sector]`` (``apex_px``, ``depth_mm``, ``angle_deg``) in SI units; None if absent."""
+    if table is None:
+        return None
+    if not isinstance(table, dict):
+        raise InputError("expected a table (apex_px, depth_mm, angle_deg)", file=path, column="image.sector")
+    values: dict[str, list[float]] = {}
+    for key, count in (("apex_px", 2), ("depth_mm", 1), ("angle_deg", 1)):
+        value = table.get(key)
+        items = value if isinstance(value, list) else [value]
+        numbers = [float(v) for v in items if isinstance(v, int | float) and not isinstance(v, bool)]
+        if len(items) != count or len(numbers) != count:
+            what = "a list of 2 numbers" if count == 2 else "a number"
+            raise InputError(f"expected {what}, got {value!r}", file=path, column=f"image.sector.{key}")
+        if not all(np.isfinite(numbers)):
+            raise InputError(f"expected finite numbers, got {value!r}", file=path, column=f"image.sector.{key}")
+        values[key] = numbers
+    rules = (
+        ("apex_px", -MAX_IMAGE_PX, MAX_IMAGE_PX, False, "px"),
+        ("depth_mm", 0.0, MAX_SECTOR_DEPTH_M * 1e3, True, "mm"),
+        ("angle_deg", 0.0, 180.0, True, "deg"),
+    )
+    for key, low, high, low_open, unit in rules:
+        for v in values[key]:
+            if not (low < v if low_open else low <= v) or v > high:
+                rule = interval_text(low, high, low_open, False, unit)
+                raise InputError(f"must be {rule}, got {v:g} {unit}", file=path, column=f"image.sector.{key}")
+    u, v = values["apex_px"]
+    return ImageSector((u, v), values["depth_mm"][0] * 1e-3, float(np.radians(values["angle_deg"][0])))
 
 
 def read_session_toml(
@@ -151,7 +219,16 @@ def read_session_toml(
     Returns:
         ``spacing_m (2,)`` metres per pixel, ``size_px (2,)`` whole pixels, ``p_ER_Mtip (3,)`` metres.
     """
-    return _read_toml(Path(path), frozenset(blank_ok))
+    return _read_toml(Path(path), frozenset(blank_ok))[:3]
+
+
+def read_image_sector(path: str | os.PathLike[str]) -> ImageSector | None:
+    """The imaging sector a ``session.toml`` states (``[image.sector]``), None if it states none.
+
+    The file is validated as :func:`read_session_toml` does, its blank lists allowed (a template's).
+    """
+    blanks = ("image.spacing_mm", "image.size_px", "top_model.tip_in_flange_mm")
+    return _read_toml(Path(path), frozenset(blanks))[3]
 
 
 def _labels(
@@ -310,7 +387,7 @@ def read_session(folder: str | os.PathLike[str], robot: Robot) -> Session:
     for name in FILES:
         if not os.path.lexists(folder / name):  # anything else there is refused by its reader
             raise InputError("missing session file", file=folder / name)
-    spacing_m, size_px, p_ER_Mtip = _read_toml(folder / "session.toml")
+    spacing_m, size_px, p_ER_Mtip, sector = _read_toml(folder / "session.toml")
     touches = _read_touches(folder / "touches.csv", robot)
     axes = _read_axes(folder / "axes.csv", robot)
     ids, samples_q, uv = _read_samples(folder / "samples.csv", robot, size_px)
@@ -325,11 +402,27 @@ def read_session(folder: str | os.PathLike[str], robot: Robot) -> Session:
         uv_px=uv,
         joint_names=robot.joint_names,
         inputs={name: sha256_file(folder / name) for name in FILES},
+        sector=sector,
     )
 
 
 def _q_fields(q: FloatArray) -> str:
     return ",".join(repr(float(x)) for x in q)
+
+
+def _sector_toml(sector: ImageSector | None) -> str:
+    """``[image.sector]`` as :func:`write_session` writes it ("" when the session states none)."""
+    if sector is None:
+        return ""
+    u, v = (float(x) for x in sector.apex_px)
+    # 12 significant digits: a sector's figures are a scanner's settings (70 mm, 120 deg), not a
+    # round trip's last bits (120 deg comes back from radians as 119.99999999999999)
+    return (
+        "[image.sector]                # the probe's imaging sector (pixels outside it show no tissue)\n"
+        f"apex_px = [{u:.12g}, {v:.12g}]        # (u, v) of the apex, the transducer's centre\n"
+        f"depth_mm = {sector.depth_m * 1e3:.12g}\n"
+        f"angle_deg = {np.degrees(sector.angle_rad):.12g}               # full opening, symmetric about +v\n\n"
+    )
 
 
 def write_session(
@@ -350,6 +443,7 @@ def write_session(
             f.write(
                 f'format = "{FORMAT}"\n\n[image]\nspacing_mm = [{su!r}, {sv!r}]     # (s_u, s_v)\n'
                 f"size_px = [{int(session.size_px[0])}, {int(session.size_px[1])}]         # (width, height)\n\n"
+                f"{_sector_toml(session.sector)}"
                 f"[top_model]\ntip_in_flange_mm = [{tip}]   # p_ER_Mtip\n"
             )
         with atomic_open(out.path(folder / "touches.csv", make_parents=True), force=force) as f:

@@ -59,7 +59,7 @@ from brachycal.data.recording import (
     read_slicer_markups,
     still_configuration,
 )
-from brachycal.data.session import Session, Touches, read_session_toml, write_session
+from brachycal.data.session import ImageSector, Session, Touches, read_image_sector, read_session_toml, write_session
 from brachycal.errors import BrachycalWarning, InputError
 from brachycal.io import OutputSet, output_set, sha256_file, write_csv, write_json
 from brachycal.se3 import FloatArray
@@ -139,11 +139,13 @@ class ImageSettings:
         spacing_m: ``(2,)`` nominal pixel spacing ``(s_u, s_v)``, metres per pixel.
         size_px: ``(2,)`` image width and height, pixels.
         p_ER_Mtip: ``(3,)`` top-model tip on the right flange, metres.
+        sector: the probe's imaging sector, if the template states it (``[image.sector]``).
     """
 
     spacing_m: FloatArray
     size_px: np.ndarray
     p_ER_Mtip: FloatArray
+    sector: ImageSector | None = None
 
 
 def session_settings(
@@ -168,6 +170,7 @@ def session_settings(
     spacing_m: FloatArray | None
     size: np.ndarray | None
     tip_m: FloatArray | None
+    sector: ImageSector | None
     if template is not None:
         given = {
             "image.spacing_mm": spacing_mm,
@@ -175,6 +178,7 @@ def session_settings(
             "top_model.tip_in_flange_mm": top_model_tip_mm,
         }
         spacing_m, size, tip_m = read_session_toml(template, blank_ok=[k for k, v in given.items() if v is not None])
+        sector = read_image_sector(template)
     else:
         missing = [
             option
@@ -189,7 +193,7 @@ def session_settings(
             raise InputError(
                 f"without a template session.toml, give {', '.join(missing)} (the session's image and top-model tip)"
             )
-        spacing_m = size = tip_m = None
+        spacing_m = size = tip_m = sector = None
     if spacing_mm is not None:
         spacing_m = check_spacing_mm(spacing_mm, "--spacing-mm") * 1e-3
     if size_px is not None:
@@ -200,7 +204,7 @@ def session_settings(
     if top_model_tip_mm is not None:
         # 2 m from the flange is beyond any tool the arm can carry: a typo or metres given as mm.
         tip_m = check_vector(top_model_tip_mm, "--top-model-tip-mm", 3, low=-2000.0, high=2000.0, unit="mm") * 1e-3
-    return ImageSettings(np.asarray(spacing_m, float), np.asarray(size, int), np.asarray(tip_m, float))
+    return ImageSettings(np.asarray(spacing_m, float), np.asarray(size, int), np.asarray(tip_m, float), sector)
 
 
 @dataclass(frozen=True)
@@ -646,6 +650,7 @@ def build_session(
         spacing_m=np.asarray(settings.spacing_m, float).copy(),
         size_px=np.asarray(settings.size_px).copy(),
         p_ER_Mtip=np.asarray(settings.p_ER_Mtip, float).copy(),
+        sector=settings.sector,
         touches=touches,
         axes=axes,
         sample_ids=names,

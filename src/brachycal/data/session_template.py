@@ -31,6 +31,15 @@ spacing_mm = []
 # Size (width, height) of the frames in whole pixels, as annotated in images.csv. E.g. [1080, 720].
 size_px = []
 
+# Optional: the probe's imaging sector (the pixels that show tissue), for the report's map of the
+# predicted landing error. Uncomment and fill in for a convex probe: the apex (u, v) in pixels (the
+# transducer's centre; v < 0 above the image), the depth in millimetres and the full opening angle
+# in degrees, symmetric about the depth (+v) direction.
+# [image.sector]
+# apex_px = [540, 0]
+# depth_mm = 70
+# angle_deg = 120
+
 [top_model]
 # The top-model's tip in the needle arm's flange frame (the SDA10F's right flange), millimetres
 # (x, y, z): p_ER_Mtip, from the top-model's CAD and test report. E.g. [0.0, 0.0, 150.0].

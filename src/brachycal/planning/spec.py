@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from brachycal.data.session import MAX_SECTOR_DEPTH_M, ImageSector
 from brachycal.errors import InputError
 from brachycal.imaging.pixels import DEFAULT_IMAGE_SIZE_PX, DEFAULT_SPACING_M, image_points, pixels
 from brachycal.se3 import FloatArray, inverse, make_transform
@@ -40,8 +41,6 @@ EDGE_RANGE_M = (1e-3, 0.5)
 #: Largest |coordinate| of the cube centre in ``base_link``, metres: four times the SDA10F's reach
 #: (about 1.2 m per arm from the torso); a larger value is a unit slip (millimetres as metres).
 MAX_CENTRE_M = 5.0
-#: Deepest sector field of view, metres: ultrasound images reach about 0.3 m at most.
-MAX_SECTOR_DEPTH_M = 0.5
 #: Largest margin the grid pixels may be asked to keep inside the field of view, metres.
 MAX_FOV_MARGIN_M = 0.05
 
@@ -66,6 +65,15 @@ class SectorFOV:
         check_range(self.radius_m, "sector depth", low=0.0, high=MAX_SECTOR_DEPTH_M, low_open=True, unit="m")
         # Up to 180 deg: the distance to the straight edges below assumes half the angle <= 90 deg.
         check_range(self.angle_rad, "sector angle", low=0.0, high=np.pi, low_open=True, unit="rad")
+
+    @classmethod
+    def of(cls, sector: ImageSector) -> SectorFOV:
+        """The geometry of a session's stated sector (:class:`~brachycal.data.session.ImageSector`)."""
+        return cls(sector.apex_px, sector.depth_m, sector.angle_rad)
+
+    def as_sector(self) -> ImageSector:
+        """This sector as a session states it (``[image.sector]`` of ``session.toml``)."""
+        return ImageSector((float(self.apex_px[0]), float(self.apex_px[1])), self.radius_m, float(self.angle_rad))
 
     def margin_to_edge(self, uv_px: ArrayLike, spacing_m: ArrayLike) -> FloatArray:
         """``(N,)`` distance in metres from each pixel to the sector's edge; negative outside."""

@@ -1,6 +1,7 @@
 """Reports for people: the paper's tables and figures, the plan figure, the 3D scene, the HTML report.
 
-Tables return text (millimetres and degrees, as their heads say). Every figure has a builder that
+Tables return text (millimetres and degrees, as their heads say); Tables I and II also come as
+data (:class:`StatsTable`, what the HTML report renders as HTML tables). Every figure has a builder that
 returns a matplotlib ``Figure`` (``*_figure``; neither touches pyplot, the backend or
 ``rcParams``) and a function that saves it (:func:`save_figure` and the functions named after the
 figure, which write through :mod:`brachycal.io`). The 3D scene (:func:`robot_scene`,
@@ -19,6 +20,9 @@ if TYPE_CHECKING:  # imported on first use (matplotlib ~0.5 s, trimesh ~0.6 s to
     from brachycal.reporting.figures import (
         error_histogram,
         error_histogram_figure,
+        landing_map,
+        landing_map_figure,
+        landing_map_raster,
         method_comparison,
         method_comparison_figure,
         points_3d,
@@ -28,16 +32,21 @@ if TYPE_CHECKING:  # imported on first use (matplotlib ~0.5 s, trimesh ~0.6 s to
         save_figure,
         study_figure,
     )
-    from brachycal.reporting.html_report import REPORT_FILES, write_report
+    from brachycal.reporting.html_report import CHAIN_REPORT_FILES, REPORT_FILES, report_files, write_report
     from brachycal.reporting.plan_plot import plan_figure, plot_plan
     from brachycal.reporting.scene import TOOL_FRAMES, render_png, robot_scene, save_glb, scene_figure
     from brachycal.reporting.tables import (
+        STATS_COLUMNS,
+        StatsRow,
+        StatsTable,
         chain_summary,
         design_table,
         plan_text,
         study_table,
         table_i,
+        table_i_data,
         table_ii,
+        table_ii_data,
         table_iii,
         targeting_table,
         uncertainty_table,
@@ -48,9 +57,13 @@ __getattr__, __dir__ = attach(__name__, __file__)
 
 
 __all__ = [
+    "CHAIN_REPORT_FILES",
     "DEMO_REPORT_FILES",
     "REPORT_FILES",
+    "STATS_COLUMNS",
     "TOOL_FRAMES",
+    "StatsRow",
+    "StatsTable",
     "ViewContent",
     "Viewer",
     "calibration_content",
@@ -61,6 +74,9 @@ __all__ = [
     "design_table",
     "error_histogram",
     "error_histogram_figure",
+    "landing_map",
+    "landing_map_figure",
+    "landing_map_raster",
     "method_comparison",
     "method_comparison_figure",
     "plan_figure",
@@ -70,6 +86,7 @@ __all__ = [
     "points_3d_figure",
     "poses_content",
     "render_png",
+    "report_files",
     "residuals_per_sample",
     "residuals_per_sample_figure",
     "robot_scene",
@@ -79,7 +96,9 @@ __all__ = [
     "study_figure",
     "study_table",
     "table_i",
+    "table_i_data",
     "table_ii",
+    "table_ii_data",
     "table_iii",
     "targeting_table",
     "uncertainty_table",

@@ -1,4 +1,5 @@
-"""Figures of a calibration, after the paper's Figs. 10 and 11, plus the targeting error and a study.
+"""Figures of a calibration, after the paper's Figs. 10 and 11, plus the targeting error, the
+predicted landing error over the image, and a study.
 
 Every figure has a builder that returns a :class:`matplotlib.figure.Figure` (shown by Jupyter when
 it is a cell's last value, or with ``display(fig)``) and a function that saves it. Neither touches
@@ -16,10 +17,13 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 from numpy.typing import ArrayLike
+from scipy.interpolate import RegularGridInterpolator
 
 from brachycal.calibration.labels import ALL_LABELS, METHOD_LABELS
 from brachycal.calibration.metrics import ErrorStats
+from brachycal.data.session import ImageSector
 from brachycal.io import atomic_path
+from brachycal.planning.spec import SectorFOV
 
 
 def save_figure(fig: Figure, path: str | os.PathLike[str], *, dpi: int) -> None:
@@ -115,6 +119,93 @@ def residuals_per_sample_figure(stats: Mapping[str, ErrorStats], sample_ids: Seq
 def residuals_per_sample(stats: Mapping[str, ErrorStats], sample_ids: list[str], path: str | os.PathLike[str]) -> Path:
     """Save :func:`residuals_per_sample_figure` as ``path``."""
     save_figure(residuals_per_sample_figure(stats, sample_ids), path, dpi=110)
+    return Path(path)
+
+
+def landing_map_raster(
+    pixels_px: ArrayLike,
+    rms_mm: ArrayLike,
+    size_px: ArrayLike,
+    spacing_m: ArrayLike,
+    sector: ImageSector | None,
+) -> np.ma.MaskedArray:
+    """The predicted landing error map on every pixel: ``(H, W)`` mm, indexed ``[v, u]``.
+
+    ``pixels_px`` ``(G, 2)`` is a regular grid of pixels ``(u, v)`` and ``rms_mm`` ``(G,)`` the
+    predicted RMS landing error at each (``ChainResult.fov_px`` and ``predicted_fov_mm``). Between
+    grid nodes the value is bilinear; beyond the outermost nodes (the image's last part-cell) it is
+    the nearest node's. Pixels outside the probe's imaging ``sector`` are masked (they show no
+    tissue: no needle tip is ever seen there); with no sector stated, none is.
+    """
+    uv, values = np.asarray(pixels_px, float), np.asarray(rms_mm, float)
+    us, vs = np.unique(uv[:, 0]), np.unique(uv[:, 1])
+    if len(us) * len(vs) != len(uv) or len(us) < 2 or len(vs) < 2:
+        raise ValueError(f"the map's {len(uv)} pixels are not a regular grid of at least 2 x 2")
+    grid = np.full((len(vs), len(us)), np.nan)
+    grid[np.searchsorted(vs, uv[:, 1]), np.searchsorted(us, uv[:, 0])] = values
+    width, height = (int(n) for n in np.asarray(size_px))
+    v, u = np.mgrid[0:height, 0:width]
+    at = np.column_stack([np.clip(v.ravel(), vs[0], vs[-1]), np.clip(u.ravel(), us[0], us[-1])])
+    raster = RegularGridInterpolator((vs, us), grid)(at).reshape(height, width)
+    outside = np.zeros((height, width), dtype=bool)
+    if sector is not None:
+        margin = SectorFOV.of(sector).margin_to_edge(np.column_stack([u.ravel(), v.ravel()]), spacing_m)
+        outside = (margin < 0).reshape(height, width)
+    return np.ma.masked_array(raster, mask=outside)
+
+
+def landing_map_figure(
+    pixels_px: ArrayLike,
+    rms_mm: ArrayLike,
+    size_px: ArrayLike,
+    spacing_m: ArrayLike,
+    sector: ImageSector | None,
+    method: str,
+) -> Figure:
+    """The predicted RMS landing error (mm) over the image of calibration ``method`` (a key of
+    :data:`~brachycal.calibration.labels.ALL_LABELS`), probe at the central sample pose.
+
+    Drawn in the image's own orientation (u to the right, v downward with depth) over the probe's
+    imaging ``sector`` only, its outline drawn; outside it the figure is blank
+    (:func:`landing_map_raster`). With no sector stated the whole image is coloured and the title
+    says so. Arguments as :func:`landing_map_raster`.
+    """
+    raster = landing_map_raster(pixels_px, rms_mm, size_px, spacing_m, sector)
+    height, width = raster.shape
+    fig = Figure(figsize=(7, 4.2), layout="constrained")
+    ax = fig.add_subplot()
+    image = ax.imshow(
+        raster, origin="upper", extent=(-0.5, width - 0.5, height - 0.5, -0.5), cmap="viridis", interpolation="nearest"
+    )
+    if sector is not None:
+        outline = SectorFOV.of(sector).outline_px(spacing_m)
+        ax.plot(*outline.T, color="0.3", lw=0.8)
+    ax.set_xlim(-0.5, width - 0.5)
+    ax.set_ylim(height - 0.5, -0.5)  # v grows downward, with depth, as on the scanner's screen
+    ax.set_aspect("equal")
+    ax.set_xlabel("u (px)")
+    ax.set_ylabel("v (px, depth: downward)")
+    fig.colorbar(image, ax=ax, label="predicted landing error, RMS (mm)")
+    where = "over the probe's imaging sector" if sector is not None else "whole image: the session states no sector"
+    ax.set_title(
+        f"Predicted landing error, {ALL_LABELS.get(method, method)} calibration\n"
+        f"probe at the central sample pose; {where}",
+        fontsize=9,
+    )
+    return fig
+
+
+def landing_map(
+    pixels_px: ArrayLike,
+    rms_mm: ArrayLike,
+    size_px: ArrayLike,
+    spacing_m: ArrayLike,
+    sector: ImageSector | None,
+    method: str,
+    path: str | os.PathLike[str],
+) -> Path:
+    """Save :func:`landing_map_figure` as ``path``."""
+    save_figure(landing_map_figure(pixels_px, rms_mm, size_px, spacing_m, sector, method), path, dpi=110)
     return Path(path)
 
 

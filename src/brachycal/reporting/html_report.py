@@ -2,6 +2,8 @@
 
 One ``report.html`` (PNG figures embedded as base64, no external files or scripts), written
 next to the figures themselves, so it can be mailed, archived with the session or opened offline.
+The page is rendered from ``templates/report.html.j2`` by Jinja2 with autoescaping on: every
+label, reason and path in it is text, never markup.
 """
 
 from __future__ import annotations
@@ -9,9 +11,12 @@ from __future__ import annotations
 import base64
 import html
 import os
+from dataclasses import dataclass
+from functools import cache
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
+import jinja2
 
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.sequential.image_to_probe import METHOD_LABELS
@@ -19,20 +24,60 @@ from brachycal.calibration.sequential.method import SequentialResult, loo_points
 from brachycal.data.session import Session
 from brachycal.io import OutputSet, atomic_open, output_set, staged_destination
 from brachycal.model.robot import Robot
-from brachycal.reporting.figures import error_histogram, points_3d, residuals_per_sample
-from brachycal.reporting.tables import chain_summary, table_i, table_ii
+from brachycal.reporting.figures import error_histogram, landing_map, points_3d, residuals_per_sample
+from brachycal.reporting.tables import STATS_COLUMNS, chain_summary, table_i_data, table_ii_data
+from brachycal.se3 import FloatArray
+
+if TYPE_CHECKING:  # types only
+    from brachycal.calibration.session.chain_report import ChainResult
 
 STYLE = """body{font-family:system-ui,sans-serif;max-width:980px;margin:2em auto;color:#222}
 pre{background:#f6f6f6;padding:1em;overflow-x:auto}img{max-width:100%}td,th{padding:2px 8px;text-align:left}
+table{border-collapse:collapse;margin:0.5em 0}thead th{border-bottom:1px solid #999}
+caption{text-align:left;font-weight:600;padding:4px 0}td.number{text-align:right;font-variant-numeric:tabular-nums}
+tr.refused td{color:#b3261e}figure{margin:1em 0}
 h1{font-size:1.5em}h2{font-size:1.2em;margin-top:2em}"""
 REPORT_FILES = ("report.html", "loo_histogram.png", "loo_per_sample.png", "points_3d.png")
 """The files :func:`write_report` writes into its folder."""
+CHAIN_REPORT_FILES = ("landing_map.png",)
+"""The files it writes besides, for a whole-chain calibration: the predicted landing error map."""
 
 
-def _img(path: Path) -> str:
-    data = base64.b64encode(path.read_bytes()).decode()
+@dataclass(frozen=True)
+class _Figure:
+    name: str
+    data: str
+
+
+@dataclass(frozen=True)
+class _Matrix:
+    name: str
+    rows: list[list[str]]
+
+
+@cache
+def _templates() -> jinja2.Environment:
+    """The report's templates (package data), autoescaped, an undefined name an error."""
+    return jinja2.Environment(
+        loader=jinja2.PackageLoader("brachycal.reporting", "templates"),
+        autoescape=True,
+        undefined=jinja2.StrictUndefined,
+    )
+
+
+def _figure(path: Path) -> _Figure:
     name = staged_destination(path) or path  # the figure's own name, not its staging file's
-    return f'<p><img alt="{html.escape(name.stem)}" src="data:image/png;base64,{data}"></p>'
+    return _Figure(name.stem, base64.b64encode(path.read_bytes()).decode())
+
+
+def _matrix(name: str, T: FloatArray) -> _Matrix:
+    return _Matrix(name, [[f"{0.0 if abs(v) < 5e-7 else v:.6f}" for v in row] for row in T])
+
+
+def report_files(chain: bool) -> tuple[str, ...]:
+    """The files :func:`write_report` writes: :data:`REPORT_FILES`, and with a whole-chain
+    calibration :data:`CHAIN_REPORT_FILES`."""
+    return REPORT_FILES + (CHAIN_REPORT_FILES if chain else ())
 
 
 def write_report(
@@ -41,22 +86,57 @@ def write_report(
     session: Session,
     robot: Robot,
     session_path: str = "",
-    chain=None,
+    chain: ChainResult | None = None,
     *,
     force: bool = False,
     outputs: OutputSet | None = None,
 ) -> Path:
-    """Write ``folder/report.html`` and its PNG figures (:data:`REPORT_FILES`); returns the HTML path.
+    """Write ``folder/report.html`` and its PNG figures (:func:`report_files`); returns the HTML path.
 
+    With ``chain`` (the whole-chain calibration) the report adds its Table II row, its summary and
+    its predicted landing error map over the session's imaging sector (``session.sector``).
     The folder is created if needed; existing files are replaced only with ``force``. All or
     nothing: with ``outputs`` (a command's :class:`~brachycal.io.OutputSet`) the files join that
     set and are committed with it; without, they are committed together on return.
     """
     folder = Path(folder)
     with output_set(outputs, force=force) as out:
-        staged = {name: out.path(folder / name, make_parents=True) for name in REPORT_FILES}
+        names = report_files(chain is not None)
+        staged = {name: out.path(folder / name, make_parents=True) for name in names}
         _write_report(staged, result, session, robot, session_path, chain, force)
     return folder / "report.html"
+
+
+def report_page(
+    result: SequentialResult,
+    session: Session,
+    robot: Robot,
+    session_path: str,
+    chain: ChainResult | None,
+    figures: list[Path],
+) -> str:
+    """The report's HTML text, the PNG ``figures`` embedded in their order."""
+    return (
+        _templates()
+        .get_template("report.html.j2")
+        .render(
+            style=STYLE,
+            session_path=session_path,
+            samples=len(session.sample_ids),
+            robot_source=robot.source,
+            columns=STATS_COLUMNS,
+            table_i=table_i_data(result),
+            table_ii=table_ii_data(result, chain.loocv if chain else None),
+            chain_lines=[]
+            if chain is None
+            else chain_summary(
+                chain, session.sample_ids, sector=session.sector, spacing_m=session.spacing_m
+            ).splitlines(),
+            figures=[_figure(f) for f in figures],
+            transforms=[_matrix("ER_T_Ntip", result.T_ER_Ntip), _matrix("EL_T_Ptip", result.T_EL_Ptip)],
+            inputs=list(result.inputs.items()),
+        )
+    )
 
 
 def _write_report(
@@ -65,7 +145,7 @@ def _write_report(
     session: Session,
     robot: Robot,
     session_path: str,
-    chain,
+    chain: ChainResult | None,
     force: bool,
 ) -> None:
     best = min(result.loocv, key=lambda m: result.loocv[m].rmse_mm)
@@ -78,33 +158,21 @@ def _write_report(
         residuals_per_sample({m: s for m, s in result.loocv.items()}, session.sample_ids, staged["loo_per_sample.png"]),
         points_3d(p_real, p_cal, staged["points_3d.png"], f"Real and calibrated points ({label}, LOO)"),
     ]
-    parts = [
-        "<!DOCTYPE html><html><head><meta charset='utf-8'><title>brachycal calibration report</title>",
-        f"<style>{STYLE}</style></head><body>",
-        "<h1>brachycal calibration report</h1>",
-        f"<p>Session: <code>{html.escape(session_path)}</code> — {len(session.sample_ids)} image samples; "
-        f"robot model <code>{html.escape(robot.source)}</code>.</p>",
-        "<h2>Mechanical calibration</h2>",
-        f"<pre>{html.escape(table_i(result))}</pre>",
-        "<h2>Image-to-probe calibration</h2>",
-        f"<pre>{html.escape(table_ii(result, chain.loocv if chain else None))}</pre>",
-    ]
     if chain is not None:
-        parts += ["<h2>Whole chain</h2>", f"<pre>{html.escape(chain_summary(chain, session.sample_ids))}</pre>"]
-    parts += [
-        "<h2>Figures</h2>",
-        *(_img(f) for f in figures),
-        "<h2>Transforms (metres)</h2><pre>",
-        html.escape(
-            f"ER_T_Ntip =\n{np.array2string(result.T_ER_Ntip, precision=6, suppress_small=True)}\n"
-            f"EL_T_Ptip =\n{np.array2string(result.T_EL_Ptip, precision=6, suppress_small=True)}"
-        ),
-        "</pre><h2>Inputs (SHA-256)</h2><table>",
-        *(f"<tr><td>{html.escape(k)}</td><td><code>{v}</code></td></tr>" for k, v in result.inputs.items()),
-        "</table></body></html>",
-    ]
+        figures.append(
+            landing_map(
+                chain.fov_px,
+                chain.predicted_fov_mm,
+                session.size_px,
+                session.spacing_m,
+                session.sector,
+                "chain",
+                staged["landing_map.png"],
+            )
+        )
+    page = report_page(result, session, robot, session_path, chain, figures)
     with atomic_open(staged["report.html"], force=force) as handle:
-        handle.write("\n".join(parts))
+        handle.write(page)
 
 
 def _threshold(value: float | None) -> str:

@@ -7,18 +7,67 @@ Every function returns text (millimetres and degrees, as the column heads say); 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from brachycal.calibration.labels import ALL_LABELS, METHOD_LABELS
 from brachycal.calibration.metrics import ErrorStats
+from brachycal.data.session import ImageSector
 from brachycal.imaging.pixels import SCANNER_SOUND_SPEED_M_S
 from brachycal.planning.robot_time import MECHANICAL_MINUTES, SECONDS_PER_SAMPLE
+from brachycal.planning.spec import SectorFOV
 
 if TYPE_CHECKING:  # types only: `brachycal plan` prints plan_text without loading the calibration
     from brachycal.calibration.sequential.method import SequentialResult
     from brachycal.planning.plan import Plan
+
+
+#: The columns of an error table, units in the heads.
+STATS_COLUMNS = ("MAE (mm)", "RMSE (mm)", "SD (mm)", "max (mm)")
+
+
+@dataclass(frozen=True)
+class StatsRow:
+    """One row of an error table: a label and its error statistics, or the reason it has none.
+
+    Attributes:
+        label: what the row measures (a tool, a method).
+        stats: its errors; None for a method that refused the samples.
+        note: a remark after the figures (a scaled method's pixel spacing), or the refusal's reason.
+    """
+
+    label: str
+    stats: ErrorStats | None
+    note: str = ""
+
+    def cells(self) -> tuple[str, ...]:
+        """The figures as the tables print them (mm, 2 decimals), one per :data:`STATS_COLUMNS`."""
+        s = self.stats
+        return () if s is None else tuple(f"{x:.2f}" for x in (s.mae_mm, s.rmse_mm, s.sd_mm, s.max_mm))
+
+
+@dataclass(frozen=True)
+class StatsTable:
+    """An error table: a title, the head of its first column, rows (:data:`STATS_COLUMNS` after the
+    first) and lines of notes under it."""
+
+    title: str
+    first: str
+    rows: tuple[StatsRow, ...]
+    notes: tuple[str, ...] = ()
+
+    def text(self, width: int = 26) -> str:
+        """The table as printed text, the first column ``width`` characters wide."""
+        lines = [self.title, _header(self.first, width)]
+        for row in self.rows:
+            if row.stats is None:
+                lines.append(f"{row.label:<{width}} refused: {row.note}")
+            else:
+                lines.append(_row(row.label, row.stats, width) + (f"   {row.note}" if row.note else ""))
+        return "\n".join([*lines, *self.notes])
 
 
 def _row(label: str, stats: ErrorStats, width: int) -> str:
@@ -26,56 +75,76 @@ def _row(label: str, stats: ErrorStats, width: int) -> str:
 
 
 def _header(first: str, width: int) -> str:
-    return f"{first:<{width}} {'MAE (mm)':>9} {'RMSE (mm)':>10} {'SD (mm)':>8} {'max (mm)':>9}"
+    widths = (9, 10, 8, 9)
+    return f"{first:<{width}} " + " ".join(f"{c:>{w}}" for c, w in zip(STATS_COLUMNS, widths, strict=True))
+
+
+def table_i_data(result: SequentialResult) -> StatsTable:
+    """TABLE I. The accuracy of mechanical calibration (validation at the second reference tip)."""
+    n = result.needle.validation.n
+    return StatsTable(
+        f"TABLE I. THE ACCURACY OF MECHANICAL CALIBRATION (validation at rtip2, {n} trials)",
+        "Calibration category",
+        (
+            StatsRow("Needle-tip calibration", result.needle.validation),
+            StatsRow("US probe-tip calibration", result.probe.validation),
+        ),
+        (
+            f"Angle between the measured tool axes (ideal 90°): needle {result.needle.rotation.axes_angle_deg:.2f}°, "
+            f"probe {result.probe.rotation.axes_angle_deg:.2f}°",
+        ),
+    )
 
 
 def table_i(result: SequentialResult) -> str:
-    """TABLE I. The accuracy of mechanical calibration (validation at the second reference tip)."""
-    width = 26
-    n = result.needle.validation.n
-    lines = [
-        f"TABLE I. THE ACCURACY OF MECHANICAL CALIBRATION (validation at rtip2, {n} trials)",
-        _header("Calibration category", width),
-        _row("Needle-tip calibration", result.needle.validation, width),
-        _row("US probe-tip calibration", result.probe.validation, width),
-        f"Angle between the measured tool axes (ideal 90°): needle {result.needle.rotation.axes_angle_deg:.2f}°, "
-        f"probe {result.probe.rotation.axes_angle_deg:.2f}°",
-    ]
-    return "\n".join(lines)
+    """TABLE I as text (:func:`table_i_data`)."""
+    return table_i_data(result).text()
 
 
-def table_ii(result: SequentialResult, chain_loocv: ErrorStats | None = None) -> str:
+def table_ii_data(result: SequentialResult, chain_loocv: ErrorStats | None = None) -> StatsTable:
     """TABLE II. The accuracy of US probe calibration (leave-one-out over the samples).
 
     ``chain_loocv`` adds the whole-chain method's row (its own leave-one-out figures); a method
-    that refused the samples has a row saying why (:func:`refused_rows`)."""
-    width = 26
+    that refused the samples has a row saying why, in Table II's order."""
     n = next(iter(result.loocv.values())).n if result.loocv else 0
-    lines = [
-        f"TABLE II. THE ACCURACY OF US PROBE CALIBRATION (leave-one-out over {n} samples)",
-        _header("Registration algorithms", width),
-    ]
+    rows = []
     for method, stats in result.loocv.items():
-        label = METHOD_LABELS[method]
         spacing = result.image[method].spacing_m * 1e3
-        suffix = (
-            f"   spacing {spacing[0]:.4f} x {spacing[1]:.4f} mm/px" if method in ("similarity", "scaled_uv") else ""
-        )
-        lines.append(_row(label, stats, width) + suffix)
-    lines += refused_rows(result, width)
+        note = f"spacing {spacing[0]:.4f} x {spacing[1]:.4f} mm/px" if method in ("similarity", "scaled_uv") else ""
+        rows.append(StatsRow(METHOD_LABELS[method], stats, note))
+    rows += _refused(result)
     if chain_loocv is not None:
-        lines.append(_row("Whole chain", chain_loocv, width))
-    return "\n".join(lines)
+        rows.append(StatsRow("Whole chain", chain_loocv))
+    return StatsTable(
+        f"TABLE II. THE ACCURACY OF US PROBE CALIBRATION (leave-one-out over {n} samples)",
+        "Registration algorithms",
+        tuple(rows),
+    )
+
+
+def table_ii(result: SequentialResult, chain_loocv: ErrorStats | None = None) -> str:
+    """TABLE II as text (:func:`table_ii_data`)."""
+    return table_ii_data(result, chain_loocv).text()
+
+
+def _refused(result: SequentialResult) -> list[StatsRow]:
+    return [StatsRow(METHOD_LABELS[m], None, result.refused[m]) for m in METHOD_LABELS if m in result.refused]
 
 
 def refused_rows(result: SequentialResult, width: int) -> list[str]:
     """One row per method that refused the samples (:attr:`SequentialResult.refused`): its label
     and the reason, in Table II's order."""
-    return [f"{METHOD_LABELS[m]:<{width}} refused: {result.refused[m]}" for m in METHOD_LABELS if m in result.refused]
+    return [f"{row.label:<{width}} refused: {row.note}" for row in _refused(result)]
 
 
-def chain_summary(report, sample_ids: list[str]) -> str:
-    """What the whole-chain method chose and how sure it is."""
+def chain_summary(
+    report, sample_ids: list[str], *, sector: ImageSector | None = None, spacing_m: ArrayLike | None = None
+) -> str:
+    """What the whole-chain method chose and how sure it is.
+
+    With the session's imaging ``sector`` (and its nominal ``spacing_m``, metres per pixel) the
+    predicted landing error across the image is given over the sector's map pixels, where a needle
+    can be seen, and over the whole image besides."""
     fit = report.fit
     evidence = report.choice.evidence()
     lines = [
@@ -106,10 +175,18 @@ def chain_summary(report, sample_ids: list[str]) -> str:
         )
     flagged = [s for s, f in zip(sample_ids, fit.outliers, strict=True) if f]
     lines.append(f"outlier images (left out of the fit): {', '.join(flagged) if flagged else 'none'}")
+    fov = report.predicted_fov_mm
+    across = f"over the image at the central pose: {fov.min():.3f}..{fov.max():.3f} mm"
+    if sector is not None and spacing_m is not None:
+        inside = fov[SectorFOV.of(sector).margin_to_edge(report.fov_px, spacing_m) >= 0]
+        if len(inside):
+            across = (
+                f"over the imaging sector at the central pose: {inside.min():.3f}..{inside.max():.3f} mm "
+                f"({fov.min():.3f}..{fov.max():.3f} mm over the whole image)"
+            )
     lines.append(
         f"predicted landing error (RMS) over the sample poses: mean {report.predicted_cube_mm.mean():.3f} mm, "
-        f"max {report.predicted_cube_mm.max():.3f} mm; over the image at the central pose: "
-        f"{report.predicted_fov_mm.min():.3f}..{report.predicted_fov_mm.max():.3f} mm"
+        f"max {report.predicted_cube_mm.max():.3f} mm; {across}"
     )
     lines += _identification_lines(report)
     return "\n".join(lines)

@@ -19,7 +19,7 @@ from brachycal.imaging.pixels import SCANNER_SOUND_SPEED_M_S, image_points
 from brachycal.model.ik import solve_ik
 from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
 from brachycal.model.robot import Robot
-from brachycal.planning import PlanSpec, plan_poses
+from brachycal.planning import PlanSpec, SectorFOV, plan_poses
 from brachycal.se3 import FloatArray, make_transform, transform_points
 from brachycal.simulation.exact import (
     SessionTruth,
@@ -317,6 +317,7 @@ def simulate(nominal: Robot, config: TwinConfig = TwinConfig()) -> Twin:
         samples_q=read(true_q),
         uv_px=annotated,
         joint_names=nominal.joint_names,
+        sector=config.spec.fov.as_sector() if isinstance(config.spec.fov, SectorFOV) else None,
     )
     return Twin(session, truth, physical, nominal, config, true_q, offsets, outlier)
 
