@@ -412,7 +412,8 @@ def test_samples_in_part_of_the_image_warn_with_the_honest_figure(robot, tmp_pat
     from brachycal.data.session import read_session, write_session
 
     full = read_session(ROOT / "examples" / "twin_session", robot)
-    write_session(_subset(full, np.arange(16)), tmp_path / "session")  # 16 images: determined, not across the image
+    # 16 images: determined, not across the image (a session stating no sector: the whole image counts)
+    write_session(replace(_subset(full, np.arange(16)), sector=None), tmp_path / "session")
     out = tmp_path / "result.json"
     assert main(["calibrate", str(tmp_path / "session"), "--out", str(out), "--solve", "chain", "--quiet"]) == 0
     warned = [line for line in capsys.readouterr().err.splitlines() if "whole chain" in line]
@@ -523,3 +524,33 @@ def test_a_model_the_data_cannot_determine_is_left_out_of_the_choice(robot, stre
     monkeypatch.setattr(model_choice, "cross_validate", refuse)  # no model left
     with pytest.raises(DegenerateDataError, match="not determined"):
         model_choice.select_model(twin.session, robot, sequential)
+
+
+def test_the_landing_warning_looks_only_inside_the_imaging_sector(robot, monkeypatch):
+    # Pixels outside the probe's sector never show a needle: their predicted landing error must not
+    # raise the warning, while the same calibration without a stated sector looks at the whole image.
+    import warnings
+
+    from conftest import ROOT
+
+    from brachycal.calibration.session import chain_report
+    from brachycal.data.session import read_session
+    from brachycal.errors import ConditioningWarning
+
+    session = read_session(ROOT / "examples" / "twin_session", robot)
+    assert session.sector is not None
+    initial = calibrate(session, robot)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConditioningWarning)
+        report = calibrate_chain(session, robot, initial)
+    inside = session.sector.margin_to_edge(report.fov_px, session.spacing_m) >= 0
+    assert 0 < inside.sum() < len(inside)
+    in_sector = max(report.predicted_fov_mm[inside].max(), report.predicted_cube_mm.max())
+    whole = report.predicted_fov_mm.max()
+    assert in_sector < whole  # the corners outside the sector predict the worst landing
+    monkeypatch.setattr(chain_report, "WARN_LANDING_RMS_MM", (in_sector + whole) / 2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ConditioningWarning)
+        calibrate_chain(session, robot, initial, choice=report.choice)
+    with pytest.warns(ConditioningWarning, match="in the image or at the sample poses"):
+        calibrate_chain(replace(session, sector=None), robot, initial, choice=report.choice)

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from brachycal.data.formats.csv_log import read_table, table_configurations, to_float, unique_names
 from brachycal.errors import InputError
@@ -73,12 +74,22 @@ class ImageSector:
         depth_m: the sector's radius from the apex, metres.
         angle_rad: full opening angle, radians, symmetric about the image's +v (depth) direction.
 
-    Its geometry (distances to the edge, outline) is :class:`~brachycal.planning.SectorFOV`'s.
+    The planner's view of it (outline, fields of view) is :class:`~brachycal.planning.SectorFOV`.
     """
 
     apex_px: tuple[float, float]
     depth_m: float
     angle_rad: float
+
+    def margin_to_edge(self, uv_px: ArrayLike, spacing_m: ArrayLike) -> FloatArray:
+        """``(N,)`` distance in metres from each pixel ``(N, 2)`` to the sector's edge (pixel
+        spacing ``spacing_m``, metres per pixel); negative outside."""
+        d = (np.atleast_2d(np.asarray(uv_px, float)) - self.apex_px) * np.asarray(spacing_m)
+        r = np.linalg.norm(d, axis=1)
+        half = self.angle_rad / 2
+        phi = np.arctan2(np.abs(d[:, 0]), d[:, 1])  # angle from the depth axis
+        # The straight edges' distance holds for phi < half + 90 deg (the angle is at most 180 deg).
+        return np.minimum(self.depth_m - r, r * np.sin(half - phi))
 
 
 @dataclass(frozen=True)

@@ -77,13 +77,7 @@ class SectorFOV:
 
     def margin_to_edge(self, uv_px: ArrayLike, spacing_m: ArrayLike) -> FloatArray:
         """``(N,)`` distance in metres from each pixel to the sector's edge; negative outside."""
-        d = (np.atleast_2d(np.asarray(uv_px, float)) - self.apex_px) * np.asarray(spacing_m)
-        r = np.linalg.norm(d, axis=1)
-        to_arc = self.radius_m - r
-        half = self.angle_rad / 2
-        phi = np.arctan2(np.abs(d[:, 0]), d[:, 1])  # angle from the depth axis
-        to_sides = r * np.sin(half - phi)  # distance to the straight edges (for phi < half + 90°)
-        return np.minimum(to_arc, to_sides)
+        return self.as_sector().margin_to_edge(uv_px, spacing_m)
 
     def outline_px(self, spacing_m: ArrayLike, n: int = 60) -> FloatArray:
         """``(M, 2)`` closed outline in pixels, for figures."""

@@ -181,7 +181,7 @@ def calibrate_chain(
 
     Warns:
         ConditioningWarning: the predicted landing RMS exceeds :data:`WARN_LANDING_RMS_MM` somewhere
-            in the image.
+            in the image (in its imaging sector when the session states one) or at a sample pose.
     """
     identification, identification_cv, joint_origins = None, None, None
     if identify:
@@ -214,11 +214,14 @@ def calibrate_chain(
     outcomes = parallel_calls(shared, [*runs.costs(), *(LANDING_COST_MS for _ in landings)])
     loocv = ErrorStats(runs.errors(outcomes[: len(runs.runs)]))
     cube, fov = (predicted_rms_mm(C) for C in outcomes[len(runs.runs) :])
-    worst = max(float(fov.max()), float(cube.max()))
+    # Over the imaging sector when the session states one: pixels outside it never show a needle.
+    shown = fov if session.sector is None else fov[session.sector.margin_to_edge(grid, session.spacing_m) >= 0]
+    worst = max(float(shown.max()) if shown.size else 0.0, float(cube.max()))
     if worst > WARN_LANDING_RMS_MM:
         span = np.ptp(session.uv_px[~fit.outliers], axis=0)
         warnings.warn(
-            f"whole chain: predicted landing error up to {worst:.2f} mm RMS in the image (more than "
+            f"whole chain: predicted landing error up to {worst:.2f} mm RMS in the "
+            f"{'image' if session.sector is None else 'imaging sector'} or at the sample poses (more than "
             f"{WARN_LANDING_RMS_MM} mm): the {int((~fit.outliers).sum())} samples span {span[0]:.0f} x "
             f"{span[1]:.0f} px of the {width} x {height} px image; spread them over the image and the probe poses",
             ConditioningWarning,
