@@ -79,7 +79,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "frame turns through qw = 0; for plots and interpolation) instead of qw >= 0 on every row; each "
         "frame's first row keeps qw >= 0",
     )
-    add_robot_option(parser)
+    add_robot_option(parser, any_arm=True)
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(run=run)
@@ -131,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.lag_s != 0.0 and args.times is None:
         raise InputError("--lag-s applies to --times (the frames' times on another clock)")
-    robot = load_robot(args)
+    robot = load_robot(args, any_arm=True)
     frames = args.frames  # names checked by argparse (none empty, no repeats)
     for frame in frames:
         robot.frame_id(frame)
