@@ -235,6 +235,7 @@ def load_description(name_or_path: str | os.PathLike[str] = DEFAULT_ROBOT) -> Ro
 def _load(path: Path) -> RobotDescription:
     file = read_description_file(path)
     robot = Robot(file.urdf_xml, base_dir=file.base_dir, source=str(path))
+    arms: tuple[Arm, ...]
     if file.dual_arm:
         rig = rig_of(file, robot.model, robot.joint_names, robot.lower, robot.upper)
         robot, arms = robot.with_rig(rig), rig.arms

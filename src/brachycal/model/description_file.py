@@ -255,7 +255,8 @@ def _check_kind(data: Mapping[str, Any], r: _Reader) -> bool:
     if not dual:
         raise r.fail(
             "arm",
-            "missing: name the robot's arms ([[arm]] tables), or its needle arm and probe arm ([needle_arm] and [probe_arm])",
+            "missing: name the robot's arms ([[arm]] tables), "
+            "or its needle arm and probe arm ([needle_arm] and [probe_arm])",
         )
     for key in ("needle_arm", "probe_arm", "tools", "workspace"):
         if key not in data:

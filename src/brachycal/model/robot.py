@@ -186,7 +186,7 @@ class Robot:
     def has_rig(self) -> bool:
         """Whether :attr:`rig` is there (a dual-arm description, or the SDA10F loaded by :meth:`load`)."""
         try:
-            self.rig
+            _ = self.rig
         except InputError:
             return False
         return True
