@@ -106,8 +106,9 @@ def _check_log_folder(path: Path) -> None:
 
 
 def _still_table(path: Path) -> str | None:
-    """The kind of table of still configurations ``path`` is (:func:`~brachycal.data.formats.joint_table.still_table_kind`),
-    or None for a joint log (a bag, or a CSV file with a time column)."""
+    """The kind of table of still configurations ``path`` is
+    (:func:`~brachycal.data.formats.joint_table.still_table_kind`), or None for a joint log (a bag, or
+    a CSV file with a time column)."""
     from brachycal.data.formats.bags import is_bag  # lazy: start-up (the command's run only)
     from brachycal.data.formats.joint_table import still_table_kind  # lazy: start-up (the command's run only)
 

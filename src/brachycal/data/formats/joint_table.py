@@ -89,8 +89,8 @@ def read_joint_table(path: str | os.PathLike[str], robot: Robot) -> JointTable:
     Raises:
         InputError: one line naming the file (and the row and joint): not a readable file (a folder,
             too large, not UTF-8), no rows, a row with another number of fields than the robot has
-            coordinates, a last line without a newline (a cut file), a field that is not a number, a value not finite, in degrees (|value| > 2π)
-            or outside the joint's limits.
+            coordinates, a last line without a newline (a cut file), a field that is not a number,
+            a value not finite, in degrees (|value| > 2π) or outside the joint's limits.
     """
     path = Path(path)
     try:
