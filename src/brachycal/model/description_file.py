@@ -301,7 +301,7 @@ def _read_arms(root: ET.Element, tables: object, base: str, r: _Reader) -> list[
         if "tool" in table:
             value = table["tool"]
             if isinstance(value, dict):
-                spec = r.table({f"{key}.tool": value}, f"{key}.tool", _TOOL_KEYS, {"frame"})
+                spec = r.table({key: {"tool": value}}, f"{key}.tool", _TOOL_KEYS, {"frame"})
                 tool = r.string(spec["frame"], f"{key}.tool.frame")
                 if tool in links:
                     raise r.fail(
