@@ -76,7 +76,7 @@ def still_table_kind(path: str | os.PathLike[str]) -> str | None:
             line = raw.decode("utf-8", "replace").removeprefix("\ufeff").strip()
             if line:
                 fields = [field.strip().strip('"') for field in line.split(",")]
-                if all_number_texts(fields):
+                if all_number_texts([field for field in fields if field]):  # a blank field is a bad number
                     return "no header"
                 return None if "time" in fields else "named"
     raise InputError("empty file: no configurations and no header", file=path)
