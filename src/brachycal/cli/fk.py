@@ -50,7 +50,7 @@ flange), arm_right_link_tool0, arm_left_link_tool0, and every vendor link.
 
 examples:
   brachycal fk examples/joint_log.csv --frames needle_tip,probe_tip --out poses.csv
-  brachycal fk hole_0.csv --robot panda --frames panda_link8 --out touches.csv
+  brachycal fk examples/joints.csv --frames needle_tip --out still_poses.csv
 """
 
 
