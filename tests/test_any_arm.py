@@ -69,6 +69,12 @@ def test_a_bundled_single_arm_loads_with_its_arm_and_no_rig(name):
     assert np.allclose(T_base_flange[:, 3, 3], 1.0)  # the chain is there: Pinocchio evaluates it
 
 
+def test_the_help_names_the_bundled_single_arms_without_reading_them():
+    from brachycal.cli.common import SINGLE_ARM_ROBOT_NAMES
+
+    assert SINGLE_ARM_ROBOT_NAMES == SINGLE_ARM_ROBOTS
+
+
 def test_a_single_arm_description_adds_its_tool_on_the_flange(tmp_path):
     tool = '[arm.tool]\nframe = "ball"\nxyz_m = [0.0, 0.0, 0.1]\nwhat = "touch probe ball"'
     robot = load_description(slide_description(tmp_path, tool)).robot
