@@ -232,3 +232,30 @@ DUAL_ARM = [
 @pytest.mark.parametrize("case", DUAL_ARM, ids=lambda c: c.id)
 def test_a_dual_arm_command_refuses_a_robot_without_needle_and_probe_arms(case, tmp_path):
     check_refusal(case, tmp_path)
+
+
+def test_tiago_described_as_one_arm_has_its_torso_lift_in_metres(tmp_path):
+    """FIGAROH's TIAGo: the base, wheels, casters, head and gripper frozen, the arm from the base to
+    the wrist is the torso lift (prismatic) and the 7 arm joints; sliding the lift by d metres moves
+    the wrist by d along the lift's axis."""
+    urdf = reference("figaroh_mocap", "tiago", "urdf", "tiago_48_schunk.urdf")
+    still = [f"caster_{s}_{k}_joint" for s in ("back_left", "back_right", "front_left", "front_right") for k in (1, 2)]
+    still += ["suspension_left_joint", "suspension_right_joint", "wheel_left_joint", "wheel_right_joint"]
+    still += ["head_1_joint", "head_2_joint"]
+    frozen = ", ".join(f"{name} = 0.0" for name in still) + ", gripper_finger_joint = 0.01"
+    path = tmp_path / "tiago.toml"
+    path.write_text(
+        f'format = "brachycal-robot/1"\nname = "tiago"\nurdf = "{urdf}"\nbase = "base_footprint"\n'
+        f'frozen = {{ {frozen} }}\n[[arm]]\nname = "arm"\nflange = "arm_7_link"\n'
+    )
+    robot = load_description(path).robot
+    arm = robot.arm()
+    assert arm.joints == ("torso_lift_joint", *(f"arm_{k}_joint" for k in range(1, 8))) == robot.joint_names
+    assert robot.in_metres.tolist() == [True] + [False] * 7
+    q = random_configurations(robot, 3, seed=8)
+    lifted = q.copy()
+    lifted[:, 0] = np.clip(q[:, 0] + 0.1, robot.lower[0], robot.upper[0])
+    d = lifted[:, 0] - q[:, 0]
+    axis = robot.fk("torso_lift_link", q)[:, :3, :3] @ robot.joint_axis("torso_lift_joint")
+    shift = robot.fk("arm_7_link", lifted)[:, :3, 3] - robot.fk("arm_7_link", q)[:, :3, 3]
+    assert np.abs(shift - d[:, None] * axis).max() < 1e-12 and d.max() > 0.05
