@@ -29,9 +29,9 @@ DEFAULT_TOPIC = (
 
 HELP = "poses of tool frames in base_link for every sample of a joint log"
 DESCRIPTION = """\
-Computes the pose of each requested frame in base_link for every sample of a joint log and
-writes the pose table: time,frame,x,y,z,qx,qy,qz,qw (metres; unit quaternion x,y,z,w, qw >= 0
-unless --quaternion-continuity).
+Computes the pose of each requested frame in the robot's base frame (the SDA10F's base_link) for
+every sample of a joint log and writes the pose table: time,frame,x,y,z,qx,qy,qz,qw (metres; unit
+quaternion x,y,z,w, qw >= 0 unless --quaternion-continuity).
 
 LOG is a CSV file (header 'time,<joint names>', radians, columns in any order), a ROS 1 .bag
 file, or a ROS 2 bag folder (sqlite3 or MCAP) with sensor_msgs/JointState messages. With --times,
