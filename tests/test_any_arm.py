@@ -259,3 +259,21 @@ def test_tiago_described_as_one_arm_has_its_torso_lift_in_metres(tmp_path):
     axis = robot.fk("torso_lift_link", q)[:, :3, :3] @ robot.joint_axis("torso_lift_joint")
     shift = robot.fk("arm_7_link", lifted)[:, :3, 3] - robot.fk("arm_7_link", q)[:, :3, 3]
     assert np.abs(shift - d[:, None] * axis).max() < 1e-12 and d.max() > 0.05
+
+
+@pytest.mark.parametrize("option", ["--robot", "--urdf"])
+def test_fk_takes_a_plain_urdf(option, tmp_path):
+    from brachycal.data.pose_table import read_pose_table
+
+    (tmp_path / "slide.urdf").write_text(SLIDE_URDF)
+    robot = load_robot(tmp_path / "slide.urdf")
+    Q = random_configurations(robot, 4, seed=9)
+    table = tmp_path / "q.csv"
+    table.write_text("".join(",".join(f"{v:.17g}" for v in row) + "\n" for row in Q))
+    out = tmp_path / "poses.csv"
+    argv = ["fk", str(table), option, str(tmp_path / "slide.urdf"), "--frames", "marker", "--out", str(out)]
+    outcome = run_cli(argv)
+    assert outcome.code == 0, outcome.err
+    samples, frames, T = read_pose_table(out)
+    assert samples.tolist() == [1, 2, 3, 4] and frames == ["marker"] * 4
+    assert np.abs(T[:, :3, 3] - robot.fk("marker", Q)[:, :3, 3]).max() < 1e-9
