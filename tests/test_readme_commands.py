@@ -192,6 +192,7 @@ def test_commands_on_outside_recordings_run(tmp_path, monkeypatch):
     """The documents' commands on PLUS's and SciKit-Surgery's real recordings, where that data is."""
     reference("sksurgery_pivot", "tracked_pointer_pivot.csv")
     reference("plus_fcal_nwire", "fCal_3NWires_segmented_frames.xml")
+    reference("mukca_touches", "data", "panda_2_clean", "front_center", "hole_0.csv")
     monkeypatch.chdir(tmp_path)
     outside = [argv for path in DOCUMENTS for argv in document_commands(path) if any(OUTSIDE in w for w in argv)]
     assert {argv[0] for argv in outside} >= {"pivot", "nwire"}

@@ -32,28 +32,42 @@ def spelling_note(old: str, new: str) -> None:
     print(f"brachycal: note: '{old}' is now '{new}'; the old spelling goes in the next release", file=sys.stderr)
 
 
-def add_urdf_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+def add_urdf_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup, *, any_arm: bool = False) -> None:
+    """``--urdf FILE``: a URDF of any robot (``any_arm``), or an SDA10F URDF for the dual-arm commands."""
     parser.add_argument(
         "--urdf",
         metavar="FILE",
-        help="robot description to use instead of the bundled SDA10F (e.g. a calibrated URDF)",
+        help="URDF file of any robot (as --robot FILE.urdf), instead of the bundled SDA10F"
+        if any_arm
+        else "SDA10F URDF to use instead of the bundled one (e.g. a calibrated URDF); another robot: --robot",
     )
 
 
 #: The robot descriptions brachycal ships (``src/brachycal/robots/*.toml``; docs/robots.md), named
-#: here so that ``--help`` needs no file read.
+#: here so that ``--help`` needs no file read: the dual-arm rigs, and the single arms.
 BUNDLED_ROBOT_NAMES = ("sda10f", "baxter", "ur5_pair")
+SINGLE_ARM_ROBOT_NAMES = ("panda", "ur5", "ur10")
 
 
-def add_robot_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
-    """``--robot NAME|FILE`` (with ``--urdf``, of which it is the general form)."""
-    parser.add_argument(
-        "--robot",
-        metavar="NAME|FILE",
-        help=f"robot description: a bundled one ({', '.join(BUNDLED_ROBOT_NAMES)}; default sda10f) or a "
-        "brachycal-robot/1 TOML file (docs/robots.md)",
-    )
-    add_urdf_option(parser)
+def add_robot_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup, *, any_arm: bool = False) -> None:
+    """``--robot NAME|FILE`` (with ``--urdf``, of which it is the general form).
+
+    ``any_arm``: the command takes any robot (a single arm, a plain URDF), not only a dual-arm rig
+    (see :func:`load_robot`).
+    """
+    if any_arm:
+        names = ", ".join(BUNDLED_ROBOT_NAMES + SINGLE_ARM_ROBOT_NAMES)
+        what = (
+            f"any robot: a bundled description ({names}; default sda10f), a brachycal-robot/1 TOML file or a URDF file"
+        )
+    else:
+        names = ", ".join(BUNDLED_ROBOT_NAMES)
+        what = (
+            f"a dual-arm robot (a needle arm and a probe arm): a bundled description ({names}; default sda10f) or a "
+            "brachycal-robot/1 TOML file"
+        )
+    parser.add_argument("--robot", metavar="NAME|FILE", help=f"{what} (docs/robots.md)")
+    add_urdf_option(parser, any_arm=any_arm)
 
 
 def command_inputs(args: argparse.Namespace, *names: str) -> list[str]:
@@ -64,35 +78,32 @@ def command_inputs(args: argparse.Namespace, *names: str) -> list[str]:
     return [value for value in values if isinstance(value, str)]
 
 
-def load_robot(args: argparse.Namespace) -> Robot:
-    """The robot of ``--robot`` (a description) or ``--urdf`` (an SDA10F URDF), default the bundled SDA10F.
+def load_robot(args: argparse.Namespace, *, any_arm: bool = False) -> Robot:
+    """The robot of ``--robot`` (a description or a URDF file) or ``--urdf`` (a URDF), default the
+    bundled SDA10F.
+
+    Unless ``any_arm``, the robot must be a dual-arm rig (a needle arm and a probe arm): checked
+    here, before any work, so that a single arm or another robot's URDF is refused in one line.
 
     Raises:
-        InputError: both given, or a description that does not load (one line naming file and key).
+        InputError: both given, a description that does not load (one line naming file and key), or
+            (not ``any_arm``) a robot without a needle arm and a probe arm.
     """
     from brachycal.errors import InputError  # lazy: start-up (the command's run only)
     from brachycal.model import Robot  # lazy: start-up (the command's run only)
 
     name = getattr(args, "robot", None)
     if name is None:
-        return Robot.load(args.urdf)
-    if args.urdf is not None:
+        robot = Robot.load(args.urdf)
+    elif args.urdf is not None:
         raise InputError("--robot and --urdf both name the robot: pass one")
-    from brachycal.model.description import load_description  # lazy: start-up (the command's run only)
+    else:
+        from brachycal.model.description import load_robot as load  # lazy: start-up (the command's run only)
 
-    return load_description(name).robot
-
-
-def tool_frame_parents(args: argparse.Namespace) -> dict[str, str]:
-    """Each tool frame of the chosen robot with the link it is attached to."""
-    name = getattr(args, "robot", None)
-    if name is None:
-        from brachycal.model import TOOL_FRAME_PARENTS  # lazy: start-up (the command's run only)
-
-        return dict(TOOL_FRAME_PARENTS)
-    from brachycal.model.description import load_description  # lazy: start-up (the command's run only)
-
-    return load_description(name).tool_frame_parents
+        robot = load(name)
+    if not any_arm:
+        _ = robot.rig  # refuses a robot without a needle arm and a probe arm, in one line
+    return robot
 
 
 def progress_bar(total: int, desc: str, quiet: bool, *, unit: str) -> tqdm:

@@ -29,9 +29,9 @@ DEFAULT_TOPIC = (
 
 HELP = "poses of tool frames in base_link for every sample of a joint log"
 DESCRIPTION = """\
-Computes the pose of each requested frame in base_link for every sample of a joint log and
-writes the pose table: time,frame,x,y,z,qx,qy,qz,qw (metres; unit quaternion x,y,z,w, qw >= 0
-unless --quaternion-continuity).
+Computes the pose of each requested frame in the robot's base frame (the SDA10F's base_link) for
+every sample of a joint log and writes the pose table: time,frame,x,y,z,qx,qy,qz,qw (metres; unit
+quaternion x,y,z,w, qw >= 0 unless --quaternion-continuity).
 
 LOG is a CSV file (header 'time,<joint names>', radians, columns in any order), a ROS 1 .bag
 file, or a ROS 2 bag folder (sqlite3 or MCAP) with sensor_msgs/JointState messages. With --times,
@@ -39,11 +39,18 @@ the joint log is interpolated linearly to those times (e.g. the timestamps of ul
 The log is streamed: read, checked, computed and written in blocks, in memory that does not grow
 with its length.
 
-frames of the bundled SDA10F: needle_tip, top_model_tip (right flange), probe_tip, us_image
-(left flange), arm_right_link_tool0, arm_left_link_tool0, and every vendor link.
+A CSV file without a time column is a table of still configurations (touches): either no header,
+one number per coordinate of the robot in its configuration order ('brachycal model' lists it),
+or a header naming the joints. Its rows are samples 1, 2, ...: the pose table's first column is
+then 'sample' instead of 'time'.
 
-example:
+The robot is any robot (--robot NAME|FILE, --urdf FILE); frames are its links and tool frames.
+The bundled SDA10F's: needle_tip, top_model_tip (right flange), probe_tip, us_image (left
+flange), arm_right_link_tool0, arm_left_link_tool0, and every vendor link.
+
+examples:
   brachycal fk examples/joint_log.csv --frames needle_tip,probe_tip --out poses.csv
+  brachycal fk examples/joints.csv --frames needle_tip --out still_poses.csv
 """
 
 
@@ -51,7 +58,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
         "fk", help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("log", metavar="LOG", help="joint log: CSV file, ROS 1 .bag, or ROS 2 bag folder")
+    parser.add_argument(
+        "log",
+        metavar="LOG",
+        help="joint log (CSV file, ROS 1 .bag, or ROS 2 bag folder), or a CSV table of still configurations",
+    )
     parser.add_argument(
         "--frames",
         required=True,
@@ -79,7 +90,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "frame turns through qw = 0; for plots and interpolation) instead of qw >= 0 on every row; each "
         "frame's first row keeps qw >= 0",
     )
-    add_robot_option(parser)
+    add_robot_option(parser, any_arm=True)
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(run=run)
@@ -92,6 +103,36 @@ def _check_log_folder(path: Path) -> None:
 
     if path.is_dir() and not is_bag(path):
         raise InputError("is a folder without metadata.yaml: neither a CSV joint log nor a ROS 2 bag", file=path)
+
+
+def _still_table(path: Path) -> str | None:
+    """The kind of table of still configurations ``path`` is
+    (:func:`~brachycal.data.formats.joint_table.still_table_kind`), or None for a joint log (a bag, or
+    a CSV file with a time column)."""
+    from brachycal.data.formats.bags import is_bag  # lazy: start-up (the command's run only)
+    from brachycal.data.formats.joint_table import still_table_kind  # lazy: start-up (the command's run only)
+
+    if is_bag(path):
+        return None
+    return still_table_kind(path)
+
+
+def still_blocks(path: Path, robot: Robot, kind: str) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """``(sample numbers (N,), q (N, nq))`` blocks of a table of still configurations, samples numbered
+    1, 2, ... in row order: a table without a header read whole (bounded), a named one streamed."""
+    import numpy as np  # lazy: start-up (the command's run only)
+
+    from brachycal.data.formats.csv_log import configuration_blocks  # lazy: start-up (the command's run only)
+    from brachycal.data.formats.joint_table import read_joint_table  # lazy: start-up (the command's run only)
+
+    if kind == "no header":
+        table = read_joint_table(path, robot)
+        yield table.samples.astype(float), table.q
+        return
+    done = 0
+    for _, Q in configuration_blocks(path, robot):
+        yield np.arange(done + 1, done + 1 + len(Q), dtype=float), Q
+        done += len(Q)
 
 
 def log_blocks(path: Path, robot: Robot, topic: str, quiet: bool) -> Iterator[tuple[np.ndarray, np.ndarray]]:
@@ -130,7 +171,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.lag_s != 0.0 and args.times is None:
         raise InputError("--lag-s applies to --times (the frames' times on another clock)")
-    robot = load_robot(args)
+    robot = load_robot(args, any_arm=True)
     frames = args.frames  # names checked by argparse (none empty, no repeats)
     for frame in frames:
         robot.frame_id(frame)
@@ -140,11 +181,19 @@ def run(args: argparse.Namespace) -> int:
         if not Path(args.log).exists():  # here, not when the first block is asked for: before --times is read
             raise InputError("no such file or folder", file=args.log)
         _check_log_folder(Path(args.log))
-        blocks = log_blocks(Path(args.log), robot, args.topic, args.quiet)
+        still = _still_table(Path(args.log))
+        if still is not None and args.times is not None:
+            raise InputError("--times: this table has no time column (one still configuration per row)", file=args.log)
+        if still is None:
+            blocks = log_blocks(Path(args.log), robot, args.topic, args.quiet)
+        else:
+            blocks = still_blocks(Path(args.log), robot, still)
         times = read_times(args.times) if args.times else None
         with open(staged, "wb") as handle:
             # Formatted and written in a thread while the next block is computed (BackgroundPoseWriter).
-            writer = BackgroundPoseWriter(PoseTableWriter(handle, frames, continuity=args.quaternion_continuity))
+            index = "time" if still is None else "sample"
+            table = PoseTableWriter(handle, frames, continuity=args.quaternion_continuity, index=index)
+            writer = BackgroundPoseWriter(table)
             with writer:
                 _compute(robot, frames, blocks, times, writer, args.log, lag_s=args.lag_s)
             samples = len(times) if times is not None else writer.writer.rows // len(frames)

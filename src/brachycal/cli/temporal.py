@@ -69,7 +69,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--joints", metavar="LOG", help="joint log on the robot's clock (robot route)")
     parser.add_argument("--frame", default="us_image", help="robot frame whose position is used (default us_image)")
     parser.add_argument("--topic", help="JointState topic in a bag")
-    add_robot_option(parser)
+    add_robot_option(parser, any_arm=True)
     parser.add_argument("--clip", type=_clip, metavar="U,V,W,H", help="line search rectangle in pixels")
     parser.add_argument(
         "--max-lag-s",
@@ -98,9 +98,9 @@ def _robot_route(args: argparse.Namespace) -> TemporalResult:
     from brachycal.errors import InputError  # lazy: start-up (the command's run only)
     from brachycal.imaging.tank_line import find_tank_line  # lazy: start-up (the command's run only)
 
-    robot = load_robot(args)
+    robot = load_robot(args, any_arm=True)
     if args.frame not in robot.frame_names:
-        raise InputError(f"--frame: no frame {args.frame!r} in the robot {robot.rig.name}")
+        raise InputError(f"--frame: no frame {args.frame!r} in the robot", file=robot.source)
     log = read_joint_log(args.joints, robot, topic=args.topic)
     sequence = read_image_sequence(args.video)
     if np.isnan(sequence.timestamps_s).any():

@@ -2,7 +2,8 @@
 
 Joint logs (CSV, ROS 1 and ROS 2 bags: :func:`read_joint_log`, a :class:`JointLog` of times in
 seconds and configurations in radians, model joint order); tables of configurations and of times
-(:func:`read_configurations`, :func:`read_times`); pose tables (:func:`write_pose_table`,
+(:func:`read_configurations`, :func:`read_times`), still configurations without a header
+(:func:`read_joint_table`, a :class:`JointTable`: one touch per row); pose tables (:func:`write_pose_table`,
 :func:`read_pose_table`: metres in ``base_link``, quaternions x, y, z, w); calibration sessions
 (:func:`read_session`, :func:`write_session`: a :class:`Session`, its probe's imaging sector an
 :class:`ImageSector` when stated); a lab's recording (marks, image
@@ -26,6 +27,7 @@ if TYPE_CHECKING:  # imported on first use: `brachycal <command> --help` and `fk
     from brachycal.data.formats.bag_images import read_bag_images
     from brachycal.data.formats.bags import DEFAULT_TOPIC, bag_log_blocks, is_bag, read_bag_log, write_bag_log
     from brachycal.data.formats.csv_log import csv_log_blocks, read_configurations, read_csv_log, read_times
+    from brachycal.data.formats.joint_table import JointTable, read_joint_table
     from brachycal.data.formats.metaimage import (
         ImageSequence,
         read_image_sequence,
@@ -114,6 +116,7 @@ __all__ = [
     "ImageSettings",
     "JointLog",
     "JointLogChecker",
+    "JointTable",
     "Mark",
     "PlannedSamples",
     "PlusConfig",
@@ -143,6 +146,7 @@ __all__ = [
     "read_image_sequence",
     "read_images",
     "read_joint_log",
+    "read_joint_table",
     "read_marks",
     "read_plan",
     "read_plus_config",

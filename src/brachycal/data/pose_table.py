@@ -1,5 +1,8 @@
 """The pose table written by ``brachycal fk``: ``time,frame,x,y,z,qx,qy,qz,qw``.
 
+For a table of still configurations without time (:mod:`brachycal.data.formats.joint_table`) the
+first column is ``sample`` instead: the sample number 1, 2, ... (a whole number), the rest alike.
+
 Positions in metres in ``base_link``; unit quaternions in ROS order (x, y, z, w); one row per
 (time, frame), frames in the order asked for. Time and positions are written with 9 decimals
 (1 ns, 1 nm), quaternion components with 12.
@@ -29,11 +32,14 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from brachycal.data.formats.csv_log import read_table, to_float
+from brachycal.errors import InputError
 from brachycal.io import atomic_open
 from brachycal.se3 import FloatArray, make_transform
 from brachycal.validate import MAX_POSITION_M, check_positions
 
 HEADER = ("time", "frame", "x", "y", "z", "qx", "qy", "qz", "qw")
+#: What the first column may hold: ``time`` in seconds, or ``sample``, a sample number (no time).
+INDEX_COLUMNS = ("time", "sample")
 #: Decimals of each numeric column of the table: time and position 9 (1 ns, 1 nm), quaternion 12.
 DECIMALS = (9, 9, 9, 9, 12, 12, 12, 12)
 
@@ -163,7 +169,12 @@ class PoseTableWriter:
         continuity: quaternion sign continuity (see the module docstring); default qw ≥ 0.
     """
 
-    def __init__(self, handle: IO[str] | IO[bytes], frames: Sequence[str], *, continuity: bool = False) -> None:
+    def __init__(
+        self, handle: IO[str] | IO[bytes], frames: Sequence[str], *, continuity: bool = False, index: str = "time"
+    ) -> None:
+        if index not in INDEX_COLUMNS:
+            raise ValueError(f"index must be one of {INDEX_COLUMNS}, got {index!r}")
+        self.index = index
         self.handle = handle
         self.frames = list(frames)
         self.continuity = continuity
@@ -171,7 +182,7 @@ class PoseTableWriter:
         self._binary = not isinstance(handle, io.TextIOBase)
         self._previous: list[FloatArray | None] = [None] * len(self.frames)
         self._names = [np.frombuffer(f",{f},".encode(), dtype=np.uint8) for f in self.frames]
-        self._put((",".join(HEADER) + "\n").encode("ascii"))
+        self._put((",".join((index, *HEADER[1:])) + "\n").encode("ascii"))
 
     def _put(self, text: bytes) -> None:
         if self._binary:
@@ -202,7 +213,8 @@ class PoseTableWriter:
         n, frames = len(time), len(self.frames)
         if n == 0:
             return
-        texts = [format_fixed(time, DECIMALS[0])[None].repeat(frames, axis=0)]  # (F, N, width) each
+        first = _format_whole(time) if self.index == "sample" else format_fixed(time, DECIMALS[0])
+        texts = [first[None].repeat(frames, axis=0)]  # (F, N, width) each
         texts += [format_fixed(numbers[:, :, c].reshape(-1), DECIMALS[c + 1]).reshape(frames, n, -1) for c in range(7)]
         # A row: time ",frame," x "," y "," z "," qx "," qy "," qz "," qw "\n", right-aligned in one width
         # so that rows of all frames interleave by time; the pad bytes on the left are dropped at the end.
@@ -224,6 +236,17 @@ class PoseTableWriter:
         flat = block.reshape(-1)
         self._put(flat[flat != _PAD].tobytes())
         self.rows += len(time) * len(self.frames)
+
+
+def _format_whole(n: FloatArray) -> np.ndarray:
+    """``(N, W)`` byte matrix of the whole numbers ``n`` ``(N,)`` (sample numbers), right-aligned as
+    :func:`format_fixed`'s."""
+    texts = [str(int(v)).encode("ascii") for v in n]
+    width = max(len(t) for t in texts)
+    out = np.full((len(texts), width), _PAD, dtype=np.uint8)
+    for i, text in enumerate(texts):
+        out[i, width - len(text) :] = np.frombuffer(text, dtype=np.uint8)
+    return out
 
 
 class BackgroundPoseWriter:
@@ -329,12 +352,16 @@ def write_pose_table(
 
 
 def read_pose_table(path: str | os.PathLike[str]) -> tuple[FloatArray, list[str], FloatArray]:
-    """Read a pose table back: ``(time (R,), frame (R,), T_base_frame (R, 4, 4))``, one per row."""
+    """Read a pose table back: ``(time (R,), frame (R,), T_base_frame (R, 4, 4))``, one per row
+    (``time`` holds the sample numbers of a table whose first column is ``sample``)."""
     from scipy.spatial.transform import Rotation  # lazy: start-up (scipy)
 
     path = Path(path)
-    header, rows, records = read_table(path, list(HEADER))
-    numbers = to_float(path, header, rows, records, [h for h in HEADER if h != "frame"])
+    header, rows, records = read_table(path, list(HEADER[1:]))
+    index = "sample" if "sample" in header and "time" not in header else "time"
+    if index not in header:
+        raise InputError("no 'time' (or 'sample') column in the header", file=path, row=1)
+    numbers = to_float(path, header, rows, records, [index, *HEADER[2:]])
     check_positions(numbers[:, 1:4], "", limit=MAX_POSITION_M, unit="m", file=path, rows=rows, columns=["x", "y", "z"])
     frames = [fields[header.index("frame")] for fields in records]
     R = Rotation.from_quat(numbers[:, 4:8]).as_matrix()

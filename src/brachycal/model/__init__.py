@@ -6,7 +6,9 @@ frame with one arm's axes (:data:`LEFT_ARM`, :data:`RIGHT_ARM`); :data:`READY` i
 planning and the simulated sessions start from; :func:`collision_link_pairs` and
 :class:`ClearanceChecker` keep the links apart. Robots other than the SDA10F: a robot description
 (:func:`load_description`, :data:`BUNDLED_ROBOTS`, ``docs/robots.md``) builds the :class:`Robot` and
-its :class:`Rig` (which arm holds what, ready stance, collision pairs, workspace).
+its :class:`Rig` (which arm holds what, ready stance, collision pairs, workspace); a description of
+single arms (:data:`SINGLE_ARM_ROBOTS`) names each :class:`Arm` (base, flange, tool), and
+:func:`load_robot` also takes a plain URDF file.
 """
 
 from typing import TYPE_CHECKING
@@ -15,7 +17,13 @@ from brachycal._lazy import attach
 
 if TYPE_CHECKING:  # imported on first use: the names need no Pinocchio, the Robot and its helpers do
     from brachycal.model.collision import ClearanceChecker, collision_link_pairs
-    from brachycal.model.description import BUNDLED_ROBOTS, RobotDescription, load_description
+    from brachycal.model.description import (
+        BUNDLED_ROBOTS,
+        SINGLE_ARM_ROBOTS,
+        RobotDescription,
+        load_description,
+        load_robot,
+    )
     from brachycal.model.ik import solve_ik
     from brachycal.model.names import (
         BASE,
@@ -33,7 +41,7 @@ if TYPE_CHECKING:  # imported on first use: the names need no Pinocchio, the Rob
         TOP_MODEL_TIP,
         US_IMAGE,
     )
-    from brachycal.model.rig import Rig
+    from brachycal.model.rig import Arm, Rig
     from brachycal.model.robot import Robot, bundled_urdf_path
 
 __getattr__, __dir__ = attach(__name__, __file__)
@@ -51,9 +59,11 @@ __all__ = [
     "READY",
     "RIGHT_ARM",
     "RIGHT_FLANGE",
+    "SINGLE_ARM_ROBOTS",
     "TOOL_FRAME_PARENTS",
     "TOP_MODEL_TIP",
     "US_IMAGE",
+    "Arm",
     "ClearanceChecker",
     "Rig",
     "Robot",
@@ -61,5 +71,6 @@ __all__ = [
     "bundled_urdf_path",
     "collision_link_pairs",
     "load_description",
+    "load_robot",
     "solve_ik",
 ]

@@ -13,8 +13,13 @@ frozen joints made fixed, ``package://`` mesh paths resolved) and returns a froz
 :class:`RobotDescription` holding the :class:`~brachycal.model.robot.Robot`. Nothing is written:
 the URDFs of example-robot-data are read from its installed share folder and never copied.
 
-Bundled descriptions (``src/brachycal/robots``): ``sda10f`` (the default, equivalent to
-:mod:`brachycal.model.names`), ``baxter`` and ``ur5_pair``. A file path loads any other.
+A description names either a dual-arm rig (``[needle_arm]`` and ``[probe_arm]``: what the paper's
+calibration needs) or any arms (``[[arm]]`` tables: a base link, a flange link, an optional tool
+frame; what the commands about one arm need). :func:`load_robot` also takes a plain URDF file.
+
+Bundled descriptions (``src/brachycal/robots``): the dual-arm rigs ``sda10f`` (the default,
+equivalent to :mod:`brachycal.model.names`), ``baxter`` and ``ur5_pair``; the single arms
+``panda``, ``ur5`` and ``ur10`` (example-robot-data's URDFs). A file path loads any other.
 """
 
 from __future__ import annotations
@@ -30,51 +35,70 @@ from brachycal.inputs import MAX_DOCUMENT_BYTES, check_input_file
 from brachycal.model.description_file import (
     BUNDLED_ROBOTS,
     DEFAULT_ROBOT,
+    SINGLE_ARM_ROBOTS,
+    arms_of,
     bundled_description_path,
+    example_robot_data_share,
     read_description_file,
     rig_of,
 )
-from brachycal.model.rig import ArmDescription, Rig, Workspace
+from brachycal.model.rig import Arm, ArmDescription, Rig, Workspace
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray
 
-__all__ = ["BUNDLED_ROBOTS", "DEFAULT_ROBOT", "RobotDescription", "load_description"]
+__all__ = [
+    "BUNDLED_ROBOTS",
+    "DEFAULT_ROBOT",
+    "SINGLE_ARM_ROBOTS",
+    "URDF_SUFFIXES",
+    "RobotDescription",
+    "load_description",
+    "load_robot",
+]
+
+#: File name endings :func:`load_robot` takes as a plain URDF (any other path is a description).
+URDF_SUFFIXES = (".urdf", ".xml")
 
 
 @dataclass(frozen=True)
 class RobotDescription:
-    """A robot brachycal can calibrate: its :class:`Rig` and the model that carries it (``robot.rig``).
+    """A described robot: its arms, its :class:`Rig` when it is a dual-arm rig, and the model that
+    carries both (``robot.arms``, ``robot.rig``).
 
     The rig's fields and properties read through (``description.needle_arm_indices`` is
-    ``description.rig.needle_arm_indices``).
+    ``description.rig.needle_arm_indices``); for a description of ``[[arm]]`` tables they refuse,
+    as :attr:`rig` does.
 
     Attributes:
-        rig: everything beyond the kinematics.
-        robot: the kinematic model with the tool frames (its URDF text is the built one), carrying ``rig``.
+        name: short name, as ``--robot`` takes it.
+        source: the TOML file.
+        summary: one line about the robot (may be empty).
+        base: the base link (the paper's R).
+        arms: its arms (a dual-arm rig's: the needle arm and the probe arm).
+        robot: the kinematic model with the tool frames (its URDF text is the built one), carrying
+            the arms and the rig.
     """
 
-    rig: Rig
+    name: str
+    source: Path
+    summary: str
+    base: str
+    arms: tuple[Arm, ...]
     robot: Robot = field(repr=False, compare=False)
 
     @property
-    def name(self) -> str:
-        """Short name, as ``--robot`` takes it."""
-        return self.rig.name
+    def rig(self) -> Rig:
+        """Everything beyond the kinematics of a dual-arm rig.
+
+        Raises:
+            InputError: the description names ``[[arm]]`` tables, not a needle arm and a probe arm.
+        """
+        return self.robot.rig
 
     @property
-    def source(self) -> Path:
-        """The TOML file."""
-        return self.rig.source
-
-    @property
-    def summary(self) -> str:
-        """One line about the robot."""
-        return self.rig.summary
-
-    @property
-    def base(self) -> str:
-        """The base link (the paper's R)."""
-        return self.rig.base
+    def dual_arm(self) -> bool:
+        """Whether it is a dual-arm rig (has :attr:`rig`)."""
+        return self.robot.has_rig
 
     @property
     def needle_arm(self) -> ArmDescription:
@@ -190,13 +214,14 @@ def load_description(name_or_path: str | os.PathLike[str] = DEFAULT_ROBOT) -> Ro
             in no arm, a ready stance of the wrong length or outside the limits, a bad transform.
     """
     text = os.fspath(name_or_path)
-    if text in BUNDLED_ROBOTS:
+    if text in BUNDLED_ROBOTS or text in SINGLE_ARM_ROBOTS:
         path = bundled_description_path(text)
     elif os.sep in text or "/" in text or text.endswith(".toml"):
         path = Path(text)
     else:
         raise InputError(
-            f"unknown robot {text!r}: bundled robots are {', '.join(BUNDLED_ROBOTS)}, or give a .toml file"
+            f"unknown robot {text!r}: bundled robots are {', '.join(BUNDLED_ROBOTS + SINGLE_ARM_ROBOTS)}, "
+            "or give a .toml description or a .urdf file"
         )
     try:
         resolved = path.resolve(strict=True)
@@ -210,5 +235,33 @@ def load_description(name_or_path: str | os.PathLike[str] = DEFAULT_ROBOT) -> Ro
 def _load(path: Path) -> RobotDescription:
     file = read_description_file(path)
     robot = Robot(file.urdf_xml, base_dir=file.base_dir, source=str(path))
-    rig = rig_of(file, robot.model, robot.joint_names, robot.lower, robot.upper)
-    return RobotDescription(rig=rig, robot=robot.with_rig(rig))
+    arms: tuple[Arm, ...]
+    if file.dual_arm:
+        rig = rig_of(file, robot.model, robot.joint_names, robot.lower, robot.upper)
+        robot, arms = robot.with_rig(rig), rig.arms
+    else:
+        arms = arms_of(file, robot.joint_names)
+        robot = robot.with_arms(arms, file.name)
+    return RobotDescription(file.name, path, file.summary, file.base, arms, robot)
+
+
+def load_robot(name_or_path: str | os.PathLike[str] = DEFAULT_ROBOT) -> Robot:
+    """The robot model of ``--robot``: a bundled description's name, a description file (``.toml``),
+    or a plain URDF file (:data:`URDF_SUFFIXES`; ``example-robot-data:robots/…`` names one of that
+    package's), loaded as :meth:`Robot.load <brachycal.model.robot.Robot.load>` loads it.
+
+    A plain URDF has no arms named (``robot.arms`` is empty unless it is the SDA10F's) and no rig of
+    another robot: the commands about a dual-arm rig refuse it, ``model`` and ``fk`` take it.
+
+    Raises:
+        InputError: as :func:`load_description`, or a URDF that cannot be read or loaded.
+    """
+    text = os.fspath(name_or_path)
+    if text.startswith("example-robot-data:"):
+        path = example_robot_data_share() / text.removeprefix("example-robot-data:")
+        if not path.is_file():
+            raise InputError(f"no file {text.removeprefix('example-robot-data:')} in example-robot-data ({path})")
+        return Robot.load(path)
+    if text.lower().endswith(URDF_SUFFIXES):
+        return Robot.load(text)
+    return load_description(text).robot

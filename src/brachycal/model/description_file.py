@@ -31,7 +31,7 @@ from brachycal.errors import InputError
 from brachycal.inputs import MAX_DOCUMENT_BYTES, read_input_bytes, read_input_text
 from brachycal.io import bundled
 from brachycal.model import urdf_text
-from brachycal.model.rig import TOOL_FRAMES, ArmDescription, Rig, Workspace
+from brachycal.model.rig import TOOL_FRAMES, Arm, ArmDescription, Rig, Workspace
 from brachycal.se3 import FloatArray, from_xyz_rpy, make_transform
 from brachycal.validate import check_finite, check_transform
 
@@ -40,7 +40,9 @@ __all__ = [
     "DEFAULT_ROBOT",
     "FORMAT",
     "MAX_OFFSET_M",
+    "SINGLE_ARM_ROBOTS",
     "DescriptionFile",
+    "arms_of",
     "bundled_description_path",
     "example_robot_data_share",
     "read_description_file",
@@ -51,6 +53,9 @@ FORMAT = "brachycal-robot/1"
 DEFAULT_ROBOT = "sda10f"
 #: Descriptions shipped in ``brachycal/robots/<name>.toml``.
 BUNDLED_ROBOTS: tuple[str, ...] = ("sda10f", "baxter", "ur5_pair")
+#: Single-arm descriptions shipped likewise (``[[arm]]``; example-robot-data's URDFs): for the
+#: commands about any arm (``model``, ``fk``, robot identification), not the dual-arm rig's.
+SINGLE_ARM_ROBOTS: tuple[str, ...] = ("panda", "ur5", "ur10")
 
 #: Largest |value| of a mount or tool translation, metres: no tool or robot cell is 10 m across,
 #: so a larger value is a unit slip (millimetres typed as metres).
@@ -64,6 +69,7 @@ _TOP_KEYS = {
     "summary",
     "urdf",
     "mount",
+    "arm",
     "base",
     "package_dirs",
     "remove_links",
@@ -87,11 +93,20 @@ class DescriptionFile:
         source: the TOML file.
         urdf_xml: the built URDF text (tool frames, mounts, frozen joints applied).
         base_dir: the folder relative mesh paths of ``urdf_xml`` are resolved against.
+        name: the description's short name.
+        summary: its one line (may be empty).
+        base: the root link.
+        dual_arm: it names a needle arm and a probe arm (a rig, :func:`rig_of`); else it names
+            ``[[arm]]`` tables (:func:`arms_of`).
     """
 
     source: Path
     urdf_xml: str = field(repr=False)
     base_dir: Path
+    name: str
+    summary: str
+    base: str
+    dual_arm: bool
     _reader: _Reader = field(repr=False, compare=False)
     _data: dict[str, Any] = field(repr=False, compare=False)
     _parsed: dict[str, Any] = field(repr=False, compare=False)
@@ -113,9 +128,10 @@ def read_description_file(path: Path) -> DescriptionFile:
     unknown = sorted(set(data) - _TOP_KEYS)
     if unknown:
         raise r.fail(unknown[0], f"unknown key (allowed: {', '.join(sorted(_TOP_KEYS))})")
-    for key in ("format", "name", "base", "needle_arm", "probe_arm", "tools", "workspace"):
+    for key in ("format", "name", "base"):
         if key not in data:
             raise r.fail(key, "missing")
+    dual_arm = _check_kind(data, r)
     if data["format"] != FORMAT:
         raise r.fail("format", f"must be {FORMAT!r}, got {data['format']!r}")
     name = r.string(data["name"], "name")
@@ -140,12 +156,12 @@ def read_description_file(path: Path) -> DescriptionFile:
         urdf_path = _resolve(r.string(data["urdf"], "urdf"), folder, "urdf", path)
         root = _read_urdf(urdf_path, "urdf", path)
         base_dir = urdf_path.parent
-        _resolve_meshes(root, urdf_path, base_dir, package_dirs, path)
+        _resolve_meshes(root, urdf_path, base_dir, package_dirs, path, required=dual_arm)
         actual_root = _root_link(root, path, "urdf")
         if base != actual_root:
             raise r.fail("base", f"must be the URDF's root link {actual_root!r}, got {base!r}")
     else:
-        root, base_dir = _mount_arms(data["mount"], base, folder, package_dirs, r, mounts, srdf_pairs)
+        root, base_dir = _mount_arms(data["mount"], base, folder, package_dirs, r, mounts, srdf_pairs, dual_arm)
 
     remove = r.strings(data.get("remove_links", []), "remove_links")
     _remove_subtrees(root, remove, r)
@@ -160,6 +176,11 @@ def read_description_file(path: Path) -> DescriptionFile:
     collision = r.table(data, "collision", {"srdf"}, set()) if "collision" in data else {}
     for ref in r.strings(collision.get("srdf", []), "collision.srdf"):
         srdf_pairs |= _srdf_pairs(_resolve(ref, folder, "collision.srdf", path), "", "collision.srdf", path)
+
+    if not dual_arm:
+        arms = _read_arms(root, data["arm"], base, r)
+        parsed = dict(name=name, summary=summary, base=base, frozen=frozen, arms=arms)
+        return DescriptionFile(path, urdf_text.to_text(root), base_dir, name, summary, base, False, r, data, parsed)
 
     # Tool frames: from the description, or already in the URDF (the bundled SDA10F's).
     arm_keys = {"flange", "joints", "ready_rad"}
@@ -197,8 +218,6 @@ def read_description_file(path: Path) -> DescriptionFile:
                 )
 
     urdf_xml = urdf_text.to_text(root)
-
-    urdf_xml = urdf_text.to_text(root)
     parsed = dict(
         name=name,
         summary=summary,
@@ -210,7 +229,133 @@ def read_description_file(path: Path) -> DescriptionFile:
         needle_table=needle_table,
         probe_table=probe_table,
     )
-    return DescriptionFile(path, urdf_xml, base_dir, r, data, parsed)
+    return DescriptionFile(path, urdf_xml, base_dir, name, summary, base, True, r, data, parsed)
+
+
+#: Keys only a dual-arm description has.
+_DUAL_ARM_KEYS = ("needle_arm", "probe_arm", "shared", "controller", "tools", "workspace")
+
+
+def _check_kind(data: Mapping[str, Any], r: _Reader) -> bool:
+    """Whether the description is a dual-arm rig (``[needle_arm]``, ``[probe_arm]``, ``[tools]``,
+    ``[workspace]``) rather than ``[[arm]]`` tables; refuses a mix and a missing part."""
+    dual = "needle_arm" in data or "probe_arm" in data
+    if "arm" in data and dual:
+        raise r.fail(
+            "arm",
+            "give either [[arm]] tables (any arms) or [needle_arm] and [probe_arm] (a dual-arm rig), not both",
+        )
+    if "arm" in data:
+        for key in _DUAL_ARM_KEYS:
+            if key in data:
+                raise r.fail(
+                    key, "belongs to a dual-arm description ([needle_arm] and [probe_arm]), not to [[arm]] tables"
+                )
+        return False
+    if not dual:
+        raise r.fail(
+            "arm",
+            "missing: name the robot's arms ([[arm]] tables), "
+            "or its needle arm and probe arm ([needle_arm] and [probe_arm])",
+        )
+    for key in ("needle_arm", "probe_arm", "tools", "workspace"):
+        if key not in data:
+            raise r.fail(
+                key, "missing (a dual-arm description names the needle arm, the probe arm, the tools and the workspace)"
+            )
+    return True
+
+
+_ARM_KEYS = {"name", "base", "flange", "tool"}
+_TOOL_KEYS = {"frame", "xyz_m", "rpy_rad", "matrix", "what"}
+
+
+def _read_arms(root: ET.Element, tables: object, base: str, r: _Reader) -> list[dict[str, Any]]:
+    """The ``[[arm]]`` tables checked against the URDF tree (a tool table added as a fixed frame on its
+    flange): ``name``, ``base``, ``flange``, ``tool`` (or None) and ``chain``, the moving joints from
+    the base link to the flange, root to flange."""
+    if not isinstance(tables, list) or not tables or not all(isinstance(t, dict) for t in tables):
+        raise r.fail("arm", "must be [[arm]] tables, one per arm")
+    arms: list[dict[str, Any]] = []
+    for i, table in enumerate(tables):
+        key = f"arm[{i}]"
+        table = r.table({key: table}, key, _ARM_KEYS, {"name", "flange"})
+        name = r.string(table["name"], f"{key}.name")
+        if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", name):
+            raise r.fail(f"{key}.name", f"must be letters, digits and '_' starting with a letter, got {name!r}")
+        if any(arm["name"] == name for arm in arms):
+            raise r.fail(f"{key}.name", f"arm {name!r} is named twice")
+        links = set(_links(root))
+        flange = r.string(table["flange"], f"{key}.flange")
+        arm_base = r.string(table.get("base", base), f"{key}.base")
+        for which, link in (("flange", flange), ("base", arm_base)):
+            if link not in links:
+                raise r.fail(f"{key}.{which}", f"no link {link!r} in the URDF")
+        chain = _path_up(root, flange, arm_base)
+        if chain is None:
+            raise r.fail(f"{key}.base", f"link {arm_base!r} is not above the flange {flange!r} in the URDF's tree")
+        moving = [joint for joint in chain if _joints(root)[joint].get("type") != "fixed"]
+        if not moving:
+            raise r.fail(f"{key}.flange", f"no joint moves {flange!r} relative to {arm_base!r}")
+        tool: str | None = None
+        if "tool" in table:
+            value = table["tool"]
+            if isinstance(value, dict):
+                spec = r.table({key: {"tool": value}}, f"{key}.tool", _TOOL_KEYS, {"frame"})
+                tool = r.string(spec["frame"], f"{key}.tool.frame")
+                if tool in links:
+                    raise r.fail(
+                        f"{key}.tool.frame", f"the URDF already has a frame {tool!r}: name it (tool = {tool!r})"
+                    )
+                T = r.transform(spec, f"{key}.tool")
+                _add_fixed_frame(root, tool, flange, T, str(spec.get("what", "")))
+            else:
+                tool = r.string(value, f"{key}.tool")
+                if tool not in links:
+                    raise r.fail(f"{key}.tool", f"no link {tool!r} in the URDF")
+                below = _path_up(root, tool, flange)
+                if below is None:
+                    raise r.fail(f"{key}.tool", f"frame {tool!r} is not below the flange {flange!r}")
+                loose = [joint for joint in below if _joints(root)[joint].get("type") != "fixed"]
+                if loose:
+                    raise r.fail(
+                        f"{key}.tool", f"frame {tool!r} is not rigidly on the flange: joint {loose[0]!r} moves it"
+                    )
+        arms.append(dict(name=name, base=arm_base, flange=flange, tool=tool, chain=moving))
+    return arms
+
+
+def _path_up(root: ET.Element, link: str, ancestor: str) -> list[str] | None:
+    """Names of the joints from ``ancestor`` down to ``link`` (root to link), or None if ``ancestor``
+    is not above ``link`` (a link is above itself: no joints)."""
+    parent_joint = {_child(joint): joint for joint in _joints(root).values()}
+    path: list[str] = []
+    while link != ancestor:
+        joint = parent_joint.get(link)
+        if joint is None:
+            return None
+        path.append(str(joint.get("name")))
+        link = _parent(joint)
+    return path[::-1]
+
+
+def arms_of(file: DescriptionFile, joint_names: tuple[str, ...]) -> tuple[Arm, ...]:
+    """The ``[[arm]]`` tables of ``file`` as :class:`~brachycal.model.rig.Arm`, each arm's joints the
+    configuration coordinates ``joint_names`` (of the model built from :attr:`DescriptionFile.urdf_xml`)
+    on its chain, root to flange. A dual-arm description's arms are its rig's (:attr:`Rig.arms`).
+
+    Raises:
+        InputError: naming the file and the key: an arm moved by no coordinate (only mimic joints).
+    """
+    if file.dual_arm:
+        raise ValueError("a dual-arm description's arms are its rig's (Rig.arms)")
+    arms = []
+    for i, arm in enumerate(file._parsed["arms"]):
+        joints = tuple(joint for joint in arm["chain"] if joint in joint_names)
+        if not joints:
+            raise file._reader.fail(f"arm[{i}].flange", f"no configuration coordinate moves {arm['flange']!r}")
+        arms.append(Arm(arm["name"], arm["base"], arm["flange"], arm["tool"], joints))
+    return tuple(arms)
 
 
 def rig_of(
@@ -224,6 +369,8 @@ def rig_of(
         InputError: naming the file and the key: a joint in no arm or in the wrong one, a ready
             stance of the wrong length or outside the limits, a bad controller order, a bad workspace.
     """
+    if not file.dual_arm:
+        raise ValueError("an [[arm]] description has no rig (arms_of gives its arms)")
     r, data, path = file._reader, file._data, file.source
     p = file._parsed
     name, summary, base = p["name"], p["summary"], p["base"]
@@ -503,17 +650,22 @@ def _root_link(root: ET.Element, source: Path, key: str) -> str:
     return roots[0]
 
 
-def _resolve_meshes(root: ET.Element, urdf_path: Path, base_dir: Path, package_dirs: list[Path], source: Path) -> None:
+def _resolve_meshes(
+    root: ET.Element, urdf_path: Path, base_dir: Path, package_dirs: list[Path], source: Path, *, required: bool = True
+) -> None:
     """Rewrite every mesh path relative to ``base_dir`` (``package://NAME/…`` looked up in ``package_dirs``).
 
     Pinocchio, MuJoCo and ``Robot.write_urdf`` then all find the meshes from ``base_dir`` without a
-    ROS package path.
+    ROS package path. A ``package://`` mesh found in none is refused when the meshes are ``required``
+    (a dual-arm rig: planning checks collisions), else left as written (kinematics needs no mesh).
     """
     for mesh in root.iter("mesh"):
         filename = mesh.get("filename", "")
         if filename.startswith("package://"):
             rest = filename.removeprefix("package://")
             found = [d / rest for d in package_dirs if (d / rest).is_file()]
+            if not found and not required:
+                continue
             if not found:
                 raise InputError(
                     f"key 'package_dirs': mesh {filename} of {urdf_path.name} is in none of "
@@ -678,6 +830,7 @@ def _mount_arms(
     r: _Reader,
     mounts: dict[str, FloatArray],
     srdf_pairs: set[frozenset[str]],
+    meshes_required: bool = True,
 ) -> tuple[ET.Element, Path]:
     """One URDF of single arms under a new root link ``base``: each arm's links and joints prefixed,
     its root link fixed to ``base`` at the stated pose. Fills ``mounts`` and ``srdf_pairs``."""
@@ -695,7 +848,7 @@ def _mount_arms(
             raise r.fail(f"{key}.prefix", f"{prefix!r} is used twice")
         urdf_path = _resolve(r.string(table["urdf"], f"{key}.urdf"), folder, f"{key}.urdf", r.source)
         arm = _read_urdf(urdf_path, f"{key}.urdf", r.source)
-        _resolve_meshes(arm, urdf_path, folder, package_dirs, r.source)
+        _resolve_meshes(arm, urdf_path, folder, package_dirs, r.source, required=meshes_required)
         _drop_simulator_elements(arm)
         arm_root = _root_link(arm, r.source, f"{key}.urdf")
         _prefixed(arm, prefix)

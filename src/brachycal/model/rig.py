@@ -1,4 +1,5 @@
-"""A dual-arm robot's rig: which arm holds which tool, the ready stance, what a controller publishes,
+"""Arms of any robot (:class:`Arm`: a base link, a flange link, an optional tool frame) and a
+dual-arm robot's rig: which arm holds which tool, the ready stance, what a controller publishes,
 which link pairs never collide, where it works (:class:`Rig`), read from a robot description
 (:mod:`brachycal.model.description`). Configurations are radians (metres for prismatic joints);
 poses ``T_base_frame`` in the rig's base, metres.
@@ -16,7 +17,7 @@ import numpy as np
 
 from brachycal.se3 import FloatArray
 
-__all__ = ["TOOL_FRAMES", "ArmDescription", "Rig", "Workspace"]
+__all__ = ["TOOL_FRAMES", "Arm", "ArmDescription", "Rig", "Workspace"]
 
 #: The tool frames of CONVENTIONS.md, each with what it is mounted on: the needle arm's flange
 #: (``"needle_flange"``), the probe arm's flange (``"probe_flange"``) or another tool frame.
@@ -28,6 +29,28 @@ TOOL_FRAMES: Mapping[str, str] = MappingProxyType(
         "us_image": "probe_tip",
     }
 )
+
+
+@dataclass(frozen=True)
+class Arm:
+    """One arm of any robot: the chain from a base link to a flange link, with an optional tool frame.
+
+    What a single-arm estimator needs (``T_base_flange`` and ``T_base_tool`` from forward kinematics,
+    the coordinates that move them); a dual-arm rig's two arms are arms too (:attr:`Rig.arms`).
+
+    Attributes:
+        name: short name (``arm``, ``needle_arm``), as a description names it.
+        base: the link poses are measured in (the robot's base, or a link above the flange).
+        flange: the link tools mount on (z out of the flange, ROS-Industrial's ``tool0`` convention).
+        tool: a frame rigidly on the flange (a touch probe's ball, a marker), or ``None``.
+        joints: the configuration coordinates that move the flange relative to the base, root to flange.
+    """
+
+    name: str
+    base: str
+    flange: str
+    tool: str | None
+    joints: tuple[str, ...]
 
 
 @dataclass(frozen=True)
@@ -162,6 +185,15 @@ class Rig:
         q[self.probe_arm_indices] = self.probe_arm.ready
         q[self.shared_indices] = self.shared_ready
         return q
+
+    @property
+    def arms(self) -> tuple[Arm, Arm]:
+        """The needle arm and the probe arm as :class:`Arm` (named ``needle_arm``, ``probe_arm``), from
+        :attr:`base` to each flange: the shared joints, then the arm's own, with the needle and probe tips."""
+        return (
+            Arm("needle_arm", self.base, self.needle_flange, "needle_tip", self.shared_joints + self.needle_arm.joints),
+            Arm("probe_arm", self.base, self.probe_flange, "probe_tip", self.shared_joints + self.probe_arm.joints),
+        )
 
     @property
     def tool_frame_parents(self) -> dict[str, str]:

@@ -45,7 +45,7 @@ from brachycal.model import urdf_text
 from brachycal.model.batch_fk import BatchForwardKinematics
 from brachycal.model.description_file import bundled_description_path, read_description_file, rig_of
 from brachycal.model.joints import ONE_AXIS, Coordinates, UnsupportedJoint
-from brachycal.model.rig import Rig
+from brachycal.model.rig import Arm, Rig
 from brachycal.se3 import FloatArray, inverse, make_transform
 
 if TYPE_CHECKING:
@@ -94,6 +94,9 @@ class Robot:
         rig: Rig | None = None,
     ) -> None:
         self._rig = rig
+        #: The arms a description of ``[[arm]]`` tables names (:meth:`with_arms`), and its name; None: none.
+        self._arms: tuple[Arm, ...] | None = None
+        self._described_as: str | None = None
         #: For :meth:`load`: the SDA10F's rig, fetched on first use of :attr:`rig` (reading the
         #: description costs 0.03 s, which commands that never ask for it should not pay).
         self._sda10f_rig_on_demand = False
@@ -144,11 +147,14 @@ class Robot:
 
     @property
     def rig(self) -> Rig:
-        """Which arm holds which tool, the ready stance, collision pairs, controller order, workspace.
+        """Which arm holds which tool, the ready stance, collision pairs, controller order, workspace:
+        what the dual-arm calibration needs.
 
         Raises:
-            InputError: the robot has none (built from URDF text without a description), or it was
-                loaded by :meth:`load` and is not the SDA10F (its joints are not the SDA10F's).
+            InputError: the robot has none, in one line saying that a needle arm and a probe arm are
+                needed: a description of ``[[arm]]`` tables (a single arm), a model built from URDF
+                text without a description, or one loaded by :meth:`load` that is not the SDA10F
+                (its joints are not the SDA10F's).
         """
         if self._rig is None and self._sda10f_rig_on_demand:
             rig = sda10f_rig()
@@ -156,17 +162,78 @@ class Robot:
                 self.model.existFrame(f) for f in (rig.needle_flange, rig.probe_flange, *rig.tool_frame_parents)
             ):
                 raise InputError(
-                    "this URDF is not the SDA10F's (its joints or tool frames differ): give a robot description "
-                    "(--robot FILE, docs/robots.md)",
+                    "this URDF is not the SDA10F's (its joints or tool frames differ), and this needs a needle arm "
+                    "and a probe arm: give a dual-arm robot description (--robot FILE, docs/robots.md)",
                     file=self.source,
                 )
             self._rig = rig
+        if self._rig is None and self._arms is not None:
+            names = ", ".join(arm.name for arm in self._arms)
+            raise InputError(
+                f"robot {self._described_as!r} names no needle arm and probe arm (its arms: {names}): this needs a "
+                "dual-arm robot, a description with [needle_arm] and [probe_arm] (docs/robots.md)",
+                file=self.source,
+            )
         if self._rig is None:
             raise InputError(
-                "this robot model has no description of its arms and tools (--robot FILE, docs/robots.md)",
+                "this robot model has no description of its arms and tools, and this needs a needle arm and a probe "
+                "arm: give a dual-arm robot description (--robot FILE, docs/robots.md)",
                 file=self.source,
             )
         return self._rig
+
+    @property
+    def has_rig(self) -> bool:
+        """Whether :attr:`rig` is there (a dual-arm description, or the SDA10F loaded by :meth:`load`)."""
+        try:
+            _ = self.rig
+        except InputError:
+            return False
+        return True
+
+    @property
+    def arms(self) -> tuple[Arm, ...]:
+        """The robot's arms (:class:`~brachycal.model.rig.Arm`): a description's ``[[arm]]`` tables, a
+        dual-arm rig's needle arm and probe arm, none for a plain URDF that is not the SDA10F's."""
+        if self._arms is not None:
+            return self._arms
+        return self.rig.arms if self.has_rig else ()
+
+    def arm(self, name: str | None = None) -> Arm:
+        """The arm called ``name``; ``None``: the robot's only arm.
+
+        Raises:
+            InputError: no such arm, or ``None`` and the robot has not exactly one arm.
+        """
+        arms = self.arms
+        if name is None:
+            if len(arms) != 1:
+                what = f"{len(arms)} arms ({', '.join(a.name for a in arms)})" if arms else "no arm named"
+                raise InputError(f"this robot has {what}: name the arm (docs/robots.md, 'Any arm')", file=self.source)
+            return arms[0]
+        for arm in arms:
+            if arm.name == name:
+                return arm
+        known = ", ".join(a.name for a in arms) or "none"
+        raise InputError(f"no arm {name!r} (arms: {known})", file=self.source)
+
+    def with_arms(self, arms: tuple[Arm, ...], name: str) -> Robot:
+        """The same model carrying the ``arms`` of the description ``name`` (one without a rig).
+
+        Raises:
+            InputError: an arm names a frame or a joint this robot does not have.
+        """
+        for arm in arms:
+            for frame in (arm.base, arm.flange, *([arm.tool] if arm.tool else [])):
+                self.frame_id(frame)
+            unknown = [j for j in arm.joints if j not in self.joint_names]
+            if unknown:
+                raise InputError(f"arm {arm.name!r}: unknown joint {unknown[0]!r}", file=self.source)
+        out = copy.copy(self)
+        out._data = self.model.createData()
+        out._rig, out._sda10f_rig_on_demand = None, False
+        out._arms, out._described_as = tuple(arms), name
+        return out
 
     def with_rig(self, rig: Rig) -> Robot:
         """The same model carrying ``rig`` (its joint names must be the robot's).
@@ -179,12 +246,14 @@ class Robot:
         out = copy.copy(self)  # the model is shared (never modified); its scratch data is not
         out._data = self.model.createData()
         out._rig, out._sda10f_rig_on_demand = rig, False
+        out._arms, out._described_as = None, None
         return out
 
     def _like_this(self, urdf_xml: str) -> Robot:
         """A robot of new URDF text with this one's folder, name and rig."""
         out = Robot(urdf_xml, base_dir=self.base_dir, source=self.source, rig=self._rig)
         out._sda10f_rig_on_demand = self._sda10f_rig_on_demand
+        out._arms, out._described_as = self._arms, self._described_as
         return out
 
     # --- names and configurations -------------------------------------------------------
