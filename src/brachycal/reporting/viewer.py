@@ -402,7 +402,7 @@ def legend_html(layers: Sequence[Layer]) -> str:
         else:
             swatch = _swatch(layer.rgb)
         rows.append(
-            f"<div style='margin:2px 0'>{swatch} <b>{html.escape(layer.label)}</b>: {html.escape(layer.meaning)}</div>"
+            f"<div style='margin:2px 0'>{swatch} <b>{html.escape(layer.label, quote=False)}</b>: {html.escape(layer.meaning, quote=False)}</div>"
         )
     return "<div style='font-size:0.85em;padding:0 0.5em'>" + "".join(rows) + "</div>"
 
