@@ -401,9 +401,8 @@ def legend_html(layers: Sequence[Layer]) -> str:
             swatch = "".join(_swatch(c) for c in ((220, 0, 0), (0, 180, 0), (0, 0, 220)))
         else:
             swatch = _swatch(layer.rgb)
-        rows.append(
-            f"<div style='margin:2px 0'>{swatch} <b>{html.escape(layer.label, quote=False)}</b>: {html.escape(layer.meaning, quote=False)}</div>"
-        )
+        label, meaning = html.escape(layer.label, quote=False), html.escape(layer.meaning, quote=False)
+        rows.append(f"<div style='margin:2px 0'>{swatch} <b>{label}</b>: {meaning}</div>")
     return "<div style='font-size:0.85em;padding:0 0.5em'>" + "".join(rows) + "</div>"
 
 
