@@ -62,7 +62,7 @@ VIEW_FRAMES = (NEEDLE_TIP, PROBE_TIP, US_IMAGE)
 LEGEND: dict[str, tuple[str, str]] = {
     "robot": ("robot", "the robot's links at the chosen pose"),
     "frames": ("tool frames", "needle tip, probe tip and image frames (x red, y green, z blue)"),
-    "image_plane": ("image plane", "the ultrasound image at the chosen pose, placed by the calibration"),
+    "image_plane": ("image plane", "the ultrasound image at the chosen pose, where the calibration puts it"),
     "points/real": ("needle tips, measured", "through the needle arm's kinematics"),
     "points/calibrated": ("needle tips, calibrated", "through the probe arm and the image calibration"),
     "vectors/residual": ("residuals", "each sample's measured tip joined to its calibrated one"),
