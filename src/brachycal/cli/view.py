@@ -16,11 +16,14 @@ through the poses with the slider, Ctrl-C to stop. What it shows:
   (nothing given)          the robot at its ready stance, its tool frames and image plane
   --plan PLAN.csv          the robot at each planned pose (brachycal plan)
   --session DIR            the robot at each image sample of a session
-  RESULT --session DIR     also, per sample, the needle tip through the needle arm (crimson)
-                           and through the probe arm and the image (teal) with their residual, and
-                           the sample cube; if DIR is a twin's session (brachycal demo: it has
-                           truth.json), targets (lime) and where the needle landed (magenta)
-Everything in the robot's base frame. --host 0.0.0.0 serves it to other machines.
+  RESULT --session DIR     also, per sample, the needle tip through the needle arm and through
+                           the probe arm and the image, joined by their residual, and the sample
+                           cube; if DIR is a twin's session (brachycal demo: it has truth.json),
+                           targets and where the needle landed
+The page's side panel has the legend (what each colour is), the calibration shown, the frame and
+units, the chosen sample's residual (mm), and a checkbox per layer. The first view shows the
+whole scene, robot included. Everything in the robot's base frame. --host 0.0.0.0 serves it to
+other machines.
 
 example:
   brachycal demo

@@ -27,9 +27,17 @@ from brachycal.io import atomic_path
 from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.reporting.figures import save_figure
-from brachycal.se3 import transform_points
+from brachycal.se3 import FloatArray, transform_points
 
 TOOL_FRAMES = (NEEDLE_TIP, PROBE_TIP, US_IMAGE)
+
+
+def load_urdf(robot: Robot) -> yourdfpy.URDF:
+    """The robot's URDF with its meshes (paths relative to the URDF's folder), as yourdfpy loads it."""
+    return yourdfpy.URDF.load(
+        io.StringIO(robot.urdf_xml),
+        filename_handler=partial(yourdfpy.filename_handler_relative, dir=str(robot.base_dir)),
+    )
 
 
 def robot_scene(
@@ -43,10 +51,7 @@ def robot_scene(
 ) -> trimesh.Scene:
     """The robot at ``q`` (``(nq,)``), axes on ``frames``, the image rectangle, optional points ``(K, 3)``."""
     q = np.asarray(q, dtype=float)
-    urdf = yourdfpy.URDF.load(
-        io.StringIO(robot.urdf_xml),
-        filename_handler=partial(yourdfpy.filename_handler_relative, dir=str(robot.base_dir)),
-    )
+    urdf = load_urdf(robot)
     urdf.update_cfg(robot.named(q))
     scene = urdf.scene.copy()
     for frame in frames:
@@ -72,6 +77,17 @@ def robot_scene(
             place = trimesh.transformations.translation_matrix(point)
             scene.add_geometry(ball, node_name=f"point_{k}", geom_name=f"point_{k}", transform=place)
     return scene
+
+
+def robot_bounds(robot: Robot, poses_q: ArrayLike) -> FloatArray:
+    """``(2, 3)`` low and high corners of the box holding the robot's meshes at every pose of
+    ``poses_q`` (``(M, nq)``, radians), in the robot's base frame, metres."""
+    urdf = load_urdf(robot)
+    boxes = []
+    for q in np.atleast_2d(np.asarray(poses_q, dtype=float)):
+        urdf.update_cfg(robot.named(q))
+        boxes.append(np.asarray(urdf.scene.bounds, dtype=float))
+    return np.array([np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)])
 
 
 def save_glb(scene: trimesh.Scene, path: str | os.PathLike[str]) -> Path:
