@@ -154,7 +154,7 @@ def wire_point_pairs(config: PlusConfig, frames: list[SegmentedFrame]) -> tuple[
     T_reference_phantom = _phantom_registration(config)
     uv, p_probe, frame_of = [], [], []
     for frame in frames:
-        if not frame.ok:
+        if not frame.usable:
             continue
         check_wire_names(config, frame)
         T_probe_phantom = _T_probe_phantom(frame, T_reference_phantom)
@@ -333,7 +333,7 @@ def matrix_wire_errors_2d(
     to_px = np.eye(2)
     out: dict[str, list[FloatArray]] = {w.name: [] for pattern in config.patterns for w in pattern}
     for frame in frames:
-        if not frame.ok:
+        if not frame.usable:
             continue
         check_wire_names(config, frame)
         T_image_phantom = T_image_probe @ _T_probe_phantom(frame, T_reference_phantom)
