@@ -394,7 +394,9 @@ class SegmentedFrame:
         return self.ok and all(status == "OK" for status in self.pose_status)
 
 
-def _frames(parent: Element | None, path: Path, which: str, tolerance: float) -> list[SegmentedFrame]:
+def _frames(
+    parent: Element | None, path: Path, which: str, tolerance: float, names: tuple[str, str]
+) -> list[SegmentedFrame]:
     if parent is None:
         raise InputError(f"no <{which}> element", file=path)
     label = f"{which} Frame"  # the XML element: <ValidationData><Frame Index=…>
@@ -428,7 +430,7 @@ def _frames(parent: Element | None, path: Path, which: str, tolerance: float) ->
         fields = {f.get("Name"): f.get("Value") for f in element.iter("CustomFrameField")}
         tracked: dict[str, FloatArray | None] = {}
         status: dict[str, str] = {}
-        for name in ("ProbeToTrackerTransform", "ReferenceToTrackerTransform"):
+        for name in names:
             status[name] = (fields.get(name + "Status") or "OK").strip()
             if status[name] != "OK":  # segmented, but no pose: kept, not used by a calibration
                 tracked[name] = None
@@ -443,19 +445,23 @@ def _frames(parent: Element | None, path: Path, which: str, tolerance: float) ->
                 index,
                 True,
                 points,
-                tracked["ProbeToTrackerTransform"],
-                tracked["ReferenceToTrackerTransform"],
+                tracked[names[0]],
+                tracked[names[1]],
                 np.array(middle) if middle else None,
                 source=str(path),
                 label=label,
-                pose_status=(status["ProbeToTrackerTransform"], status["ReferenceToTrackerTransform"]),
+                pose_status=(status[names[0]], status[names[1]]),
+                pose_names=names,
             )
         )
     return frames
 
 
 def read_segmented_frames(
-    path: str | os.PathLike[str], *, tolerance: float = NWIRE_RIGID_TOLERANCE
+    path: str | os.PathLike[str],
+    *,
+    tolerance: float = NWIRE_RIGID_TOLERANCE,
+    poses: tuple[str, str] = ("ProbeToTrackerTransform", "ReferenceToTrackerTransform"),
 ) -> tuple[list[SegmentedFrame], list[SegmentedFrame]]:
     """``(calibration frames, validation frames)`` of a PLUS probe-calibration results XML.
 
@@ -468,6 +474,9 @@ def read_segmented_frames(
     Args:
         path: the results file.
         tolerance: rigidity demanded of the tracker readings (:data:`NWIRE_RIGID_TOLERANCE`).
+        poses: the frame fields of the probe's and the reference's poses (a tracker's by default;
+            :attr:`PoseStreams.fields` of a stepper's: ``ProbeToStepperHomeTransform``,
+            ``TemplateToStepperHomeTransform``).
 
     Raises:
         InputError: one line naming the file, the frame and the field of the first problem.
@@ -488,8 +497,8 @@ def read_segmented_frames(
             file=path,
         )
     return (
-        _frames(data.find("CalibrationData"), path, "CalibrationData", tolerance),
-        _frames(data.find("ValidationData"), path, "ValidationData", tolerance),
+        _frames(data.find("CalibrationData"), path, "CalibrationData", tolerance, poses),
+        _frames(data.find("ValidationData"), path, "ValidationData", tolerance, poses),
     )
 
 
