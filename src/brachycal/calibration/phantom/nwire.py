@@ -218,7 +218,7 @@ class NWireResult:
         return M
 
 
-def _lsq_reject(design: FloatArray, target: FloatArray, reject_sd: float) -> tuple[FloatArray, np.ndarray]:
+def lsq_reject(design: FloatArray, target: FloatArray, reject_sd: float) -> tuple[FloatArray, np.ndarray]:
     """Least squares with PLUS's rejection: drop equations with |d − mean d| ≥ k σ, refit, repeat."""
     keep = np.ones(len(target), dtype=bool)
     while True:
@@ -245,7 +245,7 @@ def fit_affine(uv_px: ArrayLike, p_probe: ArrayLike, reject_sd: float = 3.0) -> 
     M = np.eye(4)
     kept = np.ones(len(uv), dtype=bool)
     for row in range(3):
-        (a, b, c), keep = _lsq_reject(design, p[:, row], reject_sd)
+        (a, b, c), keep = lsq_reject(design, p[:, row], reject_sd)
         M[row, 0], M[row, 1], M[row, 3] = a, b, c
         kept &= keep
     normal = np.cross(M[:3, 0], M[:3, 1])
