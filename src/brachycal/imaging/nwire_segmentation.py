@@ -15,7 +15,6 @@ points, its pose None with the recording's status (counted apart: it is not a se
 from __future__ import annotations
 
 import os
-import re
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -24,6 +23,7 @@ import numpy as np
 
 from brachycal.data.formats.metaimage import ImageSequence
 from brachycal.data.formats.plus_files import (
+    TRANSFORM_NAME,
     PlusConfig,
     PoseStreams,
     SegmentedFrame,
@@ -112,15 +112,13 @@ def check_pose_fields(sequence: ImageSequence, poses: PoseStreams, source: str |
     for role, name in zip(("probe", "reference"), poses.fields, strict=True):
         if name in present or name + "Status" in present:
             continue
-        recorded = sorted(n for n in present if n.endswith("Transform") and TRANSFORM_FIELD.fullmatch(n))
+        recorded = sorted(
+            n for n in present if n.endswith("Transform") and TRANSFORM_NAME.fullmatch(n[: -len("Transform")])
+        )
         has = ", ".join(recorded) if recorded else "none"
         raise InputError(
             f"no frame has the {role} pose {name} (the recording's transforms: {has})", file=source, column=name
         )
-
-
-#: A sequence frame field holding a transform, ``<From>To<To>Transform``.
-TRANSFORM_FIELD = re.compile(r"^[A-Za-z][A-Za-z0-9_]*To[A-Z][A-Za-z0-9_]*Transform$")
 
 
 def segment_sequence(

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import re
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -105,10 +104,12 @@ def add_orientation_option(parser: argparse.ArgumentParser | argparse._ArgumentG
 def transform_name(text: str) -> str:
     """A PLUS transform name, ``<From>To<To>`` (``ProbeToStepperHome``); a trailing ``Transform``
     (the frame field's name) is taken off."""
+    from brachycal.data.formats.plus_files import TRANSFORM_NAME  # lazy: start-up (parsing this option only)
+
     name = text.strip()
     if name.endswith("Transform") and len(name) > len("Transform"):
         name = name[: -len("Transform")]
-    if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*To[A-Z][A-Za-z0-9_]*", name):
+    if not TRANSFORM_NAME.fullmatch(name):
         raise argparse.ArgumentTypeError(f"expected a transform name <From>To<To> (e.g. ProbeToTracker), got {text!r}")
     return name
 
