@@ -528,12 +528,6 @@ CASES = [
         plus_files(edit_frames=frame_field("ProbeToTrackerTransform", lambda v: "nan " + " ".join(v.split()[1:]))),
     ),
     Case(
-        "nwire-tracker-status-invalid",
-        NWIRE,
-        ("frames.xml", "CalibrationData Frame 0", "ProbeToTrackerTransform status is 'INVALID'"),
-        plus_files(edit_frames=frame_field("ProbeToTrackerTransformStatus", lambda v: "INVALID")),
-    ),
-    Case(
         "nwire-frame-index-not-a-number",
         NWIRE,
         ("frames.xml", "CalibrationData Frame", "whole number", "'x'"),

@@ -44,6 +44,32 @@ def files(*, config: str | None = None, frames=None, fields=None, raw: str | Non
     return setup
 
 
+#: A brachytherapy stepper's device set (PLUS's iCal layout): its poses are ProbeToStepperHome and
+#: TemplateToStepperHome.
+STEPPER = (
+    '<DataCollection><Device Id="TrackerDevice" Type="BrachyTracker" /></DataCollection>'
+    '<iCal ProbeCoordinateFrame="Probe" TemplateCoordinateFrame="Template" />'
+    '<vtkPlusProbeCalibrationAlgo ProbeCoordinateFrame="Probe" ReferenceCoordinateFrame="StepperHome" />'
+)
+#: A stepper recording's frame: its encoders and the poses they give, mm.
+STEPPER_FRAME = {
+    "ProbePosition": "-44.65",
+    "ProbeRotation": "-2.3",
+    "TemplatePosition": "0",
+    "ProbeToStepperHomeTransform": IDENTITY,
+    "TemplateToStepperHomeTransform": IDENTITY,
+}
+
+
+def stepper_config(device: str = STEPPER) -> str:
+    return config_text().replace("<PlusConfiguration>", f"<PlusConfiguration>{device}")
+
+
+def without(*names: str) -> list[dict[str, str]]:
+    """Two stepper frames without the fields ``names``."""
+    return [{k: v for k, v in STEPPER_FRAME.items() if k not in names}] * 2
+
+
 def colour_mha() -> str:
     header = (
         "ObjectType = Image\nNDims = 3\nBinaryData = True\nCompressedData = False\nDimSize = 4 4 1\n"
@@ -135,6 +161,69 @@ CASES = [
             fields=[{"ProbeToTrackerTransform": IDENTITY, "ReferenceToTrackerTransform": IDENTITY.replace("1", "2", 1)}]
             * 2
         ),
+    ),
+    Case(
+        "stepper-recording-without-poses",
+        SEGMENT,
+        ("cal.mha", "ProbeToStepperHomeTransform", "no frame has the probe pose"),
+        files(config=stepper_config(), fields=without("ProbeToStepperHomeTransform", "TemplateToStepperHomeTransform")),
+    ),
+    Case(
+        "stepper-recording-without-encoders-or-poses",
+        SEGMENT,
+        ("cal.mha", "ProbeToStepperHomeTransform", "transforms: none"),
+        files(config=stepper_config(), fields=[{}, {}]),
+    ),
+    Case(
+        "stepper-recording-without-template-pose",
+        SEGMENT,
+        ("cal.mha", "TemplateToStepperHomeTransform", "reference pose"),
+        files(config=stepper_config(), fields=without("TemplateToStepperHomeTransform")),
+    ),
+    Case(
+        "stepper-recording-with-a-tracker-device-set",
+        SEGMENT,
+        ("cal.mha", "ProbeToTrackerTransform", "ProbeToStepperHomeTransform"),
+        files(fields=without()),
+    ),
+    Case(
+        "stepper-device-set-without-template-frame",
+        SEGMENT,
+        ("config.xml", "iCal/@TemplateCoordinateFrame"),
+        files(config=stepper_config(STEPPER.replace(' TemplateCoordinateFrame="Template"', "")), fields=without()),
+    ),
+    Case(
+        "stepper-device-set-without-base-frame",
+        SEGMENT,
+        ("config.xml", "vtkPlusProbeCalibrationAlgo/@ReferenceCoordinateFrame"),
+        files(config=stepper_config(STEPPER.replace(' ReferenceCoordinateFrame="StepperHome"', "")), fields=without()),
+    ),
+    Case(
+        "named-stream-not-recorded",
+        [*SEGMENT, "--probe-transform", "ProbeToStepperHome", "--reference-transform", "TemplateToStepperHome"],
+        ("cal.mha", "ProbeToStepperHomeTransform", "ProbeToTrackerTransform"),
+        files(),
+    ),
+    Case("transform-name-malformed", [*SEGMENT, "--probe-transform", "probe pose"], ("--probe-transform",), files()),
+    Case(
+        "images-only-with-a-stream",
+        [*SEGMENT, "--images-only", "--probe-transform", "ProbeToTracker"],
+        ("--images-only",),
+        files(),
+    ),
+    Case(
+        "nwire-sequences-stream-not-recorded",
+        [
+            *NWIRE,
+            "--calibration-sequence",
+            "{tmp}/cal.mha",
+            "--validation-sequence",
+            "{tmp}/val.mha",
+            "--probe-transform",
+            "ProbeToStepperHome",
+        ],
+        ("cal.mha", "ProbeToStepperHomeTransform"),
+        files(),
     ),
     Case("config-missing", [*SEGMENT[:5], "{tmp}/none.xml", *SEGMENT[6:]], ("none.xml",), files()),
     Case("no-config-option", SEGMENT[:4] + SEGMENT[6:], ("--config",), files()),

@@ -31,7 +31,6 @@ from brachycal.imaging import (
     segment_sequence,
 )
 from brachycal.imaging.nwire_patterns import NO_LINES, NO_PATTERN, TOO_FEW_DOTS
-from brachycal.imaging.nwire_segmentation import NO_TRACKING
 from brachycal.studies.example_files import render_wire_frame as render
 
 FCAL = "plus_fcal_nwire"
@@ -135,13 +134,20 @@ def test_a_sequence_is_segmented_frame_by_frame_and_written_as_plus_xml(tmp_path
     sequence = read_image_sequence(tmp_path / "seq.mha")
     config = read_plus_config(_write_config(tmp_path / "config.xml"))
     result = segment_sequence(sequence, config, NWireSegmentationParameters(), source=tmp_path / "seq.mha")
-    assert result.reasons == [None, None, NO_TRACKING]
-    assert result.found == 2 and result.skipped == {NO_TRACKING: 1}
+    # the frame without its probe pose is segmented all the same: the pose is missing, not the points
+    assert result.reasons == [None, None, None]
+    assert result.found == 3 and result.skipped == {} and result.without_pose == 1
+    assert result.frames[2].T_tracker_probe is None and result.frames[2].pose_status == ("MISSING", "OK")
     write_segmented_frames(
         tmp_path / "frames.xml", result.frames[:2], result.frames[2:], calibration_times_s=[1.0, 1.1]
     )
     calibration, validation = read_segmented_frames(tmp_path / "frames.xml")
-    assert [f.ok for f in calibration] == [True, True] and [f.ok for f in validation] == [False]
+    assert [f.ok for f in calibration + validation] == [True, True, True]
+    # read back: its points, its pose recorded as missing, and not a frame a calibration uses
+    assert [f.usable for f in calibration + validation] == [True, True, False]
+    assert validation[0].pose_status[0] == "MISSING" and validation[0].T_tracker_probe is None
+    for name, uv in result.frames[2].points_px.items():
+        np.testing.assert_allclose(validation[0].points_px[name], uv, atol=1e-6)
     for written, read in zip(result.frames[:2], calibration, strict=True):
         for name, uv in written.points_px.items():
             # written with 10 significant digits: 1e-6 px is far below any pixel's meaning

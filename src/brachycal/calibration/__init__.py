@@ -42,6 +42,7 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
         read_pivot,
         write_pivot,
     )
+    from brachycal.calibration.phantom.stepper import StepperFit, centre_of_rotation, pixel_spacing
     from brachycal.calibration.phantom.wedge import (
         WedgePhantom,
         calibrate_wedge,
@@ -130,6 +131,7 @@ __all__ = [
     "RobotRecord",
     "SequentialResult",
     "SessionResult",
+    "StepperFit",
     "TemporalResult",
     "ToolCalibration",
     "WedgePhantom",
@@ -145,6 +147,7 @@ __all__ = [
     "calibrate_wedge_files",
     "calibrate_wire",
     "calibrate_wire_files",
+    "centre_of_rotation",
     "corrected_robot",
     "cross_validate_identification",
     "estimate_lag",
@@ -162,6 +165,7 @@ __all__ = [
     "observation_rows",
     "pivot_algebraic",
     "pivot_robust",
+    "pixel_spacing",
     "predicted_rms_mm",
     "principal_motion",
     "read_nwire",

@@ -9,7 +9,8 @@ seconds and configurations in radians, model joint order); tables of configurati
 :class:`ImageSector` when stated); a lab's recording (marks, image
 frames, Slicer markups) built into a session (:func:`build_session_from_files`); pose lists of tracked tools
 (:func:`read_pose_list`); PLUS files (:func:`read_plus_config`, :func:`read_segmented_frames`,
-:func:`read_coordinate_definitions`: millimetres in, metres out); MetaImage sequences of B-mode
+:func:`read_coordinate_definitions`: millimetres in, metres out; :func:`read_pose_streams`: which
+frame fields are the poses, a tracker's or a brachytherapy stepper's); MetaImage sequences of B-mode
 frames with their per-frame fields (:func:`read_image_sequence`, :func:`write_image_sequence`).
 Every reader refuses bad input with one :class:`~brachycal.errors.InputError` naming the file,
 row and column.
@@ -36,10 +37,12 @@ if TYPE_CHECKING:  # imported on first use: `brachycal <command> --help` and `fk
     )
     from brachycal.data.formats.plus_files import (
         PlusConfig,
+        PoseStreams,
         SegmentedFrame,
         Wire,
         read_coordinate_definitions,
         read_plus_config,
+        read_pose_streams,
         read_segmented_frames,
     )
     from brachycal.data.formats.plus_segmentation import read_segmentation_parameters
@@ -120,6 +123,7 @@ __all__ = [
     "Mark",
     "PlannedSamples",
     "PlusConfig",
+    "PoseStreams",
     "PoseTableWriter",
     "SegmentedFrame",
     "Session",
@@ -151,6 +155,7 @@ __all__ = [
     "read_plan",
     "read_plus_config",
     "read_pose_list",
+    "read_pose_streams",
     "read_pose_table",
     "read_segmentation_parameters",
     "read_segmented_frames",

@@ -154,7 +154,7 @@ def wire_point_pairs(config: PlusConfig, frames: list[SegmentedFrame]) -> tuple[
     T_reference_phantom = _phantom_registration(config)
     uv, p_probe, frame_of = [], [], []
     for frame in frames:
-        if not frame.ok:
+        if not frame.usable:
             continue
         check_wire_names(config, frame)
         T_probe_phantom = _T_probe_phantom(frame, T_reference_phantom)
@@ -218,7 +218,7 @@ class NWireResult:
         return M
 
 
-def _lsq_reject(design: FloatArray, target: FloatArray, reject_sd: float) -> tuple[FloatArray, np.ndarray]:
+def lsq_reject(design: FloatArray, target: FloatArray, reject_sd: float) -> tuple[FloatArray, np.ndarray]:
     """Least squares with PLUS's rejection: drop equations with |d − mean d| ≥ k σ, refit, repeat."""
     keep = np.ones(len(target), dtype=bool)
     while True:
@@ -245,7 +245,7 @@ def fit_affine(uv_px: ArrayLike, p_probe: ArrayLike, reject_sd: float = 3.0) -> 
     M = np.eye(4)
     kept = np.ones(len(uv), dtype=bool)
     for row in range(3):
-        (a, b, c), keep = _lsq_reject(design, p[:, row], reject_sd)
+        (a, b, c), keep = lsq_reject(design, p[:, row], reject_sd)
         M[row, 0], M[row, 1], M[row, 3] = a, b, c
         kept &= keep
     normal = np.cross(M[:3, 0], M[:3, 1])
@@ -333,7 +333,7 @@ def matrix_wire_errors_2d(
     to_px = np.eye(2)
     out: dict[str, list[FloatArray]] = {w.name: [] for pattern in config.patterns for w in pattern}
     for frame in frames:
-        if not frame.ok:
+        if not frame.usable:
             continue
         check_wire_names(config, frame)
         T_image_phantom = T_image_probe @ _T_probe_phantom(frame, T_reference_phantom)

@@ -220,7 +220,7 @@ def calibrate_nwire_files(
     uv, p_probe, _ = wire_point_pairs(config, calibration_frames)
     start_spacing = config.approximate_spacing_m or FALLBACK_SPACING_M
     calibration = calibrate_nwire(uv, p_probe, start_spacing)
-    if not any(f.ok for f in validation_frames):
+    if not any(f.usable for f in validation_frames):
         raise InputError("no usable validation frames", file=frames_path)
     uv_v, p_v, _ = wire_point_pairs(config, validation_frames)
     refinements = refine_all(observations(config, calibration_frames), calibration, fit_affine(uv, p_probe)[1])
@@ -240,7 +240,7 @@ def calibrate_nwire_files(
         models=models,
         calibration_points=len(uv),
         validation_points=len(uv_v),
-        frames_used=sum(f.ok for f in calibration_frames),
+        frames_used=sum(f.usable for f in calibration_frames),
         frames_total=len(calibration_frames),
         validation_frames=len(validation_frames),
         start_spacing_m=start_spacing,

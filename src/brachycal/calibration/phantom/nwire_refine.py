@@ -76,7 +76,7 @@ def observations(config: PlusConfig, frames: list[SegmentedFrame]) -> WireObserv
     """
     uv, p_probe, frame_of = wire_point_pairs(config, frames)
     patterns = len(config.patterns)
-    used = [f for f in frames if f.ok]
+    used = [f for f in frames if f.usable]
     names = [w.name for pattern in config.patterns for w in pattern]
     T = np.array([phantom_to_probe(config, f) for f in used])
     return WireObservations(

@@ -1,4 +1,4 @@
-"""``brachycal nwire segment``: N-wire phantom frames of tracked B-mode sequences → PLUS segmented-frames XML."""
+"""``brachycal nwire segment``: N-wire phantom frames of B-mode sequences → PLUS segmented-frames XML."""
 
 from __future__ import annotations
 
@@ -8,19 +8,31 @@ import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from brachycal.cli.common import command_inputs, output_file
 
+if TYPE_CHECKING:
+    from brachycal.data.formats.plus_files import PoseStreams
+
 NAME = "nwire-segment"
-HELP = "segment the N-wire phantom in tracked B-mode sequences (PLUS .mha) into a PLUS segmented-frames XML"
+HELP = "segment the N-wire phantom in B-mode sequences (PLUS .mha) into a PLUS segmented-frames XML"
 DESCRIPTION = """\
-Finds the wire intersections of an N-wire phantom in every frame of tracked B-mode sequences
-(MetaImage .mha as PLUS records them: 8-bit frames, ProbeToTracker and ReferenceToTracker readings
-per frame) as PLUS's fCal does: dots (bar top-hats, disc opening, threshold, weighted centroids),
-then the phantom's Ns (three collinear dots each, parallel lines at the N planes' distances) from
-the configuration's PhantomDefinition and its Segmentation settings. Writes PLUS's segmented-frames
-XML (pixels; tracker readings in mm), which `brachycal nwire CONFIG FRAMES` calibrates from.
-Frames where the pattern is not found are written as Failed and counted by reason.
+Finds the wire intersections of an N-wire phantom in every frame of B-mode sequences (MetaImage
+.mha as PLUS records them: 8-bit frames, poses per frame) as PLUS's fCal does: dots (bar
+top-hats, disc opening, threshold, weighted centroids), then the phantom's Ns (three collinear dots
+each, parallel lines at the N planes' distances) from the configuration's PhantomDefinition and its
+Segmentation settings. Writes PLUS's segmented-frames XML (pixels; poses in mm), which
+`brachycal nwire CONFIG FRAMES` calibrates from. Frames where the pattern is not found are written
+as Failed and counted by reason.
+
+Segmentation reads the image alone. Each frame's poses are copied from two named streams: by
+default those the device set records: an optical tracker's ProbeToTracker and ReferenceToTracker,
+or, for a TRUS probe on a brachytherapy stepper (a BrachyTracker device, PLUS's iCal set-up), the
+stepper encoders' ProbeToStepperHome and TemplateToStepperHome. --probe-transform and
+--reference-transform name other streams. A frame without an OK pose is segmented all the same and
+its points written, the pose recorded as missing (a calibration does not use that frame). A
+stream that no frame of a sequence has is refused; --images-only reads no poses.
 
 The first sequence gives the calibration frames, the second (optional) the validation frames;
 `brachycal nwire` needs both.
@@ -38,6 +50,15 @@ example:
       $BRACHYCAL_REFERENCE/plus_fcal_nwire/fCal_Test_Validation_3NWires_fCal2.0.igs.mha \\
       --config $BRACHYCAL_REFERENCE/plus_fcal_nwire/PlusDeviceSet_fCal_Sim_SpatialCalibration_2.0.xml \\
       --out frames.xml
+
+On PLUS's TRUS-on-stepper recording (iCal), in $BRACHYCAL_REFERENCE/plus_trus_stepper (the poses
+are the stepper's, from its device set):
+
+example:
+  brachycal nwire segment $BRACHYCAL_REFERENCE/plus_trus_stepper/USTC_3NWires_RandomStepperMotionCalibration.igs.mha \\
+      $BRACHYCAL_REFERENCE/plus_trus_stepper/USTC_3NWires_RandomStepperMotionValidation.igs.mha \\
+      --config $BRACHYCAL_REFERENCE/plus_trus_stepper/PlusDeviceSet_iCal_SonixTouch_BlackTargetGuideStepper_1.1.xml \\
+      --out stepper_frames.xml
 """
 
 
@@ -58,6 +79,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--out", required=True, type=output_file, metavar="XML", help="segmented-frames file to write")
     add_orientation_option(parser)
+    add_pose_options(parser)
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(run=run)
@@ -79,6 +101,69 @@ def add_orientation_option(parser: argparse.ArgumentParser | argparse._ArgumentG
     )
 
 
+def transform_name(text: str) -> str:
+    """A PLUS transform name, ``<From>To<To>`` (``ProbeToStepperHome``); a trailing ``Transform``
+    (the frame field's name) is taken off."""
+    from brachycal.data.formats.plus_files import TRANSFORM_NAME  # lazy: start-up (parsing this option only)
+
+    name = text.strip()
+    if name.endswith("Transform") and len(name) > len("Transform"):
+        name = name[: -len("Transform")]
+    if not TRANSFORM_NAME.fullmatch(name):
+        raise argparse.ArgumentTypeError(f"expected a transform name <From>To<To> (e.g. ProbeToTracker), got {text!r}")
+    return name
+
+
+def add_pose_options(parser: argparse.ArgumentParser | argparse._ArgumentGroup, *, images_only: bool = True) -> None:
+    """``--probe-transform``, ``--reference-transform`` (and ``--images-only``): where the frames' poses come from."""
+    parser.add_argument(
+        "--probe-transform",
+        type=transform_name,
+        metavar="NAME",
+        help="the probe's pose stream, e.g. ProbeToTracker or ProbeToStepperHome "
+        "(default: the device set's: a tracker's ProbeToTracker, a stepper's ProbeToStepperHome)",
+    )
+    parser.add_argument(
+        "--reference-transform",
+        type=transform_name,
+        metavar="NAME",
+        help="the reference's pose stream in the same base frame, e.g. ReferenceToTracker or "
+        "TemplateToStepperHome (default: the device set's)",
+    )
+    if not images_only:  # a calibration needs the poses
+        return
+    parser.add_argument(
+        "--images-only",
+        action="store_true",
+        help="read no poses: segment the images alone (every pose written as missing)",
+    )
+
+
+def pose_streams(
+    config: str | os.PathLike[str],
+    probe: str | None,
+    reference: str | None,
+    images_only: bool,
+) -> PoseStreams | None:
+    """The pose streams to read: the options' names, else the device set's; None for images only.
+
+    Raises:
+        InputError: ``images_only`` together with a named stream, or a device set that does not
+            name its stepper's frames (when an option does not name the stream).
+    """
+    from brachycal.data.formats.plus_files import PoseStreams, read_pose_streams  # lazy: start-up
+    from brachycal.errors import InputError  # lazy: start-up (the command's run only)
+
+    if images_only:
+        if probe is not None or reference is not None:
+            raise InputError("--images-only reads no poses: give it without --probe-transform or --reference-transform")
+        return None
+    if probe is not None and reference is not None:
+        return PoseStreams(probe, reference, "options")
+    streams = read_pose_streams(config)
+    return PoseStreams(probe or streams.probe, reference or streams.reference, streams.source)
+
+
 def segment_files(
     config: str | os.PathLike[str],
     calibration: str | os.PathLike[str],
@@ -87,10 +172,14 @@ def segment_files(
     *,
     quiet: bool,
     orientation: str | None = None,
+    probe_transform: str | None = None,
+    reference_transform: str | None = None,
+    images_only: bool = False,
 ) -> list[str]:
     """Segment the sequences and write the XML to ``out`` (a staged path); the summary lines to print.
 
-    Every input is read and checked before anything is written.
+    Every input is read and checked before anything is written. The poses are read from the
+    streams :func:`pose_streams` names; a stream that no frame of a sequence has is refused.
     """
     from brachycal.cli.common import progress_bar  # lazy: start-up (the command's run only)
     from brachycal.data.formats.metaimage import read_image_sequence  # lazy: start-up (the command's run only)
@@ -105,6 +194,7 @@ def segment_files(
 
     phantom = read_plus_config(config, require_registration=False)
     params = read_segmentation_parameters(config)
+    poses = pose_streams(config, probe_transform, reference_transform, images_only)
     sequences = [
         (label, path, read_image_sequence(path))
         for label, path in (
@@ -126,12 +216,21 @@ def segment_files(
                 label=f"{label} Frame",
                 orientation=orientation,
                 progress=bar.update,
+                poses=poses,
+                require_poses=True,
             )
         results[label] = result
         skipped = ", ".join(f"{count} {reason}" for reason, count in sorted(result.skipped.items()))
+        posed = (
+            "no poses read"
+            if poses is None
+            else f"poses {poses.probe}, {poses.reference}"
+            + (f"; {result.without_pose} frames without an OK pose" if result.without_pose else "")
+        )
         lines.append(
             f"{Path(path).name}: {result.found} of {len(sequence)} frames segmented"
             + (f" (skipped: {skipped})" if skipped else "")
+            + f" [{posed}]"
         )
     calibration_result = results["CalibrationData"]
     validation_result = results.get("ValidationData")
@@ -156,7 +255,15 @@ def run(args: argparse.Namespace) -> int:
     ) as outputs:
         staged = outputs.claim(args.out, label="--out")
         lines = segment_files(
-            args.config, args.calibration, args.validation, staged, quiet=args.quiet, orientation=args.orientation
+            args.config,
+            args.calibration,
+            args.validation,
+            staged,
+            quiet=args.quiet,
+            orientation=args.orientation,
+            probe_transform=args.probe_transform,
+            reference_transform=args.reference_transform,
+            images_only=args.images_only,
         )
     for line in lines:
         print(line)
@@ -170,6 +277,7 @@ def add_sequence_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--calibration-sequence", metavar="MHA", help="tracked B-mode sequence: calibration frames")
     group.add_argument("--validation-sequence", metavar="MHA", help="tracked B-mode sequence: validation frames")
     add_orientation_option(group)
+    add_pose_options(group, images_only=False)
     group.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -201,6 +309,9 @@ def frames_file(args: argparse.Namespace) -> Iterator[str]:
             path,
             quiet=getattr(args, "quiet", False),
             orientation=getattr(args, "orientation", None),
+            probe_transform=getattr(args, "probe_transform", None),
+            reference_transform=getattr(args, "reference_transform", None),
+            images_only=getattr(args, "images_only", False),
         )
         for line in lines:
             print(line)

@@ -13,6 +13,7 @@ give a wrong calibration with a normal-looking error report.
 from __future__ import annotations
 
 import os
+import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -361,13 +362,18 @@ class SegmentedFrame:
 
     Attributes:
         index: frame index in its set.
-        ok: PLUS's segmentation status.
+        ok: PLUS's segmentation status (the image alone: a frame is segmented whatever its poses).
         points_px: wire name → ``(u, v)`` pixel of the segmented intersection.
-        T_tracker_probe, T_tracker_reference: ``(4, 4)`` tracker readings, metres, rigid.
+        T_tracker_probe, T_tracker_reference: ``(4, 4)`` the probe's and the reference's poses in
+            the pose source's base frame (a tracker's, or a stepper's ``StepperHome``), metres,
+            rigid; None where the recording has no OK pose for the frame.
         plus_middle_probe_m: PLUS's own middle-wire points in the probe frame (if the file has
             them), ``(K, 3)`` metres — used only to check our geometry against PLUS's.
         source: file it was read from (None if built in code), for messages.
         label: what ``index`` counts in that file (``"CalibrationData Frame"``), for messages.
+        pose_status: the recording's status of each pose (``OK``; ``MISSING`` where the frame has
+            no reading; PLUS's ``INVALID``, ``OUT_OF_VIEW``… as recorded).
+        pose_names: the frame fields the poses came from (PLUS's ``<From>To<To>Transform``).
     """
 
     index: int
@@ -378,9 +384,19 @@ class SegmentedFrame:
     plus_middle_probe_m: FloatArray | None = None
     source: str | None = None
     label: str = "frame"
+    pose_status: tuple[str, str] = ("OK", "OK")
+    pose_names: tuple[str, str] = ("ProbeToTrackerTransform", "ReferenceToTrackerTransform")
+
+    @property
+    def usable(self) -> bool:
+        """Segmented, and neither pose recorded as missing: a frame a calibration uses (one whose
+        status is OK but whose pose is None is refused there, naming it)."""
+        return self.ok and all(status == "OK" for status in self.pose_status)
 
 
-def _frames(parent: Element | None, path: Path, which: str, tolerance: float) -> list[SegmentedFrame]:
+def _frames(
+    parent: Element | None, path: Path, which: str, tolerance: float, names: tuple[str, str]
+) -> list[SegmentedFrame]:
     if parent is None:
         raise InputError(f"no <{which}> element", file=path)
     label = f"{which} Frame"  # the XML element: <ValidationData><Frame Index=…>
@@ -412,12 +428,15 @@ def _frames(parent: Element | None, path: Path, which: str, tolerance: float) ->
                 point.get("Position"), 3, _at(path, row=index, row_label=label, element=f"Point[@WireName='{name}']")
             )[:2]
         fields = {f.get("Name"): f.get("Value") for f in element.iter("CustomFrameField")}
-        tracked = {}
-        for name in ("ProbeToTrackerTransform", "ReferenceToTrackerTransform"):
+        tracked: dict[str, FloatArray | None] = {}
+        status: dict[str, str] = {}
+        for name in names:
+            status[name] = (fields.get(name + "Status") or "OK").strip()
+            if status[name] != "OK":  # segmented, but no pose: kept, not used by a calibration
+                tracked[name] = None
+                continue
             if name not in fields:
                 raise fail(f"missing {name} (TrackedFrame/CustomFrameField[@Name='{name}'])")
-            if fields.get(name + "Status", "OK") != "OK":
-                raise fail(f"{name} status is {fields.get(name + 'Status')!r}")
             where = _at(path, row=index, row_label=label, element=f"CustomFrameField[@Name='{name}']")
             tracked[name] = _rigid_mm(fields[name], where, tolerance)
         middle = [_numbers(m.get("PositionInProbeFrame"), 4, fail)[:3] * MM for m in element.iter("MiddleWire")]
@@ -426,28 +445,38 @@ def _frames(parent: Element | None, path: Path, which: str, tolerance: float) ->
                 index,
                 True,
                 points,
-                tracked["ProbeToTrackerTransform"],
-                tracked["ReferenceToTrackerTransform"],
+                tracked[names[0]],
+                tracked[names[1]],
                 np.array(middle) if middle else None,
                 source=str(path),
                 label=label,
+                pose_status=(status[names[0]], status[names[1]]),
+                pose_names=names,
             )
         )
     return frames
 
 
 def read_segmented_frames(
-    path: str | os.PathLike[str], *, tolerance: float = NWIRE_RIGID_TOLERANCE
+    path: str | os.PathLike[str],
+    *,
+    tolerance: float = NWIRE_RIGID_TOLERANCE,
+    poses: tuple[str, str] = ("ProbeToTrackerTransform", "ReferenceToTrackerTransform"),
 ) -> tuple[list[SegmentedFrame], list[SegmentedFrame]]:
     """``(calibration frames, validation frames)`` of a PLUS probe-calibration results XML.
 
     Reads PLUS's whole results file (frames under ``<ErrorReport>``) and the stripped form that
     keeps only the inputs (frames under ``<Data>``). Frames whose segmentation failed are kept with
-    ``ok=False``; the others must carry named wire points and rigid tracker readings.
+    ``ok=False``; the others must carry named wire points and, for each tracker reading, either a
+    rigid matrix or a status other than ``OK`` (a frame segmented without its pose, kept with that
+    pose None: not :attr:`SegmentedFrame.usable`).
 
     Args:
         path: the results file.
         tolerance: rigidity demanded of the tracker readings (:data:`NWIRE_RIGID_TOLERANCE`).
+        poses: the frame fields of the probe's and the reference's poses (a tracker's by default;
+            :attr:`PoseStreams.fields` of a stepper's: ``ProbeToStepperHomeTransform``,
+            ``TemplateToStepperHomeTransform``).
 
     Raises:
         InputError: one line naming the file, the frame and the field of the first problem.
@@ -468,8 +497,8 @@ def read_segmented_frames(
             file=path,
         )
     return (
-        _frames(data.find("CalibrationData"), path, "CalibrationData", tolerance),
-        _frames(data.find("ValidationData"), path, "ValidationData", tolerance),
+        _frames(data.find("CalibrationData"), path, "CalibrationData", tolerance, poses),
+        _frames(data.find("ValidationData"), path, "ValidationData", tolerance, poses),
     )
 
 
@@ -490,3 +519,87 @@ def sequence_transform(
     if fields.get(name + "Status", "OK") != "OK" or name not in fields:
         return None
     return _rigid_mm(fields[name], _at(Path(path), row=frame, row_label="frame", column=name), tolerance)
+
+
+def pose_status(fields: dict[str, str], name: str) -> str:
+    """The recording's status of transform ``name`` in one frame: its ``<name>Status`` field
+    (``OK`` if it has none), ``MISSING`` if the frame has no such transform."""
+    status = (fields.get(name + "Status") or "OK").strip()
+    return "MISSING" if status == "OK" and name not in fields else status
+
+
+#: PLUS's name of a transform, ``<From>To<To>`` (its frame field is the name + ``Transform``).
+TRANSFORM_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*To[A-Z][A-Za-z0-9_]*$")
+
+
+@dataclass(frozen=True)
+class PoseStreams:
+    """Which frame fields of a recording are the probe's and the reference's poses.
+
+    Attributes:
+        probe: the probe's pose, PLUS's transform name (``ProbeToTracker``, ``ProbeToStepperHome``).
+        reference: the reference body's pose in the same base frame (``ReferenceToTracker``; on a
+            brachytherapy stepper the template's, ``TemplateToStepperHome``).
+        source: ``"tracker"`` or ``"stepper"`` (the device set's pose source), or ``"options"``.
+    """
+
+    probe: str = "ProbeToTracker"
+    reference: str = "ReferenceToTracker"
+    source: str = "tracker"
+
+    @property
+    def fields(self) -> tuple[str, str]:
+        """The sequence's frame fields: ``(probe + "Transform", reference + "Transform")``."""
+        return self.probe + "Transform", self.reference + "Transform"
+
+
+def _attribute(element: Element | None, name: str, default: str | None) -> str | None:
+    value = element.get(name) if element is not None else None
+    return value.strip() if value is not None and value.strip() else default
+
+
+def read_pose_streams(path: str | os.PathLike[str]) -> PoseStreams:
+    """The pose streams a PLUS device set records: a tracker's or a brachytherapy stepper's.
+
+    A stepper device set (a ``BrachyTracker`` device or an ``iCal`` element: PLUS's TRUS-on-stepper
+    set-up) records ``<Probe>To<Base>`` and ``<Template>To<Base>`` from the stepper's encoders, the
+    frame names from its ``iCal`` element (``ProbeCoordinateFrame``, ``TemplateCoordinateFrame``)
+    and the probe calibration's ``ReferenceCoordinateFrame`` (``StepperHome``). Any other device set
+    records a tracker's ``<Probe>ToTracker`` and ``<Reference>ToTracker`` (the probe calibration
+    element's frame names, ``Probe`` and ``Reference`` by default; the tracker device's
+    ``ToolReferenceFrame``, ``Tracker`` by default).
+
+    Raises:
+        InputError: unreadable XML, or a stepper device set that does not name the probe's,
+            the template's or the base frame (naming the element and attribute).
+    """
+    path = Path(path)
+    root = _parse(path)
+    algorithm = next(
+        (e for tag in ("vtkPlusProbeCalibrationAlgo", "vtkProbeCalibrationAlgo") for e in root.iter(tag)), None
+    )
+    ical = next(root.iter("iCal"), None)
+    stepper = ical is not None or any(d.get("Type") == "BrachyTracker" for d in root.iter("Device"))
+    if not stepper:
+        devices = [d for d in root.iter("Device") if d.get("ToolReferenceFrame")]
+        tracker = _attribute(devices[0] if devices else None, "ToolReferenceFrame", "Tracker")
+        probe = _attribute(algorithm, "ProbeCoordinateFrame", "Probe")
+        reference = _attribute(algorithm, "ReferenceCoordinateFrame", DEFAULT_REFERENCE_FRAME)
+        return PoseStreams(f"{probe}To{tracker}", f"{reference}To{tracker}", "tracker")
+    needed = (
+        (ical, "iCal", "ProbeCoordinateFrame"),
+        (ical, "iCal", "TemplateCoordinateFrame"),
+        (algorithm, "vtkPlusProbeCalibrationAlgo", "ReferenceCoordinateFrame"),
+    )
+    names = []
+    for element, tag, attribute in needed:
+        value = _attribute(element, attribute, None)
+        if value is None or not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", value):
+            raise InputError(
+                f"{root.tag}//{tag}/@{attribute}: a stepper device set must name this frame "
+                f"(the stepper's poses are <Frame>To<Base>), got {value!r}",
+                file=path,
+            )
+        names.append(value)
+    probe, template, base = names
+    return PoseStreams(f"{probe}To{base}", f"{template}To{base}", "stepper")

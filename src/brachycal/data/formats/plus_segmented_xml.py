@@ -2,9 +2,12 @@
 
 ``<ProbeCalibrationResult><Data><CalibrationData>`` and ``<ValidationData>``, each a list of
 ``<Frame Index=… SegmentationStatus="OK"|"Failed">`` with the wire points in pixels
-(``<Point WireName=… Position="u v 0"/>``) and a ``<TrackedFrame>`` carrying the tracker readings as
-PLUS writes them: ``CustomFrameField`` ``ProbeToTrackerTransform`` / ``ReferenceToTrackerTransform``,
-16 numbers row-major, millimetres. PLUS's fCal and ``brachycal nwire`` read the same file.
+(``<Point WireName=… Position="u v 0"/>``) and a ``<TrackedFrame>`` carrying the poses as PLUS
+writes them, under the recording's own names: ``CustomFrameField`` ``ProbeToTrackerTransform`` /
+``ReferenceToTrackerTransform`` (a stepper's ``ProbeToStepperHomeTransform`` /
+``TemplateToStepperHomeTransform``), 16 numbers row-major, millimetres, with a ``…Status`` field
+(``OK``, or ``MISSING`` etc. for a frame segmented without its pose). PLUS's fCal and
+``brachycal nwire`` read the tracker's files.
 """
 
 from __future__ import annotations
@@ -44,16 +47,14 @@ def _frames(parent: ET.Element, frames: Sequence[SegmentedFrame], times_s: Array
         time = None if times is None or position >= len(times) else float(times[position])
         if time is not None and math.isfinite(time):
             tracked.set("Timestamp", _number(time))
-        for name, T in (
-            ("ProbeToTrackerTransform", frame.T_tracker_probe),
-            (
-                "ReferenceToTrackerTransform",
-                frame.T_tracker_reference,
-            ),
-        ):
+        poses = (frame.T_tracker_probe, frame.T_tracker_reference)
+        for name, T, status in zip(frame.pose_names, poses, frame.pose_status, strict=True):
             if T is not None:
                 ET.SubElement(tracked, "CustomFrameField", Name=name, Value=_matrix_mm(T))
                 ET.SubElement(tracked, "CustomFrameField", Name=name + "Status", Value="OK")
+            else:  # recorded as missing (the recording's own status where it has one), not as a failure
+                missing = status if status != "OK" else "MISSING"
+                ET.SubElement(tracked, "CustomFrameField", Name=name + "Status", Value=missing)
 
 
 def write_segmented_frames(
