@@ -15,6 +15,7 @@ and the error of the known distances. A calibration is judged on places it did n
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -29,6 +30,7 @@ from brachycal.calibration.robot.arm_fit import (
 )
 from brachycal.calibration.robot.identification import prior_sd
 from brachycal.calibration.robot_accuracy import RobotAccuracy
+from brachycal.data.formats.touches import read_touch_folder
 from brachycal.errors import InputError
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray
@@ -53,12 +55,42 @@ class TouchPlace:
     name: str
     touches: tuple[FloatArray, ...]
     distances: dict[tuple[int, int], float] = field(default_factory=dict)
+    torques: tuple[FloatArray, ...] | None = None
 
 
 def arm_joints(robot: Robot, flange: str) -> tuple[str, ...]:
     """The joints between the base and ``flange``, in configuration order: the columns of a touch table."""
     selection = ParameterSelection.chain(robot, flange)
     return tuple(name for name, free in zip(robot.joint_names, selection.free[:, 0], strict=True) if free)
+
+
+def read_places(
+    robot: Robot,
+    flange: str,
+    folders: Sequence[str | os.PathLike[str]],
+    distances: dict[tuple[int, int], float] | None = None,
+) -> list[TouchPlace]:
+    """The places of touch folders (:mod:`brachycal.data.formats.touches`), the tables' columns the
+    arm's joints to ``flange``, with ``distances`` (metres) known between the points of each.
+
+    Raises:
+        InputError: a folder the reader refuses; two folders of the same name; a distance between
+            points a place has not.
+    """
+    joints = arm_joints(robot, flange)
+    out: list[TouchPlace] = []
+    for path in folders:
+        folder = read_touch_folder(path, joints)
+        if any(p.name == folder.name for p in out):
+            raise InputError(f"two places are named {folder.name!r}", file=path)
+        known = dict(distances or {})
+        for i, j in known:
+            if max(i, j) >= len(folder.tables):
+                raise InputError(
+                    f"a distance between points {i} and {j}, but the place has {len(folder.tables)}", file=path
+                )
+        out.append(TouchPlace(folder.name, tuple(configurations(robot, flange, t) for t in folder.tables), known))
+    return out
 
 
 def configurations(robot: Robot, flange: str, table: FloatArray) -> FloatArray:
@@ -83,7 +115,11 @@ class TouchModel:
 
     places: tuple[TouchPlace, ...]
     flange: str
+    compliant: tuple[int, ...] = ()
     groups: tuple[str, ...] = GROUPS
+
+    def n_points(self) -> int:
+        return sum(len(p.touches) for p in self.places)
 
     def point_slots(self) -> list[list[int]]:
         """Per place, per point: its offset in ``y``."""
@@ -94,15 +130,24 @@ class TouchModel:
         return out
 
     def y_scale(self) -> FloatArray:
-        return np.full(3 + 3 * sum(len(p.touches) for p in self.places), 1e-3)
+        return np.concatenate([np.full(3 + 3 * self.n_points(), 1e-3), np.full(len(self.compliant), 1e-6)])
 
     def evaluate(self, robot: Robot, y: FloatArray) -> Evaluation:
         ny, nc = len(y), 6 * robot.nq
         r, J_c, J_y, group = [], [], [], []
         tip = y[:3]
         slots = self.point_slots()
+        k0 = 3 + 3 * self.n_points()
+        compliance = y[k0:]
+        compliant = list(self.compliant)
+        axes = [robot.joint_axis(robot.joint_names[j]) for j in compliant]
         for place, offsets in zip(self.places, slots, strict=True):
-            for Q, at in zip(place.touches, offsets, strict=True):
+            for p_index, (Q, at) in enumerate(zip(place.touches, offsets, strict=True)):
+                if compliant:
+                    assert place.torques is not None
+                    tau = place.torques[p_index][:, compliant]
+                    Q = Q.copy()
+                    Q[:, compliant] += tau * compliance
                 fp = flange_points(robot, Q, self.flange, tip)
                 n = len(Q)
                 r.append((fp.p - y[at : at + 3]).reshape(-1))
@@ -110,6 +155,8 @@ class TouchModel:
                 block = np.zeros((n, 3, ny))
                 block[:, :, :3] = fp.R
                 block[:, :, at : at + 3] = -np.eye(3)
+                for m, (j, axis) in enumerate(zip(compliant, axes, strict=True)):
+                    block[:, :, k0 + m] = (fp.J_c[:, :, 6 * j + 3 : 6 * j + 6] @ axis) * tau[:, m, None]
                 J_y.append(block.reshape(3 * n, ny))
                 group.append(np.zeros(3 * n, dtype=int))
             for (i, j), d in place.distances.items():
@@ -143,6 +190,8 @@ class TouchResult:
     tip: FloatArray
     points: tuple[FloatArray, ...]
     places: tuple[str, ...]
+    compliant: tuple[int, ...] = ()
+    compliance: FloatArray = field(default_factory=lambda: np.zeros(0))
 
     def robot(self, nominal: Robot) -> Robot:
         """The corrected robot (without the tip; :meth:`tool_robot` adds it)."""
@@ -160,6 +209,7 @@ def identify_touches(
     touch_sd_m: float = TOUCH_SD_M,
     distance_sd_m: float = DISTANCE_SD_M,
     estimate_touch_noise: bool = True,
+    compliant: Sequence[int] = (),
 ) -> TouchResult:
     """Identify the arm from touches of fixed points (module docstring).
 
@@ -186,12 +236,13 @@ def identify_touches(
         for i, j in place.distances:
             if not (0 <= i < len(place.touches) and 0 <= j < len(place.touches) and i != j):
                 raise InputError(f"place {place.name!r}: a distance between points {i} and {j}, which it has not")
-    model = TouchModel(places, flange)
+    model = TouchModel(places, flange, tuple(compliant))
     tip0 = np.zeros(3) if tip is None else np.asarray(tip, dtype=float)
     y0 = [tip0]
     for place in places:
         for Q in place.touches:
             y0.append(flange_points(nominal, Q, flange, tip0).p.mean(axis=0))
+    y0.append(np.zeros(len(compliant)))
     y = np.concatenate(y0)
     chosen = ParameterSelection.chain(nominal, flange)
     sigma = {"touch": touch_sd_m, "distance": distance_sd_m}
@@ -212,7 +263,10 @@ def identify_touches(
     )
     slots = model.point_slots()
     points = tuple(np.array([fit.y[at : at + 3] for at in offsets]) for offsets in slots)
-    return TouchResult(fit, flange, fit.y[:3].copy(), points, tuple(p.name for p in places))
+    k0 = 3 + 3 * model.n_points()
+    return TouchResult(
+        fit, flange, fit.y[:3].copy(), points, tuple(p.name for p in places), tuple(compliant), fit.y[k0:].copy()
+    )
 
 
 @dataclass(frozen=True)
@@ -233,10 +287,21 @@ class TouchScatter:
         return float(np.mean(self.scatter_m))
 
 
-def touch_scatter(robot: Robot, place: TouchPlace, flange: str, tip: FloatArray) -> TouchScatter:
+def touch_scatter(
+    robot: Robot,
+    place: TouchPlace,
+    flange: str,
+    tip: FloatArray,
+    compliant: Sequence[int] = (),
+    compliance: FloatArray | None = None,
+) -> TouchScatter:
     """MUKCa's figures of ``place`` on ``robot`` with the tip ``tip`` (metres in ``flange``)."""
     means, scatter = [], []
-    for Q in place.touches:
+    for k, Q in enumerate(place.touches):
+        if compliant:
+            assert place.torques is not None and compliance is not None
+            Q = Q.copy()
+            Q[:, list(compliant)] += place.torques[k][:, list(compliant)] * compliance
         p = flange_points(robot, Q, flange, tip).p
         means.append(p.mean(axis=0))
         scatter.append(float(np.mean(np.linalg.norm(p - means[-1], axis=1))))
