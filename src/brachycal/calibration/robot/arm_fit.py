@@ -46,7 +46,7 @@ from brachycal.se3 import FloatArray
 #: columns fall to rounding (~1e-15 relative); weakly seen ones stay above 1e-6 on real protocols.
 BASE_RCOND = 1e-8
 #: Gauss–Newton: stop when the largest step is below this in prior units / own scale.
-STEP_TOLERANCE = 1e-9
+STEP_TOLERANCE = 1e-7
 #: Gauss–Newton iterations per noise round at most.
 ITERATIONS = 30
 #: Noise rounds: each re-estimates the free groups' levels from the previous round's residuals.

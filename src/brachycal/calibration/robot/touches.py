@@ -205,7 +205,7 @@ def identify_touches(
     accuracy: RobotAccuracy | None,
     *,
     tip: FloatArray | None = None,
-    selection: str = "base",
+    selection: str | ParameterSelection = "base",
     touch_sd_m: float = TOUCH_SD_M,
     distance_sd_m: float = DISTANCE_SD_M,
     estimate_touch_noise: bool = True,
@@ -219,8 +219,9 @@ def identify_touches(
         flange: the frame the tip is fixed to.
         accuracy: the stated accuracy (the corrections' prior); ``None``: none.
         tip: start of the tip in ``flange`` (metres; default its origin).
-        selection: ``"base"`` (the corrections the data can see, :meth:`ParameterSelection.base_set`)
-            or ``"chain"`` (every component of every joint to the flange; needs a prior).
+        selection: ``"base"`` (the corrections the data can see, :meth:`ParameterSelection.base_set`),
+            ``"chain"`` (every component of every joint to the flange; needs a prior), or the
+            free corrections themselves.
         touch_sd_m: the touches' noise level (start, re-estimated unless ``estimate_touch_noise`` is false).
         distance_sd_m: the stated tolerance of the known distances (held).
 
@@ -246,7 +247,9 @@ def identify_touches(
     y = np.concatenate(y0)
     chosen = ParameterSelection.chain(nominal, flange)
     sigma = {"touch": touch_sd_m, "distance": distance_sd_m}
-    if selection == "base":
+    if isinstance(selection, ParameterSelection):
+        chosen = selection
+    elif selection == "base":
         evaluation = model.evaluate(nominal, y)
         scale = prior_sd(nominal, accuracy) if accuracy is not None else np.ones(6 * nominal.nq)
         chosen = chosen.base_set(evaluation.J_c, evaluation.J_y, scale)
