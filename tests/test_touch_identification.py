@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import reference
 
 from brachycal.calibration.robot.arm_fit import ParameterSelection, flange_points
 from brachycal.calibration.robot.identification import corrected_robot
@@ -27,7 +28,6 @@ from brachycal.data.formats.touches import read_touch_folder
 from brachycal.errors import InputError
 from brachycal.model.description_file import example_robot_data_share
 from brachycal.model.robot import Robot
-from conftest import reference
 
 FLANGE = "panda_link8"
 TIP = np.array([0.4e-3, -0.3e-3, 0.1354])  # a ball ~13.5 cm out on the flange
@@ -70,7 +70,7 @@ def synthetic_places(true: Robot, rng: np.random.Generator) -> list[TouchPlace]:
     centres = ([0.45, -0.2, 0.15], [0.5, 0.25, 0.3], [0.35, 0.0, 0.45])
     places = []
     for k, c in enumerate(centres):
-        points = (np.array(c), np.array(c) + [0.05, 0.0, 0.0])
+        points = (np.array(c), np.array(c) + np.array([0.05, 0.0, 0.0]))
         places.append(TouchPlace(f"p{k}", tuple(touches_of(true, p, TIP, 12, rng) for p in points), {(0, 1): 0.05}))
     return places
 

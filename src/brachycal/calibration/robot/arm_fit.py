@@ -381,3 +381,24 @@ def _identifiability(
     return identifiability(
         J, ny, scale, _inverse(A), tuple(robot.joint_names), nuisance="the protocol's own unknowns (tool, points)"
     )
+
+
+def gravity_torques(dynamics: Robot, robot: Robot, Q: FloatArray) -> FloatArray:
+    """``(N, robot.nq)`` the torque (N·m; force for a prismatic joint) gravity puts on each joint of
+    ``robot`` at configurations ``Q`` ``(N, robot.nq)``, from the masses of ``dynamics`` (a URDF of
+    the same arm with ``<inertial>`` elements; joints matched by name, others at zero). Joint
+    compliance under these torques is a non-geometric error a protocol may fit (``q + k τ``)."""
+    import pinocchio as pin  # lazy: start-up (pinocchio)
+
+    Q = np.atleast_2d(np.asarray(Q, dtype=float))
+    names = [n for n in robot.joint_names if n in dynamics.joint_names]
+    full = np.zeros((len(Q), dynamics.nq))
+    full[:, [dynamics.joint_names.index(n) for n in names]] = Q[:, [robot.joint_names.index(n) for n in names]]
+    model = dynamics.model
+    data = model.createData()
+    out = np.zeros((len(Q), robot.nq))
+    for row, q in enumerate(dynamics.to_pinocchio(full)):
+        g = pin.computeGeneralizedGravity(model, data, q)
+        for name in names:
+            out[row, robot.joint_names.index(name)] = g[model.joints[model.getJointId(name)].idx_v]
+    return out
