@@ -111,8 +111,8 @@ def test_point_jacobian_at_zero_matches_differences_exactly(panda):
 def test_touch_model_jacobian_matches_differences(panda):
     rng = np.random.default_rng(5)
     Q = [rng.uniform(panda.lower, panda.upper, (3, panda.nq)) for _ in range(2)]
-    torques = tuple(rng.normal(0, 20, (3, panda.nq)) for _ in range(2))
-    model = TouchModel((TouchPlace("a", tuple(Q), {(0, 1): 0.05}, torques),), FLANGE, compliant=(1, 3))
+    moments = tuple(rng.normal(0, 20, (3, panda.nq, 3)) for _ in range(2))
+    model = TouchModel((TouchPlace("a", tuple(Q), {(0, 1): 0.05}, moments),), FLANGE, compliant=((1, 2), (3, 0)))
     y = np.concatenate([TIP, [0.4, 0.1, 0.3], [0.45, 0.1, 0.3], [2e-5, -3e-5]])
     evaluation = model.evaluate(panda, y)
     for k in range(len(y)):
@@ -279,3 +279,25 @@ def test_configurations_fill_the_arm_and_leave_the_fingers():
     assert Q.shape == (2, robot.nq) and np.all(Q[:, :7] == 1) and np.all(Q[:, 7:] == 0)
     with pytest.raises(InputError, match="6 joint values"):
         configurations(robot, FLANGE, np.ones((2, 6)))
+
+
+def test_deflection_columns_are_the_joint_frames_turns(panda):
+    """A term (j, a) turns joint j's frame (after its turn) about its own axis a by k·m_a: the same
+    as moving the origin's rotation by that turn expressed before the joint's turn."""
+    from scipy.spatial.transform import Rotation
+
+    from brachycal.calibration.robot.arm_fit import deflection_columns
+
+    rng = np.random.default_rng(6)
+    Q = rng.uniform(panda.lower, panda.upper, (3, panda.nq))
+    moments = rng.normal(0, 20, (3, panda.nq, 3))
+    fp = flange_points(panda, Q, FLANGE, TIP)
+    k = 1e-7
+    for j, a in ((1, 2), (3, 0), (5, 1)):
+        G = deflection_columns(panda, Q, fp, moments, [(j, a)])[0][:, :, 0]
+        for n in range(len(Q)):
+            turn = Rotation.from_rotvec(Q[n, j] * panda.joint_axis(panda.joint_names[j])).as_matrix()
+            c = np.zeros((panda.nq, 6))
+            c[j, 3:] = turn[:, a] * moments[n, j, a] * k
+            moved = flange_points(corrected_robot(panda, c), Q[n : n + 1], FLANGE, TIP).p[0]
+            assert np.allclose(G[n] * k, moved - fp.p[n], atol=1e-3 * np.abs(G[n] * k).max() + 1e-13)

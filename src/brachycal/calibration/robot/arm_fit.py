@@ -47,6 +47,9 @@ from brachycal.se3 import FloatArray
 BASE_RCOND = 1e-8
 #: Gauss–Newton: stop when the largest step is below this in prior units / own scale.
 STEP_TOLERANCE = 1e-7
+#: Gauss–Newton: stop when a step lowers the cost by less than this fraction (rounding level:
+#: the cost's own evaluation is good to ~1e-14 relative).
+COST_TOLERANCE = 1e-12
 #: Gauss–Newton iterations per noise round at most.
 ITERATIONS = 30
 #: Noise rounds: each re-estimates the free groups' levels from the previous round's residuals.
@@ -121,11 +124,13 @@ class FlangePoints:
         p: ``(N, 3)`` world positions (metres, base frame).
         R: ``(N, 3, 3)`` the flange's rotations: ``∂p/∂p_flange``.
         J_c: ``(N, 3, 6 nq)`` ``∂p/∂c`` (joint-major ``(v, ω)``).
+        W: ``(N, nq, 6, 6)`` the flange's world twists per joint-origin motion (:func:`joint_twists`).
     """
 
     p: FloatArray
     R: FloatArray
     J_c: FloatArray
+    W: FloatArray
 
 
 def flange_points(robot: Robot, Q: FloatArray, flange: str, p_flange: FloatArray) -> FlangePoints:
@@ -138,7 +143,7 @@ def flange_points(robot: Robot, Q: FloatArray, flange: str, p_flange: FloatArray
     p = np.einsum("nab,nb->na", T[:, :3, :3], p_flange) + T[:, :3, 3]
     W = joint_twists(robot, Q, flange)
     J_c = motion_rows(point_motion(p), W).reshape(len(Q), 3, -1)
-    return FlangePoints(p, T[:, :3, :3], J_c)
+    return FlangePoints(p, T[:, :3, :3], J_c, W)
 
 
 @dataclass(frozen=True)
@@ -337,9 +342,10 @@ def _gauss_newton(
             dx, dy = dx / 2, dy / 2
         else:
             return x, y, k
+        previous = cost
         x, y, A, b, cost = x + dx, y + dy, A_new, b_new, float(b_new @ b_new)
         small = np.concatenate([np.abs(dx) / scale, np.abs(dy) / y_scale]) if len(step) else np.zeros(1)
-        if np.max(small) < STEP_TOLERANCE:
+        if np.max(small) < STEP_TOLERANCE or previous - cost <= COST_TOLERANCE * previous:
             return x, y, k + 1
     return x, y, iterations
 
@@ -383,11 +389,13 @@ def _identifiability(
     )
 
 
-def gravity_torques(dynamics: Robot, robot: Robot, Q: FloatArray) -> FloatArray:
-    """``(N, robot.nq)`` the torque (N·m; force for a prismatic joint) gravity puts on each joint of
-    ``robot`` at configurations ``Q`` ``(N, robot.nq)``, from the masses of ``dynamics`` (a URDF of
-    the same arm with ``<inertial>`` elements; joints matched by name, others at zero). Joint
-    compliance under these torques is a non-geometric error a protocol may fit (``q + k τ``)."""
+def gravity_moments(dynamics: Robot, robot: Robot, Q: FloatArray) -> FloatArray:
+    """``(N, robot.nq, 3)`` the moment (N·m) gravity puts through each joint of ``robot`` at
+    configurations ``Q`` ``(N, robot.nq)``, in the joint's frame after its turn: its component
+    along the axis is the joint's torque, the others bend the joint's bearing. From the masses of
+    ``dynamics`` (a URDF of the same arm with ``<inertial>`` elements; joints matched by name,
+    others zero). Joint compliance under these moments (:func:`deflection_columns`) is a
+    non-geometric error a protocol may fit."""
     import pinocchio as pin  # lazy: start-up (pinocchio)
 
     Q = np.atleast_2d(np.asarray(Q, dtype=float))
@@ -396,9 +404,37 @@ def gravity_torques(dynamics: Robot, robot: Robot, Q: FloatArray) -> FloatArray:
     full[:, [dynamics.joint_names.index(n) for n in names]] = Q[:, [robot.joint_names.index(n) for n in names]]
     model = dynamics.model
     data = model.createData()
-    out = np.zeros((len(Q), robot.nq))
+    zero = np.zeros(model.nv)
+    ids = [(robot.joint_names.index(n), model.getJointId(n)) for n in names]
+    out = np.zeros((len(Q), robot.nq, 3))
     for row, q in enumerate(dynamics.to_pinocchio(full)):
-        g = pin.computeGeneralizedGravity(model, data, q)
-        for name in names:
-            out[row, robot.joint_names.index(name)] = g[model.joints[model.getJointId(name)].idx_v]
+        pin.rnea(model, data, q, zero, zero)
+        for j, jid in ids:
+            out[row, j] = data.f[jid].angular
     return out
+
+
+def deflection_columns(
+    robot: Robot, Q: FloatArray, points: FlangePoints, moments: FloatArray, terms: Sequence[tuple[int, int]]
+) -> tuple[FloatArray, FloatArray]:
+    """How a flange point moves per unit compliance of each term ``(j, a)``: joint ``j``'s frame
+    turns by ``k · m_a`` (radians; ``m`` the joint's moment, ``moments`` ``(N, nq, 3)`` in the
+    joint's frame after its turn, :func:`gravity_moments`) about its own axis ``a``. First order
+    (deflections are ~1e-4 rad). Returns ``(G, Ω)``, each ``(N, 3, len(terms))``: the point's
+    motion and the flange's world rotation per unit ``k`` (``∂(G k)/∂p = [Ω k]×``)."""
+    from scipy.spatial.transform import Rotation  # lazy: start-up (scipy)
+
+    Q = np.atleast_2d(np.asarray(Q, dtype=float))
+    G = np.zeros((len(Q), 3, len(terms)))
+    Omega = np.zeros((len(Q), 3, len(terms)))
+    motion = point_motion(points.p)
+    for m, (j, a) in enumerate(terms):
+        name = robot.joint_names[j]
+        if robot.joint_kinds[name] == "prismatic":
+            turn = np.broadcast_to(np.eye(3), (len(Q), 3, 3))
+        else:  # origin ← joint after its turn
+            turn = Rotation.from_rotvec(np.outer(Q[:, j], robot.joint_axis(name))).as_matrix()
+        twist = (points.W[:, j, :, 3:] @ turn[:, :, a, None])[:, :, 0] * moments[:, j, a, None]  # (N, 6)
+        G[:, :, m] = np.einsum("nab,nb->na", motion, twist)
+        Omega[:, :, m] = twist[:, 3:]
+    return G, Omega

@@ -25,6 +25,7 @@ from brachycal.calibration.robot.arm_fit import (
     ArmFit,
     Evaluation,
     ParameterSelection,
+    deflection_columns,
     fit_arm,
     flange_points,
 )
@@ -33,7 +34,7 @@ from brachycal.calibration.robot_accuracy import RobotAccuracy
 from brachycal.data.formats.touches import read_touch_folder
 from brachycal.errors import InputError
 from brachycal.model.robot import Robot
-from brachycal.se3 import FloatArray
+from brachycal.se3 import FloatArray, skew
 
 #: Starting noise level of the touches (metres): re-estimated from the residuals.
 TOUCH_SD_M = 1e-4
@@ -55,7 +56,7 @@ class TouchPlace:
     name: str
     touches: tuple[FloatArray, ...]
     distances: dict[tuple[int, int], float] = field(default_factory=dict)
-    torques: tuple[FloatArray, ...] | None = None
+    moments: tuple[FloatArray, ...] | None = None
 
 
 def arm_joints(robot: Robot, flange: str) -> tuple[str, ...]:
@@ -115,7 +116,7 @@ class TouchModel:
 
     places: tuple[TouchPlace, ...]
     flange: str
-    compliant: tuple[int, ...] = ()
+    compliant: tuple[tuple[int, int], ...] = ()
     groups: tuple[str, ...] = GROUPS
 
     def n_points(self) -> int:
@@ -139,24 +140,24 @@ class TouchModel:
         slots = self.point_slots()
         k0 = 3 + 3 * self.n_points()
         compliance = y[k0:]
-        compliant = list(self.compliant)
-        axes = [robot.joint_axis(robot.joint_names[j]) for j in compliant]
         for place, offsets in zip(self.places, slots, strict=True):
             for p_index, (Q, at) in enumerate(zip(place.touches, offsets, strict=True)):
-                if compliant:
-                    assert place.torques is not None
-                    tau = place.torques[p_index][:, compliant]
-                    Q = Q.copy()
-                    Q[:, compliant] += tau * compliance
                 fp = flange_points(robot, Q, self.flange, tip)
                 n = len(Q)
-                r.append((fp.p - y[at : at + 3]).reshape(-1))
+                p = fp.p
+                if self.compliant:
+                    if place.moments is None:
+                        raise InputError(f"place {place.name!r} has no joint moments for the compliance terms")
+                    G, Omega = deflection_columns(robot, Q, fp, place.moments[p_index], self.compliant)
+                    p = p + G @ compliance
+                r.append((p - y[at : at + 3]).reshape(-1))
                 J_c.append(fp.J_c.reshape(3 * n, nc))
                 block = np.zeros((n, 3, ny))
                 block[:, :, :3] = fp.R
                 block[:, :, at : at + 3] = -np.eye(3)
-                for m, (j, axis) in enumerate(zip(compliant, axes, strict=True)):
-                    block[:, :, k0 + m] = (fp.J_c[:, :, 6 * j + 3 : 6 * j + 6] @ axis) * tau[:, m, None]
+                if self.compliant:
+                    block[:, :, k0:] = G
+                    block[:, :, :3] += skew(Omega @ compliance) @ fp.R
                 J_y.append(block.reshape(3 * n, ny))
                 group.append(np.zeros(3 * n, dtype=int))
             for (i, j), d in place.distances.items():
@@ -190,7 +191,7 @@ class TouchResult:
     tip: FloatArray
     points: tuple[FloatArray, ...]
     places: tuple[str, ...]
-    compliant: tuple[int, ...] = ()
+    compliant: tuple[tuple[int, int], ...] = ()
     compliance: FloatArray = field(default_factory=lambda: np.zeros(0))
 
     def robot(self, nominal: Robot) -> Robot:
@@ -209,7 +210,7 @@ def identify_touches(
     touch_sd_m: float = TOUCH_SD_M,
     distance_sd_m: float = DISTANCE_SD_M,
     estimate_touch_noise: bool = True,
-    compliant: Sequence[int] = (),
+    compliant: Sequence[tuple[int, int]] = (),
 ) -> TouchResult:
     """Identify the arm from touches of fixed points (module docstring).
 
@@ -295,17 +296,18 @@ def touch_scatter(
     place: TouchPlace,
     flange: str,
     tip: FloatArray,
-    compliant: Sequence[int] = (),
+    compliant: Sequence[tuple[int, int]] = (),
     compliance: FloatArray | None = None,
 ) -> TouchScatter:
     """MUKCa's figures of ``place`` on ``robot`` with the tip ``tip`` (metres in ``flange``)."""
     means, scatter = [], []
     for k, Q in enumerate(place.touches):
+        fp = flange_points(robot, Q, flange, tip)
+        p = fp.p
         if compliant:
-            assert place.torques is not None and compliance is not None
-            Q = Q.copy()
-            Q[:, list(compliant)] += place.torques[k][:, list(compliant)] * compliance
-        p = flange_points(robot, Q, flange, tip).p
+            if place.moments is None or compliance is None:
+                raise InputError(f"place {place.name!r} has no joint moments for the compliance terms")
+            p = p + deflection_columns(robot, Q, fp, place.moments[k], compliant)[0] @ compliance
         means.append(p.mean(axis=0))
         scatter.append(float(np.mean(np.linalg.norm(p - means[-1], axis=1))))
     errors = {(i, j): abs(float(np.linalg.norm(means[i] - means[j])) - d) for (i, j), d in place.distances.items()}
