@@ -49,6 +49,7 @@ def main(argv: list[str]) -> int:
         default="2z,3z,4z,5z,6z,7z",
         help="compliance terms: joint number (1-based) and the axes of its frame it turns about; 'none'",
     )
+    parser.add_argument("--compliance-sd", type=float, default=float("inf"), help="prior SD, rad/(N m)")
     parser.add_argument("--no-distance", action="store_true", help="do not use the 50 mm between the sockets")
     args = parser.parse_args(argv)
     train = (args.train or ("front_center" if args.robot == "panda_2_clean" else "frontcenter")).split(",")
@@ -83,6 +84,7 @@ def main(argv: list[str]) -> int:
         tip=tip0,
         selection="chain",
         compliant=compliant,
+        compliance_sd=args.compliance_sd,
     )
     seconds = time.perf_counter() - start
     robot = result.robot(nominal)

@@ -231,6 +231,7 @@ def fit_arm(
     accuracy: RobotAccuracy | None,
     *,
     estimate_noise: Sequence[str] = (),
+    y_prior_sd: FloatArray | None = None,
     rounds: int = ROUNDS,
     iterations: int = ITERATIONS,
 ) -> ArmFit:
@@ -246,6 +247,7 @@ def fit_arm(
             squares; the selection must then be a base set).
         estimate_noise: groups whose levels are re-estimated from the residuals between rounds
             (the others are held as given).
+        y_prior_sd: a zero-mean Gaussian prior's SD per protocol unknown (``inf``: none; default none).
         rounds: noise rounds (one when nothing is estimated).
 
     Raises:
@@ -266,19 +268,22 @@ def fit_arm(
     y_scale = np.asarray(model.y_scale(), dtype=float)
     x = np.zeros(len(index))
     y = np.asarray(y0, dtype=float).copy()
+    prior = _Prior(
+        accuracy is not None, np.full(len(y), np.inf) if y_prior_sd is None else np.asarray(y_prior_sd, dtype=float)
+    )
     steps = 0
     rounds = rounds if estimated.any() else 1
     for _ in range(rounds):
         x, y, taken = _gauss_newton(
-            nominal, model, selection, x, y, level, scale, y_scale, accuracy is not None, iterations
+            nominal, model, selection, x, y, level, scale, y_scale, prior, iterations
         )
         steps += taken
         evaluation = model.evaluate(corrected_robot(nominal, selection.expand(x)), y)
-        A, _ = _system(evaluation, index, x, scale, level, accuracy is not None)
+        A, _ = _system(evaluation, index, x, y, scale, level, prior)
         if estimated.any():
             level = _noise_levels(evaluation, A, level, estimated)
     evaluation = model.evaluate(corrected_robot(nominal, selection.expand(x)), y)
-    A, _ = _system(evaluation, index, x, scale, level, accuracy is not None)
+    A, _ = _system(evaluation, index, x, y, scale, level, prior)
     posterior = _inverse(A)
     units = np.concatenate([scale, np.ones(len(y))])
     covariance = posterior * np.outer(units, units)
@@ -297,18 +302,39 @@ def fit_arm(
     )
 
 
+@dataclass(frozen=True)
+class _Prior:
+    """The prior rows: the corrections' (when ``corrections``), and zero-mean ones on the ``y``
+    entries whose ``y_sd`` is finite."""
+
+    corrections: bool
+    y_sd: FloatArray
+
+
 def _system(
-    evaluation: Evaluation, index: np.ndarray, x: FloatArray, scale: FloatArray, level: FloatArray, prior: bool
+    evaluation: Evaluation,
+    index: np.ndarray,
+    x: FloatArray,
+    y: FloatArray,
+    scale: FloatArray,
+    level: FloatArray,
+    prior: _Prior,
 ) -> tuple[FloatArray, FloatArray]:
     """The normalised, augmented system ``A``, ``b`` of one Gauss–Newton step over ``(x / scale, y)``:
-    the data rows ``[J_c · scale, J_y] / σ``, then the prior's identity rows."""
+    the data rows ``[J_c · scale, J_y] / σ``, then the prior's rows."""
     w = 1.0 / level[evaluation.group]
     rows = np.hstack([evaluation.J_c[:, index] * scale, evaluation.J_y]) * w[:, None]
     b = evaluation.r * w
-    if prior:
-        prior_rows = np.hstack([np.eye(len(index)), np.zeros((len(index), evaluation.J_y.shape[1]))])
-        rows = np.vstack([rows, prior_rows])
+    ny = evaluation.J_y.shape[1]
+    if prior.corrections:
+        rows = np.vstack([rows, np.hstack([np.eye(len(index)), np.zeros((len(index), ny))])])
         b = np.concatenate([b, x / scale])
+    held = np.flatnonzero(np.isfinite(prior.y_sd))
+    if held.size:
+        y_rows = np.zeros((held.size, len(index) + ny))
+        y_rows[np.arange(held.size), len(index) + held] = 1.0 / prior.y_sd[held]
+        rows = np.vstack([rows, y_rows])
+        b = np.concatenate([b, y[held] / prior.y_sd[held]])
     return rows, b
 
 
@@ -321,14 +347,14 @@ def _gauss_newton(
     level: FloatArray,
     scale: FloatArray,
     y_scale: FloatArray,
-    prior: bool,
+    prior: _Prior,
     iterations: int,
 ) -> tuple[FloatArray, FloatArray, int]:
     """Damped Gauss–Newton on the normalised system (halving a step that raises the cost)."""
     index = selection.index
 
     def system(x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
-        return _system(model.evaluate(corrected_robot(nominal, selection.expand(x)), y), index, x, scale, level, prior)
+        return _system(model.evaluate(corrected_robot(nominal, selection.expand(x)), y), index, x, y, scale, level, prior)
 
     A, b = system(x, y)
     cost = float(b @ b)

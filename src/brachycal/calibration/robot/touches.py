@@ -211,6 +211,7 @@ def identify_touches(
     distance_sd_m: float = DISTANCE_SD_M,
     estimate_touch_noise: bool = True,
     compliant: Sequence[tuple[int, int]] = (),
+    compliance_sd: float = np.inf,
 ) -> TouchResult:
     """Identify the arm from touches of fixed points (module docstring).
 
@@ -264,6 +265,7 @@ def identify_touches(
         sigma,
         accuracy,
         estimate_noise=("touch",) if estimate_touch_noise else (),
+        y_prior_sd=np.concatenate([np.full(len(y) - len(compliant), np.inf), np.full(len(compliant), compliance_sd)]),
     )
     slots = model.point_slots()
     points = tuple(np.array([fit.y[at : at + 3] for at in offsets]) for offsets in slots)
