@@ -68,6 +68,7 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
         read_places,
         touch_scatter,
     )
+    from brachycal.calibration.robot_accuracy import RobotAccuracy
     from brachycal.calibration.sequential.method import (
         SequentialResult,
         ToolCalibration,
@@ -139,6 +140,7 @@ __all__ = [
     "PredictedUncertainty",
     "Provenance",
     "ResultFile",
+    "RobotAccuracy",
     "RobotRecord",
     "SequentialResult",
     "SessionResult",
