@@ -19,6 +19,7 @@ Specifications:
 
 from __future__ import annotations
 
+import json
 import math
 import xml.etree.ElementTree as ET
 
@@ -263,3 +264,40 @@ def test_short_or_still_axes_are_refused():
     angles = np.linspace(0.0, 8.0, 40)  # 8°
     with pytest.raises(DegenerateDataError, match="covers only 8"):
         rotation_axis(rotation_frames(angles), np.radians(angles), np.zeros(40), PATTERNS, SPACING)
+
+
+@pytest.mark.slow  # segments the three recordings (524 frames): ~20 s of CPU
+def test_plus_stepper_recordings_give_plus_baseline_and_every_axis(tmp_path):
+    """The whole command on PLUS's three recordings: spacing and centre as PLUS's baseline (with PLUS's
+    residual statistics, mm² in its file), the tilt not given (one probe position), both translation
+    axes with SDs, and the file written with every value finite."""
+    from brachycal.calibration.phantom.stepper_file import calibrate_stepper_files, write_stepper
+
+    baseline = ET.parse(reference(STEPPER, "USTC_3NWires_StepperCalibrationResultBaseline.xml")).getroot()
+    plus_spacing = baseline.find("SpacingCalibrationResult")
+    plus_centre = baseline.find("CenterOfRotationCalibrationResult")
+    result = calibrate_stepper_files(
+        reference(STEPPER, ICAL),
+        reference(STEPPER, "USTC_3NWires_ProbeRotation.igs.mha"),
+        reference(STEPPER, "USTC_3NWires_ProbeTranslation.igs.mha"),
+        reference(STEPPER, "USTC_3NWires_TemplateTranslation.igs.mha"),
+    )
+    np.testing.assert_allclose(
+        result.spacing.value * 1e3, np.array(plus_spacing.get("Spacing").split(), float), rtol=1e-5
+    )
+    np.testing.assert_allclose(
+        result.rotation.centre_px, np.array(plus_centre.get("CenterOfRotationPx").split(), float), atol=0.01
+    )
+    for fit, plus in ((result.spacing, plus_spacing), (result.rotation.fit, plus_centre)):  # m² vs PLUS's mm²
+        assert fit.residual_mean * 1e6 == pytest.approx(float(plus.get("ErrorMean")), rel=0.01)
+        assert fit.residual_sd * 1e6 == pytest.approx(float(plus.get("ErrorStdev")), rel=0.01)
+    assert result.rotation.tilt is None and "one probe position" in result.rotation.tilt_note
+    # each SD is positive and far below its value's scale (a calibration that determines it)
+    assert np.all(result.spacing_sd > 0) and np.all(result.spacing_sd < 1e-3 * result.spacing.value)
+    assert np.all(result.rotation.centre_sd_px > 0) and np.all(result.rotation.centre_sd_px < 2.0)
+    for axis in (result.probe_axis, result.template_axis):
+        assert np.all(axis.slope_sd > 0) and np.all(axis.slope_sd < 0.005)
+        assert axis.angle_deg < 5.0  # the wires run along the probe
+    payload = json.loads(write_stepper(result, tmp_path / "stepper.json").read_text())
+    assert payload["format"] == "brachycal-stepper/1"
+    assert payload["rotation_axis"]["determined"] is False and payload["rotation_axis"]["tilt"] is None

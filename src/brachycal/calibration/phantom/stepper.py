@@ -219,8 +219,9 @@ def check_range(values: ArrayLike, minimum: float, what: str, unit: str, scale: 
     if span == 0.0:
         raise DegenerateDataError(f"{what} does not move (the recording must move this axis)")
     if span < minimum:
+        sep = "" if unit == "°" else " "
         raise DegenerateDataError(
-            f"{what} covers only {span * scale:.3g} {unit} (at least {minimum * scale:.3g} {unit} needed)"
+            f"{what} covers only {span * scale:.3g}{sep}{unit} (at least {minimum * scale:.3g}{sep}{unit} needed)"
         )
     return span
 

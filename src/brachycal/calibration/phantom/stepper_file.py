@@ -219,9 +219,10 @@ def check_recording(name: str, path: str | os.PathLike[str], encoders: FloatArra
             still = STILL_ROTATION_RAD if rotation else STILL_TRANSLATION_M
             span = float(np.ptp(values)) if len(values) else 0.0
             if span > still:
+                sep = "" if rotation else " "
                 raise DegenerateDataError(
-                    f"{field} moves {span * scale:.3g} {unit} in the {name.replace('_', ' ')} recording "
-                    f"(at most {still * scale:.3g} {unit}: only one axis may move)"
+                    f"{field} moves {span * scale:.3g}{sep}{unit} in the {name.replace('_', ' ')} recording "
+                    f"(at most {still * scale:.3g}{sep}{unit}: only one axis may move)"
                 )
         except DegenerateDataError as exc:
             raise DegenerateDataError(exc.problem, file=path, row_label="frame", column=field) from None
