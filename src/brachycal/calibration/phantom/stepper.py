@@ -1,46 +1,27 @@
-"""Stepper calibration of a TRUS probe from N-wire frames: pixel spacing and centre of rotation.
+"""Stepper calibration of a TRUS probe from N-wire frames (PLUS's iCal equations; docs/stepper.md).
 
 A transrectal probe on a brachytherapy stepper images an N-wire phantom whose wires run along the
-probe's axis (PLUS's iCal set-up). From the frames of a probe-rotation recording (the probe turned
-about its axis by the stepper, the image plane staying across the wires):
+probe. From single-axis recordings (segmented frames: wire name → ``(u, v)`` px, image frame I;
+encoder values in metres and radians):
 
-- **pixel spacing** ``(s_u, s_v)``: the in-plane distance between two parallel wires is known from
-  the phantom, so each pair of dots at pixel offsets ``(Δu, Δv)`` gives one linear equation
-  ``Δu² · s_u² + Δv² · s_v² = d²`` (as PLUS's ``vtkPlusSpacingCalibAlgo``: the two side wires of
-  each N but the last, and the last side wires of neighbouring Ns);
-- **centre of rotation** ``c`` (where the rotation axis crosses the image, pixels): a side wire is
-  still in the phantom, so its dot ``P`` (metres in the image plane, ``(u·s_u, v·s_v)``) moves on
-  a circle about ``c`` as the probe turns, and two frames ``i``, ``j`` give the perpendicular-bisector
-  equation ``(P_i − P_j) · c = (|P_i|² − |P_j|²) / 2`` (as PLUS's
-  ``vtkPlusCenterOfRotationCalibAlgo``: frame ``i`` paired with frames ``i+1, i+3, i+5, …``).
+- :func:`pixel_spacing`: each pair of parallel wires' dots gives ``Δu² s_u² + Δv² s_v² = d²``
+  (PLUS's ``vtkSpacingCalibAlgo``); SD by the jackknife over frames (:func:`jackknife_spacing_sd`);
+- :func:`centre_of_rotation`: a side wire's dot ``P = (u·s_u, v·s_v)`` turns about ``c``; frames
+  ``i``, ``j`` give ``(P_i − P_j) · c = (|P_i|² − |P_j|²) / 2`` (PLUS's pairing: ``j = i+1, i+3, …``);
+  SD by propagating the dots' noise (from their radial residuals) through the fit (:func:`centre_sd`);
+- :func:`rotation_axis`: the centre (with its SD) and, from two probe positions or more, the axis's
+  tilt (the centre's drift per metre of probe position, PLUS's ``vtkRotationAxisCalibAlgo``); a
+  rotation at one position cannot give it, and says so;
+- :func:`rotation_encoder`: the image angle of each N's side-wire line against the encoder angle;
+- :func:`translation_axis`: a side wire's dot moves as ``x = x₀ + z·t_x``, ``y = y₀ + z·t_y`` with the
+  encoder's ``z`` (PLUS's ``vtkTranslAxisCalibAlgo``; its orientation is ``(−t_x, t_y, 1)``); SD from
+  the covariance. The slope is relative to the wires: the probe's is (wire − probe axis), the
+  template's (template axis − wire); their sum (:func:`relative_axis`) does not depend on the wires.
 
-and, from each axis's recording with its encoder values (as PLUS's stepper calibration):
-
-- **translation axes** (:func:`translation_axis`): a still (side) wire's dot at ``(x, y) = (u·s_u, v·s_v)``
-  moves linearly with the encoder's position ``z``, ``x = x₀ + z·t_x``, ``y = y₀ + z·t_y`` (PLUS's
-  ``vtkTranslAxisCalibAlgo``: one ``(x₀, y₀)`` per side wire, one ``(t_x, t_y)``); PLUS's axis orientation
-  is ``(−t_x, t_y, 1)``. The dots follow the axis *relative to the wires*: the probe's slope is
-  (wire direction − probe axis), the template's (template axis − wire direction), so their sum,
-  the template axis relative to the probe axis, does not depend on the wires;
-- **rotation axis** (:func:`rotation_axis`): the centre of rotation at each probe position (frames
-  clustered by ``ProbePosition``); with two positions or more, its drift with the position is the
-  axis's tilt (PLUS's ``vtkRotationAxisCalibAlgo``); a rotation at one position cannot give it;
-- **rotation encoder** (:func:`rotation_encoder`): the image angle of the line through each N's side
-  wires against the encoder's angle, ``angle = k·encoder + offset`` (PLUS's
-  ``vtkRotationEncoderCalibAlgo``; PLUS's scale is ``−k``).
-
-Each value comes with a standard deviation: the translation and encoder fits' from their
-covariance ``σ² (AᵀA)⁻¹`` (each dot in one equation); the spacing's by the jackknife over frames
-(a frame's dots enter several equations); the centre's by propagating the dots' noise (their SD
-from the radial residuals of the circles about the centre) through the whole fit, repeated with
-fresh noise draws (:data:`NOISE_DRAWS`).
-
-The spacing and the centre are solved by least squares with PLUS's rejection (equations whose residual is 3 SD or more
-from the mean are dropped and the fit repeated, :func:`~brachycal.calibration.phantom.nwire.lsq_reject`).
-The residual statistics are PLUS's: mean and population SD of ``A x − b`` over the kept equations,
-in the equations' units (m² for the spacing, m² for the centre). Frames are the wire points of
-segmented frames (wire name → ``(u, v)`` pixel), image frame I of the conventions (origin at pixel
-(0, 0), u along columns, v along rows).
+Least squares use PLUS's rejection (3 SD from the mean, :func:`~brachycal.calibration.phantom.nwire.lsq_reject`);
+residual statistics are PLUS's (mean and population SD of ``A x − b``, m² for spacing and centre).
+A recording whose axis covers less than :data:`MIN_ROTATION_RAD` / :data:`MIN_TRANSLATION_M` is
+refused (:func:`check_range`).
 """
 
 from __future__ import annotations
@@ -203,7 +184,8 @@ def _covariance(design: FloatArray, residual: FloatArray, unknowns: int) -> tupl
     if dof <= 0:
         return np.full((unknowns, unknowns), np.nan), float("nan")
     sigma2 = float(residual @ residual) / dof
-    return sigma2 * np.linalg.inv(design.T @ design), float(np.sqrt(sigma2))
+    cov = np.asarray(sigma2 * np.linalg.inv(design.T @ design), dtype=np.float64)
+    return cov, float(np.sqrt(sigma2))
 
 
 def check_range(values: ArrayLike, minimum: float, what: str, unit: str, scale: float) -> float:
@@ -484,7 +466,8 @@ def rotation_encoder(
     """
     enc = np.asarray(angles_rad, dtype=float).reshape(-1)
     s = np.asarray(spacing_m_per_px, dtype=float).reshape(2)
-    rows, target = [], []
+    rows: list[FloatArray] = []
+    target: list[FloatArray] = []
     for pattern in patterns:
         first = np.array([_uv(points, pattern[0]) * s for points in frames])
         last = np.array([_uv(points, pattern[2]) * s for points in frames])
