@@ -1,7 +1,7 @@
 """Hostile input to ``brachycal stepper calibrate``: recordings without the stepper's encoder fields,
 axes that do not move, a rotation under 10°, a translation under 5 mm, an axis that moves in
-another's recording; each refused in one line naming the file and the encoder field, exit code 2,
-nothing written."""
+another's recording (each refused in one line naming the file and the encoder field), frames
+where no N is found, a phantom of one N; exit code 2, nothing written."""
 
 from __future__ import annotations
 
@@ -47,12 +47,12 @@ GOOD = {
 }
 
 
-def recordings(**changed: list[dict[str, str]]):
+def recordings(config: str = CONFIG, **changed: list[dict[str, str]]):
     """Write ``config.xml`` and the three recordings (blank 8-bit frames): the good ones but ``changed``
     (keyword: the file's stem, ``rot``, ``pt`` or ``tt``)."""
 
     def setup(tmp: Path) -> None:
-        (tmp / "config.xml").write_text(CONFIG)
+        (tmp / "config.xml").write_text(config)
         for name, fields in GOOD.items():
             fields = changed.get(name.removesuffix(".mha"), fields)
             write_image_sequence(tmp / name, np.zeros((FRAMES, 48, 64), np.uint8), frame_fields=fields)
@@ -115,6 +115,18 @@ CASES = [
         [*STEPPER, *OUT],
         ("pt.mha", "TemplatePosition", "not a finite number"),
         recordings(pt=[{**frame, "TemplatePosition": "nan"} for frame in GOOD["pt.mha"]]),
+    ),
+    Case(
+        "no-frame-segmented",  # blank frames: no N found
+        [*STEPPER, *OUT, "--quiet"],
+        ("rot.mha", "only 0 of 12 frames segmented", "at least 30"),
+        recordings(),
+    ),
+    Case(
+        "phantom-with-one-n",
+        [*STEPPER, *OUT],
+        ("config.xml", "PhantomDefinition", "two N patterns"),
+        recordings(config=CONFIG.replace(WIRES[WIRES.index("<Pattern", 10) :], "")),
     ),
     Case("out-is-an-input", [*STEPPER, "--out", "{tmp}/rot.mha", "--force"], ("rot.mha",), recordings()),
 ]

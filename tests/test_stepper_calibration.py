@@ -267,37 +267,41 @@ def test_short_or_still_axes_are_refused():
 
 
 @pytest.mark.slow  # segments the three recordings (524 frames): ~20 s of CPU
-def test_plus_stepper_recordings_give_plus_baseline_and_every_axis(tmp_path):
-    """The whole command on PLUS's three recordings: spacing and centre as PLUS's baseline (with PLUS's
-    residual statistics, mm² in its file), the tilt not given (one probe position), both translation
-    axes with SDs, and the file written with every value finite."""
-    from brachycal.calibration.phantom.stepper_file import calibrate_stepper_files, write_stepper
+def test_plus_stepper_recordings_give_plus_baseline_and_every_axis(tmp_path, capsys):
+    """``brachycal stepper calibrate`` on PLUS's three recordings: spacing and centre as PLUS's baseline
+    (with PLUS's residual statistics, mm² in its file), the tilt not given (one probe position), both
+    translation axes with SDs, every value finite in the file."""
+    from brachycal.cli.main import main
 
     baseline = ET.parse(reference(STEPPER, "USTC_3NWires_StepperCalibrationResultBaseline.xml")).getroot()
     plus_spacing = baseline.find("SpacingCalibrationResult")
     plus_centre = baseline.find("CenterOfRotationCalibrationResult")
-    result = calibrate_stepper_files(
-        reference(STEPPER, ICAL),
-        reference(STEPPER, "USTC_3NWires_ProbeRotation.igs.mha"),
-        reference(STEPPER, "USTC_3NWires_ProbeTranslation.igs.mha"),
-        reference(STEPPER, "USTC_3NWires_TemplateTranslation.igs.mha"),
+    recordings = [
+        reference(STEPPER, f"USTC_3NWires_{name}.igs.mha")
+        for name in ("ProbeRotation", "ProbeTranslation", "TemplateTranslation")
+    ]
+    out = tmp_path / "stepper.json"
+    argv = ["stepper", "calibrate", *map(str, recordings), "--config", str(reference(STEPPER, ICAL)), "--out", str(out)]
+    assert main([*argv, "--quiet"]) == 0
+    assert "centre of rotation" in capsys.readouterr().out
+    result = json.loads(out.read_text())
+    assert result["format"] == "brachycal-stepper/1"
+    spacing, centre = result["pixel_spacing"], result["centre_of_rotation"]
+    np.testing.assert_allclose(
+        spacing["value_mm_per_px"], np.array(plus_spacing.get("Spacing").split(), float), rtol=1e-5
     )
     np.testing.assert_allclose(
-        result.spacing.value * 1e3, np.array(plus_spacing.get("Spacing").split(), float), rtol=1e-5
+        centre["value_px"], np.array(plus_centre.get("CenterOfRotationPx").split(), float), atol=0.01
     )
-    np.testing.assert_allclose(
-        result.rotation.centre_px, np.array(plus_centre.get("CenterOfRotationPx").split(), float), atol=0.01
-    )
-    for fit, plus in ((result.spacing, plus_spacing), (result.rotation.fit, plus_centre)):  # m² vs PLUS's mm²
-        assert fit.residual_mean * 1e6 == pytest.approx(float(plus.get("ErrorMean")), rel=0.01)
-        assert fit.residual_sd * 1e6 == pytest.approx(float(plus.get("ErrorStdev")), rel=0.01)
-    assert result.rotation.tilt is None and "one probe position" in result.rotation.tilt_note
-    # each SD is positive and far below its value's scale (a calibration that determines it)
-    assert np.all(result.spacing_sd > 0) and np.all(result.spacing_sd < 1e-3 * result.spacing.value)
-    assert np.all(result.rotation.centre_sd_px > 0) and np.all(result.rotation.centre_sd_px < 2.0)
-    for axis in (result.probe_axis, result.template_axis):
-        assert np.all(axis.slope_sd > 0) and np.all(axis.slope_sd < 0.005)
-        assert axis.angle_deg < 5.0  # the wires run along the probe
-    payload = json.loads(write_stepper(result, tmp_path / "stepper.json").read_text())
-    assert payload["format"] == "brachycal-stepper/1"
-    assert payload["rotation_axis"]["determined"] is False and payload["rotation_axis"]["tilt"] is None
+    for fit, plus in ((spacing, plus_spacing), (centre, plus_centre)):  # m² vs PLUS's mm²
+        assert fit["residual_mean_m2"] * 1e6 == pytest.approx(float(plus.get("ErrorMean")), rel=0.01)
+        assert fit["residual_sd_m2"] * 1e6 == pytest.approx(float(plus.get("ErrorStdev")), rel=0.01)
+    axis = result["rotation_axis"]
+    assert axis["determined"] is False and axis["tilt"] is None and "one probe position" in axis["note"]
+    # each SD is positive and far below its value's scale (recordings that determine it)
+    assert 0 < min(spacing["sd_m_per_px"]) and max(spacing["sd_m_per_px"]) < 1e-3 * min(spacing["value_m_per_px"])
+    assert 0 < min(centre["sd_px"]) and max(centre["sd_px"]) < 2.0
+    for name in ("probe_translation_axis", "template_translation_axis"):
+        assert 0 < min(result[name]["slope_sd"]) and max(result[name]["slope_sd"]) < 0.005
+        assert result[name]["angle_to_wires_deg"] < 5.0  # the wires run along the probe
+        assert result[name]["frames"] == result["recordings"][name.removesuffix("_axis")]["segmented"]

@@ -12,14 +12,16 @@ centre of rotation, rotation axis and encoder, both translation axes, each with 
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
-from contextlib import contextmanager
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager, contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from brachycal.calibration.phantom.stepper import (
+    MIN_ROTATION_FRAMES,
     MIN_ROTATION_RAD,
     MIN_TRANSLATION_M,
     STILL_ROTATION_RAD,
@@ -36,7 +38,7 @@ from brachycal.calibration.phantom.stepper import (
     rotation_encoder,
     translation_axis,
 )
-from brachycal.data.formats.metaimage import read_image_sequence
+from brachycal.data.formats.metaimage import read_image_sequence, read_sequence_header
 from brachycal.data.formats.plus_files import (
     STEPPER_ENCODER_FIELDS,
     PlusConfig,
@@ -50,6 +52,11 @@ from brachycal.io import sha256_file, write_json
 from brachycal.se3 import FloatArray
 
 FORMAT = "brachycal-stepper/1"
+#: Fewest segmented frames a translation recording needs (a line through the encoder's positions
+#: with room for its residuals).
+MIN_TRANSLATION_FRAMES = 3
+#: A progress report: ``progress(name, frames)`` is a context whose value has ``update(n)``.
+Progress = Callable[[str, int], AbstractContextManager[Any]]
 #: The three recordings, in the command's order, with the encoder (index into
 #: :data:`~brachycal.data.formats.plus_files.STEPPER_ENCODER_FIELDS`) each must move.
 RECORDINGS = {"rotation": 1, "probe_translation": 0, "template_translation": 2}
@@ -229,35 +236,47 @@ def check_recording(name: str, path: str | os.PathLike[str], encoders: FloatArra
 
 
 def read_stepper_recording(
-    name: str, path: str | os.PathLike[str], config: PlusConfig, config_path: str | os.PathLike[str]
+    path: str | os.PathLike[str],
+    encoders: FloatArray,
+    config: PlusConfig,
+    config_path: str | os.PathLike[str],
+    *,
+    minimum: int,
+    progress: Progress | None = None,
 ) -> StepperRecording:
-    """Read, check (:func:`check_recording`) and segment a stepper recording; the segmented frames
-    with their encoder values.
+    """Segment a stepper recording (its frames' ``encoders`` read and checked already); the
+    segmented frames with their encoder values.
 
     Raises:
-        InputError: a frame without the stepper's encoder fields (naming the file, frame, field),
-            or frames that are not 8-bit.
-        DegenerateDataError: an axis that does not move as the recording must.
+        InputError: frames that are not 8-bit.
+        DegenerateDataError: fewer than ``minimum`` frames segmented (naming the file).
     """
     sequence = read_image_sequence(path)
-    encoders = stepper_encoder_values(sequence.frame_fields, path)
-    check_recording(name, path, encoders)
-    result = segment_sequence(sequence, config, read_segmentation_parameters(config_path), source=path, poses=None)
+    params = read_segmentation_parameters(config_path)
+    with progress(Path(path).name, len(sequence)) if progress is not None else nullcontext() as bar:
+        result = segment_sequence(
+            sequence, config, params, source=path, poses=None, progress=None if bar is None else bar.update
+        )
     kept = [k for k, frame in enumerate(result.frames) if frame.ok]
+    if len(kept) < minimum:
+        raise DegenerateDataError(
+            f"only {len(kept)} of {len(sequence)} frames segmented (the phantom's Ns found); at least {minimum} needed",
+            file=path,
+        )
     return StepperRecording(
         str(path), [result.frames[k].points_px for k in kept], encoders[kept].reshape(-1, 3), len(sequence)
     )
 
 
 @contextmanager
-def _naming(recording: StepperRecording, field: str) -> Iterator[None]:
-    """A DegenerateDataError raised inside, re-raised naming the recording's file and encoder field."""
+def _naming(recording: StepperRecording) -> Iterator[None]:
+    """A DegenerateDataError raised inside, re-raised naming the recording's file."""
     try:
         yield
     except DegenerateDataError as exc:
         if exc.file is not None:
             raise
-        raise DegenerateDataError(exc.problem, file=recording.path, row_label="frame", column=field) from None
+        raise DegenerateDataError(exc.problem, file=recording.path) from None
 
 
 def calibrate_stepper_files(
@@ -265,29 +284,55 @@ def calibrate_stepper_files(
     rotation: str | os.PathLike[str],
     probe_translation: str | os.PathLike[str],
     template_translation: str | os.PathLike[str],
+    *,
+    progress: Progress | None = None,
 ) -> StepperFileResult:
     """Calibrate a stepper from PLUS's three single-axis recordings (:class:`StepperFileResult`).
 
+    Every recording's encoder fields are read and checked (:func:`check_recording`) before any
+    frame is segmented. ``progress(name, frames)``: a context giving an object whose ``update(1)``
+    is called after each frame segmented (a progress bar), or None.
+
     Raises:
-        InputError: a file that does not read, or a recording without encoder fields.
-        DegenerateDataError: a recording that does not determine what it is for (naming its file
-            and encoder field).
+        InputError: a file that does not read, or a recording without encoder fields (naming the
+            file, frame and field).
+        DegenerateDataError: a phantom with fewer than two Ns, a recording that does not move its
+            axis as it must (naming the file and the encoder field), or too few frames segmented.
     """
     phantom = read_plus_config(config, require_registration=False)
+    if len(phantom.patterns) < 2:
+        raise DegenerateDataError(
+            f"PhantomDefinition: the pixel spacing needs at least two N patterns, got {len(phantom.patterns)}",
+            file=config,
+        )
     paths = {"rotation": rotation, "probe_translation": probe_translation, "template_translation": template_translation}
-    recordings = {name: read_stepper_recording(name, path, phantom, config) for name, path in paths.items()}
+    encoders = {}
+    for name, path in paths.items():
+        encoders[name] = stepper_encoder_values(read_sequence_header(path)[1], path)
+        check_recording(name, path, encoders[name])
+    recordings = {
+        name: read_stepper_recording(
+            path,
+            encoders[name],
+            phantom,
+            config,
+            minimum=MIN_ROTATION_FRAMES if name == "rotation" else MIN_TRANSLATION_FRAMES,
+            progress=progress,
+        )
+        for name, path in paths.items()
+    }
     rot = recordings["rotation"]
-    with _naming(rot, "ProbeRotation"):
+    with _naming(rot):
         spacing = pixel_spacing(rot.frames, phantom.patterns)
         spacing_sd = jackknife_spacing_sd(rot.frames, phantom.patterns)
         axis = rotation_axis(rot.frames, rot.encoders[:, 1], rot.encoders[:, 0], phantom.patterns, spacing.value)
         encoder = rotation_encoder(rot.frames, rot.encoders[:, 1], phantom.patterns, spacing.value)
     spacing_all = pixel_spacing([points for r in recordings.values() for points in r.frames], phantom.patterns)
     probe = recordings["probe_translation"]
-    with _naming(probe, "ProbePosition"):
+    with _naming(probe):
         probe_axis = translation_axis(probe.frames, probe.encoders[:, 0], phantom.patterns, spacing.value)
     template = recordings["template_translation"]
-    with _naming(template, "TemplatePosition"):
+    with _naming(template):
         template_axis = translation_axis(template.frames, template.encoders[:, 2], phantom.patterns, spacing.value)
     return StepperFileResult(
         spacing, spacing_sd, spacing_all, axis, encoder, probe_axis, template_axis, recordings, str(config)

@@ -61,12 +61,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--out", required=True, type=output_file, metavar="JSON", help="result file to write")
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
     # lazy: start-up (the command's run only)
     from brachycal.calibration.phantom.stepper_file import calibrate_stepper_files, summary_lines, write_stepper
+    from brachycal.cli.common import progress_bar  # lazy: start-up (the command's run only)
     from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
 
     with OutputSet(
@@ -74,7 +76,13 @@ def run(args: argparse.Namespace) -> int:
         inputs=command_inputs(args, "rotation", "probe_translation", "template_translation", "config"),
     ) as outputs:
         staged = outputs.claim(args.out, label="--out")
-        result = calibrate_stepper_files(args.config, args.rotation, args.probe_translation, args.template_translation)
+        result = calibrate_stepper_files(
+            args.config,
+            args.rotation,
+            args.probe_translation,
+            args.template_translation,
+            progress=lambda name, frames: progress_bar(frames, name, args.quiet, unit="frame"),
+        )
         write_stepper(result, staged)
     for line in summary_lines(result):
         print(line)
