@@ -353,7 +353,7 @@ def summary_lines(result: StepperFileResult) -> list[str]:
     lines.append(f"pixel spacing: {s[0]:.6f} ± {sd[0]:.6f} x {s[1]:.6f} ± {sd[1]:.6f} mm/px (SD)")
     lines.append(f"centre of rotation: {c[0]:.3f} ± {csd[0]:.3f}, {c[1]:.3f} ± {csd[1]:.3f} px (SD)")
     if rot.tilt is None:
-        lines.append(f"rotation axis tilt: not determined ({rot.tilt_note})")
+        lines.append(f"rotation axis tilt: not determined: {rot.tilt_note}")
     else:
         t, tsd = rot.tilt, rot.tilt_sd if rot.tilt_sd is not None else np.zeros(2)
         lines.append(f"rotation axis tilt: {t[0]:.5f} ± {tsd[0]:.5f}, {t[1]:.5f} ± {tsd[1]:.5f} (PLUS: -x, y, 1)")

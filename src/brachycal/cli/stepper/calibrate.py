@@ -18,12 +18,16 @@ from the recording. As PLUS's stepper calibration, from them:
 
   - the pixel spacing (mm/px along u and v), from the known distances between wires;
   - the centre of rotation (where the probe's rotation axis crosses the image, px);
-  - the probe and the template translation axes (unit directions in the stepper frame), from each
-    still wire's dot against the encoder's position.
+  - the rotation axis's tilt, only when the rotation was recorded at two probe positions or more
+    (a rotation at one depth cannot give it: the result says so), and the rotation encoder's scale;
+  - the probe and the template translation axes (PLUS's form x, y, 1, relative to the phantom's
+    wires; their sum, the template axis relative to the probe axis, does not depend on the wires),
+    from each still wire's dot against the encoder's position.
 
-Each value comes with its standard deviation (from the fit's residuals). A recording whose axis
-does not move, whose rotation covers less than 10 degrees or whose translation is too short, or
-that lacks the encoder fields, is refused. Writes JSON (format brachycal-stepper/1).
+Each value comes with its standard deviation. A recording without the encoder fields, whose axis
+does not move, whose rotation covers less than 10 degrees, whose translation covers less than
+5 mm, or in which another axis moves, is refused, naming the file and the field. Writes JSON
+(format brachycal-stepper/1), only if the whole calibration succeeds.
 
 example:
   brachycal stepper calibrate $BRACHYCAL_REFERENCE/plus_trus_stepper/USTC_3NWires_ProbeRotation.igs.mha \\
