@@ -305,3 +305,43 @@ def test_plus_stepper_recordings_give_plus_baseline_and_every_axis(tmp_path, cap
         assert 0 < min(result[name]["slope_sd"]) and max(result[name]["slope_sd"]) < 0.005
         assert result[name]["angle_to_wires_deg"] < 5.0  # the wires run along the probe
         assert result[name]["frames"] == result["recordings"][name.removesuffix("_axis")]["segmented"]
+
+
+def test_angle_and_encoder_sds_match_the_spread_over_noise_draws():
+    """The translation axis's angle to the wires (first-order SD from the slopes') and the rotation
+    encoder's scale (SD from the fit's covariance) spread over fresh noise draws as stated: ±20 %."""
+    rng = np.random.default_rng(3)
+    z = np.linspace(-0.030, 0.0, 25)
+    fits = [translation_axis(translation_frames(z, 0 * z, rng, 0.5), z, PATTERNS, SPACING) for _ in range(300)]
+    spread = np.std([f.angle_deg for f in fits], ddof=1)
+    assert abs(np.mean([f.angle_sd_deg for f in fits]) / spread - 1.0) < 0.2
+    encoder = np.linspace(-30.0, 30.0, 40)
+    clean = rotation_frames(0.9 * encoder)
+    scales, stated = [], []
+    for _ in range(300):
+        frames = [{name: uv + rng.normal(0.0, 0.8, 2) for name, uv in points.items()} for points in clean]
+        fit = rotation_encoder(frames, np.radians(encoder), PATTERNS, SPACING)
+        scales.append(fit.scale)
+        stated.append(fit.scale_sd)
+    assert abs(np.mean(stated) / np.std(scales, ddof=1) - 1.0) < 0.2
+
+
+def test_tilt_sd_matches_the_spread_over_noise_draws():
+    """From two probe positions (no residual degree of freedom) the tilt's SD comes from each
+    position's centre SD; it matches the tilt's spread over fresh 0.8 px draws: ±35 % (30 draws)."""
+    rng = np.random.default_rng(13)
+    angles = np.linspace(-20.0, 25.0, 32)
+    clean, positions = [], []
+    for z in (-0.05, -0.02):
+        clean += rotation_frames(angles)
+        positions += [z] * len(angles)
+    encoder = np.radians(np.concatenate([angles, angles]))
+    tilts, stated = [], []
+    for _ in range(30):
+        frames = [{name: uv + rng.normal(0.0, 0.8, 2) for name, uv in points.items()} for points in clean]
+        axis = rotation_axis(frames, encoder, positions, PATTERNS, SPACING, draws=15)
+        assert axis.tilt is not None and axis.tilt_sd is not None
+        tilts.append(axis.tilt)
+        stated.append(axis.tilt_sd)
+    spread = np.std(tilts, axis=0, ddof=1)
+    np.testing.assert_array_less(np.abs(np.mean(stated, axis=0) / spread - 1.0), 0.35)

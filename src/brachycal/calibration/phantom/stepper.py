@@ -240,6 +240,14 @@ class TranslationAxisFit:
         """The angle between the axis and the wires, degrees."""
         return float(np.degrees(np.arctan(np.hypot(*self.slope))))
 
+    @property
+    def angle_sd_deg(self) -> float:
+        """Its SD, degrees (first order: ``d atan|t| = (t · dt) / (|t| (1 + |t|²))``, the slopes independent)."""
+        norm = float(np.hypot(*self.slope))
+        if norm == 0.0:
+            return float(np.degrees(np.hypot(*self.slope_sd)))
+        return float(np.degrees(np.hypot(*(self.slope * self.slope_sd)) / (norm * (1 + norm**2))))
+
 
 def translation_axis(
     frames: Sequence[Points],
@@ -362,7 +370,7 @@ class RotationAxisFit:
         positions_m: the probe positions (cluster means) the rotation was recorded at, metres.
         tilt: ``(r_x, r_y)``: the centre's drift (image metres) per metre of probe position, PLUS's
             ``(−r_x, r_y, 1)`` orientation; None when the recording has fewer than two positions.
-        tilt_sd: its SD (None with it).
+        tilt_sd: its SD (None with it), from each position's centre SD.
         tilt_note: why the tilt is not given (empty when it is).
         range_rad: the encoder's rotation range, radians.
     """
@@ -421,16 +429,23 @@ def rotation_axis(
             "give the axis's tilt (record it at two probe positions or more)"
         )
         return RotationAxisFit(fit.value, sd, dot_sd, fit, means, span, tilt_note=note)
-    per = np.array([centre_of_rotation([frames[k] for k in g], patterns, s).value for g in groups])
-    # PLUS's line: centre (metres) = c₀ + z·r, per image axis
+    per, per_sd = [], []
+    for g in groups:
+        subset = [frames[k] for k in g]
+        centre = centre_of_rotation(subset, patterns, s).value
+        per.append(centre)
+        per_sd.append(centre_sd(subset, patterns, s, centre, draws=draws)[0])
+    centres, centres_sd = np.array(per), np.array(per_sd)
+    # PLUS's line, centre (metres) = c₀ + z·r per image axis, weighted by each centre's SD (known
+    # from its own noise: two positions suffice, where residuals would leave no degree of freedom)
     tilt, tilt_sd = np.zeros(2), np.zeros(2)
+    A = np.column_stack([means, np.ones(len(means))])
     for axis in range(2):
-        A = np.column_stack([means, np.ones(len(means))])
-        y = per[:, axis] * s[axis]
-        coef = np.linalg.lstsq(A, y, rcond=None)[0]
-        cov, _ = _covariance(A, A @ coef - y, 2)
+        w = 1.0 / (centres_sd[:, axis] * s[axis])
+        coef = np.linalg.lstsq(A * w[:, None], centres[:, axis] * s[axis] * w, rcond=None)[0]
+        cov = np.linalg.inv((A * w[:, None]).T @ (A * w[:, None]))
         tilt[axis], tilt_sd[axis] = coef[0], np.sqrt(cov[0, 0])
-    return RotationAxisFit(fit.value, sd, dot_sd, fit, means, span, tilt, tilt_sd, "", per)
+    return RotationAxisFit(fit.value, sd, dot_sd, fit, means, span, tilt, tilt_sd, "", centres)
 
 
 @dataclass(frozen=True)

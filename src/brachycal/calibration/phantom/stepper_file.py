@@ -180,20 +180,13 @@ class StepperFileResult:
 
 def _axis_json(axis: TranslationAxisFit) -> dict:
     direction = axis.plus_orientation / np.linalg.norm(axis.plus_orientation)
-    slope_norm = float(np.hypot(*axis.slope))
-    # d atan(|t|) = (t · dt) / (|t| (1 + |t|²)), independent components
-    angle_sd = (
-        float(np.degrees(np.hypot(*(axis.slope * axis.slope_sd)) / (slope_norm * (1 + slope_norm**2))))
-        if slope_norm > 0
-        else float(np.degrees(np.hypot(*axis.slope_sd)))
-    )
     return {
         "slope": axis.slope.tolist(),
         "slope_sd": axis.slope_sd.tolist(),
         "plus_orientation": axis.plus_orientation.tolist(),
         "direction": direction.tolist(),
         "angle_to_wires_deg": axis.angle_deg,
-        "angle_to_wires_sd_deg": angle_sd,
+        "angle_to_wires_sd_deg": axis.angle_sd_deg,
         "range_m": axis.range_m,
         "frames": axis.frames,
         "residual_sd_m": axis.residual_sd_m.tolist(),
