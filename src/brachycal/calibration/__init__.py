@@ -42,7 +42,15 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
         read_pivot,
         write_pivot,
     )
-    from brachycal.calibration.phantom.stepper import StepperFit, centre_of_rotation, pixel_spacing
+    from brachycal.calibration.phantom.stepper import (
+        StepperFit,
+        centre_of_rotation,
+        pixel_spacing,
+        rotation_axis,
+        rotation_encoder,
+        translation_axis,
+    )
+    from brachycal.calibration.phantom.stepper_file import StepperFileResult, calibrate_stepper_files, write_stepper
     from brachycal.calibration.phantom.wedge import (
         WedgePhantom,
         calibrate_wedge,
@@ -145,6 +153,7 @@ __all__ = [
     "RobotRecord",
     "SequentialResult",
     "SessionResult",
+    "StepperFileResult",
     "StepperFit",
     "TemporalResult",
     "ToolCalibration",
@@ -160,6 +169,7 @@ __all__ = [
     "calibrate_nwire",
     "calibrate_nwire_files",
     "calibrate_pivot_files",
+    "calibrate_stepper_files",
     "calibrate_wedge",
     "calibrate_wedge_files",
     "calibrate_wire",
@@ -197,8 +207,11 @@ __all__ = [
     "read_result",
     "read_wedge_phantom",
     "read_wire_phantom",
+    "rotation_axis",
+    "rotation_encoder",
     "select_model",
     "touch_scatter",
+    "translation_axis",
     "validate_result_document",
     "verify_folder",
     "wire_point_pairs",
@@ -206,4 +219,5 @@ __all__ = [
     "write_phantom_observations",
     "write_pivot",
     "write_result",
+    "write_stepper",
 ]
