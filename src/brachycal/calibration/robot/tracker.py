@@ -543,7 +543,7 @@ def leave_one_out(
         p, R = fit.predict(held)
         e_p[i] = p[0] - held.p[0]
         if e_o is not None and held.R is not None:
-            e_o[i] = _log((R @ np.swapaxes(held.R, 1, 2)))[0]
+            e_o[i] = _log(R @ np.swapaxes(held.R, 1, 2))[0]
     return e_p, e_o
 
 
