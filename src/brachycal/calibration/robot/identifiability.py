@@ -75,12 +75,19 @@ class Identifiability:
 
 
 def identifiability(
-    J: FloatArray, p: int, scale: FloatArray, posterior: FloatArray, joint_names: tuple[str, ...]
+    J: FloatArray,
+    p: int,
+    scale: FloatArray,
+    posterior: FloatArray,
+    joint_names: tuple[str, ...],
+    *,
+    nuisance: str = "the tool, image and reference-tip parameters",
 ) -> Identifiability:
     """The base-set analysis of the normalised data Jacobian ``J = [J_θ, J_c · scale]`` (``p`` chain
     columns): the robot columns projected off the chain parameters' span (which are free), their
     singular values in prior units (structural rank, identified count), and per parameter its
-    posterior/prior SD ratio with the reason when the data barely see it."""
+    posterior/prior SD ratio with the reason when the data barely see it. ``nuisance`` names the
+    ``p`` other parameters in the reasons (absorbed by them)."""
     J_t, J_c = J[:, :p], J[:, p:]
     Q, _ = np.linalg.qr(J_t)
     projected = J_c - Q @ (Q.T @ J_c)
@@ -99,7 +106,7 @@ def identifiability(
         if column_norm[k] <= 1e-12 * max(column_norm.max(), 1e-300):
             reasons[name] = "no recorded datum moves it"
         elif outside[k] < ABSORBED_FRACTION * column_norm[k]:
-            reasons[name] = "absorbed by the tool, image and reference-tip parameters"
+            reasons[name] = f"absorbed by {nuisance}"
         elif k not in independent:
             reasons[name] = "its effect equals a combination of other joints' corrections (lumped with them)"
         else:

@@ -147,6 +147,34 @@ def read_table(path: Path, required: list[str]) -> tuple[list[str], list[int], l
     return header, rows, records
 
 
+def read_bare_table(path: Path, columns: list[str]) -> tuple[list[int], FloatArray]:
+    """Row numbers and ``(N, len(columns))`` floats of a CSV table without a header row (row 1 is
+    data), every row holding exactly ``len(columns)`` numbers; ``columns`` names them in messages.
+    Blank lines are skipped; a field that is not a finite number is refused naming its row and column."""
+    with _open(path) as handle:
+        lines = _Lines(handle)
+        reader = csv.reader(lines)
+        rows: list[int] = []
+        records: list[list[str]] = []
+        try:
+            for fields in reader:
+                if not fields or (len(fields) == 1 and not fields[0].strip()):
+                    continue
+                if len(fields) != len(columns):
+                    if _unterminated(lines.last):
+                        raise InputError(TRUNCATED, file=path, row=reader.line_num)
+                    raise InputError(
+                        f"has {len(fields)} fields, expected {len(columns)}", file=path, row=reader.line_num
+                    )
+                rows.append(reader.line_num)
+                records.append([f.strip() for f in fields])
+        except (csv.Error, UnicodeDecodeError) as exc:
+            raise InputError(f"not a readable CSV file ({exc})", file=path) from None
+        if _unterminated(lines.last):
+            raise InputError(TRUNCATED, file=path, row=reader.line_num)
+    return rows, to_float(path, columns, rows, records, columns)
+
+
 def to_float(
     path: Path, header: list[str], rows: list[int], records: list[list[str]], columns: list[str]
 ) -> np.ndarray:

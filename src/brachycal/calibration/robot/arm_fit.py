@@ -1,0 +1,466 @@
+"""Arm identification core: the joint-origin corrections of any serial arm, fitted to any protocol.
+
+A protocol (touches of fixed points, a tracker's 3-D or 6-D measurements, the dual-arm session)
+supplies a :class:`ResidualModel`: its residuals (metres) on a robot, their Jacobian with respect
+to every joint-origin correction (joint-major ``(v, ω)``, :func:`joint_twists`' order) and to its
+own unknowns ``y`` (tool points, fixed points, a tracker's pose), and a noise group per row. This
+module does the rest, the same for every protocol:
+
+* :class:`ParameterSelection`: which corrections are free. :meth:`ParameterSelection.chain` frees
+  the joints between the base and the flange; :meth:`ParameterSelection.base_set` keeps only the
+  combinations the data can see at all once ``y`` is free (pivoted QR of the prior-scaled,
+  ``y``-projected Jacobian: the last joint's components a tool point absorbs, the first joint's
+  that fixed points absorb, lumped pairs of parallel axes), FIGAROH's base parameters.
+* :func:`flange_points`: a flange-fixed point's world position and its Jacobian (analytic, from
+  :func:`joint_twists`).
+* :func:`fit_arm`: the maximum a posteriori fit ``min ‖r/σ‖² + ‖c/s‖²`` (``s`` the stated accuracy,
+  :func:`prior_sd`) by damped Gauss–Newton, the noise levels ``σ`` of the groups not held fixed
+  re-estimated from the residuals between rounds (degrees of freedom with the regularised
+  problem's leverages), its posterior covariance, and the identifiability report
+  (:func:`identifiability`) of all ``6 nq`` corrections.
+
+Corrections are those of :func:`corrected_robot`: ``T_parent_joint ← T_parent_joint @ T(exp ω, v)``.
+
+Design: ``docs/design/robot_identification.md``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+import scipy.linalg
+
+from brachycal.calibration.chain.robot_terms import joint_twists, motion_rows, point_motion
+from brachycal.calibration.robot.identifiability import COMPONENTS, Identifiability, identifiability
+from brachycal.calibration.robot.identification import corrected_robot, prior_sd
+from brachycal.calibration.robot_accuracy import RobotAccuracy
+from brachycal.errors import DegenerateDataError, InputError
+from brachycal.model.robot import Robot
+from brachycal.se3 import FloatArray
+
+#: Base set: a correction is kept when its column, prior-scaled and projected off the protocol's
+#: unknowns, adds at least this fraction of the largest pivot (pivoted QR). Exactly absorbed
+#: columns fall to rounding (~1e-15 relative); weakly seen ones stay above 1e-6 on real protocols.
+BASE_RCOND = 1e-8
+#: Gauss–Newton: stop when the largest step is below this in prior units / own scale.
+STEP_TOLERANCE = 1e-7
+#: Gauss–Newton: stop when a step lowers the cost by less than this fraction (rounding level:
+#: the cost's own evaluation is good to ~1e-14 relative).
+COST_TOLERANCE = 1e-12
+#: Gauss–Newton iterations per noise round at most.
+ITERATIONS = 30
+#: Noise rounds: each re-estimates the free groups' levels from the previous round's residuals.
+ROUNDS = 4
+
+
+@dataclass(frozen=True)
+class ParameterSelection:
+    """Which joint-origin corrections are free.
+
+    Attributes:
+        joint_names: the robot's joints (configuration order).
+        free: ``(nq, 6)`` bool, per joint its free components ``(vx, vy, vz, wx, wy, wz)``.
+    """
+
+    joint_names: tuple[str, ...]
+    free: np.ndarray
+
+    @classmethod
+    def chain(cls, robot: Robot, flange: str) -> ParameterSelection:
+        """All six components of every joint between the base and ``flange``."""
+        model = robot.model
+        support = set(model.supports[model.frames[robot.frame_id(flange)].parentJoint])
+        on_chain = np.array([model.getJointId(name) in support for name in robot.joint_names])
+        return cls(tuple(robot.joint_names), np.repeat(on_chain[:, None], 6, axis=1))
+
+    @property
+    def size(self) -> int:
+        return int(self.free.sum())
+
+    @property
+    def index(self) -> np.ndarray:
+        """Flat indices (joint-major, ``6 j + component``) of the free corrections."""
+        return np.flatnonzero(self.free.reshape(-1))
+
+    @property
+    def names(self) -> list[str]:
+        """``"joint.component"`` of each free correction."""
+        return [f"{self.joint_names[k // 6]}.{COMPONENTS[k % 6]}" for k in self.index]
+
+    def expand(self, x: FloatArray) -> FloatArray:
+        """``(nq, 6)`` corrections: ``x`` ``(size,)`` at the free components, zero elsewhere."""
+        out = np.zeros(6 * len(self.joint_names))
+        out[self.index] = x
+        return out.reshape(-1, 6)
+
+    def base_set(
+        self, J_c: FloatArray, J_y: FloatArray, scale: FloatArray, rcond: float = BASE_RCOND
+    ) -> ParameterSelection:
+        """The free corrections the data see at all: those of this selection whose columns of
+        ``J_c`` ``(M, 6 nq)`` (× ``scale``, the prior SD), projected off the span of ``J_y`` ``(M, ny)``,
+        a pivoted QR ranks independent (pivot above ``rcond`` of the largest)."""
+        index = self.index
+        if J_y.shape[1]:
+            Q, _ = np.linalg.qr(J_y)
+            projected = J_c[:, index] * scale[index] - Q @ (Q.T @ (J_c[:, index] * scale[index]))
+        else:
+            projected = J_c[:, index] * scale[index]
+        _, R, pivots = scipy.linalg.qr(projected, mode="economic", pivoting=True)
+        d = np.abs(np.diag(R))
+        rank = int(np.sum(d > d[0] * rcond)) if d.size and d[0] > 0 else 0
+        free = np.zeros(6 * len(self.joint_names), dtype=bool)
+        free[index[pivots[:rank]]] = True
+        return ParameterSelection(self.joint_names, free.reshape(-1, 6))
+
+
+@dataclass(frozen=True)
+class FlangePoints:
+    """Points fixed to a flange, at many configurations.
+
+    Attributes:
+        p: ``(N, 3)`` world positions (metres, base frame).
+        R: ``(N, 3, 3)`` the flange's rotations: ``∂p/∂p_flange``.
+        J_c: ``(N, 3, 6 nq)`` ``∂p/∂c`` (joint-major ``(v, ω)``).
+        W: ``(N, nq, 6, 6)`` the flange's world twists per joint-origin motion (:func:`joint_twists`).
+    """
+
+    p: FloatArray
+    R: FloatArray
+    J_c: FloatArray
+    W: FloatArray
+
+
+def flange_points(robot: Robot, Q: FloatArray, flange: str, p_flange: FloatArray) -> FlangePoints:
+    """The point ``p_flange`` (``(3,)`` or ``(N, 3)``, metres in ``flange``) at configurations ``Q``
+    ``(N, nq)`` and its Jacobian with respect to every joint-origin correction (analytic:
+    ``[I, −[p]×]`` through :func:`joint_twists`)."""
+    Q = np.atleast_2d(np.asarray(Q, dtype=float))
+    T = robot.fk_frames([flange], Q)[0]
+    p_flange = np.broadcast_to(np.asarray(p_flange, dtype=float), (len(Q), 3))
+    p = np.einsum("nab,nb->na", T[:, :3, :3], p_flange) + T[:, :3, 3]
+    W = joint_twists(robot, Q, flange)
+    J_c = motion_rows(point_motion(p), W).reshape(len(Q), 3, -1)
+    return FlangePoints(p, T[:, :3, :3], J_c, W)
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """A protocol's residuals at one estimate.
+
+    Attributes:
+        r: ``(M,)`` residuals (metres, or the group's own unit).
+        J_c: ``(M, 6 nq)`` ``∂r/∂c``, joint-major ``(v, ω)``.
+        J_y: ``(M, ny)`` ``∂r/∂y``.
+        group: ``(M,)`` int, each row's noise group (an index into :attr:`ResidualModel.groups`).
+    """
+
+    r: FloatArray
+    J_c: FloatArray
+    J_y: FloatArray
+    group: np.ndarray
+
+
+class ResidualModel(Protocol):
+    """A protocol's residuals: ``groups`` names the noise groups; ``evaluate`` gives the
+    residuals on ``robot`` (the corrected robot) at the protocol's unknowns ``y``; ``y_scale``
+    the size of a step in each unknown worth noticing (Gauss–Newton's stopping test)."""
+
+    @property
+    def groups(self) -> tuple[str, ...]: ...
+
+    def evaluate(self, robot: Robot, y: FloatArray) -> Evaluation: ...
+
+    def y_scale(self) -> FloatArray: ...
+
+
+@dataclass(frozen=True)
+class ArmFit:
+    """The identified arm.
+
+    Attributes:
+        corrections: ``(nq, 6)`` per joint ``(v, ω)`` (metres, radians), :func:`corrected_robot`'s.
+        joint_names: the joints, in order.
+        selection: the free corrections.
+        y: the protocol's unknowns at the estimate.
+        sigma: each group's noise level (estimated, or as given when held).
+        covariance: ``(size + ny, size + ny)`` posterior covariance of (free corrections, ``y``),
+            SI units.
+        identifiability: the base-set analysis of all ``6 nq`` corrections under the prior.
+        accuracy: the stated accuracy used as the prior (``None``: no prior).
+        residuals: the protocol's residuals at the estimate.
+        iterations: Gauss–Newton steps taken in all.
+    """
+
+    corrections: FloatArray
+    joint_names: tuple[str, ...]
+    selection: ParameterSelection
+    y: FloatArray
+    sigma: dict[str, float]
+    covariance: FloatArray
+    identifiability: Identifiability
+    accuracy: RobotAccuracy | None
+    residuals: Evaluation
+    iterations: int
+
+    def robot(self, nominal: Robot) -> Robot:
+        """The corrected robot (``nominal``: the robot the fit started from)."""
+        return corrected_robot(nominal, self.corrections)
+
+    def correction_sd(self) -> FloatArray:
+        """``(nq, 6)`` posterior SD of each correction (zero where it was held)."""
+        out = np.zeros(6 * len(self.joint_names))
+        n = self.selection.size
+        out[self.selection.index] = np.sqrt(np.clip(np.diag(self.covariance)[:n], 0.0, None))
+        return out.reshape(-1, 6)
+
+    def y_covariance(self) -> FloatArray:
+        """Posterior covariance of the protocol's unknowns ``y``."""
+        n = self.selection.size
+        return self.covariance[n:, n:]
+
+
+def fit_arm(
+    nominal: Robot,
+    model: ResidualModel,
+    y0: FloatArray,
+    selection: ParameterSelection,
+    sigma: Mapping[str, float],
+    accuracy: RobotAccuracy | None,
+    *,
+    estimate_noise: Sequence[str] = (),
+    y_prior_sd: FloatArray | None = None,
+    rounds: int = ROUNDS,
+    iterations: int = ITERATIONS,
+) -> ArmFit:
+    """The MAP fit of the free corrections and the protocol's unknowns (module docstring).
+
+    Args:
+        nominal: the robot's URDF.
+        model: the protocol.
+        y0: start of the protocol's unknowns.
+        selection: the free corrections (the others stay zero).
+        sigma: starting noise level of each group of ``model.groups`` (its unit).
+        accuracy: the stated accuracy: the corrections' prior. ``None``: no prior (plain least
+            squares; the selection must then be a base set).
+        estimate_noise: groups whose levels are re-estimated from the residuals between rounds
+            (the others are held as given).
+        y_prior_sd: a zero-mean Gaussian prior's SD per protocol unknown (``inf``: none; default none).
+        rounds: noise rounds (one when nothing is estimated).
+
+    Raises:
+        DegenerateDataError: the data (with the prior) do not determine the unknowns.
+        InputError: a group without a noise level, or a level not positive.
+    """
+    groups = model.groups
+    for g in groups:
+        if not (g in sigma and np.isfinite(sigma[g]) and sigma[g] > 0):
+            raise InputError(f"noise level of {g!r} must be a positive number")
+    level = np.array([float(sigma[g]) for g in groups])
+    estimated = np.array([g in estimate_noise for g in groups])
+    index = selection.index
+    full_scale = prior_sd(nominal, accuracy) if accuracy is not None else np.ones(6 * nominal.nq)
+    if accuracy is not None and np.any(full_scale[index] <= 0):
+        raise InputError("the stated robot accuracy is zero for a free correction: hold it, or state its accuracy")
+    scale = full_scale[index]
+    y_scale = np.asarray(model.y_scale(), dtype=float)
+    x = np.zeros(len(index))
+    y = np.asarray(y0, dtype=float).copy()
+    prior = _Prior(
+        accuracy is not None, np.full(len(y), np.inf) if y_prior_sd is None else np.asarray(y_prior_sd, dtype=float)
+    )
+    steps = 0
+    rounds = rounds if estimated.any() else 1
+    for _ in range(rounds):
+        x, y, taken = _gauss_newton(
+            nominal, model, selection, x, y, level, scale, y_scale, prior, iterations
+        )
+        steps += taken
+        evaluation = model.evaluate(corrected_robot(nominal, selection.expand(x)), y)
+        A, _ = _system(evaluation, index, x, y, scale, level, prior)
+        if estimated.any():
+            level = _noise_levels(evaluation, A, level, estimated)
+    evaluation = model.evaluate(corrected_robot(nominal, selection.expand(x)), y)
+    A, _ = _system(evaluation, index, x, y, scale, level, prior)
+    posterior = _inverse(A)
+    units = np.concatenate([scale, np.ones(len(y))])
+    covariance = posterior * np.outer(units, units)
+    report = _identifiability(nominal, evaluation, level, full_scale, len(y))
+    return ArmFit(
+        selection.expand(x),
+        tuple(nominal.joint_names),
+        selection,
+        y,
+        dict(zip(groups, map(float, level), strict=True)),
+        covariance,
+        report,
+        accuracy,
+        evaluation,
+        steps,
+    )
+
+
+@dataclass(frozen=True)
+class _Prior:
+    """The prior rows: the corrections' (when ``corrections``), and zero-mean ones on the ``y``
+    entries whose ``y_sd`` is finite."""
+
+    corrections: bool
+    y_sd: FloatArray
+
+
+def _system(
+    evaluation: Evaluation,
+    index: np.ndarray,
+    x: FloatArray,
+    y: FloatArray,
+    scale: FloatArray,
+    level: FloatArray,
+    prior: _Prior,
+) -> tuple[FloatArray, FloatArray]:
+    """The normalised, augmented system ``A``, ``b`` of one Gauss–Newton step over ``(x / scale, y)``:
+    the data rows ``[J_c · scale, J_y] / σ``, then the prior's rows."""
+    w = 1.0 / level[evaluation.group]
+    rows = np.hstack([evaluation.J_c[:, index] * scale, evaluation.J_y]) * w[:, None]
+    b = evaluation.r * w
+    ny = evaluation.J_y.shape[1]
+    if prior.corrections:
+        rows = np.vstack([rows, np.hstack([np.eye(len(index)), np.zeros((len(index), ny))])])
+        b = np.concatenate([b, x / scale])
+    held = np.flatnonzero(np.isfinite(prior.y_sd))
+    if held.size:
+        y_rows = np.zeros((held.size, len(index) + ny))
+        y_rows[np.arange(held.size), len(index) + held] = 1.0 / prior.y_sd[held]
+        rows = np.vstack([rows, y_rows])
+        b = np.concatenate([b, y[held] / prior.y_sd[held]])
+    return rows, b
+
+
+def _gauss_newton(
+    nominal: Robot,
+    model: ResidualModel,
+    selection: ParameterSelection,
+    x: FloatArray,
+    y: FloatArray,
+    level: FloatArray,
+    scale: FloatArray,
+    y_scale: FloatArray,
+    prior: _Prior,
+    iterations: int,
+) -> tuple[FloatArray, FloatArray, int]:
+    """Damped Gauss–Newton on the normalised system (halving a step that raises the cost)."""
+    index = selection.index
+
+    def system(x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
+        return _system(model.evaluate(corrected_robot(nominal, selection.expand(x)), y), index, x, y, scale, level, prior)
+
+    A, b = system(x, y)
+    cost = float(b @ b)
+    for k in range(iterations):
+        step = np.linalg.lstsq(A, -b, rcond=None)[0]
+        dx, dy = step[: len(x)] * scale, step[len(x) :]
+        for _ in range(20):
+            A_new, b_new = system(x + dx, y + dy)
+            if float(b_new @ b_new) <= cost * (1 + 1e-12):
+                break
+            dx, dy = dx / 2, dy / 2
+        else:
+            return x, y, k
+        previous = cost
+        x, y, A, b, cost = x + dx, y + dy, A_new, b_new, float(b_new @ b_new)
+        small = np.concatenate([np.abs(dx) / scale, np.abs(dy) / y_scale]) if len(step) else np.zeros(1)
+        if np.max(small) < STEP_TOLERANCE or previous - cost <= COST_TOLERANCE * previous:
+            return x, y, k + 1
+    return x, y, iterations
+
+
+def _noise_levels(evaluation: Evaluation, A: FloatArray, level: FloatArray, estimated: np.ndarray) -> FloatArray:
+    """Each estimated group's level from its residuals, its degrees of freedom reduced by the
+    leverages of the regularised problem (the prior's rows take their share of the fit)."""
+    m = len(evaluation.r)
+    J = A[:m]
+    h = np.einsum("ij,jk,ik->i", J, _inverse(A), J)
+    out = level.copy()
+    for g in np.flatnonzero(estimated):
+        rows = evaluation.group == g
+        dof = rows.sum() - h[rows].sum()
+        if dof <= 0:
+            raise DegenerateDataError(f"too few data to estimate a noise level (group {g})")
+        out[g] = float(np.sqrt(np.sum(evaluation.r[rows] ** 2) / dof))
+        if not out[g] > 0:  # exact data: keep the level given
+            out[g] = level[g]
+    return out
+
+
+def _inverse(A: FloatArray) -> FloatArray:
+    """``(AᵀA)⁻¹``, refusing a system the data and prior do not determine."""
+    _, s, Vt = np.linalg.svd(A, full_matrices=False)
+    if s.size == 0 or s[-1] <= s[0] * 1e-13:
+        raise DegenerateDataError("robot identification: the data do not determine the unknowns")
+    return (Vt.T / s**2) @ Vt
+
+
+def _identifiability(
+    robot: Robot, evaluation: Evaluation, level: FloatArray, scale: FloatArray, ny: int
+) -> Identifiability:
+    """:func:`identifiability` of all ``6 nq`` corrections (each with its prior) and the protocol's unknowns."""
+    w = 1.0 / level[evaluation.group]
+    J = np.hstack([evaluation.J_y, evaluation.J_c * scale]) * w[:, None]
+    n = J.shape[1] - ny
+    A = np.vstack([J, np.hstack([np.zeros((n, ny)), np.eye(n)])])
+    return identifiability(
+        J, ny, scale, _inverse(A), tuple(robot.joint_names), nuisance="the protocol's own unknowns (tool, points)"
+    )
+
+
+def gravity_moments(dynamics: Robot, robot: Robot, Q: FloatArray) -> FloatArray:
+    """``(N, robot.nq, 3)`` the moment (N·m) gravity puts through each joint of ``robot`` at
+    configurations ``Q`` ``(N, robot.nq)``, in the joint's frame after its turn: its component
+    along the axis is the joint's torque, the others bend the joint's bearing. From the masses of
+    ``dynamics`` (a URDF of the same arm with ``<inertial>`` elements; joints matched by name,
+    others zero). Joint compliance under these moments (:func:`deflection_columns`) is a
+    non-geometric error a protocol may fit."""
+    import pinocchio as pin  # lazy: start-up (pinocchio)
+
+    Q = np.atleast_2d(np.asarray(Q, dtype=float))
+    names = [n for n in robot.joint_names if n in dynamics.joint_names]
+    full = np.zeros((len(Q), dynamics.nq))
+    full[:, [dynamics.joint_names.index(n) for n in names]] = Q[:, [robot.joint_names.index(n) for n in names]]
+    model = dynamics.model
+    data = model.createData()
+    zero = np.zeros(model.nv)
+    ids = [(robot.joint_names.index(n), model.getJointId(n)) for n in names]
+    out = np.zeros((len(Q), robot.nq, 3))
+    for row, q in enumerate(dynamics.to_pinocchio(full)):
+        pin.rnea(model, data, q, zero, zero)
+        for j, jid in ids:
+            out[row, j] = data.f[jid].angular
+    return out
+
+
+def deflection_columns(
+    robot: Robot, Q: FloatArray, points: FlangePoints, moments: FloatArray, terms: Sequence[tuple[int, int]]
+) -> tuple[FloatArray, FloatArray]:
+    """How a flange point moves per unit compliance of each term ``(j, a)``: joint ``j``'s frame
+    turns by ``k · m_a`` (radians; ``m`` the joint's moment, ``moments`` ``(N, nq, 3)`` in the
+    joint's frame after its turn, :func:`gravity_moments`) about its own axis ``a``. First order
+    (deflections are ~1e-4 rad). Returns ``(G, Ω)``, each ``(N, 3, len(terms))``: the point's
+    motion and the flange's world rotation per unit ``k`` (``∂(G k)/∂p = [Ω k]×``)."""
+    from scipy.spatial.transform import Rotation  # lazy: start-up (scipy)
+
+    Q = np.atleast_2d(np.asarray(Q, dtype=float))
+    G = np.zeros((len(Q), 3, len(terms)))
+    Omega = np.zeros((len(Q), 3, len(terms)))
+    motion = point_motion(points.p)
+    for m, (j, a) in enumerate(terms):
+        name = robot.joint_names[j]
+        if robot.joint_kinds[name] == "prismatic":
+            turn = np.broadcast_to(np.eye(3), (len(Q), 3, 3))
+        else:  # origin ← joint after its turn
+            turn = Rotation.from_rotvec(np.outer(Q[:, j], robot.joint_axis(name))).as_matrix()
+        twist = (points.W[:, j, :, 3:] @ turn[:, :, a, None])[:, :, 0] * moments[:, j, a, None]  # (N, 6)
+        G[:, :, m] = np.einsum("nab,nb->na", motion, twist)
+        Omega[:, :, m] = twist[:, 3:]
+    return G, Omega

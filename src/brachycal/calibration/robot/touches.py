@@ -1,0 +1,316 @@
+"""Robot identification from touches of fixed points (MUKCa's protocol, the seed paper's reference tips).
+
+A tool whose tip is a point fixed to the flange (a ball seated in a socket, a sharp tip in a
+divot) touches ``K`` fixed points from many arm postures. Perfect kinematics would put the tip at
+one position per point. Unknowns: the joint-origin corrections (:mod:`~brachycal.calibration.robot.arm_fit`),
+the tip on the flange (3, metres in the flange frame) and each point (3, base frame); optionally
+known distances between points (a machined block's sockets) as residuals of their own, with the
+stated tolerance as their noise level. Each *place* (a recording with the points somewhere in the
+workspace) has points of its own; the tip is shared.
+
+The figure of merit is MUKCa's: per point, the mean distance of the tip (forward kinematics of
+each touch) from the mean tip of that point, averaged over the points (:func:`touch_scatter`),
+and the error of the known distances. A calibration is judged on places it did not use.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from brachycal.calibration.robot.arm_fit import (
+    ArmFit,
+    Evaluation,
+    ParameterSelection,
+    deflection_columns,
+    fit_arm,
+    flange_points,
+)
+from brachycal.calibration.robot.identification import prior_sd
+from brachycal.calibration.robot_accuracy import RobotAccuracy
+from brachycal.data.formats.touches import read_touch_folder
+from brachycal.errors import InputError
+from brachycal.model.robot import Robot
+from brachycal.se3 import FloatArray, skew
+
+#: Starting noise level of the touches (metres): re-estimated from the residuals.
+TOUCH_SD_M = 1e-4
+#: Default tolerance of a stated distance between points (metres): a printed or machined block.
+DISTANCE_SD_M = 5e-5
+GROUPS = ("touch", "distance")
+
+
+@dataclass(frozen=True)
+class TouchPlace:
+    """The touches of one place.
+
+    Attributes:
+        name: the place (a folder name).
+        touches: per point, its touches' configurations ``(N_k, nq)`` (radians, the robot's joint order).
+        distances: known distances between points, ``{(i, j): metres}``.
+    """
+
+    name: str
+    touches: tuple[FloatArray, ...]
+    distances: dict[tuple[int, int], float] = field(default_factory=dict)
+    moments: tuple[FloatArray, ...] | None = None
+
+
+def arm_joints(robot: Robot, flange: str) -> tuple[str, ...]:
+    """The joints between the base and ``flange``, in configuration order: the columns of a touch table."""
+    selection = ParameterSelection.chain(robot, flange)
+    return tuple(name for name, free in zip(robot.joint_names, selection.free[:, 0], strict=True) if free)
+
+
+def read_places(
+    robot: Robot,
+    flange: str,
+    folders: Sequence[str | os.PathLike[str]],
+    distances: dict[tuple[int, int], float] | None = None,
+) -> list[TouchPlace]:
+    """The places of touch folders (:mod:`brachycal.data.formats.touches`), the tables' columns the
+    arm's joints to ``flange``, with ``distances`` (metres) known between the points of each.
+
+    Raises:
+        InputError: a folder the reader refuses; two folders of the same name; a distance between
+            points a place has not.
+    """
+    joints = arm_joints(robot, flange)
+    out: list[TouchPlace] = []
+    for path in folders:
+        folder = read_touch_folder(path, joints)
+        if any(p.name == folder.name for p in out):
+            raise InputError(f"two places are named {folder.name!r}", file=path)
+        known = dict(distances or {})
+        for i, j in known:
+            if max(i, j) >= len(folder.tables):
+                raise InputError(
+                    f"a distance between points {i} and {j}, but the place has {len(folder.tables)}", file=path
+                )
+        out.append(TouchPlace(folder.name, tuple(configurations(robot, flange, t) for t in folder.tables), known))
+    return out
+
+
+def configurations(robot: Robot, flange: str, table: FloatArray) -> FloatArray:
+    """``(N, nq)`` configurations from a table of the arm's joints (:func:`arm_joints` columns); the
+    robot's other joints (a gripper's fingers) at zero."""
+    joints = arm_joints(robot, flange)
+    table = np.atleast_2d(np.asarray(table, dtype=float))
+    if table.shape[1] != len(joints):
+        raise InputError(f"a touch has {table.shape[1]} joint values; the arm to {flange!r} has {len(joints)}")
+    Q = np.zeros((len(table), robot.nq))
+    Q[:, [robot.joint_names.index(j) for j in joints]] = table
+    return Q
+
+
+@dataclass(frozen=True)
+class TouchModel:
+    """The touches' residuals (:class:`~brachycal.calibration.robot.arm_fit.ResidualModel`).
+
+    ``y = (tip (3), point 0 of place 0 (3), point 1 of place 0, …)``; rows: per touch the tip minus
+    its point (3, group ``touch``), then per known distance ``|p_i − p_j| − d`` (group ``distance``).
+    """
+
+    places: tuple[TouchPlace, ...]
+    flange: str
+    compliant: tuple[tuple[int, int], ...] = ()
+    groups: tuple[str, ...] = GROUPS
+
+    def n_points(self) -> int:
+        return sum(len(p.touches) for p in self.places)
+
+    def point_slots(self) -> list[list[int]]:
+        """Per place, per point: its offset in ``y``."""
+        out, at = [], 3
+        for place in self.places:
+            out.append([at + 3 * k for k in range(len(place.touches))])
+            at += 3 * len(place.touches)
+        return out
+
+    def y_scale(self) -> FloatArray:
+        return np.concatenate([np.full(3 + 3 * self.n_points(), 1e-3), np.full(len(self.compliant), 1e-6)])
+
+    def evaluate(self, robot: Robot, y: FloatArray) -> Evaluation:
+        ny, nc = len(y), 6 * robot.nq
+        r, J_c, J_y, group = [], [], [], []
+        tip = y[:3]
+        slots = self.point_slots()
+        k0 = 3 + 3 * self.n_points()
+        compliance = y[k0:]
+        for place, offsets in zip(self.places, slots, strict=True):
+            for p_index, (Q, at) in enumerate(zip(place.touches, offsets, strict=True)):
+                fp = flange_points(robot, Q, self.flange, tip)
+                n = len(Q)
+                p = fp.p
+                if self.compliant:
+                    if place.moments is None:
+                        raise InputError(f"place {place.name!r} has no joint moments for the compliance terms")
+                    G, Omega = deflection_columns(robot, Q, fp, place.moments[p_index], self.compliant)
+                    p = p + G @ compliance
+                r.append((p - y[at : at + 3]).reshape(-1))
+                J_c.append(fp.J_c.reshape(3 * n, nc))
+                block = np.zeros((n, 3, ny))
+                block[:, :, :3] = fp.R
+                block[:, :, at : at + 3] = -np.eye(3)
+                if self.compliant:
+                    block[:, :, k0:] = G
+                    block[:, :, :3] += skew(Omega @ compliance) @ fp.R
+                J_y.append(block.reshape(3 * n, ny))
+                group.append(np.zeros(3 * n, dtype=int))
+            for (i, j), d in place.distances.items():
+                delta = y[offsets[i] : offsets[i] + 3] - y[offsets[j] : offsets[j] + 3]
+                length = float(np.linalg.norm(delta))
+                u = delta / length
+                row = np.zeros(ny)
+                row[offsets[i] : offsets[i] + 3] = u
+                row[offsets[j] : offsets[j] + 3] = -u
+                r.append(np.array([length - d]))
+                J_c.append(np.zeros((1, nc)))
+                J_y.append(row[None])
+                group.append(np.ones(1, dtype=int))
+        return Evaluation(np.concatenate(r), np.vstack(J_c), np.vstack(J_y), np.concatenate(group))
+
+
+@dataclass(frozen=True)
+class TouchResult:
+    """The arm identified from touches.
+
+    Attributes:
+        fit: the arm fit (corrections, posterior, identifiability, noise levels).
+        flange: the frame the tip is fixed to.
+        tip: ``(3,)`` the tip on the flange (metres, flange frame).
+        points: per place, ``(K, 3)`` its points (metres, base frame).
+        places: the places' names.
+    """
+
+    fit: ArmFit
+    flange: str
+    tip: FloatArray
+    points: tuple[FloatArray, ...]
+    places: tuple[str, ...]
+    compliant: tuple[tuple[int, int], ...] = ()
+    compliance: FloatArray = field(default_factory=lambda: np.zeros(0))
+
+    def robot(self, nominal: Robot) -> Robot:
+        """The corrected robot (without the tip; :meth:`tool_robot` adds it)."""
+        return self.fit.robot(nominal)
+
+
+def identify_touches(
+    nominal: Robot,
+    places: Sequence[TouchPlace],
+    flange: str,
+    accuracy: RobotAccuracy | None,
+    *,
+    tip: FloatArray | None = None,
+    selection: str | ParameterSelection = "base",
+    touch_sd_m: float = TOUCH_SD_M,
+    distance_sd_m: float = DISTANCE_SD_M,
+    estimate_touch_noise: bool = True,
+    compliant: Sequence[tuple[int, int]] = (),
+    compliance_sd: float = np.inf,
+) -> TouchResult:
+    """Identify the arm from touches of fixed points (module docstring).
+
+    Args:
+        nominal: the robot's URDF.
+        places: the touches, per place.
+        flange: the frame the tip is fixed to.
+        accuracy: the stated accuracy (the corrections' prior); ``None``: none.
+        tip: start of the tip in ``flange`` (metres; default its origin).
+        selection: ``"base"`` (the corrections the data can see, :meth:`ParameterSelection.base_set`),
+            ``"chain"`` (every component of every joint to the flange; needs a prior), or the
+            free corrections themselves.
+        touch_sd_m: the touches' noise level (start, re-estimated unless ``estimate_touch_noise`` is false).
+        distance_sd_m: the stated tolerance of the known distances (held).
+
+    Raises:
+        InputError: a place without two touches of a point, a distance between unknown points.
+        DegenerateDataError: the touches do not determine the unknowns.
+    """
+    places = tuple(places)
+    for place in places:
+        for k, Q in enumerate(place.touches):
+            if len(Q) < 2:
+                raise InputError(f"place {place.name!r}: point {k} has {len(Q)} touch(es); at least 2 are needed")
+        for i, j in place.distances:
+            if not (0 <= i < len(place.touches) and 0 <= j < len(place.touches) and i != j):
+                raise InputError(f"place {place.name!r}: a distance between points {i} and {j}, which it has not")
+    model = TouchModel(places, flange, tuple(compliant))
+    tip0 = np.zeros(3) if tip is None else np.asarray(tip, dtype=float)
+    y0 = [tip0]
+    for place in places:
+        for Q in place.touches:
+            y0.append(flange_points(nominal, Q, flange, tip0).p.mean(axis=0))
+    y0.append(np.zeros(len(compliant)))
+    y = np.concatenate(y0)
+    chosen = ParameterSelection.chain(nominal, flange)
+    sigma = {"touch": touch_sd_m, "distance": distance_sd_m}
+    if isinstance(selection, ParameterSelection):
+        chosen = selection
+    elif selection == "base":
+        evaluation = model.evaluate(nominal, y)
+        scale = prior_sd(nominal, accuracy) if accuracy is not None else np.ones(6 * nominal.nq)
+        chosen = chosen.base_set(evaluation.J_c, evaluation.J_y, scale)
+    elif selection != "chain":
+        raise InputError(f"unknown parameter selection {selection!r} (base, chain)")
+    fit = fit_arm(
+        nominal,
+        model,
+        y,
+        chosen,
+        sigma,
+        accuracy,
+        estimate_noise=("touch",) if estimate_touch_noise else (),
+        y_prior_sd=np.concatenate([np.full(len(y) - len(compliant), np.inf), np.full(len(compliant), compliance_sd)]),
+    )
+    slots = model.point_slots()
+    points = tuple(np.array([fit.y[at : at + 3] for at in offsets]) for offsets in slots)
+    k0 = 3 + 3 * model.n_points()
+    return TouchResult(
+        fit, flange, fit.y[:3].copy(), points, tuple(p.name for p in places), tuple(compliant), fit.y[k0:].copy()
+    )
+
+
+@dataclass(frozen=True)
+class TouchScatter:
+    """MUKCa's figures of one place.
+
+    Attributes:
+        scatter_m: per point, the mean distance of the tips from their mean (metres).
+        distance_error_m: ``{(i, j): | |p̄_i − p̄_j| − d |}`` for the known distances (metres).
+    """
+
+    scatter_m: FloatArray
+    distance_error_m: dict[tuple[int, int], float]
+
+    @property
+    def mean_scatter_m(self) -> float:
+        """The scatter averaged over the points (MUKCa's "mean absolute error")."""
+        return float(np.mean(self.scatter_m))
+
+
+def touch_scatter(
+    robot: Robot,
+    place: TouchPlace,
+    flange: str,
+    tip: FloatArray,
+    compliant: Sequence[tuple[int, int]] = (),
+    compliance: FloatArray | None = None,
+) -> TouchScatter:
+    """MUKCa's figures of ``place`` on ``robot`` with the tip ``tip`` (metres in ``flange``)."""
+    means, scatter = [], []
+    for k, Q in enumerate(place.touches):
+        fp = flange_points(robot, Q, flange, tip)
+        p = fp.p
+        if compliant:
+            if place.moments is None or compliance is None:
+                raise InputError(f"place {place.name!r} has no joint moments for the compliance terms")
+            p = p + deflection_columns(robot, Q, fp, place.moments[k], compliant)[0] @ compliance
+        means.append(p.mean(axis=0))
+        scatter.append(float(np.mean(np.linalg.norm(p - means[-1], axis=1))))
+    errors = {(i, j): abs(float(np.linalg.norm(means[i] - means[j])) - d) for (i, j), d in place.distances.items()}
+    return TouchScatter(np.array(scatter), errors)

@@ -1,0 +1,303 @@
+"""Robot identification from touches of fixed points: the arm core and the touch protocol.
+
+Exact touches of a corrected Panda (example-robot-data's URDF) identify it to the last nanometre;
+the analytic Jacobians agree with differences; MUKCa's real Panda touches (outside data) are
+predicted at places the calibration never saw far better than by the nominal URDF.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import reference
+
+from brachycal.calibration.robot.arm_fit import ParameterSelection, flange_points
+from brachycal.calibration.robot.identification import corrected_robot
+from brachycal.calibration.robot.touches import (
+    TouchModel,
+    TouchPlace,
+    configurations,
+    identify_touches,
+    read_places,
+    touch_scatter,
+)
+from brachycal.calibration.robot_accuracy import RobotAccuracy
+from brachycal.data.formats.touches import read_touch_folder
+from brachycal.errors import InputError
+from brachycal.model.description_file import example_robot_data_share
+from brachycal.model.robot import Robot
+
+FLANGE = "panda_link8"
+TIP = np.array([0.4e-3, -0.3e-3, 0.1354])  # a ball ~13.5 cm out on the flange
+
+
+@pytest.fixture(scope="module")
+def panda() -> Robot:
+    return Robot.load(example_robot_data_share() / "robots" / "panda_description" / "urdf" / "panda.urdf")
+
+
+def position_jacobian(robot: Robot, Q: np.ndarray, tip: np.ndarray) -> np.ndarray:
+    """``(N, 3, nq)`` ∂p/∂q of the tip: each joint's turn is the origin's rotation about its axis."""
+    J_c = flange_points(robot, Q, FLANGE, tip).J_c
+    out = np.zeros((len(Q), 3, robot.nq))
+    for j, name in enumerate(robot.joint_names):
+        if robot.joint_kinds[name] == "revolute":
+            out[:, :, j] = J_c[:, :, 6 * j + 3 : 6 * j + 6] @ robot.joint_axis(name)
+    return out
+
+
+def touches_of(robot: Robot, point: np.ndarray, tip: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    """``(n, nq)`` configurations putting ``tip`` exactly at ``point`` (least-norm Newton from
+    random postures near a reaching one)."""
+    start = np.array([0.0, 0.3, 0.0, -2.0, 0.0, 2.3, 0.8, 0.0])
+    out = []
+    while len(out) < n:
+        q = start + rng.normal(0, 0.35, robot.nq) * (np.arange(robot.nq) < 7)
+        for _ in range(60):
+            p = flange_points(robot, q[None], FLANGE, tip).p[0]
+            J = position_jacobian(robot, q[None], tip)[0]
+            q = q - np.linalg.pinv(J) @ (p - point)
+            if np.linalg.norm(p - point) < 1e-14:
+                break
+        if np.linalg.norm(flange_points(robot, q[None], FLANGE, tip).p[0] - point) < 1e-13 and robot.within_limits(q):
+            out.append(q)
+    return np.array(out)
+
+
+def synthetic_places(true: Robot, rng: np.random.Generator) -> list[TouchPlace]:
+    centres = ([0.45, -0.2, 0.15], [0.5, 0.25, 0.3], [0.35, 0.0, 0.45])
+    places = []
+    for k, c in enumerate(centres):
+        points = (np.array(c), np.array(c) + np.array([0.05, 0.0, 0.0]))
+        places.append(TouchPlace(f"p{k}", tuple(touches_of(true, p, TIP, 12, rng) for p in points), {(0, 1): 0.05}))
+    return places
+
+
+def test_point_jacobian_matches_central_differences(panda):
+    rng = np.random.default_rng(3)
+    Q = rng.uniform(panda.lower, panda.upper, (4, panda.nq))
+    c = rng.normal(0, 1e-3, (panda.nq, 6))
+    robot = corrected_robot(panda, c)
+    J = flange_points(robot, Q, FLANGE, TIP).J_c
+    step = 1e-6
+    for k in rng.choice(6 * 7, 10, replace=False):
+        plus, minus = c.copy(), c.copy()
+        plus.flat[k] += step
+        minus.flat[k] -= step
+        # the correction composes on the right: differences about c, the Jacobian about the
+        # corrected robot's origin (the same to first order in |c| ~ 1e-3: compare at that level)
+        diff = (
+            flange_points(corrected_robot(panda, plus), Q, FLANGE, TIP).p
+            - flange_points(corrected_robot(panda, minus), Q, FLANGE, TIP).p
+        ) / (2 * step)
+        assert np.allclose(J[:, :, k], diff, atol=5e-3 * np.abs(J).max()), k
+
+
+def test_point_jacobian_at_zero_matches_differences_exactly(panda):
+    rng = np.random.default_rng(4)
+    Q = rng.uniform(panda.lower, panda.upper, (3, panda.nq))
+    J = flange_points(panda, Q, FLANGE, TIP).J_c
+    step = 1e-6
+    for k in range(6 * 7):
+        c = np.zeros(6 * panda.nq)
+        c[k] = step
+        plus = flange_points(corrected_robot(panda, c.reshape(-1, 6)), Q, FLANGE, TIP).p
+        minus = flange_points(corrected_robot(panda, -c.reshape(-1, 6)), Q, FLANGE, TIP).p
+        assert np.allclose(J[:, :, k], (plus - minus) / (2 * step), atol=1e-8), k
+
+
+def test_touch_model_jacobian_matches_differences(panda):
+    rng = np.random.default_rng(5)
+    Q = [rng.uniform(panda.lower, panda.upper, (3, panda.nq)) for _ in range(2)]
+    moments = tuple(rng.normal(0, 20, (3, panda.nq, 3)) for _ in range(2))
+    model = TouchModel((TouchPlace("a", tuple(Q), {(0, 1): 0.05}, moments),), FLANGE, compliant=((1, 2), (3, 0)))
+    y = np.concatenate([TIP, [0.4, 0.1, 0.3], [0.45, 0.1, 0.3], [2e-5, -3e-5]])
+    evaluation = model.evaluate(panda, y)
+    for k in range(len(y)):
+        h = 1e-9 if k >= len(y) - 2 else 1e-6
+        plus, minus = y.copy(), y.copy()
+        plus[k] += h
+        minus[k] -= h
+        diff = (model.evaluate(panda, plus).r - model.evaluate(panda, minus).r) / (2 * h)
+        assert np.allclose(evaluation.J_y[:, k], diff, atol=1e-7 * max(1.0, np.abs(diff).max())), k
+
+
+def test_exact_touches_identify_the_arm_to_nanometres(panda):
+    rng = np.random.default_rng(0)
+    # The truth: corrections on the combinations touches can see (the base set at the nominal).
+    probe = synthetic_places(panda, rng)
+    evaluation = TouchModel(tuple(probe), FLANGE).evaluate(
+        panda, np.concatenate([TIP, *[q for p in probe for q in _means(panda, p)]])
+    )
+    base = ParameterSelection.chain(panda, FLANGE).base_set(evaluation.J_c, evaluation.J_y, np.ones(6 * panda.nq))
+    assert 0 < base.size < 42  # the first joint's origin (points absorb it) and the tip's share are not seen
+    truth = base.expand(rng.normal(0, 1, base.size) * np.where(base.index % 6 < 3, 1e-3, 2e-3))
+    true_robot = corrected_robot(panda, truth)
+    places = synthetic_places(true_robot, rng)
+    result = identify_touches(  # no prior: a prior shrinks the weakly seen combinations (MAP, not the truth)
+        panda,
+        places,
+        FLANGE,
+        None,
+        tip=[0, 0, 0.13],
+        selection=base,
+        touch_sd_m=1e-6,
+        distance_sd_m=1e-6,
+        estimate_touch_noise=False,
+    )
+    assert np.allclose(result.tip, TIP, atol=1e-9)
+    assert np.allclose(result.fit.corrections, truth, atol=1e-8)
+    Q = rng.uniform(panda.lower, panda.upper, (50, panda.nq))
+    identified = flange_points(result.robot(panda), Q, FLANGE, result.tip).p
+    assert np.max(np.linalg.norm(identified - flange_points(true_robot, Q, FLANGE, TIP).p, axis=1)) < 1e-9
+    for place, points in zip(places, result.points, strict=True):
+        scatter = touch_scatter(result.robot(panda), place, FLANGE, result.tip)
+        assert scatter.mean_scatter_m < 1e-10
+        assert np.allclose(points[1] - points[0], [0.05, 0, 0], atol=1e-9)
+
+
+def _means(robot: Robot, place: TouchPlace) -> list[np.ndarray]:
+    return [flange_points(robot, Q, FLANGE, TIP).p.mean(axis=0) for Q in place.touches]
+
+
+def test_noise_level_and_tip_sd_are_the_truths(panda):
+    """Noisy touches: the estimated noise level is the drawn one and the stated tip SD covers its
+    error (z-scores over repeated draws have unit spread)."""
+    rng = np.random.default_rng(1)
+    places = synthetic_places(panda, rng)
+    sd = 1e-4
+    z, levels = [], []
+    for seed in range(5):
+        noise = np.random.default_rng(100 + seed)
+        # noise on the joint readings that moves the tip by ~sd
+        noisy = []
+        for place in places:
+            touches = []
+            for Q in place.touches:
+                J = position_jacobian(panda, Q, TIP)
+                dq = np.einsum("nij,nj->ni", np.linalg.pinv(J), noise.normal(0, sd, (len(Q), 3)))
+                touches.append(Q + dq)
+            noisy.append(TouchPlace(place.name, tuple(touches), place.distances))
+        result = identify_touches(
+            panda, noisy, FLANGE, RobotAccuracy(1e-3, float(np.radians(0.1))), tip=[0, 0, 0.13], selection="chain"
+        )
+        levels.append(result.fit.sigma["touch"])
+        tip_sd = np.sqrt(np.diag(result.fit.y_covariance())[:3])
+        z.extend((result.tip - TIP) / tip_sd)
+    assert np.mean(levels) == pytest.approx(sd, rel=0.15)
+    assert 0.5 < np.std(z) < 1.6
+
+
+# --- the touch folders' reader ------------------------------------------------------------------
+
+JOINTS = tuple(f"panda_joint{k}" for k in range(1, 8))
+
+
+def write_place(folder: Path, tables: dict[str, str]) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    for name, text in tables.items():
+        (folder / name).write_text(text)
+    return folder
+
+
+ROW = "0.1,0.2,0.3,-2.0,0.1,2.2,0.7\n"
+
+
+def test_reader_reads_points_in_order_and_ignores_other_files(tmp_path):
+    folder = write_place(
+        tmp_path / "front",
+        {"hole_1.csv": ROW * 3, "hole_0.csv": ROW * 2, "hole_0_pose.csv": "x\n", "comments.txt": "hi"},
+    )
+    read = read_touch_folder(folder, JOINTS)
+    assert read.name == "front" and [t.shape for t in read.tables] == [(2, 7), (3, 7)]
+
+
+@pytest.mark.parametrize(
+    ("tables", "words"),
+    [
+        ({}, ["no touch table"]),
+        ({"hole_1.csv": ROW * 2}, ["hole_0.csv is missing"]),
+        ({"hole_0.csv": ROW * 2, "hole_2.csv": ROW * 2}, ["hole_1.csv is missing"]),
+        ({"hole_0.csv": "0.1,0.2\n0.1,0.2\n"}, ["row 1", "2 fields, expected 7"]),
+        ({"hole_0.csv": ROW + "0.1,0.2,x,-2.0,0.1,2.2,0.7\n"}, ["row 2", "panda_joint3", "not a number"]),
+        ({"hole_0.csv": ROW + "0.1,0.2,nan,-2.0,0.1,2.2,0.7\n"}, ["row 2", "not a finite number"]),
+        ({"hole_0.csv": ROW + "0.1,0.2,30,-2.0,0.1,2.2,0.7\n"}, ["row 2", "panda_joint3", "radians"]),
+        ({"hole_0.csv": ROW}, ["1 touch", "at least 2"]),
+        ({"hole_0.csv": ROW + ROW.strip()}, ["truncated"]),
+        ({"hole_0.csv": ""}, ["0 touch"]),
+    ],
+    ids=["empty", "no-zero", "gap", "short-row", "text", "nan", "degrees", "one-touch", "truncated", "empty-table"],
+)
+def test_reader_refuses_in_one_line_naming_the_place(tmp_path, tables, words):
+    folder = write_place(tmp_path / "place", tables)
+    with pytest.raises(InputError) as caught:
+        read_touch_folder(folder, JOINTS)
+    message = str(caught.value)
+    assert "\n" not in message
+    for word in words:
+        assert word.lower() in message.lower(), message
+
+
+def test_reader_refuses_a_file_for_a_folder(tmp_path):
+    (tmp_path / "f").write_text(ROW)
+    with pytest.raises(InputError, match="not a folder"):
+        read_touch_folder(tmp_path / "f", JOINTS)
+
+
+# --- MUKCa's real Pandas ------------------------------------------------------------------------
+
+
+def test_mukca_panda_held_out_places_beat_the_urdf():
+    """panda_2 trained on front_center: every other place's scatter is a tenth of the nominal
+    URDF's or less, and their mean is within 0.36 mm (MUKCa's own calibrated URDF: 0.350)."""
+    root = reference("mukca_touches")
+    nominal = Robot.load(root / "urdf" / "panda.urdf")
+    folders = sorted((root / "data" / "panda_2_clean").iterdir())
+    places = {p.name: p for p in read_places(nominal, FLANGE, folders, {(0, 1): 0.05})}
+    tip = nominal.transform(FLANGE, "ball_link", np.zeros(nominal.nq))[:3, 3]
+    result = identify_touches(
+        nominal,
+        [places["front_center"]],
+        FLANGE,
+        RobotAccuracy(5e-4, float(np.radians(0.1))),
+        tip=tip,
+        selection="chain",
+    )
+    held = [name for name in places if name != "front_center"]
+    before = np.array([touch_scatter(nominal, places[n], FLANGE, tip).mean_scatter_m for n in held])
+    after = np.array([touch_scatter(result.robot(nominal), places[n], FLANGE, result.tip).mean_scatter_m for n in held])
+    assert np.all(after < before / 10)
+    assert after.mean() < 0.36e-3
+    assert result.fit.sigma["touch"] < 0.15e-3
+
+
+def test_configurations_fill_the_arm_and_leave_the_fingers():
+    robot = Robot.load(example_robot_data_share() / "robots" / "panda_description" / "urdf" / "panda.urdf")
+    Q = configurations(robot, FLANGE, np.ones((2, 7)))
+    assert Q.shape == (2, robot.nq) and np.all(Q[:, :7] == 1) and np.all(Q[:, 7:] == 0)
+    with pytest.raises(InputError, match="6 joint values"):
+        configurations(robot, FLANGE, np.ones((2, 6)))
+
+
+def test_deflection_columns_are_the_joint_frames_turns(panda):
+    """A term (j, a) turns joint j's frame (after its turn) about its own axis a by k·m_a: the same
+    as moving the origin's rotation by that turn expressed before the joint's turn."""
+    from scipy.spatial.transform import Rotation
+
+    from brachycal.calibration.robot.arm_fit import deflection_columns
+
+    rng = np.random.default_rng(6)
+    Q = rng.uniform(panda.lower, panda.upper, (3, panda.nq))
+    moments = rng.normal(0, 20, (3, panda.nq, 3))
+    fp = flange_points(panda, Q, FLANGE, TIP)
+    k = 1e-7
+    for j, a in ((1, 2), (3, 0), (5, 1)):
+        G = deflection_columns(panda, Q, fp, moments, [(j, a)])[0][:, :, 0]
+        for n in range(len(Q)):
+            turn = Rotation.from_rotvec(Q[n, j] * panda.joint_axis(panda.joint_names[j])).as_matrix()
+            c = np.zeros((panda.nq, 6))
+            c[j, 3:] = turn[:, a] * moments[n, j, a] * k
+            moved = flange_points(corrected_robot(panda, c), Q[n : n + 1], FLANGE, TIP).p[0]
+            assert np.allclose(G[n] * k, moved - fp.p[n], atol=1e-3 * np.abs(G[n] * k).max() + 1e-13)
