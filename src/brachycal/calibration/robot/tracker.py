@@ -39,10 +39,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg
+from scipy.spatial.transform import Rotation
 
-from brachycal.calibration.chain.robot_terms import joint_twists
-from brachycal.calibration.robot.identifiability import COMPONENTS, STRUCTURAL_RCOND
+from brachycal.calibration.chain.robot_terms import joint_twists, motion_rows, point_motion
+from brachycal.calibration.robot.arm_fit import ArmFit, Evaluation, ParameterSelection, fit_arm
 from brachycal.calibration.robot.identification import corrected_robot, prior_sd
 from brachycal.calibration.robot_accuracy import RobotAccuracy
 from brachycal.calibration.sequential.registration import kabsch
@@ -58,9 +58,13 @@ __all__ = [
     "TrackerData",
     "TrackerFit",
     "TrackerIdentification",
+    "TrackerResiduals",
     "fit_tracker",
     "identify_from_tracker",
     "leave_one_out",
+    "model_selection",
+    "select_parameters",
+    "start_frames",
     "tracker_data",
 ]
 
@@ -74,15 +78,8 @@ TRACKER_ACCURACY = RobotAccuracy(
     rotation_sd_rad=float(np.radians(0.1)),
     source="tracker default: an industrial arm, 1 mm / 0.1 deg per joint origin",
 )
-#: Noise-level rounds of one fit (the levels settle to 1e-3 relative in 3 on the FIGAROH data).
-NOISE_ROUNDS = 3
-#: Gauss–Newton iterations per round, and the stop: the largest step below this (metres, radians).
-ITERATIONS = 30
-STEP_TOLERANCE = 1e-12
-#: Also stop when a step lowers the cost by less than this fraction (its last digits).
-COST_TOLERANCE = 1e-14
-#: Step halvings tried before a Gauss–Newton step is given up (the minimum reached to rounding).
-HALVINGS = 8
+#: Rounds of the starting frames' alternation (registration, marker) at most.
+START_ROUNDS = 50
 #: Joint readings beyond a limit by at most this are accepted (real encoders read a little past
 #: the URDF's limits: TIAGo's torso lift at 0.35018 m of 0.35 in FIGAROH's data); further is refused.
 LIMIT_TOLERANCE_RAD = 1e-2
@@ -157,250 +154,106 @@ def tracker_data(robot: Robot, table: TrackerTable, flange: str | None = None) -
     return TrackerData(robot, flange, Q, table.p_tracker_marker, table.R_tracker_marker, table.rows)
 
 
-# --- the model's parameters ------------------------------------------------------------------
+# --- the residuals ---------------------------------------------------------------------------
 
 
-def candidate_columns(robot: Robot, model: str, flange: str) -> tuple[FloatArray, list[str]]:
-    """``(6 nq, K)`` unit directions of the corrections a model may estimate, and their names
-    (``joint.vx`` … ``joint.wz``, ``joint.offset``): only joints that move the flange."""
-    if model not in TRACKER_MODELS:
-        raise InputError(f"unknown model {model!r}; expected one of {', '.join(TRACKER_MODELS)}")
-    W = joint_twists(robot, robot.neutral()[None], flange)[0]
-    columns: list[FloatArray] = []
-    names: list[str] = []
-    for j, name in enumerate(robot.joint_names):
-        if model == "frames" or not np.any(W[j]):
-            continue
-        if model == "offsets":
-            axis = robot.joint_axis(name)
-            e = np.zeros(6 * robot.nq)
-            e[6 * j + (0 if robot.in_metres[j] else 3) : 6 * j + (3 if robot.in_metres[j] else 6)] = axis
-            columns.append(e)
-            names.append(f"{name}.offset")
-        else:
-            for k in range(6):
-                e = np.zeros(6 * robot.nq)
-                e[6 * j + k] = 1.0
-                columns.append(e)
-                names.append(f"{name}.{COMPONENTS[k]}")
-    B = np.array(columns).T if columns else np.zeros((6 * robot.nq, 0))
-    return B, names
-
-
-@dataclass
-class _State:
-    """The unknowns' current values."""
-
-    T_tracker_base: FloatArray
-    T_flange_marker: FloatArray
-    theta: FloatArray  # (K,) the kept corrections' values (metres / radians)
-
-
-class _Kinematics:
-    """The flange's pose and the joint origins' twists (:func:`joint_twists`' convention) of the
-    robot with corrections, from a private copy of its Pinocchio model whose joint placements are
-    set in place (``placement · T(exp(ω), v)``, what :func:`corrected_robot` writes into the
-    URDF): the fits evaluate thousands of corrected robots, and rebuilding each from its URDF
-    costs ~50 ms where this costs ~1 ms."""
-
-    def __init__(self, robot: Robot, flange: str) -> None:
-        import pinocchio as pin  # lazy: start-up (pinocchio)
-
-        self.pin = pin
-        self.robot = robot
-        self.model = pin.Model(robot.model)
-        self.data = self.model.createData()
-        self.frame = robot.frame_id(flange)
-        support = set(self.model.supports[self.model.frames[self.frame].parentJoint])
-        ids = [self.model.getJointId(n) for n in robot.joint_names]
-        self.moving = [(j, jid) for j, jid in enumerate(ids) if jid in support]
-        self.placements = {jid: self.model.jointPlacements[jid].copy() for _, jid in self.moving}
-
-    def evaluate(self, Q: FloatArray, c: FloatArray, twists: bool) -> tuple[FloatArray, FloatArray | None]:
-        """``(T_base_flange (N, 4, 4), W (N, nq, 6, 6) or None)`` at ``Q (N, nq)``, corrections ``c (nq, 6)``."""
-        pin, model, data = self.pin, self.model, self.data
-        for j, jid in self.moving:
-            model.jointPlacements[jid] = self.placements[jid] * pin.SE3(rotation(c[j, 3:]), c[j, :3])
-        Q_pin = self.robot.to_pinocchio(Q)
-        T = np.empty((len(Q), 4, 4))
-        W = np.zeros((len(Q), self.robot.nq, 6, 6)) if twists else None
-        for n, q in enumerate(Q_pin):
-            pin.forwardKinematics(model, data, q)
-            T[n] = pin.updateFramePlacement(model, data, self.frame).homogeneous
-            if W is not None:
-                for j, jid in self.moving:
-                    origin = data.oMi[model.parents[jid]] * model.jointPlacements[jid]
-                    R, t = origin.rotation, origin.translation
-                    W[n, j, :3, :3] = R
-                    W[n, j, :3, 3:] = skew(t) @ R
-                    W[n, j, 3:, 3:] = R
-        return T, W
-
-
-@dataclass(frozen=True)
-class _Problem:
-    """One model on one data set: the residuals, their Jacobian, the prior."""
-
-    data: TrackerData
-    B: FloatArray  # (6 nq, K) kept correction directions
-    prior: FloatArray  # (K,) their prior SD
-    kinematics: _Kinematics
-
-    @property
-    def marker_size(self) -> int:
-        return 6 if self.data.six_d else 3
-
-    @property
-    def frame_size(self) -> int:
-        return 6 + self.marker_size
-
-    def corrections(self, theta: FloatArray) -> FloatArray:
-        return (self.B @ theta).reshape(self.data.robot.nq, 6)
-
-    def predict(self, s: _State, twists: bool = False) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray | None]:
-        """``(T_base_flange (N,4,4), p (N,3), R (N,3,3), W or None)`` at the data's postures."""
-        T_bf, W = self.kinematics.evaluate(self.data.Q, self.corrections(s.theta), twists)
-        T = s.T_tracker_base @ T_bf @ s.T_flange_marker
-        return T_bf, T[:, :3, 3], T[:, :3, :3], W
-
-    def residuals(self, s: _State) -> tuple[FloatArray, FloatArray | None]:
-        """``(N, 3)`` position residuals (predicted − measured, metres) and, 6-D, ``(N, 3)``
-        orientation residuals ``log(R_pred R_measᵀ)`` (radians, tracker frame)."""
-        _, p, R, _ = self.predict(s)
-        r_p = p - self.data.p
-        if self.data.R is None:
-            return r_p, None
-        return r_p, _log(R @ np.swapaxes(self.data.R, 1, 2))
-
-    def jacobian(self, s: _State) -> tuple[FloatArray, FloatArray | None]:
-        """``(N, 3, P)`` of the position residuals and, 6-D, ``(N, 3, P)`` of the orientation
-        residuals, with respect to ``(ξ_base, marker, θ)`` (module docstring's updates)."""
-        d = self.data
-        T_bf, _, R_pred, W = self.predict(s, twists=bool(self.B.shape[1]))
-        N, K, m = len(d.Q), self.B.shape[1], self.marker_size
-        R_tb = s.T_tracker_base[:3, :3]
-        p_fm = s.T_flange_marker[:3, 3]
-        x_b = T_bf[:, :3, :3] @ p_fm + T_bf[:, :3, 3]  # the marker in the base frame
-        motion = np.concatenate([np.broadcast_to(np.eye(3), (N, 3, 3)), -skew(x_b)], axis=2)  # (N, 3, 6)
-        Jp = np.zeros((N, 3, self.frame_size + K))
-        Jp[:, :, :6] = R_tb @ motion
-        R_tf = R_tb @ T_bf[:, :3, :3]
-        Jp[:, :, 6:9] = R_tf
-        if m == 6:
-            Jp[:, :, 9:12] = -R_tf @ skew(p_fm)
-        if W is not None:
-            Wc = np.einsum("njab,jbk->nak", W, self.B.reshape(d.robot.nq, 6, K))  # (N, 6, K)
-            Jp[:, :, self.frame_size :] = R_tb @ motion @ Wc
-        if d.R is None:
-            return Jp, None
-        Jo = np.zeros_like(Jp)
-        Jo[:, :, 3:6] = np.broadcast_to(R_tb, (N, 3, 3))
-        Jo[:, :, 9:12] = R_tf
-        if W is not None:
-            Jo[:, :, self.frame_size :] = R_tb @ Wc[:, 3:]
-        r_o = _log(R_pred @ np.swapaxes(d.R, 1, 2))
-        J_inv = np.array([np.linalg.inv(left_jacobian(r)) for r in r_o])
-        return Jp, J_inv @ Jo
-
-    def update(self, s: _State, step: FloatArray) -> _State:
-        m = self.marker_size
-        T_tb = s.T_tracker_base @ _exp(step[:6])
-        if m == 6:
-            T_fm = _exp(step[6:12]) @ s.T_flange_marker
-        else:
-            T_fm = s.T_flange_marker.copy()
-            T_fm[:3, 3] += step[6:9]
-        return _State(T_tb, T_fm, s.theta + step[self.frame_size :])
-
-    def normalised(self, s: _State, sigma: dict[str, float]) -> tuple[FloatArray, FloatArray, list[str]]:
-        """Stacked residuals and Jacobian over their noise levels, and each row's kind."""
-        r_p, r_o = self.residuals(s)
-        Jp, Jo = self.jacobian(s)
-        r = [r_p.ravel() / sigma["position"]]
-        J = [Jp.reshape(-1, Jp.shape[2]) / sigma["position"]]
-        kinds = ["position"] * r_p.size
-        if r_o is not None and Jo is not None:
-            r.append(r_o.ravel() / sigma["orientation"])
-            J.append(Jo.reshape(-1, Jo.shape[2]) / sigma["orientation"])
-            kinds += ["orientation"] * r_o.size
-        return np.concatenate(r), np.vstack(J), kinds
-
-    def augmented(self, s: _State, sigma: dict[str, float]) -> tuple[FloatArray, FloatArray, list[str]]:
-        """:meth:`normalised` with the prior's rows ``θ / prior`` appended."""
-        r, J, kinds = self.normalised(s, sigma)
-        K = len(self.prior)
-        if K:
-            rows = np.zeros((K, J.shape[1]))
-            rows[:, self.frame_size :] = np.diag(1.0 / self.prior)
-            r, J = np.concatenate([r, s.theta / self.prior]), np.vstack([J, rows])
-        return r, J, kinds
-
-    def solve(self, s: _State, sigma: dict[str, float]) -> _State:
-        """Gauss–Newton on the augmented problem, halving a step that raises the cost."""
-        r, J, _ = self.augmented(s, sigma)
-        cost = float(r @ r)
-        for _ in range(ITERATIONS):
-            step = np.linalg.lstsq(J, -r, rcond=None)[0]
-            for _ in range(HALVINGS):
-                trial = self.update(s, step)
-                r_t, J_t, _ = self.augmented(trial, sigma)
-                if float(r_t @ r_t) <= cost:
-                    break
-                step = step / 2
-            else:
-                break  # no step lowers the cost: at the minimum to rounding
-            gain = cost - float(r_t @ r_t)
-            s, r, J, cost = trial, r_t, J_t, float(r_t @ r_t)
-            if np.max(np.abs(step)) < STEP_TOLERANCE or gain <= COST_TOLERANCE * cost:
-                break
-        return s
-
-    def noise(self, s: _State, sigma: dict[str, float]) -> dict[str, float]:
-        """Each kind's noise level from the residuals, degrees of freedom less its rows' leverages."""
-        r, J, kinds = self.normalised(s, sigma)
-        A = self.augmented(s, sigma)[1]
-        h = np.einsum("ij,jk,ik->i", J, np.linalg.pinv(A.T @ A), J)
-        out = {}
-        for kind in dict.fromkeys(kinds):
-            rows = np.array([k == kind for k in kinds])
-            dof = rows.sum() - h[rows].sum()
-            if dof <= 0.5:
-                raise DegenerateDataError(f"tracker fit: no degrees of freedom left for the {kind} noise")
-            out[kind] = float(np.sqrt(np.sum((r[rows] * sigma[kind]) ** 2) / dof))
-        return out
-
-
-def _exp(xi: FloatArray) -> FloatArray:
-    """``(4, 4)`` ``T(exp(ω), v)`` of a step ``(v, ω)`` (:func:`corrected_robot`'s parameterisation)."""
+def _D(xi: FloatArray) -> FloatArray:
+    """``(4, 4)`` ``T(exp(ω), v)`` of ``ξ = (v, ω)`` (:func:`corrected_robot`'s parameterisation)."""
     return make_transform(rotation(xi[3:]), xi[:3])
 
 
 def _log(R: FloatArray) -> FloatArray:
     """``(N, 3)`` rotation vectors of ``(N, 3, 3)`` rotations."""
-    from scipy.spatial.transform import Rotation  # lazy: only 6-D data need it
-
     return Rotation.from_matrix(R).as_rotvec()
+
+
+@dataclass(frozen=True)
+class TrackerResiduals:
+    """The tracker's residuals (:class:`~brachycal.calibration.robot.arm_fit.ResidualModel`).
+
+    ``y = (ξ_base (6), marker (3 or 6))`` about starting frames: ``T_tracker_base = T0_base · T(ξ_base)``;
+    a 3-D marker at ``p0 + y_marker``, a 6-D one at ``T0_marker · T(ξ_marker)`` (``T(v, ω) =
+    [exp ω, v]``). Rows per posture: the position residual (3, group ``position``, metres) and,
+    6-D, ``log(R_pred R_measᵀ)`` (3, group ``orientation``, radians, tracker frame).
+    """
+
+    data: TrackerData
+    T0_base: FloatArray
+    T0_marker: FloatArray
+
+    @property
+    def groups(self) -> tuple[str, ...]:
+        return ("position", "orientation") if self.data.six_d else ("position",)
+
+    @property
+    def ny(self) -> int:
+        return 12 if self.data.six_d else 9
+
+    def y_scale(self) -> FloatArray:
+        return np.full(self.ny, 1e-3)
+
+    def frames(self, y: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """``(T_tracker_base, T_flange_marker)`` at ``y``."""
+        T_tb = self.T0_base @ _D(y[:6])
+        if self.data.six_d:
+            return T_tb, self.T0_marker @ _D(y[6:12])
+        T_fm = self.T0_marker.copy()
+        T_fm[:3, 3] += y[6:9]
+        return T_tb, T_fm
+
+    def evaluate(self, robot: Robot, y: FloatArray) -> Evaluation:
+        d = self.data
+        N, nc = len(d.Q), 6 * robot.nq
+        T_tb, T_fm = self.frames(y)
+        T_bf = robot.fk(d.flange, d.Q)
+        W = joint_twists(robot, d.Q, d.flange)
+        R_tb = T_tb[:3, :3]
+        x_b = T_bf[:, :3, :3] @ T_fm[:3, 3] + T_bf[:, :3, 3]  # the marker in the base frame
+        R_tf = R_tb @ T_bf[:, :3, :3]
+        r_p = x_b @ R_tb.T + T_tb[:3, 3] - d.p
+        J_c = (R_tb @ motion_rows(point_motion(x_b), W).reshape(N, 3, nc)).reshape(3 * N, nc)
+        J_y = np.zeros((N, 3, self.ny))
+        J_y[:, :, :3] = self.T0_base[:3, :3]
+        J_y[:, :, 3:6] = -R_tb @ skew(x_b) @ left_jacobian(-y[3:6])
+        if not d.six_d or d.R is None:
+            J_y[:, :, 6:9] = R_tf
+            return Evaluation(r_p.ravel(), J_c, J_y.reshape(3 * N, self.ny), np.zeros(3 * N, dtype=int))
+        J_y[:, :, 6:9] = R_tf @ self.T0_marker[:3, :3]
+        R_pred = R_tf @ T_fm[:3, :3]
+        r_o = _log(R_pred @ np.swapaxes(d.R, 1, 2))
+        J_inv = np.linalg.inv(np.array([left_jacobian(r) for r in r_o]))  # d log / d (world-side turn)
+        Jo_c = J_inv @ (R_tb @ W[:, :, 3:, :]).transpose(0, 2, 1, 3).reshape(N, 3, nc)
+        Jo_y = np.zeros((N, 3, self.ny))
+        Jo_y[:, :, 3:6] = R_tb @ left_jacobian(-y[3:6])
+        Jo_y[:, :, 9:12] = R_pred @ left_jacobian(-y[9:12])
+        Jo_y = J_inv @ Jo_y
+        return Evaluation(
+            np.concatenate([r_p.ravel(), r_o.ravel()]),
+            np.vstack([J_c, Jo_c.reshape(3 * N, nc)]),
+            np.vstack([J_y.reshape(3 * N, self.ny), Jo_y.reshape(3 * N, self.ny)]),
+            np.concatenate([np.zeros(3 * N, dtype=int), np.ones(3 * N, dtype=int)]),
+        )
 
 
 # --- starting values -------------------------------------------------------------------------
 
 
-def _start(data: TrackerData) -> tuple[FloatArray, FloatArray]:
+def start_frames(data: TrackerData) -> tuple[FloatArray, FloatArray]:
     """``(T_tracker_base, T_flange_marker)`` of the nominal robot: rigid registrations alternated
     with the marker's linear least squares (the frames' problem is nearly linear once near)."""
     T_bf = data.robot.fk(data.flange, data.Q)
     p_fm = np.zeros(3)
     T_tb = np.eye(4)
-    for _ in range(50):
+    for _ in range(START_ROUNDS):
         x_b = T_bf[:, :3, :3] @ p_fm + T_bf[:, :3, 3]
         T_tb = kabsch(x_b, data.p)
         A = (T_tb[:3, :3] @ T_bf[:, :3, :3]).reshape(-1, 3)
-        b = (data.p - T_tb[:3, 3] - (T_tb[:3, :3] @ T_bf[:, :3, 3].T).T).ravel()
+        b = (data.p - T_tb[:3, 3] - T_bf[:, :3, 3] @ T_tb[:3, :3].T).ravel()
         new = np.linalg.lstsq(A, b, rcond=None)[0]
-        if np.max(np.abs(new - p_fm)) < 1e-12:
-            p_fm = new
-            break
+        done = np.max(np.abs(new - p_fm)) < 1e-12
         p_fm = new
+        if done:
+            break
     R_fm = np.eye(3)
     if data.R is not None:
         M = np.sum(np.swapaxes(T_tb[:3, :3] @ T_bf[:, :3, :3], 1, 2) @ data.R, axis=0)
@@ -420,10 +273,8 @@ class TrackerFit:
         model: a name of :data:`TRACKER_MODELS`.
         T_tracker_base: the robot's base in the tracker's frame.
         T_flange_marker: the marker on the flange (3-D marker: identity rotation, position only).
-        corrections: ``(nq, 6)`` joint-origin corrections ``(v, ω)`` (metres, radians).
-        parameters: names of the estimated corrections (the kept base set).
-        dropped: names of the model's corrections the data cannot see (not estimated).
-        sigma: noise level per kind (``position`` metres, ``orientation`` radians).
+        arm: the arm fit (corrections ``(nq, 6)``, their posterior, identifiability, noise levels
+            ``position`` metres and ``orientation`` radians).
         position_residuals: ``(N, 3)`` predicted − measured (metres, tracker frame).
         orientation_residuals: ``(N, 3)`` (radians) or ``None``.
     """
@@ -431,12 +282,22 @@ class TrackerFit:
     model: str
     T_tracker_base: FloatArray
     T_flange_marker: FloatArray
-    corrections: FloatArray
-    parameters: tuple[str, ...]
-    dropped: tuple[str, ...]
-    sigma: dict[str, float]
+    arm: ArmFit
     position_residuals: FloatArray
     orientation_residuals: FloatArray | None
+
+    @property
+    def corrections(self) -> FloatArray:
+        return self.arm.corrections
+
+    @property
+    def parameters(self) -> list[str]:
+        """Names of the estimated corrections (the model's base set)."""
+        return self.arm.selection.names
+
+    @property
+    def sigma(self) -> dict[str, float]:
+        return self.arm.sigma
 
     def robot(self, nominal: Robot) -> Robot:
         return corrected_robot(nominal, self.corrections)
@@ -447,33 +308,38 @@ class TrackerFit:
         return T[:, :3, 3], T[:, :3, :3]
 
 
-def select_parameters(
-    data: TrackerData, model: str, accuracy: RobotAccuracy
-) -> tuple[FloatArray, FloatArray, list[str], list[str]]:
-    """The model's corrections the data can see: ``(B (6nq, K), prior (K,), kept, dropped)``.
+def model_selection(robot: Robot, model: str, flange: str) -> ParameterSelection:
+    """The corrections a model may estimate (before the base set): none (``frames``), each joint's
+    zero (``offsets``: the component along a revolute joint's rotation axis or a prismatic one's
+    slide, which must be a coordinate axis of the joint's frame), or all (``joints``)."""
+    if model not in TRACKER_MODELS:
+        raise InputError(f"unknown model {model!r}; expected one of {', '.join(TRACKER_MODELS)}")
+    chain = ParameterSelection.chain(robot, flange)
+    if model == "joints":
+        return chain
+    free = np.zeros_like(chain.free)
+    if model == "offsets":
+        for j, name in enumerate(robot.joint_names):
+            if not chain.free[j, 0]:
+                continue
+            axis = np.abs(robot.joint_axis(name))
+            k = int(np.argmax(axis))
+            if axis[k] < 1 - 1e-12:
+                raise InputError(f"joint {name!r}: its axis is not a coordinate axis; use the 'joints' model")
+            free[j, k + (0 if robot.in_metres[j] else 3)] = True
+    return ParameterSelection(chain.joint_names, free)
 
-    At the nominal robot's frames fit, the candidate columns (prior units) projected off the
-    frames' span, ranked by pivoted QR; those past the structural rank
-    (:data:`~brachycal.calibration.robot.identifiability.STRUCTURAL_RCOND`) are dropped."""
-    B_all, names = candidate_columns(data.robot, model, data.flange)
-    sd = prior_sd(data.robot, accuracy)
-    prior_all = np.array([np.sqrt(np.sum((b * sd) ** 2)) for b in B_all.T])
-    if not names:
-        return B_all, prior_all, [], []
-    frames = fit_tracker(data, "frames", accuracy)
-    probe = _Problem(data, B_all, prior_all, _Kinematics(data.robot, data.flange))
-    s = _State(frames.T_tracker_base, frames.T_flange_marker, np.zeros(len(names)))
-    _, J, _ = probe.normalised(s, frames.sigma)
-    J_f, J_c = J[:, : probe.frame_size], J[:, probe.frame_size :] * prior_all
-    Q, _ = np.linalg.qr(J_f)
-    projected = J_c - Q @ (Q.T @ J_c)
-    _, R, pivots = scipy.linalg.qr(projected, mode="economic", pivoting=True)
-    diag = np.abs(np.diag(R))
-    rank = int(np.sum(diag > diag[0] * STRUCTURAL_RCOND)) if diag.size and diag[0] > 0 else 0
-    keep = sorted(pivots[:rank].tolist())
-    kept = [names[k] for k in keep]
-    dropped = [n for n in names if n not in kept]
-    return B_all[:, keep], prior_all[keep], kept, dropped
+
+def select_parameters(data: TrackerData, model: str, accuracy: RobotAccuracy) -> ParameterSelection:
+    """The model's corrections the data can see (:meth:`ParameterSelection.base_set` at the
+    starting frames, the frames free)."""
+    selection = model_selection(data.robot, model, data.flange)
+    if not selection.size:
+        return selection
+    residuals = TrackerResiduals(data, *start_frames(data))
+    evaluation = residuals.evaluate(data.robot, np.zeros(residuals.ny))
+    w = 1.0 / np.array([START_SIGMA[g] for g in residuals.groups])[evaluation.group]
+    return selection.base_set(evaluation.J_c * w[:, None], evaluation.J_y * w[:, None], prior_sd(data.robot, accuracy))
 
 
 def fit_tracker(
@@ -481,47 +347,37 @@ def fit_tracker(
     model: str = "frames",
     accuracy: RobotAccuracy = TRACKER_ACCURACY,
     *,
-    selection: tuple[FloatArray, FloatArray, list[str], list[str]] | None = None,
+    selection: ParameterSelection | None = None,
 ) -> TrackerFit:
-    """Fit ``model`` (:data:`TRACKER_MODELS`) to ``data`` (module docstring).
+    """Fit ``model`` (:data:`TRACKER_MODELS`) to ``data`` (module docstring) with
+    :func:`~brachycal.calibration.robot.arm_fit.fit_arm`.
 
     ``selection``: :func:`select_parameters`' result, reused across folds (default: computed).
 
     Raises:
         DegenerateDataError: too few postures for the frames and noise levels.
     """
-    n_rows = len(data.Q) * (6 if data.six_d else 3)
-    frame_size = 12 if data.six_d else 9
-    if n_rows <= frame_size:
+    residuals = TrackerResiduals(data, *start_frames(data))
+    n_rows = len(data.Q) * len(residuals.groups) * 3
+    if n_rows <= residuals.ny:
         raise DegenerateDataError(
-            f"tracker fit: {len(data.Q)} postures give {n_rows} measurements for {frame_size} frame unknowns"
+            f"tracker fit: {len(data.Q)} postures give {n_rows} measurements for {residuals.ny} frame unknowns"
         )
-    if model == "frames":
-        B, prior, kept, dropped = np.zeros((6 * data.robot.nq, 0)), np.zeros(0), [], []
-    else:
-        B, prior, kept, dropped = selection if selection is not None else select_parameters(data, model, accuracy)
-    problem = _Problem(data, B, prior, _Kinematics(data.robot, data.flange))
-    T_tb, T_fm = _start(data)
-    s = _State(T_tb, T_fm, np.zeros(B.shape[1]))
-    sigma = dict(START_SIGMA)
-    for _ in range(NOISE_ROUNDS):
-        s = problem.solve(s, sigma)
-        sigma = {**sigma, **problem.noise(s, sigma)}
-    s = problem.solve(s, sigma)
-    r_p, r_o = problem.residuals(s)
-    if not data.six_d:
-        sigma.pop("orientation", None)
-    return TrackerFit(
-        model,
-        s.T_tracker_base,
-        s.T_flange_marker,
-        problem.corrections(s.theta),
-        tuple(kept),
-        tuple(dropped),
-        sigma,
-        r_p,
-        r_o,
+    chosen = selection if selection is not None else select_parameters(data, model, accuracy)
+    arm = fit_arm(
+        data.robot,
+        residuals,
+        np.zeros(residuals.ny),
+        chosen,
+        {g: START_SIGMA[g] for g in residuals.groups},
+        accuracy,
+        estimate_noise=residuals.groups,
     )
+    T_tb, T_fm = residuals.frames(arm.y)
+    r = arm.residuals.r
+    N = len(data.Q)
+    r_o = r[3 * N :].reshape(N, 3) if data.six_d else None
+    return TrackerFit(model, T_tb, T_fm, arm, r[: 3 * N].reshape(N, 3), r_o)
 
 
 def leave_one_out(
@@ -532,7 +388,7 @@ def leave_one_out(
     """``(N, 3)`` position errors (metres) and, 6-D, ``(N, 3)`` orientation errors (radians) of
     each posture predicted by a fit of ``model`` made without it (the parameter selection is
     made once on all postures: it is structural, not a fit to the values)."""
-    selection = None if model == "frames" else select_parameters(data, model, accuracy)
+    selection = select_parameters(data, model, accuracy)
     N = len(data.Q)
     e_p = np.zeros((N, 3))
     e_o = np.zeros((N, 3)) if data.six_d else None
