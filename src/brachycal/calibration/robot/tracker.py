@@ -330,29 +330,33 @@ def model_selection(robot: Robot, model: str, flange: str) -> ParameterSelection
     return ParameterSelection(chain.joint_names, free)
 
 
-def select_parameters(data: TrackerData, model: str, accuracy: RobotAccuracy) -> ParameterSelection:
+def select_parameters(data: TrackerData, model: str, accuracy: RobotAccuracy | None) -> ParameterSelection:
     """The model's corrections the data can see (:meth:`ParameterSelection.base_set` at the
-    starting frames, the frames free)."""
+    starting frames, the frames free; columns in prior units, or metres and radians without a prior)."""
     selection = model_selection(data.robot, model, data.flange)
     if not selection.size:
         return selection
     residuals = TrackerResiduals(data, *start_frames(data))
     evaluation = residuals.evaluate(data.robot, np.zeros(residuals.ny))
     w = 1.0 / np.array([START_SIGMA[g] for g in residuals.groups])[evaluation.group]
-    return selection.base_set(evaluation.J_c * w[:, None], evaluation.J_y * w[:, None], prior_sd(data.robot, accuracy))
+    scale = prior_sd(data.robot, accuracy) if accuracy is not None else np.ones(6 * data.robot.nq)
+    return selection.base_set(evaluation.J_c * w[:, None], evaluation.J_y * w[:, None], scale)
 
 
 def fit_tracker(
     data: TrackerData,
     model: str = "frames",
-    accuracy: RobotAccuracy = TRACKER_ACCURACY,
+    accuracy: RobotAccuracy | None = TRACKER_ACCURACY,
     *,
     selection: ParameterSelection | None = None,
+    estimate_noise: bool = True,
 ) -> TrackerFit:
     """Fit ``model`` (:data:`TRACKER_MODELS`) to ``data`` (module docstring) with
     :func:`~brachycal.calibration.robot.arm_fit.fit_arm`.
 
     ``selection``: :func:`select_parameters`' result, reused across folds (default: computed).
+    ``accuracy`` ``None``: no prior (plain least squares on the base set). ``estimate_noise``
+    false: the levels are held at :data:`START_SIGMA` (exact data, whose levels are rounding).
 
     Raises:
         DegenerateDataError: too few postures for the frames and noise levels.
@@ -371,7 +375,7 @@ def fit_tracker(
         chosen,
         {g: START_SIGMA[g] for g in residuals.groups},
         accuracy,
-        estimate_noise=residuals.groups,
+        estimate_noise=residuals.groups if estimate_noise else (),
     )
     T_tb, T_fm = residuals.frames(arm.y)
     r = arm.residuals.r
@@ -383,7 +387,7 @@ def fit_tracker(
 def leave_one_out(
     data: TrackerData,
     model: str,
-    accuracy: RobotAccuracy = TRACKER_ACCURACY,
+    accuracy: RobotAccuracy | None = TRACKER_ACCURACY,
 ) -> tuple[FloatArray, FloatArray | None]:
     """``(N, 3)`` position errors (metres) and, 6-D, ``(N, 3)`` orientation errors (radians) of
     each posture predicted by a fit of ``model`` made without it (the parameter selection is
@@ -456,7 +460,7 @@ def _deg(e: FloatArray | None) -> float | None:
 
 def identify_from_tracker(
     data: TrackerData,
-    accuracy: RobotAccuracy = TRACKER_ACCURACY,
+    accuracy: RobotAccuracy | None = TRACKER_ACCURACY,
     models: tuple[str, ...] = TRACKER_MODELS,
 ) -> TrackerIdentification:
     """Score ``models`` (smallest first) by leave-one-out and return the supported one (module
