@@ -46,6 +46,8 @@ T_TRACKER_BASE = make_transform(Rotation.from_rotvec([0.3, -1.2, 2.0]).as_matrix
 T_FLANGE_MARKER = make_transform(Rotation.from_rotvec([0.2, 0.1, -0.4]).as_matrix(), [0.03, -0.02, 0.11])
 FIGAROH = ("figaroh_mocap",)
 SPECS = ROOT / "benchmarks" / "figaroh_mocap"
+SPEC_HEAD = 'format = "brachycal-tracker-columns/1"\njoints = ["a"]\n'
+POSITION = '[position]\ncolumns = ["x", "y", "z"]\n'
 
 
 @pytest.fixture(scope="module")
@@ -303,12 +305,11 @@ def test_reader_refuses_in_one_line_naming_the_field(tmp_path, case, rows, heade
         ('format = "other"\n', "format"),
         ('format = "brachycal-tracker-columns/1"\njoints = ["a"]\n', "position"),
         (
-            'format = "brachycal-tracker-columns/1"\njoints = ["a"]\n[position]\ncolumns = ["x", "y", "z"]\nunit = "cm"\n',
+            SPEC_HEAD + POSITION + 'unit = "cm"\n',
             "position.unit",
         ),
         (
-            'format = "brachycal-tracker-columns/1"\njoints = ["a"]\n[position]\ncolumns = ["x", "y", "z"]\nunit = "m"\n'
-            '[orientation]\ncolumns = ["a1", "a2", "a3"]\nkind = "euler"\n',
+            SPEC_HEAD + POSITION + 'unit = "m"\n[orientation]\ncolumns = ["a1", "a2", "a3"]\nkind = "euler"\n',
             "orientation.kind",
         ),
     ],
@@ -326,8 +327,8 @@ def test_table_placed_on_a_robot_refuses_a_joint_it_lacks_or_beyond_limits(panda
     columns = TrackerColumns(joints=ARM, position=("x", "y", "z"))
     table = read_tracker_table(_write(tmp_path / "t.csv", rows, header), columns)
     assert tracker_data(panda, table).Q.shape == (5, panda.nq)
-    bad = read_tracker_table(_write(tmp_path / "b.csv", [r[:3] + [1.0] + r[4:] for r in rows], header), columns)
-    with pytest.raises(InputError, match="panda_joint4.*limits|limits.*panda_joint4"):
+    bad = read_tracker_table(_write(tmp_path / "b.csv", [[*r[:3], 1.0, *r[4:]] for r in rows], header), columns)
+    with pytest.raises(InputError, match=r"panda_joint4.*limits|limits.*panda_joint4"):
         tracker_data(panda, bad)
     short = TrackerColumns(joints=ARM[:-1], position=("x", "y", "z"))
     with pytest.raises(InputError, match="panda_joint7"):
