@@ -301,3 +301,33 @@ def test_deflection_columns_are_the_joint_frames_turns(panda):
             c[j, 3:] = turn[:, a] * moments[n, j, a] * k
             moved = flange_points(corrected_robot(panda, c), Q[n : n + 1], FLANGE, TIP).p[0]
             assert np.allclose(G[n] * k, moved - fp.p[n], atol=1e-3 * np.abs(G[n] * k).max() + 1e-13)
+
+
+def test_cli_prints_held_out_first_and_writes_a_urdf_that_reproduces_them(tmp_path, capsys):
+    """``brachycal robot identify touches`` on MUKCa's panda_2: the held-out places come first, and
+    the written URDF alone (its tool frame at the identified tip) gives the figures printed."""
+    import json
+
+    from brachycal.cli.main import main
+
+    root = reference("mukca_touches")
+    folders = sorted(str(p) for p in (root / "data" / "panda_2_clean").iterdir())
+    code = main(
+        [
+            "robot", "identify", "touches", *folders,
+            "--urdf", str(root / "urdf" / "panda.urdf"), "--tool-frame", "ball_link",
+            "--train", "front_center", "--distance-mm", "50",
+            "--robot-accuracy-mm", "0.3", "--robot-accuracy-deg", "0.1", "--out", str(tmp_path / "out"),
+        ]
+    )  # fmt: skip
+    assert code == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("held-out places (7)") and lines[8].startswith("training places (1)")
+    report = json.loads((tmp_path / "out" / "identification.json").read_text())
+    calibrated = Robot.load(tmp_path / "out" / "robot.urdf")
+    for name in ("back_left", "mid_right"):
+        Q = [np.loadtxt(root / "data" / "panda_2_clean" / name / f"hole_{k}.csv", delimiter=",") for k in (0, 1)]
+        P = [calibrated.fk("ball_link", np.c_[q, np.zeros(len(q))])[:, :3, 3] for q in Q]
+        scatter = np.mean([np.mean(np.linalg.norm(p - p.mean(axis=0), axis=1)) for p in P])
+        assert scatter * 1e3 == pytest.approx(report["identified"][name]["scatter_mm"], abs=1e-6)
+        assert scatter < report["nominal"][name]["scatter_mm"] * 1e-3 / 5

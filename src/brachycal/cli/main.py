@@ -42,6 +42,7 @@ from brachycal.cli.nwire import segment as nwire_segment
 from brachycal.cli.plan import check as plan_check
 from brachycal.cli.plan import excitation as plan_excitation
 from brachycal.cli.plan import grid as plan
+from brachycal.cli.robot import identify as robot_identify
 from brachycal.errors import BrachycalError
 
 DESCRIPTION = """\
@@ -81,6 +82,8 @@ start here:
                                       multi-wedge, arbitrary-wire or N-wire phantom calibration
   brachycal temporal VIDEO.mha TRACKER.mha --out lag.json
                                       lag of the tracker (or joint log) behind the ultrasound frames
+  brachycal robot identify touches FOLDER... --urdf URDF --tool-frame FRAME --train PLACE --out DIR
+                                      an arm's joint geometry from touches of fixed points
   brachycal study --out DIR           how many samples? truth error vs LOO on the twin
   brachycal design --out DIR          which sample design gives most accuracy per robot minute
 """
@@ -115,6 +118,7 @@ COMMANDS = {
     "verify": verify,
     "examples": examples,
     "tips": tips,
+    robot_identify.NAME: robot_identify,
 }
 
 

@@ -274,9 +274,7 @@ def fit_arm(
     steps = 0
     rounds = rounds if estimated.any() else 1
     for _ in range(rounds):
-        x, y, taken = _gauss_newton(
-            nominal, model, selection, x, y, level, scale, y_scale, prior, iterations
-        )
+        x, y, taken = _gauss_newton(nominal, model, selection, x, y, level, scale, y_scale, prior, iterations)
         steps += taken
         evaluation = model.evaluate(corrected_robot(nominal, selection.expand(x)), y)
         A, _ = _system(evaluation, index, x, y, scale, level, prior)
@@ -354,7 +352,9 @@ def _gauss_newton(
     index = selection.index
 
     def system(x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
-        return _system(model.evaluate(corrected_robot(nominal, selection.expand(x)), y), index, x, y, scale, level, prior)
+        return _system(
+            model.evaluate(corrected_robot(nominal, selection.expand(x)), y), index, x, y, scale, level, prior
+        )
 
     A, b = system(x, y)
     cost = float(b @ b)

@@ -28,7 +28,9 @@ from brachycal.calibration.robot.arm_fit import (
     deflection_columns,
     fit_arm,
     flange_points,
+    gravity_moments,
 )
+from brachycal.calibration.robot.identifiability import COMPONENTS
 from brachycal.calibration.robot.identification import prior_sd
 from brachycal.calibration.robot_accuracy import RobotAccuracy
 from brachycal.data.formats.touches import read_touch_folder
@@ -314,3 +316,156 @@ def touch_scatter(
         scatter.append(float(np.mean(np.linalg.norm(p - means[-1], axis=1))))
     errors = {(i, j): abs(float(np.linalg.norm(means[i] - means[j])) - d) for (i, j), d in place.distances.items()}
     return TouchScatter(np.array(scatter), errors)
+
+
+@dataclass(frozen=True)
+class TouchReport:
+    """A touch identification judged place by place: what ``brachycal robot identify touches`` reports.
+
+    Attributes:
+        result: the identification (trained on :attr:`train`).
+        train: the training places' names.
+        nominal: per place, MUKCa's figures on the nominal URDF with its tool frame.
+        identified: per place, on the identified robot with the identified tip (and compliance).
+        geometry_only: per place, on the identified robot and tip without the compliance terms
+            (what the written URDF alone gives); equal to :attr:`identified` without compliance.
+        tool_frame: the URDF frame of the touching tip.
+    """
+
+    result: TouchResult
+    train: tuple[str, ...]
+    nominal: dict[str, TouchScatter]
+    identified: dict[str, TouchScatter]
+    geometry_only: dict[str, TouchScatter]
+    tool_frame: str
+
+    @property
+    def held_out(self) -> list[str]:
+        return [name for name in self.nominal if name not in self.train]
+
+    def calibrated_robot(self, nominal: Robot) -> Robot:
+        """The corrected robot with the identified tip written into the tool frame's fixed joint."""
+        parent, T_parent_tool = nominal.tool_transform(self.tool_frame)
+        T_flange_parent = nominal.transform(self.result.flange, parent, np.zeros(nominal.nq))
+        T = T_parent_tool.copy()
+        T[:3, 3] = np.linalg.solve(T_flange_parent[:3, :3], self.result.tip - T_flange_parent[:3, 3])
+        return self.result.robot(nominal).with_tool_transform(self.tool_frame, T)
+
+    def as_json(self) -> dict[str, object]:
+        def figures(scores: dict[str, TouchScatter]) -> dict[str, object]:
+            return {
+                name: {
+                    "scatter_mm": s.mean_scatter_m * 1e3,
+                    "distance_error_mm": {f"{i}-{j}": e * 1e3 for (i, j), e in s.distance_error_m.items()},
+                }
+                for name, s in scores.items()
+            }
+
+        fit = self.result.fit
+        return {
+            "protocol": "touches of fixed points",
+            "train": list(self.train),
+            "held_out": list(self.held_out),
+            "flange": self.result.flange,
+            "tool_frame": self.tool_frame,
+            "tip_m": self.result.tip.tolist(),
+            "tip_sd_m": np.sqrt(np.diag(fit.y_covariance())[:3]).tolist(),
+            "touch_noise_sd_m": fit.sigma["touch"],
+            "corrections": {
+                name: dict(zip(COMPONENTS, map(float, c), strict=True))
+                for name, c in zip(fit.joint_names, fit.corrections, strict=True)
+            },
+            "parameterisation": "per joint origin: T_parent_joint <- T_parent_joint @ T(exp(w), v); metres, radians",
+            "free_corrections": fit.selection.names,
+            "compliance_rad_per_nm": {
+                f"{fit.joint_names[j]}.{'xyz'[a]}": float(k)
+                for (j, a), k in zip(self.result.compliant, self.result.compliance, strict=True)
+            },
+            "prior": fit.accuracy.as_json() if fit.accuracy is not None else None,
+            "identified_combinations": fit.identifiability.identified,
+            "structural_rank": fit.identifiability.structural_rank,
+            "nominal": figures(self.nominal),
+            "identified": figures(self.identified),
+            "urdf_only": figures(self.geometry_only),
+        }
+
+
+def identify_touch_folders(
+    nominal: Robot,
+    folders: Sequence[str | os.PathLike[str]],
+    tool_frame: str,
+    train: Sequence[str],
+    accuracy: RobotAccuracy,
+    *,
+    distance_m: float | None = None,
+    dynamics: Robot | None = None,
+) -> TouchReport:
+    """Identify ``nominal`` from the touch folders ``train`` names and judge it on every place.
+
+    Args:
+        nominal: the robot's URDF; ``tool_frame`` is the touching tip's frame in it (fixed to the
+            flange, its link: the start of the tip, and where the identified tip is written).
+        folders: place folders (:mod:`brachycal.data.formats.touches`).
+        train: the places (folder names) to identify from; the others are held out.
+        accuracy: the stated accuracy (the prior).
+        distance_m: the known distance between points 0 and 1 of every place (None: unknown).
+        dynamics: a URDF of the same arm with masses: joint compliance under gravity is fitted
+            (each revolute arm joint that gravity loads, about its axis).
+
+    Raises:
+        InputError: a folder the reader refuses, a training place not among them, a tool frame
+            not fixed to a link.
+    """
+    flange, T_flange_tool = nominal.tool_transform(tool_frame)
+    # The tip's link may be several fixed joints from the last moving one: the tip lives in it.
+    distances = {(0, 1): float(distance_m)} if distance_m is not None else {}
+    places = read_places(nominal, flange, folders, distances)
+    names = [p.name for p in places]
+    for name in train:
+        if name not in names:
+            raise InputError(f"training place {name!r} is not among the folders ({', '.join(names)})")
+    if len(set(train)) != len(train):
+        raise InputError("a training place is named twice")
+    compliant: tuple[tuple[int, int], ...] = ()
+    if dynamics is not None:
+        places = [
+            TouchPlace(p.name, p.touches, p.distances, tuple(gravity_moments(dynamics, nominal, Q) for Q in p.touches))
+            for p in places
+        ]
+        compliant = _loaded_joints(nominal, flange, [p for p in places if p.name in train])
+    fit_places = [p for p in places if p.name in train]
+    result = identify_touches(
+        nominal, fit_places, flange, accuracy, tip=T_flange_tool[:3, 3], selection="chain", compliant=compliant
+    )
+    robot = result.robot(nominal)
+    tip0 = T_flange_tool[:3, 3]
+    return TouchReport(
+        result,
+        tuple(train),
+        {p.name: touch_scatter(nominal, p, flange, tip0) for p in places},
+        {p.name: touch_scatter(robot, p, flange, result.tip, result.compliant, result.compliance) for p in places},
+        {p.name: touch_scatter(robot, p, flange, result.tip) for p in places},
+        tool_frame,
+    )
+
+
+#: A joint is compliant under gravity in the fit when its RMS gravity torque over the training
+#: touches reaches this fraction of the most loaded joint's (a vertical first axis carries none).
+LOADED_FRACTION = 1e-3
+
+
+def _loaded_joints(robot: Robot, flange: str, places: Sequence[TouchPlace]) -> tuple[tuple[int, int], ...]:
+    """``(j, a)`` terms of the revolute arm joints whose gravity torque about their axis is not negligible."""
+    joints = [robot.joint_names.index(n) for n in arm_joints(robot, flange) if robot.joint_kinds[n] != "prismatic"]
+    rms = {}
+    for j in joints:
+        axis = robot.joint_axis(robot.joint_names[j])
+        torques = np.concatenate([m[:, j] @ axis for p in places for m in (p.moments or ())])
+        rms[j] = float(np.sqrt(np.mean(torques**2))) if torques.size else 0.0
+    top = max(rms.values(), default=0.0)
+    terms = []
+    for j in joints:
+        if top > 0 and rms[j] >= LOADED_FRACTION * top:
+            axis = np.abs(robot.joint_axis(robot.joint_names[j]))
+            terms.append((j, int(np.argmax(axis))))
+    return tuple(terms)
