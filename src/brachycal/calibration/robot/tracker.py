@@ -36,6 +36,7 @@ over the held-out postures; otherwise the smaller model is returned and the repo
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -43,10 +44,11 @@ from scipy.spatial.transform import Rotation
 
 from brachycal.calibration.chain.robot_terms import joint_twists, motion_rows, point_motion
 from brachycal.calibration.robot.arm_fit import ArmFit, Evaluation, ParameterSelection, fit_arm
+from brachycal.calibration.robot.identifiability import COMPONENTS
 from brachycal.calibration.robot.identification import corrected_robot, prior_sd
 from brachycal.calibration.robot_accuracy import RobotAccuracy
 from brachycal.calibration.sequential.registration import kabsch
-from brachycal.data.formats.tracker_table import TrackerTable
+from brachycal.data.formats.tracker_table import TrackerTable, read_tracker_columns, read_tracker_table
 from brachycal.errors import DegenerateDataError, InputError
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, left_jacobian, make_transform, rotation, skew
@@ -61,6 +63,7 @@ __all__ = [
     "TrackerResiduals",
     "fit_tracker",
     "identify_from_tracker",
+    "identify_tracker_file",
     "leave_one_out",
     "model_selection",
     "select_parameters",
@@ -242,14 +245,14 @@ def start_frames(data: TrackerData) -> tuple[FloatArray, FloatArray]:
     """``(T_tracker_base, T_flange_marker)`` of the nominal robot: rigid registrations alternated
     with the marker's linear least squares (the frames' problem is nearly linear once near)."""
     T_bf = data.robot.fk(data.flange, data.Q)
-    p_fm = np.zeros(3)
+    p_fm: FloatArray = np.zeros(3)
     T_tb = np.eye(4)
     for _ in range(START_ROUNDS):
         x_b = T_bf[:, :3, :3] @ p_fm + T_bf[:, :3, 3]
         T_tb = kabsch(x_b, data.p)
         A = (T_tb[:3, :3] @ T_bf[:, :3, :3]).reshape(-1, 3)
         b = (data.p - T_tb[:3, 3] - T_bf[:, :3, 3] @ T_tb[:3, :3].T).ravel()
-        new = np.linalg.lstsq(A, b, rcond=None)[0]
+        new = np.asarray(np.linalg.lstsq(A, b, rcond=None)[0], dtype=float)
         done = np.max(np.abs(new - p_fm)) < 1e-12
         p_fm = new
         if done:
@@ -433,6 +436,46 @@ class TrackerIdentification:
     chosen: str
     reason: str
     fit: TrackerFit
+    data: TrackerData
+    accuracy: RobotAccuracy | None
+
+    def as_json(self) -> dict[str, object]:
+        """The figures, the choice, the frames and the chosen model's corrections (mm, deg, SI matrices)."""
+        fit = self.fit
+        corrections = {
+            name: dict(zip(COMPONENTS, map(float, c), strict=True))
+            for name, c in zip(self.data.robot.joint_names, fit.corrections, strict=True)
+            if np.any(c != 0.0)
+        }
+        noise = {"position_mm": fit.sigma["position"] * 1e3}
+        if "orientation" in fit.sigma:
+            noise["orientation_deg"] = float(np.degrees(fit.sigma["orientation"]))
+        return {
+            "protocol": "tracker",
+            "postures": len(self.data.Q),
+            "marker": "6-D" if self.data.six_d else "3-D",
+            "flange": self.data.flange,
+            "models": {
+                s.model: {
+                    "parameters": s.parameters,
+                    "loo_position_mm_per_coordinate": s.loo_position_mm,
+                    "training_position_mm_per_coordinate": s.training_position_mm,
+                    "loo_orientation_deg": s.loo_orientation_deg,
+                    "training_orientation_deg": s.training_orientation_deg,
+                    "loo_change_vs_previous_choice_mm2": None if s.vs_chosen is None else list(s.vs_chosen),
+                }
+                for s in self.scores
+            },
+            "chosen": self.chosen,
+            "reason": self.reason,
+            "T_tracker_base": fit.T_tracker_base.tolist(),
+            "T_flange_marker": fit.T_flange_marker.tolist(),
+            "noise": noise,
+            "estimated": fit.parameters,
+            "parameterisation": "per joint origin: T_parent_joint <- T_parent_joint @ T(exp(w), v); metres, radians",
+            "corrections": corrections,
+            "prior": None if self.accuracy is None else self.accuracy.as_json(),
+        }
 
     def summary(self) -> list[str]:
         lines = []
@@ -462,38 +505,46 @@ def identify_from_tracker(
     data: TrackerData,
     accuracy: RobotAccuracy | None = TRACKER_ACCURACY,
     models: tuple[str, ...] = TRACKER_MODELS,
+    *,
+    model: str | None = None,
 ) -> TrackerIdentification:
     """Score ``models`` (smallest first) by leave-one-out and return the supported one (module
     docstring): each richer model replaces the chosen one only if its held-out mean squared
-    position error is lower by more than the paired differences' standard error."""
+    position error is lower by more than the paired differences' standard error. ``model``:
+    return that one whatever the scores say (it is scored too, after the frames alone)."""
+    forced = model
+    if forced is not None:
+        if forced not in TRACKER_MODELS:
+            raise InputError(f"unknown model {forced!r}; expected one of {', '.join(TRACKER_MODELS)}")
+        models = ("frames",) if forced == "frames" else ("frames", forced)
     scores: list[ModelScore] = []
     fits: dict[str, TrackerFit] = {}
     chosen, chosen_sq = "", np.zeros(0)
     reasons: list[str] = []
-    for model in models:
-        fit = fit_tracker(data, model, accuracy)
-        e_p, e_o = leave_one_out(data, model, accuracy)
-        fits[model] = fit
+    for name in models:
+        fit = fit_tracker(data, name, accuracy)
+        e_p, e_o = leave_one_out(data, name, accuracy)
+        fits[name] = fit
         sq = np.sum(e_p**2, axis=1) / 3 * 1e6  # mm² per coordinate, per held-out posture
         versus = None
         if not chosen:
-            chosen, chosen_sq = model, sq
-            reasons.append(f"{model}: the smallest model")
+            chosen, chosen_sq = name, sq
+            reasons.append(f"{name}: the smallest model")
         else:
             d = sq - chosen_sq
             mean, se = float(np.mean(d)), float(np.std(d, ddof=1) / np.sqrt(len(d)))
             versus = (mean, se)
             if mean < -se:
-                reasons.append(f"{model} beats {chosen} by {-mean:.3g} ± {se:.3g} mm² (LOO)")
-                chosen, chosen_sq = model, sq
+                reasons.append(f"{name} beats {chosen} by {-mean:.3g} ± {se:.3g} mm² (LOO)")
+                chosen, chosen_sq = name, sq
             else:
                 reasons.append(
-                    f"{model} not supported: LOO change {mean:+.3g} ± {se:.3g} mm² vs {chosen}, "
+                    f"{name} not supported: LOO change {mean:+.3g} ± {se:.3g} mm² vs {chosen}, "
                     "not better by more than its standard error"
                 )
         scores.append(
             ModelScore(
-                model,
+                name,
                 (12 if data.six_d else 9) + len(fit.parameters),
                 _per_coordinate_mm(e_p),
                 _per_coordinate_mm(fit.position_residuals),
@@ -503,4 +554,22 @@ def identify_from_tracker(
                 versus,
             )
         )
-    return TrackerIdentification(tuple(scores), chosen, "; ".join(reasons), fits[chosen])
+    if forced is not None and forced != chosen:
+        reasons.append(f"{forced} returned as asked")
+        chosen = forced
+    return TrackerIdentification(tuple(scores), chosen, "; ".join(reasons), fits[chosen], data, accuracy)
+
+
+def identify_tracker_file(
+    robot: Robot,
+    table: str | os.PathLike[str],
+    columns: str | os.PathLike[str],
+    accuracy: RobotAccuracy | None = TRACKER_ACCURACY,
+    *,
+    flange: str | None = None,
+    model: str | None = None,
+) -> TrackerIdentification:
+    """:func:`identify_from_tracker` of a tracker table file read with its column spec file
+    (:func:`~brachycal.data.formats.tracker_table.read_tracker_table`)."""
+    data = tracker_data(robot, read_tracker_table(table, read_tracker_columns(columns)), flange)
+    return identify_from_tracker(data, accuracy, model=model)
