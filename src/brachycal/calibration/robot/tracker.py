@@ -1,37 +1,17 @@
 """Robot identification from an external tracker: any arm, a marker on it seen in 3-D or 6-D.
 
-Each posture ``n`` has joint values ``q_n`` and the tracker's measurement of a marker rigidly on a
-flange: its position ``p_tracker_marker`` (and, 6-D, its orientation ``R_tracker_marker``). Neither
-the tracker's frame nor the marker's place on the flange is known. The model::
+``T_tracker_marker(n) = T_tracker_base · T_base_flange(q_n; c) · T_flange_marker``: the tracker's
+frame and the marker's place on the flange are unknown (the protocol's own unknowns of
+:func:`~brachycal.calibration.robot.arm_fit.fit_arm`), the robot's geometry ``c`` is one of
+:data:`TRACKER_MODELS` (the URDF as it is, joint zeros, every joint-origin component), reduced to
+what the data can see (the base set) and fitted with the stated accuracy as prior. Residuals are
+positions (metres) and, 6-D, orientations (radians), each kind with its own estimated noise level.
 
-    T_tracker_marker(n) = T_tracker_base · T_base_flange(q_n; c) · T_flange_marker
+The headline figure is leave-one-out over postures, training second; a richer model is returned
+only if its held-out error beats the smaller one's by more than the paired differences' standard
+error (:func:`identify_from_tracker`). Units: metres, radians; frames as named.
 
-with unknowns
-
-- ``T_tracker_base`` (6), updated on the right: ``T ← T · exp(ξ)``, ``ξ`` in the base frame;
-- the marker: its position on the flange ``p_flange_marker`` (3) or, 6-D, its pose (6, updated on
-  the left in the flange frame: ``T ← exp(ξ) · T``);
-- the robot's geometry ``c`` (:func:`~brachycal.calibration.robot.identification.corrected_robot`'s
-  joint-origin corrections ``(v, ω)`` per joint), in one of three models (:data:`TRACKER_MODELS`):
-  ``frames`` (none: the URDF as it is), ``offsets`` (each joint's zero: ``ω`` along a revolute
-  joint's axis, ``v`` along a prismatic one's), ``joints`` (every component). Only the components
-  the data can see at all are estimated: the columns of the corrections' Jacobian, projected off
-  the frames' span (the frames are free), are ranked by a pivoted QR and those past the numerical
-  rank dropped (the structural base set, as FIGAROH's QR reduction finds it: e.g. the first joint's
-  zero is the tracker frame's rotation, the last joint's origin the marker's place).
-
-The estimate is the maximum a posteriori one: residuals over their noise levels (one per kind,
-position and orientation, estimated from the residuals with leverage-corrected degrees of freedom,
-re-estimated over :data:`NOISE_ROUNDS` rounds) and the kept corrections over their prior SD (the
-stated accuracy, :class:`~brachycal.calibration.robot_accuracy.RobotAccuracy`); the frames have no
-prior. Gauss–Newton, the robot's Jacobian analytic through
-:func:`~brachycal.calibration.chain.robot_terms.joint_twists`.
-
-The headline figure is leave-one-out over postures (each posture predicted by a fit made without
-it), training second: with tens of postures and tens of parameters a training figure flatters.
-*Fit only what the data support*: a richer model replaces the chosen one only if its leave-one-out
-mean squared position error is lower by more than the standard error of the paired differences
-over the held-out postures; otherwise the smaller model is returned and the report says so.
+Design: ``docs/design/robot_identification.md`` ("From an external tracker").
 """
 
 from __future__ import annotations
