@@ -51,6 +51,7 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
     )
     from brachycal.calibration.phantom.wire import WirePhantom, calibrate_wire, calibrate_wire_files, read_wire_phantom
     from brachycal.calibration.result import Calibration, ImageCalibration, PredictedUncertainty, Provenance
+    from brachycal.calibration.robot.arm_fit import ArmFit, ParameterSelection, fit_arm, flange_points, gravity_moments
     from brachycal.calibration.robot.identification import (
         IdentificationResult,
         corrected_robot,
@@ -58,6 +59,16 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
         identify_robot,
     )
     from brachycal.calibration.robot.observability import Criterion, Observation, base_criterion, observation_rows
+    from brachycal.calibration.robot.touches import (
+        TouchPlace,
+        TouchReport,
+        TouchResult,
+        identify_touch_folders,
+        identify_touches,
+        read_places,
+        touch_scatter,
+    )
+    from brachycal.calibration.robot_accuracy import RobotAccuracy
     from brachycal.calibration.sequential.method import (
         SequentialResult,
         ToolCalibration,
@@ -106,6 +117,7 @@ __all__ = [
     "MODELS",
     "PAPER_METHODS",
     "PIVOT_METHODS",
+    "ArmFit",
     "Calibration",
     "ChainFit",
     "ChainResult",
@@ -119,6 +131,7 @@ __all__ = [
     "NWireFileResult",
     "NWireResult",
     "Observation",
+    "ParameterSelection",
     "PhantomObservations",
     "PhantomResult",
     "PivotFile",
@@ -127,11 +140,15 @@ __all__ = [
     "PredictedUncertainty",
     "Provenance",
     "ResultFile",
+    "RobotAccuracy",
     "RobotRecord",
     "SequentialResult",
     "SessionResult",
     "TemporalResult",
     "ToolCalibration",
+    "TouchPlace",
+    "TouchReport",
+    "TouchResult",
     "WedgePhantom",
     "WirePhantom",
     "base_criterion",
@@ -148,9 +165,14 @@ __all__ = [
     "corrected_robot",
     "cross_validate_identification",
     "estimate_lag",
+    "fit_arm",
     "fit_chain",
+    "flange_points",
+    "gravity_moments",
     "hand_eye",
     "identify_robot",
+    "identify_touch_folders",
+    "identify_touches",
     "image_pose_in_phantom",
     "inside_ellipsoid",
     "lag_from_plus_files",
@@ -167,10 +189,12 @@ __all__ = [
     "read_nwire",
     "read_phantom_observations",
     "read_pivot",
+    "read_places",
     "read_result",
     "read_wedge_phantom",
     "read_wire_phantom",
     "select_model",
+    "touch_scatter",
     "validate_result_document",
     "verify_folder",
     "wire_point_pairs",

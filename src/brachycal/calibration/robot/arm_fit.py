@@ -6,20 +6,18 @@ to every joint-origin correction (joint-major ``(v, ω)``, :func:`joint_twists`'
 own unknowns ``y`` (tool points, fixed points, a tracker's pose), and a noise group per row. This
 module does the rest, the same for every protocol:
 
-* :class:`ParameterSelection`: which corrections are free. :meth:`ParameterSelection.chain` frees
-  the joints between the base and the flange; :meth:`ParameterSelection.base_set` keeps only the
-  combinations the data can see at all once ``y`` is free (pivoted QR of the prior-scaled,
-  ``y``-projected Jacobian: the last joint's components a tool point absorbs, the first joint's
-  that fixed points absorb, lumped pairs of parallel axes), FIGAROH's base parameters.
+* :class:`ParameterSelection`: which corrections are free: :meth:`~ParameterSelection.chain`, the
+  joints to the flange; :meth:`~ParameterSelection.base_set`, only what the data see once ``y`` is
+  free (pivoted QR; FIGAROH's base parameters).
 * :func:`flange_points`: a flange-fixed point's world position and its Jacobian (analytic, from
   :func:`joint_twists`).
-* :func:`fit_arm`: the maximum a posteriori fit ``min ‖r/σ‖² + ‖c/s‖²`` (``s`` the stated accuracy,
-  :func:`prior_sd`) by damped Gauss–Newton, the noise levels ``σ`` of the groups not held fixed
-  re-estimated from the residuals between rounds (degrees of freedom with the regularised
-  problem's leverages), its posterior covariance, and the identifiability report
-  (:func:`identifiability`) of all ``6 nq`` corrections.
+* :func:`fit_arm`: the MAP fit ``min ‖r/σ‖² + ‖c/s‖²`` (``s`` the stated accuracy) by
+  Levenberg–Marquardt, the free groups' noise levels re-estimated between rounds, its posterior
+  covariance and the identifiability (:func:`identifiability`) of all ``6 nq`` corrections.
+* :func:`gravity_moments`, :func:`deflection_columns`: joint compliance under gravity (each
+  joint's frame turning by ``k · m`` under its gravity moment ``m``), fitted as protocol unknowns.
 
-Corrections are those of :func:`corrected_robot`: ``T_parent_joint ← T_parent_joint @ T(exp ω, v)``.
+Corrections are :func:`corrected_robot`'s: ``T_parent_joint ← T_parent_joint @ T(exp ω, v)``.
 
 Design: ``docs/design/robot_identification.md``.
 """
@@ -51,7 +49,7 @@ STEP_TOLERANCE = 1e-7
 #: the cost's own evaluation is good to ~1e-14 relative).
 COST_TOLERANCE = 1e-12
 #: Gauss–Newton iterations per noise round at most.
-ITERATIONS = 30
+ITERATIONS = 50
 #: Noise rounds: each re-estimates the free groups' levels from the previous round's residuals.
 ROUNDS = 4
 
@@ -348,7 +346,9 @@ def _gauss_newton(
     prior: _Prior,
     iterations: int,
 ) -> tuple[FloatArray, FloatArray, int]:
-    """Damped Gauss–Newton on the normalised system (halving a step that raises the cost)."""
+    """Levenberg–Marquardt on the normalised system: the Gauss–Newton step, damped by ``λ`` times
+    the columns' norms while a step raises the cost (a start far from the solution, a weakly
+    determined combination without a prior), the damping relaxed after each accepted step."""
     index = selection.index
 
     def system(x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -358,20 +358,29 @@ def _gauss_newton(
 
     A, b = system(x, y)
     cost = float(b @ b)
+    damping = 0.0
     for k in range(iterations):
-        step = np.linalg.lstsq(A, -b, rcond=None)[0]
-        dx, dy = step[: len(x)] * scale, step[len(x) :]
-        for _ in range(20):
+        norms = np.linalg.norm(A, axis=0)
+        norms[norms == 0] = 1.0
+        for _ in range(40):
+            if damping:
+                damped = np.vstack([A, np.diag(np.sqrt(damping) * norms)])
+                step = np.linalg.lstsq(damped, -np.concatenate([b, np.zeros(len(norms))]), rcond=None)[0]
+            else:
+                step = np.linalg.lstsq(A, -b, rcond=None)[0]
+            dx, dy = step[: len(x)] * scale, step[len(x) :]
             A_new, b_new = system(x + dx, y + dy)
             if float(b_new @ b_new) <= cost * (1 + 1e-12):
+                damped_step = damping > 0
+                damping = damping / 10 if damping > 1e-9 else 0.0
                 break
-            dx, dy = dx / 2, dy / 2
+            damping = max(damping * 10, 1e-6)
         else:
             return x, y, k
         previous = cost
         x, y, A, b, cost = x + dx, y + dy, A_new, b_new, float(b_new @ b_new)
         small = np.concatenate([np.abs(dx) / scale, np.abs(dy) / y_scale]) if len(step) else np.zeros(1)
-        if np.max(small) < STEP_TOLERANCE or previous - cost <= COST_TOLERANCE * previous:
+        if not damped_step and (np.max(small) < STEP_TOLERANCE or previous - cost <= COST_TOLERANCE * previous):
             return x, y, k + 1
     return x, y, iterations
 

@@ -53,6 +53,8 @@ class TouchPlace:
         name: the place (a folder name).
         touches: per point, its touches' configurations ``(N_k, nq)`` (radians, the robot's joint order).
         distances: known distances between points, ``{(i, j): metres}``.
+        moments: per point, ``(N_k, nq, 3)`` the joints' gravity moments at its touches
+            (:func:`~brachycal.calibration.robot.arm_fit.gravity_moments`), for compliance terms.
     """
 
     name: str
@@ -112,8 +114,9 @@ def configurations(robot: Robot, flange: str, table: FloatArray) -> FloatArray:
 class TouchModel:
     """The touches' residuals (:class:`~brachycal.calibration.robot.arm_fit.ResidualModel`).
 
-    ``y = (tip (3), point 0 of place 0 (3), point 1 of place 0, …)``; rows: per touch the tip minus
-    its point (3, group ``touch``), then per known distance ``|p_i − p_j| − d`` (group ``distance``).
+    ``y = (tip (3), point 0 of place 0 (3), point 1 of place 0, …, compliance k per term)``; rows:
+    per touch the tip (deflected by ``G k`` under the compliance terms ``compliant``) minus its
+    point (3, group ``touch``), then per known distance ``|p_i − p_j| − d`` (group ``distance``).
     """
 
     places: tuple[TouchPlace, ...]
@@ -208,7 +211,7 @@ def identify_touches(
     accuracy: RobotAccuracy | None,
     *,
     tip: FloatArray | None = None,
-    selection: str | ParameterSelection = "base",
+    selection: str | ParameterSelection | None = None,
     touch_sd_m: float = TOUCH_SD_M,
     distance_sd_m: float = DISTANCE_SD_M,
     estimate_touch_noise: bool = True,
@@ -223,11 +226,14 @@ def identify_touches(
         flange: the frame the tip is fixed to.
         accuracy: the stated accuracy (the corrections' prior); ``None``: none.
         tip: start of the tip in ``flange`` (metres; default its origin).
-        selection: ``"base"`` (the corrections the data can see, :meth:`ParameterSelection.base_set`),
-            ``"chain"`` (every component of every joint to the flange; needs a prior), or the
-            free corrections themselves.
+        selection: ``"chain"`` (every component of every joint to the flange; needs a prior; the
+            default with one), ``"base"`` (the corrections the data can see,
+            :meth:`ParameterSelection.base_set`; the default without a prior), or the free
+            corrections themselves.
         touch_sd_m: the touches' noise level (start, re-estimated unless ``estimate_touch_noise`` is false).
         distance_sd_m: the stated tolerance of the known distances (held).
+        compliant: joint compliance terms ``(j, a)`` (:func:`~brachycal.calibration.robot.arm_fit.deflection_columns`),
+            fitted with the places' ``moments``; ``compliance_sd``: their prior SD (rad per N·m; none by default).
 
     Raises:
         InputError: a place without two touches of a point, a distance between unknown points.
@@ -251,6 +257,8 @@ def identify_touches(
     y = np.concatenate(y0)
     chosen = ParameterSelection.chain(nominal, flange)
     sigma = {"touch": touch_sd_m, "distance": distance_sd_m}
+    if selection is None:
+        selection = "chain" if accuracy is not None else "base"
     if isinstance(selection, ParameterSelection):
         chosen = selection
     elif selection == "base":

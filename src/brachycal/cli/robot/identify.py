@@ -35,8 +35,13 @@ too; the written URDF carries the geometry only (its figures are printed as "URD
 Writes DIR/robot.urdf (the identified joints, the tip written into --tool-frame) and
 DIR/identification.json (corrections, tip, noise level, compliance, figures per place).
 
-example (MUKCa's Franka Panda touches, in $BRACHYCAL_REFERENCE/mukca_touches):
-  brachycal robot identify touches $BRACHYCAL_REFERENCE/mukca_touches/data/panda_2_clean/* \\
+On MUKCa's Franka Panda touches (trained on one place, judged on two others), from
+$BRACHYCAL_REFERENCE/mukca_touches:
+
+example:
+  brachycal robot identify touches $BRACHYCAL_REFERENCE/mukca_touches/data/panda_2_clean/front_center \\
+      $BRACHYCAL_REFERENCE/mukca_touches/data/panda_2_clean/back_left \\
+      $BRACHYCAL_REFERENCE/mukca_touches/data/panda_2_clean/mid_right \\
       --urdf $BRACHYCAL_REFERENCE/mukca_touches/urdf/panda.urdf --tool-frame ball_link \\
       --train front_center --distance-mm 50 --robot-accuracy-mm 0.3 --robot-accuracy-deg 0.1 --out panda_2
 
