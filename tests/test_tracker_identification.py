@@ -9,6 +9,7 @@ tracker tables reads FIGAROH's two files by a column spec and refuses mixed-up u
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +30,7 @@ from brachycal.calibration.robot.tracker import (
     tracker_data,
 )
 from brachycal.calibration.robot_accuracy import RobotAccuracy
+from brachycal.cli.main import main
 from brachycal.data.formats.tracker_table import (
     MIN_TRACKER_ROWS,
     TrackerColumns,
@@ -368,3 +370,26 @@ def test_ur10_figures_match_the_published_ones(ur10):
     assert joints.parameters == 30
     assert frames.loo_orientation_deg is not None and 0.25 < frames.loo_orientation_deg < 0.45
     assert result.chosen == "frames" and "joints not supported" in result.reason
+
+
+def test_cli_writes_a_urdf_that_reproduces_the_fit(ur10, tmp_path):
+    """``robot identify tracker`` on FIGAROH's UR10 with the joints model: the written URDF with the
+    written frames predicts every measured pose as the fit did (to 1e-9 m), and the JSON holds the
+    figures of both models scored, held out first."""
+    root = reference(*FIGAROH, "ur10")
+    out = tmp_path / "out"
+    code = main(
+        [
+            "robot", "identify", "tracker", str(root / "data" / "calibration.csv"),
+            "--columns", str(SPECS / "ur10_columns.toml"), "--urdf", str(root / "urdf" / "ur10_robot.urdf"),
+            "--flange", "wrist_3_link", "--model", "joints", "--out", str(out),
+        ]
+    )  # fmt: skip
+    assert code == 0
+    document = json.loads((out / "identification.json").read_text())
+    assert document["chosen"] == "joints" and set(document["models"]) == {"frames", "joints"}
+    assert 2.15 < document["models"]["joints"]["loo_position_mm_per_coordinate"] < 2.40
+    robot = Robot.load(out / "robot.urdf")
+    T = np.array(document["T_tracker_base"]) @ robot.fk("wrist_3_link", ur10.Q) @ np.array(document["T_flange_marker"])
+    fit = fit_tracker(ur10, "joints")
+    assert np.max(np.abs(T[:, :3, 3] - ur10.p - fit.position_residuals)) < 1e-9
