@@ -54,8 +54,10 @@ __all__ = [
 #: The models, from the smallest: the URDF as it is, joint zeros, every joint-origin component.
 TRACKER_MODELS = ("frames", "offsets", "joints")
 #: Default prior of the corrections: an industrial arm off its URDF by ~1 mm / 0.1° per joint
-#: origin (real arms measured by trackers are; the twin's default 0.03 mm / 0.003° is a
-#: well-built arm's and would hold real errors in the frames).
+#: origin (the twin's default 0.03 mm / 0.003° is a well-built arm's and would hold real errors in
+#: the frames). It matters: held out, FIGAROH's UR10 does best at 0.3 mm / 0.03° (2.24 mm per
+#: coordinate; 2.28 mm at the default) and its TIAGo at 3 mm / 0.3° (2.16 mm; 2.42 mm at the
+#: default): state the arm's own figures when known.
 TRACKER_ACCURACY = RobotAccuracy(
     translation_sd_m=1e-3,
     rotation_sd_rad=float(np.radians(0.1)),
