@@ -393,3 +393,22 @@ def test_cli_writes_a_urdf_that_reproduces_the_fit(ur10, tmp_path):
     T = np.array(document["T_tracker_base"]) @ robot.fk("wrist_3_link", ur10.Q) @ np.array(document["T_flange_marker"])
     fit = fit_tracker(ur10, "joints")
     assert np.max(np.abs(T[:, :3, 3] - ur10.p - fit.position_residuals)) < 1e-9
+
+
+@pytest.mark.slow
+def test_tiago_figures_match_the_published_ones():
+    """FIGAROH's TIAGo (34 postures, a Qualisys 3-D hand marker, torso lift + 7 arm joints): the
+    frames alone fit to 2.29 mm per coordinate and predict held-out postures to 2.53 mm (both as
+    published); the joints' base set predicts them to 2.42 mm, better by more than the standard
+    error, and is returned."""
+    robot = Robot.load(reference(*FIGAROH, "tiago", "urdf", "tiago_48_schunk.urdf"))
+    table = read_tracker_table(
+        reference(*FIGAROH, "tiago", "data", "calibration", "mocap", "qualysis_base_hand_calibration.csv"),
+        read_tracker_columns(SPECS / "tiago_columns.toml"),
+    )
+    result = identify_from_tracker(tracker_data(robot, table, "arm_7_link"), models=("frames", "joints"))
+    frames, joints = result.scores
+    assert 2.25 < frames.training_position_mm < 2.33
+    assert 2.48 < frames.loo_position_mm < 2.58
+    assert 2.30 < joints.loo_position_mm < 2.50
+    assert result.chosen == "joints"
