@@ -86,7 +86,7 @@ CASES = [
         ("input",),
         setup=_urdf_in_out,
     ),
-    Case("unknown-protocol", ["robot", "identify", "tracker", "{tmp}/a"], ("tracker",)),
+    Case("unknown-protocol", ["robot", "identify", "laser", "{tmp}/a"], ("laser",)),
 ]
 
 

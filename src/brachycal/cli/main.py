@@ -89,6 +89,8 @@ start here:
                                       lag of the tracker (or joint log) behind the ultrasound frames
   brachycal robot identify touches FOLDER... --urdf URDF --tool-frame FRAME --train PLACE --out DIR
                                       an arm's joint geometry from touches of fixed points
+  brachycal robot identify tracker TABLE --columns SPEC --urdf URDF --out DIR
+                                      an arm's joint geometry from a tracker's marker measurements
   brachycal study --out DIR           how many samples? truth error vs LOO on the twin
   brachycal design --out DIR          which sample design gives most accuracy per robot minute
 """

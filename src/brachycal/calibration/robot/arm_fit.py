@@ -37,7 +37,7 @@ from brachycal.calibration.robot.identification import corrected_robot, prior_sd
 from brachycal.calibration.robot_accuracy import RobotAccuracy
 from brachycal.errors import DegenerateDataError, InputError
 from brachycal.model.robot import Robot
-from brachycal.se3 import FloatArray
+from brachycal.se3 import FloatArray, left_jacobian, rotation
 
 #: Base set: a correction is kept when its column, prior-scaled and projected off the protocol's
 #: unknowns, adds at least this fraction of the largest pivot (pivoted QR). Exactly absorbed
@@ -274,11 +274,11 @@ def fit_arm(
     for _ in range(rounds):
         x, y, taken = _gauss_newton(nominal, model, selection, x, y, level, scale, y_scale, prior, iterations)
         steps += taken
-        evaluation = model.evaluate(corrected_robot(nominal, selection.expand(x)), y)
+        evaluation = _evaluate(nominal, model, selection, x, y)
         A, _ = _system(evaluation, index, x, y, scale, level, prior)
         if estimated.any():
             level = _noise_levels(evaluation, A, level, estimated)
-    evaluation = model.evaluate(corrected_robot(nominal, selection.expand(x)), y)
+    evaluation = _evaluate(nominal, model, selection, x, y)
     A, _ = _system(evaluation, index, x, y, scale, level, prior)
     posterior = _inverse(A)
     units = np.concatenate([scale, np.ones(len(y))])
@@ -334,6 +334,28 @@ def _system(
     return rows, b
 
 
+def _evaluate(
+    nominal: Robot, model: ResidualModel, selection: ParameterSelection, x: FloatArray, y: FloatArray
+) -> Evaluation:
+    """The protocol at corrections ``x``, its ``J_c`` turned into the derivative with respect to the
+    corrections themselves: a protocol's ``J_c`` (:func:`joint_twists`') is for a motion composed on
+    the corrected origin, ``T(c) · T(δ')``, while the fit steps ``c + δc``; per joint
+    ``δv' = exp(ω)ᵀ δv`` and ``δω' = J_r(ω) δω`` (SO(3)'s right Jacobian). Without it the step is off
+    by ~|c| near the solution and the iterations stall instead of converging."""
+    c = selection.expand(x)
+    evaluation = model.evaluate(corrected_robot(nominal, c), y)
+    moved = [j for j in range(len(c)) if np.any(c[j] != 0.0)]
+    if not moved:
+        return evaluation
+    J_c = evaluation.J_c.copy()
+    for j in moved:
+        block = np.zeros((6, 6))
+        block[:3, :3] = rotation(c[j, 3:]).T
+        block[3:, 3:] = left_jacobian(-c[j, 3:])
+        J_c[:, 6 * j : 6 * j + 6] = evaluation.J_c[:, 6 * j : 6 * j + 6] @ block
+    return Evaluation(evaluation.r, J_c, evaluation.J_y, evaluation.group)
+
+
 def _gauss_newton(
     nominal: Robot,
     model: ResidualModel,
@@ -352,9 +374,7 @@ def _gauss_newton(
     index = selection.index
 
     def system(x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
-        return _system(
-            model.evaluate(corrected_robot(nominal, selection.expand(x)), y), index, x, y, scale, level, prior
-        )
+        return _system(_evaluate(nominal, model, selection, x, y), index, x, y, scale, level, prior)
 
     A, b = system(x, y)
     cost = float(b @ b)

@@ -1,4 +1,5 @@
-"""``brachycal robot identify touches``: an arm's joint geometry identified from touches of fixed points."""
+"""``brachycal robot identify touches|tracker``: an arm's joint geometry identified from touches of
+fixed points, or from an external tracker's measurements (:mod:`brachycal.cli.robot.tracker`)."""
 
 from __future__ import annotations
 
@@ -6,16 +7,18 @@ import argparse
 from typing import TYPE_CHECKING
 
 from brachycal.cli.common import add_robot_accuracy_options, command_inputs
+from brachycal.cli.robot import tracker as tracker_cli
 
 if TYPE_CHECKING:
     from brachycal.calibration.robot.touches import TouchReport
 
 NAME = "robot"
-HELP = "identify an arm's joint geometry from touches of fixed points (robot identify touches)"
+HELP = "identify an arm's joint geometry from touches of fixed points or a tracker (robot identify touches|tracker)"
 #: The protocols ``brachycal robot identify PROTOCOL`` knows.
-PROTOCOLS = ("touches",)
-DESCRIPTION = """\
-Identifies an arm's joint geometry (every joint origin's translation and rotation, and the tool's
+PROTOCOLS = ("touches", "tracker")
+DESCRIPTION = (
+    """\
+touches: identifies an arm's joint geometry (every joint origin's translation and rotation, and the tool's
 tip) from touches: a tool on the flange (a ball, a sharp tip) touches fixed points (sockets,
 divots) from many postures. Each FOLDER is one place (the points somewhere in the workspace):
 hole_0.csv, hole_1.csv, ... one per point, one row per touch, the arm's joint values in radians in
@@ -41,7 +44,10 @@ example:
       $BRACHYCAL_REFERENCE/mukca_touches/data/panda_2_clean/mid_right \\
       --urdf $BRACHYCAL_REFERENCE/mukca_touches/urdf/panda.urdf --tool-frame ball_link \\
       --train front_center --distance-mm 50 --robot-accuracy-mm 0.3 --robot-accuracy-deg 0.1 --out panda_2
+
 """
+    + tracker_cli.DESCRIPTION
+)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -55,17 +61,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("action", choices=("identify",), help="what to do (identify)")
-    parser.add_argument("protocol", choices=PROTOCOLS, help="the protocol of the recordings (touches)")
-    parser.add_argument("folders", nargs="+", metavar="FOLDER", help="place folders (hole_0.csv, hole_1.csv, ...)")
+    parser.add_argument("protocol", choices=PROTOCOLS, help="the protocol of the recordings (touches, tracker)")
+    parser.add_argument(
+        "folders",
+        nargs="+",
+        metavar="INPUT",
+        help="touches: place folders (hole_0.csv, hole_1.csv, ...); tracker: the tracker table (CSV)",
+    )
     parser.add_argument("--urdf", required=True, metavar="FILE", help="the arm's nominal URDF")
     parser.add_argument(
         "--tool-frame",
-        required=True,
         metavar="FRAME",
-        help="the touching tip's frame in the URDF (fixed to the flange)",
+        help="touches (required): the touching tip's frame in the URDF (fixed to the flange)",
     )
     parser.add_argument(
-        "--train", required=True, metavar="PLACE[,PLACE]", help="the places to identify from (folder names)"
+        "--train", metavar="PLACE[,PLACE]", help="touches (required): the places to identify from (folder names)"
     )
     parser.add_argument(
         "--distance-mm",
@@ -79,6 +89,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--out", required=True, metavar="DIR", help="folder to write robot.urdf and identification.json to"
     )
     parser.add_argument("--force", action="store_true", help="replace the outputs if they exist")
+    tracker_cli.add_options(parser)
     parser.set_defaults(run=run)
 
 
@@ -90,6 +101,16 @@ def run(args: argparse.Namespace) -> int:
     from brachycal.io import OutputSet, write_json  # lazy: start-up (the command's run only)
     from brachycal.model import Robot  # lazy: start-up (the command's run only)
 
+    if args.protocol == "tracker":
+        return tracker_cli.run(args)
+    from brachycal.errors import InputError  # lazy: start-up (the command's run only)
+
+    for option in ("tool_frame", "train"):
+        if getattr(args, option) is None:
+            raise InputError(f"touches: the following argument is required: --{option.replace('_', '-')}")
+    for option in ("columns", "flange"):
+        if getattr(args, option) is not None:
+            raise InputError(f"--{option} is for the tracker protocol, not touches")
     out = Path(args.out)
     with OutputSet(force=args.force, inputs=[*command_inputs(args, "dynamics"), *args.folders]) as outputs:
         urdf_path = outputs.claim(out / "robot.urdf", make_parents=True, label="--out robot.urdf")
