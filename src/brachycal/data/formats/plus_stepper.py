@@ -134,9 +134,7 @@ class TemplateGrid:
         return self.holes[hole_id]
 
 
-def _definition(
-    definitions: dict[tuple[str, str], FloatArray], frm: str, to: str, top: str, path: Path
-) -> FloatArray:
+def _definition(definitions: dict[tuple[str, str], FloatArray], frm: str, to: str, top: str, path: Path) -> FloatArray:
     place = f"{top}/CoordinateDefinitions/Transform[@From='{frm}'][@To='{to}']"
     if (frm, to) in definitions:
         M = definitions[frm, to]
