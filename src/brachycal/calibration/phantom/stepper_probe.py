@@ -48,7 +48,6 @@ from brachycal.calibration.phantom.nwire_file import (
 )
 from brachycal.calibration.phantom.stepper import StepperFit, centre_of_rotation, pixel_spacing
 from brachycal.data.formats.plus_files import (
-    PlusConfig,
     SegmentedFrame,
     Wire,
     read_plus_config,
@@ -80,7 +79,8 @@ class PhantomRegistration:
     Attributes:
         T_template_phantom: ``(4, 4)`` the phantom frame in the template's (``StepperHome`` with
             the template at home), metres: PLUS's ``Phantom → StepperHome``.
-        spacing: the pixel spacing fit ``(s_u, s_v)`` m/px (:func:`~brachycal.calibration.phantom.stepper.pixel_spacing`).
+        spacing: the pixel spacing fit ``(s_u, s_v)`` m/px
+            (:func:`~brachycal.calibration.phantom.stepper.pixel_spacing`).
         centre: the centre-of-rotation fit ``(u, v)`` px.
         vertical_m, horizontal_m: the mean distances from the rotation axis to the two wire lines, metres.
         frames: rotation frames used.
@@ -256,7 +256,8 @@ def calibrate_stepper_image_files(
     streams = read_pose_streams(config_path)
     if streams.source != "stepper":
         raise InputError(
-            "not a stepper device set: no iCal element or BrachyTracker device (use `brachycal nwire` for a tracked probe)",
+            "not a stepper device set: no iCal element or BrachyTracker device "
+            "(use `brachycal nwire` for a tracked probe)",
             file=config_path,
         )
     config = read_plus_config(config_path, require_registration=False)

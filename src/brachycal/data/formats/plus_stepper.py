@@ -129,7 +129,7 @@ class TemplateGrid:
         """
         if hole_id not in self.holes:
             ids = list(self.holes)
-            shown = ", ".join(ids[:3] + ["..."] + ids[-2:]) if len(ids) > 6 else ", ".join(ids)
+            shown = ", ".join([*ids[:3], "...", *ids[-2:]]) if len(ids) > 6 else ", ".join(ids)
             raise InputError(f"no template hole {hole_id!r}: the template's holes are {shown}", file=self.source)
         return self.holes[hole_id]
 
