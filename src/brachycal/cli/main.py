@@ -37,11 +37,13 @@ from brachycal.cli import (
 )
 from brachycal.cli import nwire as nwire_group
 from brachycal.cli import plan as plan_group
+from brachycal.cli import stepper as stepper_group
 from brachycal.cli.nwire import calibrate as nwire
 from brachycal.cli.nwire import segment as nwire_segment
 from brachycal.cli.plan import check as plan_check
 from brachycal.cli.plan import excitation as plan_excitation
 from brachycal.cli.plan import grid as plan
+from brachycal.cli.stepper import calibrate as stepper
 from brachycal.errors import BrachycalError
 
 DESCRIPTION = """\
@@ -79,6 +81,9 @@ start here:
                                       the N-wire phantom's points in tracked B-mode sequences
   brachycal phantom wedge|wire|nwire GEOMETRY OBSERVATIONS --out result.json
                                       multi-wedge, arbitrary-wire or N-wire phantom calibration
+  brachycal stepper [calibrate] ROTATION.mha PROBE_TRANSLATION.mha TEMPLATE_TRANSLATION.mha \\
+      --config DEVICE_SET.xml --out stepper.json
+                                      a TRUS probe's brachytherapy stepper: axes, pixel spacing, centre of rotation
   brachycal temporal VIDEO.mha TRACKER.mha --out lag.json
                                       lag of the tracker (or joint log) behind the ultrasound frames
   brachycal study --out DIR           how many samples? truth error vs LOO on the twin
@@ -108,6 +113,7 @@ COMMANDS = {
     "nwire": nwire,
     nwire_segment.NAME: nwire_segment,
     "phantom": phantom,
+    "stepper": stepper,
     "temporal": temporal,
     "study": study,
     "design": design,
@@ -123,6 +129,7 @@ COMMANDS = {
 TWO_WORD_COMMANDS = {
     **{("nwire", word): name for word, name in nwire_group.SUBCOMMANDS.items()},
     **{("plan", word): name for word, name in plan_group.SUBCOMMANDS.items()},
+    **{("stepper", word): name for word, name in stepper_group.SUBCOMMANDS.items()},
 }
 #: Each command group (``plan``, ``nwire``) with its sub-commands' words: ``brachycal --help`` lists the group
 #: once, naming them, and not the sub-commands' own names.
@@ -155,7 +162,7 @@ def build_parser(full: Collection[str] | None = None) -> argparse.ArgumentParser
     listed_under_group = set(TWO_WORD_COMMANDS.values()) - set(GROUPS)
     shown = []
     for entry in sub._choices_actions:
-        if entry.dest in GROUPS:
+        if GROUPS.get(entry.dest):
             entry.help = f"{entry.help}; also {', '.join(f'{entry.dest} {word}' for word in GROUPS[entry.dest])}"
         if entry.dest not in listed_under_group:
             shown.append(entry)

@@ -25,7 +25,7 @@ import numpy as np
 from brachycal.errors import InputError
 from brachycal.inputs import MAX_DOCUMENT_BYTES, read_input_bytes
 from brachycal.se3 import FloatArray, inverse
-from brachycal.validate import MAX_POSITION_M, check_transform, numbers_from_text, whole_from_text
+from brachycal.validate import MAX_POSITION_M, check_transform, number_from_text, numbers_from_text, whole_from_text
 
 MM = 1e-3
 
@@ -603,3 +603,32 @@ def read_pose_streams(path: str | os.PathLike[str]) -> PoseStreams:
         names.append(value)
     probe, template, base = names
     return PoseStreams(f"{probe}To{base}", f"{template}To{base}", "stepper")
+
+
+#: A brachytherapy stepper's encoder fields of a PLUS frame, in order: probe translation (mm),
+#: probe rotation (degrees), template translation (mm).
+STEPPER_ENCODER_FIELDS = ("ProbePosition", "ProbeRotation", "TemplatePosition")
+
+
+def stepper_encoder_values(frame_fields: list[dict[str, str]], path: str | os.PathLike[str]) -> FloatArray:
+    """``(N, 3)`` a stepper recording's encoder values per frame: probe position (m), probe rotation
+    (rad), template position (m), from PLUS's ``ProbePosition`` (mm), ``ProbeRotation`` (degrees)
+    and ``TemplatePosition`` (mm) frame fields (:data:`STEPPER_ENCODER_FIELDS`).
+
+    Raises:
+        InputError: naming the file, the frame and the field, when a frame lacks one of the
+            fields or it is not a finite number.
+    """
+    values = np.empty((len(frame_fields), 3))
+    scale = (1e-3, np.pi / 180.0, 1e-3)
+    for k, fields in enumerate(frame_fields):
+        for j, name in enumerate(STEPPER_ENCODER_FIELDS):
+            fail = _at(Path(path), row=k, row_label="frame", column=name)
+            text = fields.get(name)
+            if text is None:
+                raise fail("missing: a stepper recording has ProbePosition, ProbeRotation and TemplatePosition")
+            value = number_from_text(text.strip())
+            if value is None or not np.isfinite(value):
+                raise fail(f"not a finite number: {text!r}")
+            values[k, j] = value * scale[j]
+    return values

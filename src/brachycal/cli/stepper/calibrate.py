@@ -1,0 +1,82 @@
+"""``brachycal stepper`` (``stepper calibrate``): a brachytherapy stepper's axes, pixel spacing and
+centre of rotation from PLUS's single-axis recordings."""
+
+from __future__ import annotations
+
+import argparse
+
+from brachycal.cli.common import command_inputs, output_file
+
+HELP = "calibrate a TRUS probe's brachytherapy stepper: axes, pixel spacing, centre of rotation"
+DESCRIPTION = """\
+Calibrates a transrectal probe on a brachytherapy stepper (PLUS's iCal set-up) from three B-mode
+recordings of an N-wire phantom whose wires run along the probe, each made while one stepper axis
+moves: the probe turned (ROTATION), the probe translated (PROBE_TRANSLATION), the template
+translated (TEMPLATE_TRANSLATION). The frames are segmented as `brachycal nwire segment` does and
+each frame's encoder values (ProbePosition, ProbeRotation, TemplatePosition, mm and degrees) read
+from the recording. As PLUS's stepper calibration, from them:
+
+  - the pixel spacing (mm/px along u and v), from the known distances between wires;
+  - the centre of rotation (where the probe's rotation axis crosses the image, px);
+  - the probe and the template translation axes (unit directions in the stepper frame), from each
+    still wire's dot against the encoder's position.
+
+Each value comes with its standard deviation (from the fit's residuals). A recording whose axis
+does not move, whose rotation covers less than 10 degrees or whose translation is too short, or
+that lacks the encoder fields, is refused. Writes JSON (format brachycal-stepper/1).
+
+example:
+  brachycal stepper calibrate $BRACHYCAL_REFERENCE/plus_trus_stepper/USTC_3NWires_ProbeRotation.igs.mha \\
+      $BRACHYCAL_REFERENCE/plus_trus_stepper/USTC_3NWires_ProbeTranslation.igs.mha \\
+      $BRACHYCAL_REFERENCE/plus_trus_stepper/USTC_3NWires_TemplateTranslation.igs.mha \\
+      --config $BRACHYCAL_REFERENCE/plus_trus_stepper/PlusDeviceSet_iCal_SonixTouch_BlackTargetGuideStepper_1.1.xml \\
+      --out stepper.json
+"""
+EPILOG = """\
+sub-commands (each with its own --help):
+  brachycal stepper [calibrate] ROTATION.mha PROBE_TRANSLATION.mha TEMPLATE_TRANSLATION.mha \\
+      --config DEVICE_SET.xml --out stepper.json
+      this page: the stepper's axes, pixel spacing and centre of rotation (the default)
+"""
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "stepper",
+        help=HELP,
+        description=DESCRIPTION,
+        epilog=EPILOG,
+        prog="brachycal stepper calibrate",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("rotation", metavar="ROTATION.mha", help="B-mode sequence: the probe turned by the stepper")
+    parser.add_argument(
+        "probe_translation", metavar="PROBE_TRANSLATION.mha", help="B-mode sequence: the probe translated"
+    )
+    parser.add_argument(
+        "template_translation", metavar="TEMPLATE_TRANSLATION.mha", help="B-mode sequence: the template translated"
+    )
+    parser.add_argument(
+        "--config", required=True, metavar="DEVICE_SET.xml", help="PLUS device set (PhantomDefinition, Segmentation)"
+    )
+    parser.add_argument("--out", required=True, type=output_file, metavar="JSON", help="result file to write")
+    parser.add_argument("--force", action="store_true", help="replace --out if it exists")
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    # lazy: start-up (the command's run only)
+    from brachycal.calibration.phantom.stepper_file import calibrate_stepper_files, summary_lines, write_stepper
+    from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
+
+    with OutputSet(
+        force=args.force,
+        inputs=command_inputs(args, "rotation", "probe_translation", "template_translation", "config"),
+    ) as outputs:
+        staged = outputs.claim(args.out, label="--out")
+        result = calibrate_stepper_files(args.config, args.rotation, args.probe_translation, args.template_translation)
+        write_stepper(result, staged)
+    for line in summary_lines(result):
+        print(line)
+    print(f"wrote {args.out}")
+    return 0
