@@ -47,6 +47,8 @@ from brachycal.calibration.phantom.nwire_file import (
     read_nwire,
 )
 from brachycal.calibration.phantom.stepper import StepperFit, centre_of_rotation, pixel_spacing
+from brachycal.calibration.phantom.stepper_file import read_stepper_recording
+from brachycal.data.formats.metaimage import read_image_sequence
 from brachycal.data.formats.plus_files import (
     SegmentedFrame,
     Wire,
@@ -54,8 +56,10 @@ from brachycal.data.formats.plus_files import (
     read_pose_streams,
     read_segmented_frames,
 )
-from brachycal.data.formats.plus_stepper import StepperAxes, TemplateGrid, read_stepper_axes
+from brachycal.data.formats.plus_segmentation import read_segmentation_parameters
+from brachycal.data.formats.plus_stepper import STRAIGHT_AXES, StepperAxes, TemplateGrid, read_stepper_axes
 from brachycal.errors import DegenerateDataError, InputError
+from brachycal.imaging.nwire_segmentation import segment_sequence
 from brachycal.io import sha256_file, write_json
 from brachycal.se3 import FloatArray, inverse, rotation, transform_points
 from brachycal.validate import check_transform
@@ -123,7 +127,7 @@ def register_phantom(
         horizontal.append(_point_line_distance(o, b, c))
     d_v, d_h = float(np.mean(vertical)), float(np.mean(horizontal))
     T = np.eye(4)
-    T[:3, 3] = -np.array([b_wire.front_m[0] + d_h, b_wire.front_m[1] + d_v, 0.0])
+    T[:3, 3] = [-(b_wire.front_m[0] + d_h), -(b_wire.front_m[1] + d_v), 0.0]
     return PhantomRegistration(T, spacing, centre, d_v, d_h, len(frames))
 
 
@@ -228,8 +232,9 @@ class StepperImageResult:
 
 def calibrate_stepper_image_files(
     config_path: str | os.PathLike[str],
-    frames_path: str | os.PathLike[str],
     rotation_path: str | os.PathLike[str],
+    calibration_path: str | os.PathLike[str],
+    validation_path: str | os.PathLike[str] | None = None,
     *,
     model: str | None = None,
     correct_axes: bool = True,
@@ -237,11 +242,14 @@ def calibrate_stepper_image_files(
     """Image → Probe of a TRUS probe on a stepper from PLUS files, validated as PLUS does.
 
     Args:
-        config_path: PLUS's stepper device set (phantom, its ``vtkPlusProbeCalibrationAlgo``
-            reference ``StepperHome``, the ``StepperCalibration`` axes).
-        frames_path: segmented calibration and validation frames (random stepper motion) with the
-            stepper's pose streams (``ProbeToStepperHome``, ``TemplateToStepperHome``).
-        rotation_path: segmented frames of a probe-rotation recording (for the registration).
+        config_path: PLUS's stepper device set (phantom, segmentation settings, its
+            ``vtkPlusProbeCalibrationAlgo`` reference ``StepperHome``, the ``StepperCalibration`` axes).
+        rotation_path: B-mode sequence (``.mha``) of the probe turned by the stepper: segmented here,
+            for the phantom's registration.
+        calibration_path: B-mode sequence of random stepper motion (segmented here, with its
+            stepper pose streams), or a segmented-frames XML holding both frame sets (then
+            ``validation_path`` is None).
+        validation_path: B-mode sequence of the validation frames, or None.
         model: a :data:`~brachycal.calibration.phantom.nwire_file.NWIRE_MODELS` name, or None (lowest
             best-95 % validation mean).
         correct_axes: rebuild the poses along the device set's calibrated axes (False: as recorded).
@@ -261,28 +269,30 @@ def calibrate_stepper_image_files(
             file=config_path,
         )
     config = read_plus_config(config_path, require_registration=False)
-    axes = read_stepper_axes(config_path) if correct_axes else StepperAxes(np.array([0.0, 0, 1]), np.array([0.0, 0, 1]))
-    calibration, validation = read_segmented_frames(frames_path, poses=streams.fields)
-    rotation, _ = read_segmented_frames(rotation_path, poses=streams.fields)
-    names = [w.name for pattern in config.patterns for w in pattern]
-    rotation_points = []
-    for frame in rotation:
-        if not frame.ok:
-            continue
-        lacking = [n for n in names if n not in frame.points_px]
-        if lacking:
-            raise InputError(
-                f"lacks the segmented point of wire(s) {', '.join(map(repr, lacking))}",
-                file=frame.source,
-                row=frame.index,
-                row_label=frame.label,
-            )
-        rotation_points.append(frame.points_px)
-    registration = register_phantom(rotation_points, config.patterns)
+    axes = read_stepper_axes(config_path) if correct_axes else STRAIGHT_AXES
+    if validation_path is None:
+        calibration, validation = read_segmented_frames(calibration_path, poses=streams.fields)
+    else:
+        params = read_segmentation_parameters(config_path)
+        calibration, validation = (
+            segment_sequence(
+                read_image_sequence(path),
+                config,
+                params,
+                source=path,
+                label=f"{label} Frame",
+                poses=streams,
+                require_poses=True,
+            ).frames
+            for label, path in (("CalibrationData", calibration_path), ("ValidationData", validation_path))
+        )
+    rotation = read_stepper_recording(rotation_path, config, config_path)
+    registration = register_phantom(rotation.frames, config.patterns)
     registered = replace(
         config, transforms={**config.transforms, ("Phantom", "Reference"): registration.T_template_phantom}
     )
-    inputs = {Path(p).name: sha256_file(p) for p in (config_path, frames_path, rotation_path)}
+    paths = [p for p in (config_path, rotation_path, calibration_path, validation_path) if p is not None]
+    inputs = {Path(p).name: sha256_file(p) for p in paths}
     recorded = calibrate_nwire_frames(registered, calibration, validation, model=model, inputs=inputs)
     if axes.straight:
         return StepperImageResult(recorded, None, registration, axes)
@@ -404,7 +414,7 @@ def hole_in_image(
     values = (depth_m, probe_translation_m, probe_rotation_rad, template_translation_m)
     if not np.all(np.isfinite(values)):
         raise InputError(f"depth and stepper readings must be finite numbers, got {values}")
-    axes = axes or StepperAxes(np.array([0.0, 0, 1]), np.array([0.0, 0, 1]))
+    axes = axes or STRAIGHT_AXES
     p_template = template.hole(hole) + np.array([0.0, 0.0, depth_m])
     p_phantom = transform_points(template.T_phantom_template, p_template)
     T_SH_probe = stepper_pose(
