@@ -99,13 +99,18 @@ class PhantomRegistration:
 
 
 def register_phantom(
-    frames: Sequence[Mapping[str, ArrayLike]], patterns: Sequence[tuple[Wire, Wire, Wire]]
+    frames: Sequence[Mapping[str, ArrayLike]],
+    patterns: Sequence[tuple[Wire, Wire, Wire]],
+    axis_at_m: ArrayLike = (0.0, 0.0),
 ) -> PhantomRegistration:
     """PLUS's phantom registration on a stepper, from the segmented frames of a probe-rotation recording.
 
     Args:
         frames: per frame, wire name → ``(u, v)`` pixel (every wire of ``patterns``).
         patterns: the phantom's Ns (at least two).
+        axis_at_m: ``(x, y)`` where the probe's rotation axis was in the stepper's frame during the
+            recording, metres: ``(Tx, Ty) · d`` for a probe translated by ``d`` along a calibrated
+            axis ``(Tx, Ty, 1)``; zero (PLUS's) when the poses move the probe along ``z``.
 
     Raises:
         DegenerateDataError: fewer than two Ns, or frames that do not determine the spacing or the
@@ -127,7 +132,8 @@ def register_phantom(
         horizontal.append(_point_line_distance(o, b, c))
     d_v, d_h = float(np.mean(vertical)), float(np.mean(horizontal))
     T = np.eye(4)
-    T[:3, 3] = [-(b_wire.front_m[0] + d_h), -(b_wire.front_m[1] + d_v), 0.0]
+    at = np.asarray(axis_at_m, dtype=float).reshape(2)
+    T[:3, 3] = [at[0] - (b_wire.front_m[0] + d_h), at[1] - (b_wire.front_m[1] + d_v), 0.0]
     return PhantomRegistration(T, spacing, centre, d_v, d_h, len(frames))
 
 
@@ -287,18 +293,22 @@ def calibrate_stepper_image_files(
             for label, path in (("CalibrationData", calibration_path), ("ValidationData", validation_path))
         )
     rotation = read_stepper_recording(rotation_path, config, config_path)
-    registration = register_phantom(rotation.frames, config.patterns)
-    registered = replace(
-        config, transforms={**config.transforms, ("Phantom", "Reference"): registration.T_template_phantom}
-    )
+    plus_registration = register_phantom(rotation.frames, config.patterns)
     paths = [p for p in (config_path, rotation_path, calibration_path, validation_path) if p is not None]
     inputs = {Path(p).name: sha256_file(p) for p in paths}
-    recorded = calibrate_nwire_frames(registered, calibration, validation, model=model, inputs=inputs)
+
+    def fit(registration: PhantomRegistration, cal: list[SegmentedFrame], val: list[SegmentedFrame]) -> NWireFileResult:
+        T = registration.T_template_phantom
+        registered = replace(config, transforms={**config.transforms, ("Phantom", "Reference"): T})
+        return calibrate_nwire_frames(registered, cal, val, model=model, inputs=inputs)
+
+    recorded = fit(plus_registration, calibration, validation)
     if axes.straight:
-        return StepperImageResult(recorded, None, registration, axes)
-    corrected = calibrate_nwire_frames(
-        registered, corrected_frames(calibration, axes), corrected_frames(validation, axes), model=model, inputs=inputs
-    )
+        return StepperImageResult(recorded, None, plus_registration, axes)
+    # the probe's axis during the rotation recording, moved across z by the calibrated translation axis
+    d_rotation = float(np.mean(rotation.encoders[:, 0])) if len(rotation.encoders) else 0.0
+    registration = register_phantom(rotation.frames, config.patterns, axes.probe_translation[:2] * d_rotation)
+    corrected = fit(registration, corrected_frames(calibration, axes), corrected_frames(validation, axes))
     return StepperImageResult(corrected, recorded, registration, axes)
 
 
