@@ -117,7 +117,8 @@ def frames(M, config, readings, axes: StepperAxes, label: str) -> list[Segmented
 
 def random_motion(seed: int, count: int) -> list[tuple[float, float]]:
     rng = np.random.default_rng(seed)
-    return [(d, t) for d, t in zip(rng.uniform(-0.095, -0.013, count), np.radians(rng.uniform(-3, 3, count)))]
+    travel, turn = rng.uniform(-0.095, -0.013, count), np.radians(rng.uniform(-3, 3, count))
+    return list(zip(travel.tolist(), turn.tolist(), strict=True))
 
 
 def test_phantom_registration_is_plus_s_and_exact_on_exact_rotation_frames():
@@ -232,3 +233,46 @@ def test_poses_along_the_calibrated_axis_validate_at_or_below_plus(ical_result):
     stored = read_stepper_image(path)
     np.testing.assert_allclose(stored.image_to_probe, result.nwire.matrix(), atol=1e-12)
     np.testing.assert_allclose(stored.T_template_phantom, result.registration.T_template_phantom, atol=1e-12)
+
+
+def test_the_hand_off_reads_back_in_millimetres(tmp_path):
+    """ImageToProbe.tfm and the PLUS CoordinateDefinitions hold Image → Probe (pixels → mm) and
+    Phantom → StepperHome as the result has them; `stepper template` prints a row per hole and depth."""
+    from test_hostile_trus_probe import stepper_result
+
+    from brachycal.cli.main import main
+    from brachycal.data.formats.plus_files import read_coordinate_definitions
+    from brachycal.export import read_itk_transform
+
+    stepper_result(tmp_path / "result.json")
+    stored = read_stepper_image(tmp_path / "result.json")
+    assert main(["stepper", "export", str(tmp_path / "result.json"), "--out", str(tmp_path / "out")]) == 0
+    image_mm = stored.image_to_probe.copy()
+    image_mm[:3, :] *= 1e3
+    phantom_mm = stored.T_template_phantom.copy()
+    phantom_mm[:3, 3] *= 1e3
+    np.testing.assert_allclose(read_itk_transform(tmp_path / "out" / "ImageToProbe.tfm"), image_mm, atol=1e-9)
+    np.testing.assert_allclose(read_itk_transform(tmp_path / "out" / "PhantomToStepperHome.tfm"), phantom_mm, atol=1e-9)
+    definitions = read_coordinate_definitions(tmp_path / "out" / "PlusCoordinateDefinitions.xml")
+    np.testing.assert_allclose(definitions["Image", "Probe"], image_mm, rtol=1e-8, atol=1e-8)
+    np.testing.assert_allclose(definitions["Phantom", "StepperHome"], phantom_mm, rtol=1e-8, atol=1e-8)
+
+
+def test_template_prints_one_row_per_hole_and_depth(tmp_path, capsys):
+    from test_hostile_trus_probe import device_set, stepper_result
+
+    from brachycal.cli.main import main
+
+    stepper_result(tmp_path / "result.json")
+    (tmp_path / "config.xml").write_text(device_set())
+    argv = ["stepper", "template", str(tmp_path / "result.json"), "--config", str(tmp_path / "config.xml")]
+    assert (
+        main([*argv, "--hole", "B2", "--hole", "A3", "--depth", "80", "--depth", "90", "--probe-position", "-40"]) == 0
+    )
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("# image frame (pixels)")
+    assert lines[1] == "hole,depth_mm,u_px,v_px,distance_from_image_plane_mm"
+    rows = [line.split(",") for line in lines[2:]]
+    assert [(r[0], r[1]) for r in rows] == [("B2", "80.000"), ("B2", "90.000"), ("A3", "80.000"), ("A3", "90.000")]
+    # the image is across the probe's axis: 10 mm deeper is 10 mm further along the image's z
+    assert abs(float(rows[1][4]) - float(rows[0][4])) == pytest.approx(10.0, abs=1e-3)
