@@ -1,31 +1,20 @@
 """Image → Probe of a TRUS probe on a brachytherapy stepper (PLUS's iCal set-up), and the needle template in the image.
 
-There is no tracker: the stepper's encoders give each frame's poses in ``StepperHome`` (the probe's,
-``ProbeToStepperHome``; the template's, ``TemplateToStepperHome``), and the N-wire phantom is
-mounted on the template holder, so it moves with the template. The chain of one frame is
+No tracker: the stepper's encoders give each frame's poses in ``StepperHome`` (``ProbeToStepperHome``,
+``TemplateToStepperHome``), and the N-wire phantom rides on the template holder:
 
 ``p_probe = T_SH_probe⁻¹ · T_SH_template · T_template_phantom · p_phantom``
 
-with ``T_template_phantom`` the phantom's registration (the template at home). PLUS measures it
-from a probe-rotation recording (``vtkPlusBrachyStepperPhantomRegistrationAlgo``), and so does
-:func:`register_phantom`: with the pixel spacing and the centre of rotation of the stepper
-calibration (:mod:`brachycal.calibration.phantom.stepper`), the distances from the rotation axis
-to the line through the middle N's side wires (vertical) and to the line through the second N's
-last wire and the first N's last wire (horizontal), averaged over the frames, place the rotation
-axis in the phantom: the phantom is the translation ``−(x_w + d_h, y_w + d_v, 0)`` in the stepper's
-frame, ``w`` the middle N's last wire (PLUS's iCal layout; its axes parallel to the stepper's).
+- :func:`register_phantom`: ``T_template_phantom`` as PLUS's ``vtkPlusBrachyStepperPhantomRegistrationAlgo``
+  measures it from a probe-rotation recording (pixel spacing, centre of rotation, the rotation
+  axis's distances to two lines of wires);
+- :func:`corrected_frames`: each pose rebuilt from its encoder readings along the stepper's
+  calibrated axes (PLUS's recordings move the probe along ``z`` exactly);
+- :func:`calibrate_stepper_image_files`: the N-wire estimators of
+  :mod:`~brachycal.calibration.phantom.nwire_file` with the stepper as the reference, on both pose models;
+- :func:`hole_in_image`: a needle through a template hole, at a depth, in the image at a stepper pose.
 
-With the phantom registered, the N-wire estimators of :mod:`brachycal.calibration.phantom.nwire_file`
-run with the stepper as the reference. One difference from PLUS: the recorded poses move the probe
-along ``z`` exactly, while the stepper's calibration (its device set's ``StepperCalibration``)
-says the probe travels along ``(Tx, Ty, 1)``; :func:`corrected_frames` rebuilds each pose from its
-encoder readings as PLUS's ``vtkPlusBrachyTracker`` does when it compensates. The fit on the
-recorded poses (PLUS's own) is kept beside it for comparison.
-
-Note what random stepper motion determines: a translation along the probe's axis commutes with a
-shift of the phantom across it, so the registration's ``x, y`` (and a turn about ``z``) trade with
-Image → Probe's translation (and rotation) on frames without probe rotation; the registration's
-values matter where the probe turns, and there they come from the rotation recording.
+Design and what random stepper motion determines: ``docs/stepper.md``, "Image to probe".
 """
 
 from __future__ import annotations
