@@ -6,11 +6,20 @@ Specifications:
 - a gross outlier is rejected (PLUS's 3 SD rule) and the fit stays exact, its residual statistics
   those of the kept equations;
 - too few frames, too few Ns, or a recording without rotation are refused as degenerate;
-- on PLUS's probe-rotation recording, both match PLUS's regression baseline.
+- on PLUS's probe-rotation recording, both match PLUS's regression baseline;
+- translation axes: on exact frames of wires tilted against the image normal, the probe's slope is
+  (wire direction − probe axis), the template's (template axis − wire direction), and their sum the
+  template axis relative to the probe axis, whatever the wires' direction;
+- the rotation axis's tilt is recovered from two probe positions, and not given (with the reason)
+  from one; the rotation encoder's scale is recovered;
+- every stated SD matches the spread of the estimate over fresh noise draws (within a band that a
+  SD off by a third would leave);
+- a translation shorter than 5 mm, a rotation under 10°, or an axis that does not move is refused.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import xml.etree.ElementTree as ET
 
@@ -19,7 +28,17 @@ import pytest
 from conftest import reference
 
 from brachycal.calibration import centre_of_rotation, pixel_spacing
-from brachycal.calibration.phantom.stepper import MIN_ROTATION_FRAMES, rotation_equations, spacing_equations
+from brachycal.calibration.phantom.stepper import (
+    MIN_ROTATION_FRAMES,
+    centre_sd,
+    jackknife_spacing_sd,
+    relative_axis,
+    rotation_axis,
+    rotation_encoder,
+    rotation_equations,
+    spacing_equations,
+    translation_axis,
+)
 from brachycal.data.formats.metaimage import read_image_sequence
 from brachycal.data.formats.plus_files import Wire, read_plus_config
 from brachycal.data.formats.plus_segmentation import read_segmentation_parameters
@@ -126,3 +145,159 @@ def test_plus_probe_rotation_recording_gives_plus_baseline():
     np.testing.assert_allclose(spacing.value, plus_spacing, rtol=1e-5)
     centre = centre_of_rotation(frames, config.patterns, spacing.value)
     np.testing.assert_allclose(centre.value, plus_centre, atol=0.01)
+
+
+SIDES = [wire for pattern in PATTERNS for wire in (pattern[0], pattern[2])]
+PROBE_AXIS = np.array([0.012, -0.031, 1.0])  # per metre of the encoder
+TEMPLATE_AXIS = np.array([-0.004, 0.022, 1.0])
+WIRE_DIRECTION = np.array([0.017, 0.045, 1.0])  # the phantom's wires, against the image normal
+
+
+def _dot(wire: Wire, probe_m: float, template_m: float) -> np.ndarray:
+    """Pixel of ``wire``'s dot: the image plane is z = 0 of the probe, moved by ``probe_m`` along the
+    probe axis; the phantom (its wires along WIRE_DIRECTION) moved by ``template_m`` along the template
+    axis. The intersection is solved in 3D (an oracle the fit does not share)."""
+    start = np.array([wire.front_m[0], wire.front_m[1], 0.02]) + template_m * TEMPLATE_AXIS
+    origin = probe_m * PROBE_AXIS
+    t = (origin[2] - start[2]) / WIRE_DIRECTION[2]  # where the wire crosses the image plane
+    xy = (start + t * WIRE_DIRECTION - origin)[:2]
+    return (xy + np.array([0.010, 0.005])) / SPACING
+
+
+def translation_frames(probe_m, template_m, rng=None, noise_px=0.0):
+    frames = []
+    for p, t in zip(probe_m, template_m, strict=True):
+        points = {}
+        for wire in SIDES:
+            points[wire.name] = _dot(wire, p, t) + (rng.normal(0.0, noise_px, 2) if noise_px else 0.0)
+        frames.append(points)
+    return frames
+
+
+def test_exact_translation_frames_give_both_axes_and_their_difference():
+    z = np.linspace(-0.060, -0.010, 30)
+    still = np.zeros_like(z)
+    probe = translation_axis(translation_frames(z, still), z, PATTERNS, SPACING)
+    template = translation_axis(translation_frames(still, z), z, PATTERNS, SPACING)
+    np.testing.assert_allclose(probe.slope, (WIRE_DIRECTION - PROBE_AXIS)[:2], atol=1e-9)
+    np.testing.assert_allclose(template.slope, (TEMPLATE_AXIS - WIRE_DIRECTION)[:2], atol=1e-9)
+    relative, _ = relative_axis(probe, template)
+    np.testing.assert_allclose(relative, (TEMPLATE_AXIS - PROBE_AXIS)[:2], atol=1e-9)
+    # PLUS's orientation form: (−t_x, t_y, 1)
+    np.testing.assert_allclose(probe.plus_orientation, [-probe.slope[0], probe.slope[1], 1.0])
+    assert probe.range_m == pytest.approx(0.050) and probe.frames == 30
+
+
+def test_translation_slope_sd_matches_the_spread_over_noise_draws():
+    """The stated SD (from the fit's covariance) is the spread of the slope over fresh 0.5 px noise
+    draws: within ±15 % (300 draws: the spread's own SD is ~4 %)."""
+    rng = np.random.default_rng(7)
+    z = np.linspace(-0.030, 0.0, 25)
+    fits = [translation_axis(translation_frames(z, 0 * z, rng, 0.5), z, PATTERNS, SPACING) for _ in range(300)]
+    spread = np.std([f.slope for f in fits], axis=0, ddof=1)
+    stated = np.mean([f.slope_sd for f in fits], axis=0)
+    np.testing.assert_array_less(np.abs(stated / spread - 1.0), 0.15)
+
+
+def test_centre_sd_matches_the_spread_over_noise_draws():
+    """The centre's SD (the dots' noise, estimated from the radial residuals, propagated through the
+    whole fit) is the spread of the centre over fresh 0.8 px noise draws: within ±30 %."""
+    rng = np.random.default_rng(11)
+    clean = rotation_frames(np.linspace(-20.0, 25.0, 36))
+    centres, stated = [], []
+    for _ in range(40):
+        frames = [{name: uv + rng.normal(0.0, 0.8, 2) for name, uv in points.items()} for points in clean]
+        fit = centre_of_rotation(frames, PATTERNS, SPACING)
+        sd, _ = centre_sd(frames, PATTERNS, SPACING, fit.value, draws=20)
+        centres.append(fit.value)
+        stated.append(sd)
+    spread = np.std(centres, axis=0, ddof=1)
+    np.testing.assert_array_less(np.abs(np.mean(stated, axis=0) / spread - 1.0), 0.3)
+
+
+def test_spacing_sd_matches_the_spread_over_noise_draws():
+    """The spacing's jackknife SD over frames is the spread of the spacing over fresh 0.8 px draws: ±30 %."""
+    rng = np.random.default_rng(5)
+    clean = rotation_frames(np.linspace(-20.0, 25.0, 30))
+    values, stated = [], []
+    for _ in range(60):
+        frames = [{name: uv + rng.normal(0.0, 0.8, 2) for name, uv in points.items()} for points in clean]
+        values.append(pixel_spacing(frames, PATTERNS).value)
+        stated.append(jackknife_spacing_sd(frames, PATTERNS))
+    spread = np.std(values, axis=0, ddof=1)
+    np.testing.assert_array_less(np.abs(np.mean(stated, axis=0) / spread - 1.0), 0.3)
+
+
+def test_rotation_tilt_from_two_probe_positions_and_none_from_one():
+    angles = np.linspace(-20.0, 25.0, 40)
+    tilt = np.array([0.02, -0.01])  # the centre's drift, image metres per metre of probe position
+    frames, positions = [], []
+    for z in (-0.05, -0.02):
+        shift = tilt * z / SPACING  # px
+        frames += [{k: uv + shift for k, uv in f.items()} for f in rotation_frames(angles)]
+        positions += [z] * len(angles)
+    encoder = np.radians(np.concatenate([angles, angles]))
+    axis = rotation_axis(frames, encoder, positions, PATTERNS, SPACING, draws=5)
+    assert axis.tilt is not None and axis.tilt_note == ""
+    np.testing.assert_allclose(axis.tilt, tilt, atol=1e-9)
+    one = rotation_axis(frames[:40], encoder[:40], positions[:40], PATTERNS, SPACING, draws=5)
+    assert one.tilt is None and "one probe position" in one.tilt_note
+    np.testing.assert_allclose(one.centre_px, CENTRE_PX + tilt * -0.05 / SPACING, atol=1e-6)
+
+
+def test_rotation_encoder_scale_is_recovered():
+    """Frames turned by 0.9 × the encoder's angle: PLUS's angle of the side-wire line turns by −0.9×
+    (its scale, −k, is 0.9), offset 0 (the lines are level at angle 0)."""
+    encoder = np.linspace(-30.0, 30.0, 40)
+    fit = rotation_encoder(rotation_frames(0.9 * encoder), np.radians(encoder), PATTERNS, SPACING)
+    assert fit.scale == pytest.approx(-0.9, abs=1e-9)
+    assert fit.offset_rad == pytest.approx(0.0, abs=1e-9)
+
+
+def test_short_or_still_axes_are_refused():
+    z = np.linspace(0.0, 0.004, 10)  # 4 mm
+    with pytest.raises(DegenerateDataError, match="covers only 4 mm"):
+        translation_axis(translation_frames(z, 0 * z), z, PATTERNS, SPACING)
+    still = np.zeros(10)
+    with pytest.raises(DegenerateDataError, match="does not move"):
+        translation_axis(translation_frames(still, still), still, PATTERNS, SPACING)
+    angles = np.linspace(0.0, 8.0, 40)  # 8°
+    with pytest.raises(DegenerateDataError, match="covers only 8"):
+        rotation_axis(rotation_frames(angles), np.radians(angles), np.zeros(40), PATTERNS, SPACING)
+
+
+@pytest.mark.slow  # segments the three recordings (524 frames): ~20 s of CPU
+def test_plus_stepper_recordings_give_plus_baseline_and_every_axis(tmp_path):
+    """The whole command on PLUS's three recordings: spacing and centre as PLUS's baseline (with PLUS's
+    residual statistics, mm² in its file), the tilt not given (one probe position), both translation
+    axes with SDs, and the file written with every value finite."""
+    from brachycal.calibration.phantom.stepper_file import calibrate_stepper_files, write_stepper
+
+    baseline = ET.parse(reference(STEPPER, "USTC_3NWires_StepperCalibrationResultBaseline.xml")).getroot()
+    plus_spacing = baseline.find("SpacingCalibrationResult")
+    plus_centre = baseline.find("CenterOfRotationCalibrationResult")
+    result = calibrate_stepper_files(
+        reference(STEPPER, ICAL),
+        reference(STEPPER, "USTC_3NWires_ProbeRotation.igs.mha"),
+        reference(STEPPER, "USTC_3NWires_ProbeTranslation.igs.mha"),
+        reference(STEPPER, "USTC_3NWires_TemplateTranslation.igs.mha"),
+    )
+    np.testing.assert_allclose(
+        result.spacing.value * 1e3, np.array(plus_spacing.get("Spacing").split(), float), rtol=1e-5
+    )
+    np.testing.assert_allclose(
+        result.rotation.centre_px, np.array(plus_centre.get("CenterOfRotationPx").split(), float), atol=0.01
+    )
+    for fit, plus in ((result.spacing, plus_spacing), (result.rotation.fit, plus_centre)):  # m² vs PLUS's mm²
+        assert fit.residual_mean * 1e6 == pytest.approx(float(plus.get("ErrorMean")), rel=0.01)
+        assert fit.residual_sd * 1e6 == pytest.approx(float(plus.get("ErrorStdev")), rel=0.01)
+    assert result.rotation.tilt is None and "one probe position" in result.rotation.tilt_note
+    # each SD is positive and far below its value's scale (a calibration that determines it)
+    assert np.all(result.spacing_sd > 0) and np.all(result.spacing_sd < 1e-3 * result.spacing.value)
+    assert np.all(result.rotation.centre_sd_px > 0) and np.all(result.rotation.centre_sd_px < 2.0)
+    for axis in (result.probe_axis, result.template_axis):
+        assert np.all(axis.slope_sd > 0) and np.all(axis.slope_sd < 0.005)
+        assert axis.angle_deg < 5.0  # the wires run along the probe
+    payload = json.loads(write_stepper(result, tmp_path / "stepper.json").read_text())
+    assert payload["format"] == "brachycal-stepper/1"
+    assert payload["rotation_axis"]["determined"] is False and payload["rotation_axis"]["tilt"] is None

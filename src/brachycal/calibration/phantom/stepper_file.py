@@ -2,26 +2,64 @@
 
 :func:`calibrate_stepper_files` reads a PLUS device set (the N-wire phantom, its segmentation
 settings) and three single-axis recordings of a TRUS probe on a brachytherapy stepper (probe
-rotation, probe translation, template translation), segments every frame as ``brachycal nwire
-segment`` does, reads each frame's encoder values, and runs the stepper calibration of
-:mod:`brachycal.calibration.phantom.stepper`; :func:`write_stepper` writes the result.
+rotation, probe translation, template translation), checks that each moves its axis (and only
+it), segments every frame as ``brachycal nwire segment`` does, reads each frame's encoder values,
+and runs the stepper calibration of :mod:`brachycal.calibration.phantom.stepper`: pixel spacing,
+centre of rotation, rotation axis and encoder, both translation axes, each with its SD;
+:func:`write_stepper` writes the result.
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
-from brachycal.calibration.phantom.stepper import StepperFit, centre_of_rotation, pixel_spacing
+import numpy as np
+
+from brachycal.calibration.phantom.stepper import (
+    MIN_ROTATION_RAD,
+    MIN_TRANSLATION_M,
+    STILL_ROTATION_RAD,
+    STILL_TRANSLATION_M,
+    EncoderFit,
+    RotationAxisFit,
+    StepperFit,
+    TranslationAxisFit,
+    check_range,
+    jackknife_spacing_sd,
+    pixel_spacing,
+    relative_axis,
+    rotation_axis,
+    rotation_encoder,
+    translation_axis,
+)
 from brachycal.data.formats.metaimage import read_image_sequence
-from brachycal.data.formats.plus_files import PlusConfig, read_plus_config, stepper_encoder_values
+from brachycal.data.formats.plus_files import (
+    STEPPER_ENCODER_FIELDS,
+    PlusConfig,
+    read_plus_config,
+    stepper_encoder_values,
+)
 from brachycal.data.formats.plus_segmentation import read_segmentation_parameters
+from brachycal.errors import DegenerateDataError
 from brachycal.imaging.nwire_segmentation import segment_sequence
 from brachycal.io import sha256_file, write_json
 from brachycal.se3 import FloatArray
 
 FORMAT = "brachycal-stepper/1"
+#: The three recordings, in the command's order, with the encoder (index into
+#: :data:`~brachycal.data.formats.plus_files.STEPPER_ENCODER_FIELDS`) each must move.
+RECORDINGS = {"rotation": 1, "probe_translation": 0, "template_translation": 2}
+#: What the frame's axes are: the image's, PLUS's convention for the orientations.
+AXES_NOTE = (
+    "slopes are the still wires' dots' motion in the image (x = u * spacing_u, y = v * spacing_v) per "
+    "metre of the encoder; plus_orientation is PLUS's (-slope_x, slope_y, 1), comparable with a device "
+    "set's StepperCalibration; each translation axis is relative to the phantom's wires, their sum "
+    "(template relative to probe) is not"
+)
 
 
 @dataclass(frozen=True)
@@ -47,23 +85,81 @@ class StepperFileResult:
     """A stepper calibration of three recordings.
 
     Attributes:
-        spacing: pixel spacing ``(s_u, s_v)``, metres per pixel (the rotation recording).
-        centre: centre of rotation ``(u, v)``, pixels (the rotation recording).
+        spacing: pixel spacing ``(s_u, s_v)``, metres per pixel (the rotation recording, as PLUS's
+            baseline), with ``spacing_sd`` (jackknife over frames).
+        spacing_all: the spacing from all three recordings' frames (a cross-check).
+        rotation: the centre of rotation and what the recording says of the axis's tilt.
+        encoder: the rotation encoder's scale and offset against the image.
+        probe_axis, template_axis: the translation axes.
         recordings: ``"rotation"``, ``"probe_translation"``, ``"template_translation"`` → recording.
         config: the device set's file.
     """
 
     spacing: StepperFit
-    centre: StepperFit
+    spacing_sd: FloatArray
+    spacing_all: StepperFit
+    rotation: RotationAxisFit
+    encoder: EncoderFit
+    probe_axis: TranslationAxisFit
+    template_axis: TranslationAxisFit
     recordings: dict[str, StepperRecording]
     config: str
 
     def to_json(self) -> dict:
-        """The ``brachycal-stepper/1`` payload (metres, radians; ``_px``, ``_mm`` where a key says)."""
+        """The ``brachycal-stepper/1`` payload (metres, radians; ``_px``, ``_mm``, ``_deg`` where a key says)."""
+        rot = self.rotation
+        relative, relative_sd = relative_axis(self.probe_axis, self.template_axis)
         return {
             "format": FORMAT,
-            "pixel_spacing_m_per_px": self.spacing.value.tolist(),
-            "centre_of_rotation_px": self.centre.value.tolist(),
+            "pixel_spacing": {
+                "value_m_per_px": self.spacing.value.tolist(),
+                "sd_m_per_px": self.spacing_sd.tolist(),
+                "value_mm_per_px": (self.spacing.value * 1e3).tolist(),
+                "sd_mm_per_px": (self.spacing_sd * 1e3).tolist(),
+                "from": "rotation",
+                "residual_mean_m2": self.spacing.residual_mean,
+                "residual_sd_m2": self.spacing.residual_sd,
+                "equations": self.spacing.equations,
+                "kept": self.spacing.kept,
+                "all_recordings_m_per_px": self.spacing_all.value.tolist(),
+            },
+            "centre_of_rotation": {
+                "value_px": rot.centre_px.tolist(),
+                "sd_px": rot.centre_sd_px.tolist(),
+                "dot_sd_m": rot.dot_sd_m,
+                "residual_mean_m2": rot.fit.residual_mean,
+                "residual_sd_m2": rot.fit.residual_sd,
+                "equations": rot.fit.equations,
+                "kept": rot.fit.kept,
+            },
+            "rotation_axis": {
+                "probe_positions_m": rot.positions_m.tolist(),
+                "rotation_range_rad": rot.range_rad,
+                "tilt": None if rot.tilt is None else rot.tilt.tolist(),
+                "tilt_sd": None if rot.tilt_sd is None else rot.tilt_sd.tolist(),
+                "plus_orientation": None if rot.tilt is None else [-rot.tilt[0], rot.tilt[1], 1.0],
+                "determined": rot.tilt is not None,
+                "note": rot.tilt_note,
+            },
+            "rotation_encoder": {
+                "scale": self.encoder.scale,
+                "scale_sd": self.encoder.scale_sd,
+                "plus_scale": -self.encoder.scale,
+                "offset_rad": self.encoder.offset_rad,
+                "offset_sd_rad": self.encoder.offset_sd_rad,
+                "residual_sd_rad": self.encoder.residual_sd_rad,
+                "equations": self.encoder.equations,
+                "kept": self.encoder.kept,
+            },
+            "probe_translation_axis": _axis_json(self.probe_axis),
+            "template_translation_axis": _axis_json(self.template_axis),
+            "template_relative_to_probe": {
+                "slope": relative.tolist(),
+                "slope_sd": relative_sd.tolist(),
+                "plus_orientation": [-relative[0], relative[1], 1.0],
+                "angle_deg": float(np.degrees(np.arctan(np.hypot(*relative)))),
+            },
+            "axes": AXES_NOTE,
             "recordings": {
                 name: {"file": Path(r.path).name, "frames": r.total, "segmented": len(r.frames)}
                 for name, r in self.recordings.items()
@@ -75,22 +171,93 @@ class StepperFileResult:
         }
 
 
+def _axis_json(axis: TranslationAxisFit) -> dict:
+    direction = axis.plus_orientation / np.linalg.norm(axis.plus_orientation)
+    slope_norm = float(np.hypot(*axis.slope))
+    # d atan(|t|) = (t · dt) / (|t| (1 + |t|²)), independent components
+    angle_sd = (
+        float(np.degrees(np.hypot(*(axis.slope * axis.slope_sd)) / (slope_norm * (1 + slope_norm**2))))
+        if slope_norm > 0
+        else float(np.degrees(np.hypot(*axis.slope_sd)))
+    )
+    return {
+        "slope": axis.slope.tolist(),
+        "slope_sd": axis.slope_sd.tolist(),
+        "plus_orientation": axis.plus_orientation.tolist(),
+        "direction": direction.tolist(),
+        "angle_to_wires_deg": axis.angle_deg,
+        "angle_to_wires_sd_deg": angle_sd,
+        "range_m": axis.range_m,
+        "frames": axis.frames,
+        "residual_sd_m": axis.residual_sd_m.tolist(),
+        "equations": axis.equations,
+        "kept": axis.kept,
+    }
+
+
+def check_recording(name: str, path: str | os.PathLike[str], encoders: FloatArray) -> None:
+    """Refuse a recording whose axis does not move enough, or whose other axes move.
+
+    The rotation recording must turn at least :data:`MIN_ROTATION_RAD` and keep the template
+    still (the probe may sit at several positions: that gives the axis's tilt); a translation
+    recording must move its encoder at least :data:`MIN_TRANSLATION_M` and keep the others still.
+
+    Raises:
+        DegenerateDataError: naming the file and the encoder field.
+    """
+    moving = RECORDINGS[name]
+    for j, field in enumerate(STEPPER_ENCODER_FIELDS):
+        rotation = j == 1
+        unit, scale = ("°", 180.0 / np.pi) if rotation else ("mm", 1e3)
+        values = encoders[:, j]
+        try:
+            if j == moving:
+                check_range(values, MIN_ROTATION_RAD if rotation else MIN_TRANSLATION_M, field, unit, scale)
+                continue
+            if name == "rotation" and j == 0:
+                continue
+            still = STILL_ROTATION_RAD if rotation else STILL_TRANSLATION_M
+            span = float(np.ptp(values)) if len(values) else 0.0
+            if span > still:
+                sep = "" if rotation else " "
+                raise DegenerateDataError(
+                    f"{field} moves {span * scale:.3g}{sep}{unit} in the {name.replace('_', ' ')} recording "
+                    f"(at most {still * scale:.3g}{sep}{unit}: only one axis may move)"
+                )
+        except DegenerateDataError as exc:
+            raise DegenerateDataError(exc.problem, file=path, row_label="frame", column=field) from None
+
+
 def read_stepper_recording(
-    path: str | os.PathLike[str], config: PlusConfig, config_path: str | os.PathLike[str]
+    name: str, path: str | os.PathLike[str], config: PlusConfig, config_path: str | os.PathLike[str]
 ) -> StepperRecording:
-    """Segment a stepper recording and read its frames' encoder values.
+    """Read, check (:func:`check_recording`) and segment a stepper recording; the segmented frames
+    with their encoder values.
 
     Raises:
         InputError: a frame without the stepper's encoder fields (naming the file, frame, field),
             or frames that are not 8-bit.
+        DegenerateDataError: an axis that does not move as the recording must.
     """
     sequence = read_image_sequence(path)
     encoders = stepper_encoder_values(sequence.frame_fields, path)
+    check_recording(name, path, encoders)
     result = segment_sequence(sequence, config, read_segmentation_parameters(config_path), source=path, poses=None)
     kept = [k for k, frame in enumerate(result.frames) if frame.ok]
     return StepperRecording(
         str(path), [result.frames[k].points_px for k in kept], encoders[kept].reshape(-1, 3), len(sequence)
     )
+
+
+@contextmanager
+def _naming(recording: StepperRecording, field: str) -> Iterator[None]:
+    """A DegenerateDataError raised inside, re-raised naming the recording's file and encoder field."""
+    try:
+        yield
+    except DegenerateDataError as exc:
+        if exc.file is not None:
+            raise
+        raise DegenerateDataError(exc.problem, file=recording.path, row_label="frame", column=field) from None
 
 
 def calibrate_stepper_files(
@@ -103,32 +270,54 @@ def calibrate_stepper_files(
 
     Raises:
         InputError: a file that does not read, or a recording without encoder fields.
-        DegenerateDataError: a recording that does not determine what it is for.
+        DegenerateDataError: a recording that does not determine what it is for (naming its file
+            and encoder field).
     """
     phantom = read_plus_config(config, require_registration=False)
-    recordings = {
-        name: read_stepper_recording(path, phantom, config)
-        for name, path in (
-            ("rotation", rotation),
-            ("probe_translation", probe_translation),
-            ("template_translation", template_translation),
-        )
-    }
-    spacing = pixel_spacing(recordings["rotation"].frames, phantom.patterns)
-    centre = centre_of_rotation(recordings["rotation"].frames, phantom.patterns, spacing.value)
-    return StepperFileResult(spacing, centre, recordings, str(config))
+    paths = {"rotation": rotation, "probe_translation": probe_translation, "template_translation": template_translation}
+    recordings = {name: read_stepper_recording(name, path, phantom, config) for name, path in paths.items()}
+    rot = recordings["rotation"]
+    with _naming(rot, "ProbeRotation"):
+        spacing = pixel_spacing(rot.frames, phantom.patterns)
+        spacing_sd = jackknife_spacing_sd(rot.frames, phantom.patterns)
+        axis = rotation_axis(rot.frames, rot.encoders[:, 1], rot.encoders[:, 0], phantom.patterns, spacing.value)
+        encoder = rotation_encoder(rot.frames, rot.encoders[:, 1], phantom.patterns, spacing.value)
+    spacing_all = pixel_spacing([points for r in recordings.values() for points in r.frames], phantom.patterns)
+    probe = recordings["probe_translation"]
+    with _naming(probe, "ProbePosition"):
+        probe_axis = translation_axis(probe.frames, probe.encoders[:, 0], phantom.patterns, spacing.value)
+    template = recordings["template_translation"]
+    with _naming(template, "TemplatePosition"):
+        template_axis = translation_axis(template.frames, template.encoders[:, 2], phantom.patterns, spacing.value)
+    return StepperFileResult(
+        spacing, spacing_sd, spacing_all, axis, encoder, probe_axis, template_axis, recordings, str(config)
+    )
 
 
 def write_stepper(result: StepperFileResult, path: str | os.PathLike[str], *, force: bool = False) -> Path:
-    """Write ``result`` as ``brachycal-stepper/1`` JSON, all or nothing (never NaN)."""
+    """Write ``result`` as ``brachycal-stepper/1`` JSON, all or nothing (never NaN: a missing value is null)."""
     return write_json(path, result.to_json(), force=force)
 
 
 def summary_lines(result: StepperFileResult) -> list[str]:
     """What ``brachycal stepper calibrate`` prints: per recording the frames used, then the values."""
     lines = [f"{Path(r.path).name}: {len(r.frames)} of {r.total} frames segmented" for r in result.recordings.values()]
-    s = result.spacing.value * 1e3
-    c = result.centre.value
-    lines.append(f"pixel spacing: {s[0]:.6f} x {s[1]:.6f} mm/px")
-    lines.append(f"centre of rotation: {c[0]:.3f}, {c[1]:.3f} px")
+    s, sd = result.spacing.value * 1e3, result.spacing_sd * 1e3
+    rot = result.rotation
+    c, csd = rot.centre_px, rot.centre_sd_px
+    lines.append(f"pixel spacing: {s[0]:.6f} ± {sd[0]:.6f} x {s[1]:.6f} ± {sd[1]:.6f} mm/px (SD)")
+    lines.append(f"centre of rotation: {c[0]:.3f} ± {csd[0]:.3f}, {c[1]:.3f} ± {csd[1]:.3f} px (SD)")
+    if rot.tilt is None:
+        lines.append(f"rotation axis tilt: not determined ({rot.tilt_note})")
+    else:
+        t, tsd = rot.tilt, rot.tilt_sd if rot.tilt_sd is not None else np.zeros(2)
+        lines.append(f"rotation axis tilt: {t[0]:.5f} ± {tsd[0]:.5f}, {t[1]:.5f} ± {tsd[1]:.5f} (PLUS: -x, y, 1)")
+    e = result.encoder
+    lines.append(f"rotation encoder scale: {-e.scale:.5f} ± {e.scale_sd:.5f} (PLUS's sign)")
+    for label, axis in (("probe", result.probe_axis), ("template", result.template_axis)):
+        o = axis.plus_orientation
+        lines.append(
+            f"{label} translation axis (PLUS): {o[0]:.6f} ± {axis.slope_sd[0]:.6f}, "
+            f"{o[1]:.6f} ± {axis.slope_sd[1]:.6f}, 1 ({axis.angle_deg:.3f}° to the wires)"
+        )
     return lines
