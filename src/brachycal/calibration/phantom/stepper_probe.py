@@ -36,6 +36,7 @@ from brachycal.calibration.phantom.nwire_file import (
     read_nwire,
 )
 from brachycal.calibration.phantom.stepper import StepperFit, centre_of_rotation, pixel_spacing
+from brachycal.calibration.phantom.stepper_file import FORMAT as STEPPER_FORMAT
 from brachycal.calibration.phantom.stepper_file import read_stepper_recording
 from brachycal.data.formats.metaimage import read_image_sequence
 from brachycal.data.formats.plus_files import (
@@ -47,6 +48,7 @@ from brachycal.data.formats.plus_files import (
 )
 from brachycal.data.formats.plus_segmentation import read_segmentation_parameters
 from brachycal.data.formats.plus_stepper import STRAIGHT_AXES, StepperAxes, TemplateGrid, read_stepper_axes
+from brachycal.data.json_files import read_format_json
 from brachycal.errors import DegenerateDataError, InputError
 from brachycal.imaging.nwire_segmentation import segment_sequence
 from brachycal.io import sha256_file, write_json
@@ -181,6 +183,35 @@ def corrected_frames(frames: Sequence[SegmentedFrame], axes: StepperAxes) -> lis
     return out
 
 
+def read_calibrated_axes(path: str | os.PathLike[str]) -> StepperAxes:
+    """The stepper's axes from a ``brachycal stepper calibrate`` result (``brachycal-stepper/1``), PLUS's form.
+
+    Raises:
+        InputError: another format, or an axis or scale that is missing or not PLUS's ``Tx Ty 1``
+            within 0.2 of the stepper's z (a scale within 0.5–2), naming the key.
+    """
+    raw = read_format_json(path, STEPPER_FORMAT)
+    axes: list[FloatArray] = []
+    for key in ("probe_translation_axis", "template_translation_axis"):
+        entry = raw.get(key)
+        try:
+            axis: FloatArray = np.asarray(entry["plus_orientation"], dtype=np.float64).reshape(3)  # type: ignore[index]
+        except (KeyError, TypeError, ValueError):
+            axis = np.full(3, np.nan)
+        if not (np.all(np.isfinite(axis)) and axis[2] == 1.0 and np.hypot(axis[0], axis[1]) <= 0.2):
+            raise InputError(
+                "must be PLUS's axis 'Tx Ty 1' within 0.2 of z", file=path, column=f"{key}.plus_orientation"
+            )
+        axes.append(axis)
+    try:
+        scale = float(raw["rotation_encoder"]["plus_scale"])
+    except (KeyError, TypeError, ValueError):
+        scale = float("nan")
+    if not 0.5 <= scale <= 2.0:
+        raise InputError("must be a scale within 0.5-2", file=path, column="rotation_encoder.plus_scale")
+    return StepperAxes(axes[0], axes[1], scale, f"brachycal stepper calibrate ({Path(path).name})")
+
+
 @dataclass(frozen=True)
 class StepperImageResult:
     """Image → Probe of a probe on a stepper, with the phantom's registration and both pose models.
@@ -233,6 +264,7 @@ def calibrate_stepper_image_files(
     *,
     model: str | None = None,
     correct_axes: bool = True,
+    axes: StepperAxes | None = None,
 ) -> StepperImageResult:
     """Image → Probe of a TRUS probe on a stepper from PLUS files, validated as PLUS does.
 
@@ -247,7 +279,8 @@ def calibrate_stepper_image_files(
         validation_path: B-mode sequence of the validation frames, or None.
         model: a :data:`~brachycal.calibration.phantom.nwire_file.NWIRE_MODELS` name, or None (lowest
             best-95 % validation mean).
-        correct_axes: rebuild the poses along the device set's calibrated axes (False: as recorded).
+        correct_axes: rebuild the poses along the calibrated axes (False: as recorded).
+        axes: the stepper's axes to rebuild them along; None: the device set's ``StepperCalibration``.
 
     Raises:
         InputError: unreadable or malformed files, a device set without a stepper, recorded poses
@@ -264,7 +297,10 @@ def calibrate_stepper_image_files(
             file=config_path,
         )
     config = read_plus_config(config_path, require_registration=False)
-    axes = read_stepper_axes(config_path) if correct_axes else STRAIGHT_AXES
+    if not correct_axes:
+        axes = STRAIGHT_AXES
+    elif axes is None:
+        axes = read_stepper_axes(config_path)
     if validation_path is None:
         calibration, validation = read_segmented_frames(calibration_path, poses=streams.fields)
     else:
@@ -281,7 +317,7 @@ def calibrate_stepper_image_files(
             ).frames
             for label, path in (("CalibrationData", calibration_path), ("ValidationData", validation_path))
         )
-    rotation = read_stepper_recording(rotation_path, config, config_path)
+    rotation = read_stepper_recording("rotation", rotation_path, config, config_path)
     plus_registration = register_phantom(rotation.frames, config.patterns)
     paths = [p for p in (config_path, rotation_path, calibration_path, validation_path) if p is not None]
     inputs = {Path(p).name: sha256_file(p) for p in paths}

@@ -26,8 +26,9 @@ N-wire phantom mounted on the template holder:
 The recorded poses move the probe along the stepper's z exactly; the device set's
 StepperCalibration (ProbeTranslationAxisOrientation, 'Tx Ty 1') says along which axis it really
 travels, and each pose is rebuilt from its encoder values along it (as PLUS's stepper device does
-when it compensates). The fit on the poses as recorded, PLUS's own, is validated beside it;
---recorded-poses uses only those. CALIBRATION may also be a segmented-frames XML holding both
+when it compensates); --stepper takes the axes (and the rotation encoder's scale) from
+`brachycal stepper calibrate`'s result instead. The fit on the poses as recorded, PLUS's own, is
+validated beside it; --recorded-poses uses only those. CALIBRATION may also be a segmented-frames XML holding both
 frame sets (PLUS's results file, or `brachycal nwire segment`'s output); then leave out VALIDATION.
 
 Writes JSON (brachycal-nwire/1 with a 'stepper' block: the registration T_Template_Phantom, the
@@ -72,6 +73,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="use the poses as recorded (PLUS's fit), not rebuilt along the device set's calibrated axes",
     )
+    parser.add_argument(
+        "--stepper",
+        metavar="STEPPER.json",
+        help="the stepper's axes from `brachycal stepper calibrate` (default: the device set's StepperCalibration)",
+    )
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     parser.set_defaults(run=run)
 
@@ -80,13 +86,21 @@ def run(args: argparse.Namespace) -> int:
     from brachycal.calibration.phantom.nwire import best_fraction  # lazy: start-up (the command's run only)
 
     # lazy: start-up (the command's run only)
-    from brachycal.calibration.phantom.stepper_probe import calibrate_stepper_image_files, write_stepper_image
+    from brachycal.calibration.phantom.stepper_probe import (
+        calibrate_stepper_image_files,
+        read_calibrated_axes,
+        write_stepper_image,
+    )
+    from brachycal.errors import InputError  # lazy: start-up (the command's run only)
     from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
 
     with OutputSet(
-        force=args.force, inputs=command_inputs(args, "rotation", "calibration", "validation", "config")
+        force=args.force, inputs=command_inputs(args, "rotation", "calibration", "validation", "config", "stepper")
     ) as outputs:
         staged = outputs.claim(args.out, label="--out")
+        if args.stepper is not None and args.recorded_poses:
+            raise InputError("--recorded-poses uses no axes: give it without --stepper")
+        axes = read_calibrated_axes(args.stepper) if args.stepper is not None else None
         result = calibrate_stepper_image_files(
             args.config,
             args.rotation,
@@ -94,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
             args.validation,
             model=args.model,
             correct_axes=not args.recorded_poses,
+            axes=axes,
         )
         write_stepper_image(result, staged, force=args.force)
     r = result.registration
@@ -105,7 +120,11 @@ def run(args: argparse.Namespace) -> int:
         f"Phantom->StepperHome translation {t[0]:.3f} {t[1]:.3f} {t[2]:.3f} mm"
     )
     a = result.axes.probe_translation
-    poses = "as recorded" if result.recorded is None else f"along the probe axis {a[0]:.6f} {a[1]:.6f} 1"
+    poses = (
+        "as recorded"
+        if result.recorded is None
+        else f"along the probe axis {a[0]:.6f} {a[1]:.6f} 1 (from {result.axes.source})"
+    )
     print(f"poses: {poses}")
     n = result.nwire
     print(

@@ -139,7 +139,7 @@ def _definition(definitions: dict[tuple[str, str], FloatArray], frm: str, to: st
     if (frm, to) in definitions:
         M = definitions[frm, to]
     elif (to, frm) in definitions:
-        M = np.linalg.inv(definitions[to, frm])
+        M = inverse(definitions[to, frm])
     else:
         raise InputError(f"no template registration: missing {place} (where the template sits)", file=path)
     try:
