@@ -89,7 +89,7 @@ start here:
                                       a TRUS probe's brachytherapy stepper: axes, pixel spacing, centre of rotation
   brachycal stepper image ROTATION.mha CAL.mha VAL.mha --config DEVICE_SET.xml --out stepper_image.json
                                       Image -> Probe of a TRUS probe on a stepper (random stepper motion)
-  brachycal stepper template RESULT --config DEVICE_SET.xml --hole D4 --depth MM --probe-position MM
+  brachycal stepper template RESULT --config DEVICE_SET.xml --hole D4 --depth 100 --probe-position -50
                                       where a needle through a template hole lands in the image
   brachycal stepper export RESULT --out DIR
                                       a stepper result as PLUS CoordinateDefinitions and Slicer/ITK files
