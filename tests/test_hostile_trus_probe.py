@@ -139,6 +139,18 @@ CASES = [
         files(plain_nwire=True),
     ),
     Case(
+        "image-stepper-file-of-another-format",
+        [*IMAGE, "--stepper", "{tmp}/result.json"],
+        ["result.json", "format", "brachycal-stepper/1"],
+        files(),
+    ),
+    Case(
+        "image-stepper-axes-with-recorded-poses",
+        [*IMAGE, "--stepper", "{tmp}/result.json", "--recorded-poses"],
+        ["--recorded-poses", "--stepper"],
+        files(),
+    ),
+    Case(
         "image-tracker-device-set",
         IMAGE,
         ["config.xml", "not a stepper device set", "brachycal nwire"],

@@ -198,32 +198,35 @@ def ical_result(tmp_path_factory):
     return result, path
 
 
+def plus_result() -> tuple[dict[str, float], np.ndarray]:
+    """PLUS's 3D statistics (mm) and its Image → Probe (mm) from its results file."""
+    from brachycal.data.formats.plus_files import parse_xml, read_coordinate_definitions
+
+    path = reference(STEPPER, "UsTemplateCalibration_3NWires.results.xml")
+    stats = next(parse_xml(path).iter("ReprojectionError3DStatistics")).attrib
+    return {k: float(v) for k, v in stats.items()}, read_coordinate_definitions(path)["Image", "Probe"]
+
+
 def test_plus_s_poses_reproduce_plus_s_calibration(ical_result):
-    result, _ = ical_result
-    plus = result.recorded.models["affine"]
-    assert plus.validation_best95.mae_mm == pytest.approx(2.153, abs=0.005)
-    assert plus.validation_best95.sd_mm == pytest.approx(1.115, abs=0.005)
     from brachycal.calibration.phantom.nwire import best_fraction
 
-    assert best_fraction(plus.calibration_3d).mae_mm == pytest.approx(2.245, abs=0.005)
-    plus_matrix = np.array(
-        [
-            [0.147116, -0.00189713, -0.00928478, -59.6058],
-            [0.00173063, -0.140886, -0.000724136, 2.85008],
-            [-0.00950324, 0.000831574, -0.143866, 159.927],
-        ]
-    )
-    ours = result.recorded.matrix("affine")[:3] * 1e3
-    np.testing.assert_allclose(ours[:, :2], plus_matrix[:, :2], atol=2e-5)
-    np.testing.assert_allclose(ours[:, 3], plus_matrix[:, 3], atol=0.01)
-    # PLUS's stepper baseline: the centre of rotation and the spacing the registration used
+    result, _ = ical_result
+    stats, plus_matrix = plus_result()
+    plus = result.recorded.models["affine"]
+    assert plus.validation_best95.mae_mm == pytest.approx(stats["ValidationMeanMm"], abs=0.005)
+    assert plus.validation_best95.sd_mm == pytest.approx(stats["ValidationStdDevMm"], abs=0.005)
+    assert best_fraction(plus.calibration_3d).mae_mm == pytest.approx(stats["CalibrationMeanMm"], abs=0.005)
+    ours = result.recorded.matrix("affine") * np.array([[1e3], [1e3], [1e3], [1.0]])
+    np.testing.assert_allclose(ours[:3, :2], plus_matrix[:3, :2], atol=2e-5)  # mm per pixel
+    np.testing.assert_allclose(ours[:3, 3], plus_matrix[:3, 3], atol=0.01)  # mm
+    # PLUS's stepper baseline: the centre of rotation the registration used
     np.testing.assert_allclose(result.registration.centre.value, [414.094, 22.592], atol=0.01)
 
 
 def test_poses_along_the_calibrated_axis_validate_at_or_below_plus(ical_result):
     result, path = ical_result
     chosen = result.nwire.models[result.nwire.model]
-    assert chosen.validation_best95.mae_mm <= 2.153
+    assert chosen.validation_best95.mae_mm <= plus_result()[0]["ValidationMeanMm"]
     # every 3D model improves on its own fit with the poses as recorded
     for model in ("affine", "rigid", "3d-aniso", "3d-iso"):
         assert (
@@ -276,3 +279,23 @@ def test_template_prints_one_row_per_hole_and_depth(tmp_path, capsys):
     assert [(r[0], r[1]) for r in rows] == [("B2", "80.000"), ("B2", "90.000"), ("A3", "80.000"), ("A3", "90.000")]
     # the image is across the probe's axis: 10 mm deeper is 10 mm further along the image's z
     assert abs(float(rows[1][4]) - float(rows[0][4])) == pytest.approx(10.0, abs=1e-3)
+
+
+def test_the_axes_of_a_stepper_calibration_are_plus_s(tmp_path):
+    """`stepper image --stepper` takes PLUS's form of `stepper calibrate`'s axes and encoder scale."""
+    import json
+
+    from brachycal.calibration.phantom.stepper_probe import read_calibrated_axes
+
+    payload = {
+        "format": "brachycal-stepper/1",
+        "probe_translation_axis": {"slope": [0.026, -0.043], "plus_orientation": [-0.026, -0.043, 1.0]},
+        "template_translation_axis": {"slope": [0.0036, 0.0017], "plus_orientation": [-0.0036, 0.0017, 1.0]},
+        "rotation_encoder": {"scale": -0.96, "plus_scale": 0.96},
+    }
+    (tmp_path / "stepper.json").write_text(json.dumps(payload))
+    axes = read_calibrated_axes(tmp_path / "stepper.json")
+    np.testing.assert_allclose(axes.probe_translation, [-0.026, -0.043, 1.0])
+    np.testing.assert_allclose(axes.template_translation, [-0.0036, 0.0017, 1.0])
+    assert axes.rotation_encoder_scale == 0.96
+    assert not axes.straight
