@@ -27,6 +27,7 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
         NWireFile,
         NWireFileResult,
         calibrate_nwire_files,
+        calibrate_nwire_frames,
         read_nwire,
         write_nwire,
     )
@@ -49,9 +50,11 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
         StepperImageFile,
         StepperImageResult,
         calibrate_stepper_image_files,
+        corrected_frames,
         hole_in_image,
         read_stepper_image,
         register_phantom,
+        stepper_pose,
         write_stepper_image,
     )
     from brachycal.calibration.phantom.wedge import (
@@ -157,6 +160,7 @@ __all__ = [
     "calibrate_folder",
     "calibrate_nwire",
     "calibrate_nwire_files",
+    "calibrate_nwire_frames",
     "calibrate_pivot_files",
     "calibrate_stepper_image_files",
     "calibrate_wedge",
@@ -164,6 +168,7 @@ __all__ = [
     "calibrate_wire",
     "calibrate_wire_files",
     "centre_of_rotation",
+    "corrected_frames",
     "corrected_robot",
     "cross_validate_identification",
     "estimate_lag",
@@ -194,6 +199,7 @@ __all__ = [
     "read_wire_phantom",
     "register_phantom",
     "select_model",
+    "stepper_pose",
     "validate_result_document",
     "verify_folder",
     "wire_point_pairs",
