@@ -55,6 +55,10 @@ NOT_RUN = {
     ("demo", "--images"): "a second demo (~30 s of CPU) plus 66 rendered frames; tests/test_needle_tip.py renders a "
     "twin's recording and runs brachycal tips on it",
     ("tips",): "needs the frames of demo --images (above): ~0.15 s of CPU a frame; tests/test_needle_tip.py runs it",
+    ("stepper", "image"): "a stepper's recordings are outside data (PLUS's iCal; no bundled twin of a stepper): "
+    "tests/test_trus_probe.py runs it on them and on exact frames",
+    ("stepper", "template"): "needs a stepper image result (above): tests/test_trus_probe.py runs it",
+    ("stepper", "export"): "needs a stepper image result (above): tests/test_trus_probe.py runs it",
 }
 #: CPU budget of the ordered walk in this process, seconds (measured ~40 s on a 2-core x86_64 VM).
 CPU_BUDGET_S = 60.0

@@ -45,6 +45,9 @@ from brachycal.cli.plan import excitation as plan_excitation
 from brachycal.cli.plan import grid as plan
 from brachycal.cli.robot import identify as robot_identify
 from brachycal.cli.stepper import calibrate as stepper
+from brachycal.cli.stepper import export as stepper_export
+from brachycal.cli.stepper import image as stepper_image
+from brachycal.cli.stepper import template as stepper_template
 from brachycal.errors import BrachycalError
 
 DESCRIPTION = """\
@@ -85,6 +88,12 @@ start here:
   brachycal stepper [calibrate] ROTATION.mha PROBE_TRANSLATION.mha TEMPLATE_TRANSLATION.mha \\
       --config DEVICE_SET.xml --out stepper.json
                                       a TRUS probe's brachytherapy stepper: axes, pixel spacing, centre of rotation
+  brachycal stepper image ROTATION.mha CAL.mha VAL.mha --config DEVICE_SET.xml --out stepper_image.json
+                                      Image -> Probe of a TRUS probe on a stepper (random stepper motion)
+  brachycal stepper template RESULT --config DEVICE_SET.xml --hole D4 --depth 100 --probe-position -50
+                                      where a needle through a template hole lands in the image
+  brachycal stepper export RESULT --out DIR
+                                      a stepper result as PLUS CoordinateDefinitions and Slicer/ITK files
   brachycal temporal VIDEO.mha TRACKER.mha --out lag.json
                                       lag of the tracker (or joint log) behind the ultrasound frames
   brachycal robot identify touches FOLDER... --urdf URDF --tool-frame FRAME --train PLACE --out DIR
@@ -119,6 +128,9 @@ COMMANDS = {
     nwire_segment.NAME: nwire_segment,
     "phantom": phantom,
     "stepper": stepper,
+    stepper_image.NAME: stepper_image,
+    stepper_template.NAME: stepper_template,
+    stepper_export.NAME: stepper_export,
     "temporal": temporal,
     "study": study,
     "design": design,

@@ -47,6 +47,7 @@ if TYPE_CHECKING:  # imported on first use: `brachycal <command> --help` and `fk
     )
     from brachycal.data.formats.plus_segmentation import read_segmentation_parameters
     from brachycal.data.formats.plus_segmented_xml import write_segmented_frames
+    from brachycal.data.formats.plus_stepper import StepperAxes, TemplateGrid, read_stepper_axes, read_template
     from brachycal.data.joint_log import (
         JointLog,
         JointLogChecker,
@@ -128,8 +129,10 @@ __all__ = [
     "SegmentedFrame",
     "Session",
     "SessionBuild",
+    "StepperAxes",
     "StillSettings",
     "StillWindow",
+    "TemplateGrid",
     "Touches",
     "Wire",
     "bag_log_blocks",
@@ -163,6 +166,8 @@ __all__ = [
     "read_session",
     "read_session_toml",
     "read_slicer_markups",
+    "read_stepper_axes",
+    "read_template",
     "read_times",
     "session_settings",
     "still_configuration",

@@ -17,6 +17,7 @@ if TYPE_CHECKING:  # imported on first use (the formats need Pinocchio)
     from brachycal.calibration.result import calibrated_robot
     from brachycal.export.formats import (
         EXPORT_FILES,
+        STEPPER_EXPORT_FILES,
         check_ros_package_name,
         export_files,
         flange_labels,
@@ -29,12 +30,14 @@ if TYPE_CHECKING:  # imported on first use (the formats need Pinocchio)
         write_exports,
         write_itk_transform,
         write_ros_package,
+        write_stepper_exports,
     )
 
 __getattr__, __dir__ = attach(__name__, __file__)
 
 __all__ = [
     "EXPORT_FILES",
+    "STEPPER_EXPORT_FILES",
     "calibrated_robot",
     "check_ros_package_name",
     "export_files",
@@ -48,4 +51,5 @@ __all__ = [
     "write_exports",
     "write_itk_transform",
     "write_ros_package",
+    "write_stepper_exports",
 ]

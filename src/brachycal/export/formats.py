@@ -9,7 +9,7 @@ import io
 import os
 import re
 import shutil
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
@@ -26,6 +26,7 @@ from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, make_transform, to_position_quaternion
 
 if TYPE_CHECKING:
+    from brachycal.calibration.phantom.stepper_probe import StepperImageFile
     from brachycal.model.rig import Rig
 
 LPS = np.diag([-1.0, -1.0, 1.0, 1.0])
@@ -151,18 +152,23 @@ def plus_coordinate_definitions(calibration: Calibration, *args: Any) -> str:
     calibration, rest = calibration_args("plus_coordinate_definitions", calibration, args)
     labels: tuple[str, str] = _one("plus_coordinate_definitions", rest, ("RightFlange", "LeftFlange"))
     T_ER_Ntip, T_EL_Ptip, image = calibration.T_ER_Ntip, calibration.T_EL_Ptip, calibration.image
-    date = datetime.now(UTC).strftime("%Y.%m.%d %H:%M:%S")
     needle, probe = labels
     items = [
         ("Image", "Probe", image_to_probe_mm(image)),
         ("Probe", probe, _mm(T_EL_Ptip)),
         ("NeedleTip", needle, _mm(T_ER_Ntip)),
     ]
+    return coordinate_definitions_text(items)
+
+
+def coordinate_definitions_text(items: Sequence[tuple[str, str, FloatArray]], comment: str = "") -> str:
+    """A PLUS ``<CoordinateDefinitions>`` element (text): one ``Transform`` per ``(From, To, matrix in mm)``."""
+    date = datetime.now(UTC).strftime("%Y.%m.%d %H:%M:%S")
     body = "\n".join(
         f'  <Transform From="{a}" To="{b}"\n    Matrix="\n        {_matrix_text(M)}"\n    Date="{date}" />'
         for a, b, M in items
     )
-    header = "<CoordinateDefinitions>\n  <!-- brachycal calibration; millimetres, Image in pixels -->\n"
+    header = f"<CoordinateDefinitions>\n  <!-- brachycal calibration; millimetres, Image in pixels{comment} -->\n"
     return f"{header}{body}\n</CoordinateDefinitions>\n"
 
 
@@ -521,3 +527,33 @@ def write_ros_package(
             with atomic_open(staged[file], force=force) as f:
                 f.write(text)
     return [*(package / file for file in files), *meshes]
+
+
+#: The files :func:`write_stepper_exports` writes.
+STEPPER_EXPORT_FILES = ("ImageToProbe.tfm", "PhantomToStepperHome.tfm", "PlusCoordinateDefinitions.xml")
+
+
+def write_stepper_exports(
+    result: StepperImageFile, folder: str | os.PathLike[str], *, force: bool = False, outputs: OutputSet | None = None
+) -> list[Path]:
+    """Write a stepper Image → Probe result's hand-off into ``folder``, all or nothing.
+
+    ``ImageToProbe.tfm`` (pixels → mm, PLUS's form, the chosen model), ``PhantomToStepperHome.tfm``
+    (the phantom's registration, the template at home) for 3D Slicer and ITK, and
+    ``PlusCoordinateDefinitions.xml`` with both (PLUS's ``Image → Probe`` and ``Phantom → StepperHome``).
+    The Image → Probe belongs with poses built along the stepper axes the result records.
+    """
+    folder = Path(folder)
+    image_to_probe = result.image_to_probe.copy()
+    image_to_probe[:3, :] *= 1e3  # pixels -> mm: the scaled columns and the translation
+    phantom = _mm(result.T_template_phantom)
+    a = result.axes.probe_translation
+    comment = f"; stepper poses along the probe axis {a[0]:.6g} {a[1]:.6g} 1"
+    with output_set(outputs, force=force) as out:
+        staged = {name: out.path(folder / name, make_parents=True) for name in STEPPER_EXPORT_FILES}
+        write_itk_transform(image_to_probe, staged["ImageToProbe.tfm"], force=force)
+        write_itk_transform(phantom, staged["PhantomToStepperHome.tfm"], force=force)
+        items = [("Image", "Probe", image_to_probe), ("Phantom", "StepperHome", phantom)]
+        with atomic_open(staged["PlusCoordinateDefinitions.xml"], force=force) as f:
+            f.write(coordinate_definitions_text(items, comment))
+    return [folder / name for name in STEPPER_EXPORT_FILES]

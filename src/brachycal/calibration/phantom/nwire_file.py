@@ -38,7 +38,7 @@ from brachycal.calibration.phantom.nwire import (
     wire_point_pairs,
 )
 from brachycal.calibration.phantom.nwire_refine import PLUS_NAMES, REFINEMENTS, Refinement, observations, refine_all
-from brachycal.data.formats.plus_files import read_plus_config, read_segmented_frames
+from brachycal.data.formats.plus_files import PlusConfig, SegmentedFrame, read_plus_config, read_segmented_frames
 from brachycal.data.json_files import read_format_json
 from brachycal.errors import InputError
 from brachycal.io import sha256_file, write_json
@@ -217,11 +217,40 @@ def calibrate_nwire_files(
         raise InputError(f"no N-wire model {model!r}: expected one of {', '.join(NWIRE_MODELS)}")
     config = read_plus_config(config_path)
     calibration_frames, validation_frames = read_segmented_frames(frames_path)
+    return calibrate_nwire_frames(
+        config,
+        calibration_frames,
+        validation_frames,
+        model=model,
+        inputs={Path(p).name: sha256_file(p) for p in (config_path, frames_path)},
+    )
+
+
+def calibrate_nwire_frames(
+    config: PlusConfig,
+    calibration_frames: list[SegmentedFrame],
+    validation_frames: list[SegmentedFrame],
+    *,
+    model: str | None = None,
+    inputs: dict[str, str] | None = None,
+) -> NWireFileResult:
+    """:func:`calibrate_nwire_files` of frames already read (``config`` holds the phantom registration).
+
+    Args:
+        inputs: file name → SHA-256 recorded in the result.
+
+    Raises:
+        InputError: an unknown model, no usable validation frame, a frame the fits refuse.
+        DegenerateDataError: the middle-wire points cannot determine a fit.
+    """
+    if model is not None and model not in NWIRE_MODELS:
+        raise InputError(f"no N-wire model {model!r}: expected one of {', '.join(NWIRE_MODELS)}")
     uv, p_probe, _ = wire_point_pairs(config, calibration_frames)
     start_spacing = config.approximate_spacing_m or FALLBACK_SPACING_M
     calibration = calibrate_nwire(uv, p_probe, start_spacing)
     if not any(f.usable for f in validation_frames):
-        raise InputError("no usable validation frames", file=frames_path)
+        source = validation_frames[0].source if validation_frames else None
+        raise InputError("no usable validation frames", file=source)
     uv_v, p_v, _ = wire_point_pairs(config, validation_frames)
     refinements = refine_all(observations(config, calibration_frames), calibration, fit_affine(uv, p_probe)[1])
     matrices = {name: calibration.matrix(name) for name in ("affine", "rigid")}
@@ -244,7 +273,7 @@ def calibrate_nwire_files(
         frames_total=len(calibration_frames),
         validation_frames=len(validation_frames),
         start_spacing_m=start_spacing,
-        inputs={Path(p).name: sha256_file(p) for p in (config_path, frames_path)},
+        inputs=dict(inputs or {}),
         refinements=refinements,
         model=chosen,
         chosen_by="--model" if model is not None else CHOSEN_BY_VALIDATION,

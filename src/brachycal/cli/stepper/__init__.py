@@ -9,4 +9,9 @@ command ``stepper`` (:data:`SUBCOMMANDS`); a sub-command added to the group adds
 from __future__ import annotations
 
 #: ``brachycal stepper WORD``: the command each word names (``calibrate`` is also the default).
-SUBCOMMANDS = {"calibrate": "stepper"}
+SUBCOMMANDS = {
+    "calibrate": "stepper",
+    "image": "stepper-image",
+    "template": "stepper-template",
+    "export": "stepper-export",
+}

@@ -309,8 +309,11 @@ def read_plus_config(path: str | os.PathLike[str], *, require_registration: bool
         T = _check_rigid(transforms[key], _in_element(path, place), NWIRE_RIGID_TOLERANCE)
         transforms["Phantom", "Reference"] = T if key == forward else inverse(T)
     elif require_registration:
+        stepper = next(root.iter("iCal"), None) is not None
+        hint = " (a stepper's phantom is registered by `brachycal stepper image`)" if stepper else ""
         raise InputError(
-            f"no phantom registration: missing {registration_place} ({phantom_frame}->{reference_frame})", file=path
+            f"no phantom registration: missing {registration_place} ({phantom_frame}->{reference_frame}){hint}",
+            file=path,
         )
     spacing_m = None
     segmentation = root.find("Segmentation")
