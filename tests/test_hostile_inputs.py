@@ -79,6 +79,24 @@ USES = [
     ("temporal-joints", "temporal {tank}/video.mha --joints {bad} --out {tmp}/t.json"),
     ("view-result", "view {bad} --session {session}"),
     ("view-plan", "view --plan {bad}"),
+    (
+        "stepper-calibrate-recording",
+        "stepper calibrate {bad} {tank}/video.mha {tank}/video.mha --config {stepper_config} --out {tmp}/s.json",
+    ),
+    (
+        "stepper-calibrate-config",
+        "stepper calibrate {tank}/video.mha {tank}/video.mha {tank}/video.mha --config {bad} --out {tmp}/s.json",
+    ),
+    (
+        "stepper-image-rotation",
+        "stepper image {bad} {tank}/video.mha {tank}/video.mha --config {stepper_config} --out {tmp}/s.json",
+    ),
+    (
+        "stepper-image-config",
+        "stepper image {tank}/video.mha {tank}/video.mha {tank}/video.mha --config {bad} --out {tmp}/s.json",
+    ),
+    ("stepper-template-result", "stepper template {bad} --config {stepper_config} --hole D4 --probe-position 0"),
+    ("stepper-export-result", "stepper export {bad} --out {tmp}/x"),
 ]
 
 CASES = [
@@ -140,7 +158,18 @@ def inputs(tmp_path_factory) -> dict[str, Path]:
     rec = record(Robot.load(), TwinConfig(seed=4), RecordingConfig(rate_hz=25.0, speed_scale=0.5, hold_s=1.6))
     write_recording(rec, folder / "rec")
     write_tank_recording(folder / "tank")
-    return {"result": result, "rec": folder / "rec", "tank": folder / "tank", "session": SESSION, "examples": EXAMPLES}
+    # A stepper device set: the twin's N-wire set with an iCal element (PLUS's TRUS-on-stepper set-up).
+    twin_config = (EXAMPLES / "nwire" / "PlusDeviceSet_twin_fCal2.xml").read_text()
+    ical = '<iCal ProbeCoordinateFrame="Probe" TemplateCoordinateFrame="Template" />'
+    (folder / "stepper.xml").write_text(twin_config.replace("</PlusConfiguration>", ical + "</PlusConfiguration>"))
+    return {
+        "result": result,
+        "rec": folder / "rec",
+        "tank": folder / "tank",
+        "session": SESSION,
+        "examples": EXAMPLES,
+        "stepper_config": folder / "stepper.xml",
+    }
 
 
 @pytest.mark.parametrize("case", [pytest.param(c, id=c.id) for c in CASES])

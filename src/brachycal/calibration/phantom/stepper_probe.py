@@ -37,14 +37,15 @@ from brachycal.calibration.phantom.nwire_file import (
 )
 from brachycal.calibration.phantom.stepper import StepperFit, centre_of_rotation, pixel_spacing
 from brachycal.calibration.phantom.stepper_file import FORMAT as STEPPER_FORMAT
-from brachycal.calibration.phantom.stepper_file import read_stepper_recording
-from brachycal.data.formats.metaimage import read_image_sequence
+from brachycal.calibration.phantom.stepper_file import MIN_ROTATION_FRAMES, check_recording, read_stepper_recording
+from brachycal.data.formats.metaimage import read_image_sequence, read_sequence_header
 from brachycal.data.formats.plus_files import (
     SegmentedFrame,
     Wire,
     read_plus_config,
     read_pose_streams,
     read_segmented_frames,
+    stepper_encoder_values,
 )
 from brachycal.data.formats.plus_segmentation import read_segmentation_parameters
 from brachycal.data.formats.plus_stepper import STRAIGHT_AXES, StepperAxes, TemplateGrid, read_stepper_axes
@@ -301,6 +302,9 @@ def calibrate_stepper_image_files(
         axes = STRAIGHT_AXES
     elif axes is None:
         axes = read_stepper_axes(config_path)
+    # The rotation recording's encoders (its header only) are checked before any frame is segmented.
+    encoders = stepper_encoder_values(read_sequence_header(rotation_path)[1], rotation_path)
+    check_recording("rotation", rotation_path, encoders)
     if validation_path is None:
         calibration, validation = read_segmented_frames(calibration_path, poses=streams.fields)
     else:
@@ -317,7 +321,7 @@ def calibrate_stepper_image_files(
             ).frames
             for label, path in (("CalibrationData", calibration_path), ("ValidationData", validation_path))
         )
-    rotation = read_stepper_recording("rotation", rotation_path, config, config_path)
+    rotation = read_stepper_recording(rotation_path, encoders, config, config_path, minimum=MIN_ROTATION_FRAMES)
     plus_registration = register_phantom(rotation.frames, config.patterns)
     paths = [p for p in (config_path, rotation_path, calibration_path, validation_path) if p is not None]
     inputs = {Path(p).name: sha256_file(p) for p in paths}
