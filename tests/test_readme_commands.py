@@ -212,7 +212,9 @@ def start_list() -> list[str]:
     text = build_parser(full=()).format_help()
     section = re.search(r"^start here:\n((?:[ \t]+.*\n)+)", text, flags=re.MULTILINE)
     assert section, "brachycal --help has no 'start here:' list"
-    lines = [line.strip() for line in section.group(1).splitlines()]
+    # A command continued on the next line (a trailing backslash, as a shell reads it) is one line.
+    joined = re.sub(r"\\\n\s*", "", section.group(1))
+    lines = [line.strip() for line in joined.splitlines()]
     return [re.split(r"\s{2,}", line)[0] for line in lines if line.startswith("brachycal ")]
 
 
