@@ -84,7 +84,9 @@ def _arm_index(robot: Robot, flange: str) -> np.ndarray:
     return np.array([names.index(n) for n in arm_joints(robot, flange)])
 
 
-def _tip_jacobian(robot: Robot, q: FloatArray, flange: str, tip: FloatArray, index: np.ndarray) -> FloatArray:
+def _tip_jacobian(
+    robot: Robot, q: FloatArray, flange: str, tip: FloatArray, index: np.ndarray
+) -> tuple[FloatArray, FloatArray]:
     """``(p (3,), J (3, len(index)))``: the tip in the base frame and its derivative by the arm's joints
     (a joint's motion is the correction of its origin along its axis: a turn, or a slide)."""
     fp = flange_points(robot, q[None], flange, tip)

@@ -8,7 +8,9 @@ files that ship with brachycal (``examples/pivot``, ``examples/nwire``; the real
 outside, the documentation's reference data). ``examples/phantom`` holds a multi-wedge and an arbitrary-wire session
 of the twin in brachycal's own phantom formats (:mod:`brachycal.calibration.phantom.phantom_file`), for
 ``brachycal phantom``; ``examples/temporal`` a PLUS water-tank video and tracker pair with a known lag,
-for ``brachycal temporal``. Every file here is read back by the real readers
+for ``brachycal temporal``; ``examples/touches`` and ``examples/tracker`` a Panda's touches of fixed
+points and a UR10's tracker table (:mod:`brachycal.simulation.arm_touches`), for ``brachycal robot
+identify``. Every file here is read back by the real readers
 (:func:`~brachycal.data.pose_list.read_pose_list`, :func:`~brachycal.data.formats.plus_files.read_plus_config`,
 :func:`~brachycal.data.formats.plus_files.read_segmented_frames`,
 :func:`~brachycal.calibration.phantom.phantom_file.read_observations`) in the tests and calibrated to its truth.
