@@ -46,6 +46,11 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/needle_tip.py
 	$(BIN)/python benchmarks/verify_check.py
 	$(BIN)/python benchmarks/parallel_pool.py
+	$(BIN)/python benchmarks/mukca.py panda_2_clean
+	$(BIN)/python benchmarks/mukca.py panda_3
+	$(BIN)/python benchmarks/figaroh_mocap.py
+	$(BIN)/python benchmarks/trus_stepper.py
+	$(BIN)/python benchmarks/trus_segmentation.py
 
 # Each stated SD, dof count, inflation and threshold has a test that fails when it is wrong: every
 # mutant of benchmarks/mutants.py's table must be caught (a few minutes; non-zero exit if one survives).

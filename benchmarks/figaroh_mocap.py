@@ -87,7 +87,10 @@ def rms_mm(e: np.ndarray) -> float:
     return float(np.sqrt(np.mean(e**2)) * 1e3)
 
 
-def main() -> None:
+def main() -> int:
+    if not DATA.is_dir():
+        print(f"skipped: {DATA} is not there (FIGAROH's public data)", file=sys.stderr)
+        return 1
     print(f"prior of the corrections: {TRACKER_ACCURACY.source}")
     for name in ("ur10", "tiago"):
         data = load(name)
@@ -127,6 +130,7 @@ def main() -> None:
                 f"orientation {live['orientation_deg']:.3f} deg"
             )
         print(f"  {PUBLISHED[name]}")
+    return 0
 
 
 if __name__ == "__main__":

@@ -58,6 +58,9 @@ def main(argv: list[str]) -> int:
         (int(term[0]) - 1, "xyz".index(a)) for term in args.compliance.split(",") if term != "none" for a in term[1:]
     )
 
+    if not (DATA / "data" / args.robot).is_dir():
+        print(f"skipped: {DATA / 'data' / args.robot} is not there (MUKCa's public data)", file=sys.stderr)
+        return 1
     nominal = Robot.load(DATA / "urdf" / "panda.urdf")
     calibrated = Robot.load(DATA / "calibrated_urdf" / CALIBRATED[args.robot] / "panda_calibrated.urdf")
     folders = sorted(p for p in (DATA / "data" / args.robot).iterdir() if p.is_dir())

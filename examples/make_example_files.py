@@ -16,6 +16,11 @@ Run from the repository root: ``python examples/make_example_files.py``. Determi
   (:func:`brachycal.studies.phantom_twin.simulate_phantom`), for ``brachycal phantom``.
 - ``temporal/``: a PLUS water-tank video and tracker sequence pair with a known lag and its truth
   (:func:`brachycal.studies.tank_recording.write_tank_files`), for ``brachycal temporal``.
+- ``touches/``: a Panda off its URDF touching two sockets at three places (``<place>/hole_k.csv``,
+  MUKCa's layout) and its truth (:func:`brachycal.simulation.simulate_touches`), for
+  ``brachycal robot identify touches``.
+- ``tracker/``: a UR10 off its URDF seen by a tracker (a 6-D marker): the table, its column spec and
+  the truth (:func:`brachycal.simulation.simulate_tracker`), for ``brachycal robot identify tracker``.
 """
 
 from __future__ import annotations

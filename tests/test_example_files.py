@@ -11,18 +11,24 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import ROOT, assert_same_files
+from conftest import ROOT, TOLERANCE_JOINT_RAD, assert_same_files
 from hostile import Case, check_refusal
 
 from brachycal.calibration import calibrate_nwire_files, calibrate_pivot_files
 from brachycal.calibration.phantom.phantom_file import read_observations
 from brachycal.calibration.phantom.wedge import calibrate_wedge_files, read_wedge_phantom
 from brachycal.calibration.phantom.wire import calibrate_wire_files, read_wire_phantom
+from brachycal.calibration.robot.arm_fit import flange_points
+from brachycal.calibration.robot.identification import corrected_robot
+from brachycal.calibration.robot.touches import identify_touch_folders
+from brachycal.calibration.robot.tracker import identify_tracker_file
+from brachycal.calibration.robot_accuracy import RobotAccuracy
 from brachycal.cli.examples import bundled_example_files
 from brachycal.cli.main import main
 from brachycal.data.formats.metaimage import read_image_sequence, read_sequence_header
 from brachycal.data.formats.plus_files import read_plus_config, read_segmented_frames
 from brachycal.data.pose_list import read_pose_list
+from brachycal.model.description import load_robot
 from brachycal.se3 import inverse
 from brachycal.studies.example_files import (
     NWIRE_CONFIG_NAME,
@@ -35,6 +41,11 @@ from brachycal.studies.example_files import (
     PIVOT_NAME,
     TEMPORAL_LAG_S,
     TEMPORAL_NAMES,
+    TOUCH_DISTANCE_MM,
+    TOUCH_PLACES,
+    TOUCH_TOOL_FRAME,
+    TOUCH_TRUTH_NAME,
+    TRACKER_NAMES,
     simulate_pivot_recording,
     write_example_files,
 )
@@ -46,6 +57,9 @@ MADE += [name for files in PHANTOM_FILES.values() for name in files[:2]] + [PHAN
 #: The MetaImage sequences among the made files, compared by :func:`assert_same_sequences`.
 SEQUENCES = [name for name in TEMPORAL_NAMES if name.endswith(".mha")] + list(NWIRE_SEQUENCE_NAMES)
 MADE += [name for name in TEMPORAL_NAMES if name not in SEQUENCES]
+MADE += [TOUCH_TRUTH_NAME, *TRACKER_NAMES]
+#: The touch tables (no header: compared as numbers, not as CSV with a header row).
+TOUCH_TABLES = [f"touches/{place}/hole_{k}.csv" for place, points in TOUCH_PLACES.items() for k in range(len(points))]
 
 
 def _numbers_or_text(text: str) -> list[float] | str:
@@ -75,7 +89,7 @@ def assert_same_sequences(got: Path, want: Path) -> None:
 def test_committed_example_files_are_what_the_script_makes(tmp_path):
     copy = tmp_path / "examples"
     shutil.copytree(EXAMPLES, copy)
-    for name in MADE + SEQUENCES:
+    for name in MADE + SEQUENCES + TOUCH_TABLES:
         (copy / name).unlink()
     subprocess.run([sys.executable, str(copy / "make_example_files.py")], check=True, capture_output=True)
     # Numbers within conftest's TOLERANCE_* (1e-9 SI and mm-valued matrix entries, 1e-6 px): the
@@ -83,6 +97,9 @@ def test_committed_example_files_are_what_the_script_makes(tmp_path):
     assert_same_files(copy, EXAMPLES, MADE)
     for name in SEQUENCES:
         assert_same_sequences(copy / name, EXAMPLES / name)
+    for name in TOUCH_TABLES:  # joint values: within conftest's joint tolerance
+        got, want = (np.loadtxt(folder / name, delimiter=",") for folder in (copy, EXAMPLES))
+        assert got.shape == want.shape and np.allclose(got, want, rtol=0, atol=TOLERANCE_JOINT_RAD), name
 
 
 def test_example_files_are_small():
@@ -277,3 +294,61 @@ CASES = [
 @pytest.mark.parametrize("case", CASES, ids=lambda c: c.id)
 def test_examples_command_refuses(case, tmp_path):
     check_refusal(case, tmp_path)
+
+
+# --- the robot identification examples -------------------------------------------------------------
+
+
+def test_touch_example_identifies_the_arm_it_was_made_with():
+    """``examples/touches``: a Panda off its URDF by 0.3 mm / 0.05° per joint-origin axis touches two
+    sockets at three places. Trained on one place with that stated accuracy, the held-out places'
+    tip scatter falls far below the nominal URDF's (the drawn errors, ~1.4 mm of scatter, against
+    0.05 mm of touch noise: a mean scatter of ~0.08 mm would be the noise alone), and the fitted
+    tip is the true one within 4 of its stated SDs per axis."""
+    truth = json.loads((EXAMPLES / TOUCH_TRUTH_NAME).read_text())
+    nominal = load_robot(truth["robot"])
+    folders = [EXAMPLES / "touches" / place for place in TOUCH_PLACES]
+    accuracy = RobotAccuracy(0.3e-3, float(np.radians(0.05)))
+    report = identify_touch_folders(
+        nominal, folders, TOUCH_TOOL_FRAME, ["front"], accuracy, distance_m=TOUCH_DISTANCE_MM * 1e-3
+    )
+    assert report.held_out == ["left", "right"]
+    for place in report.held_out:
+        assert report.identified[place].mean_scatter_m < report.nominal[place].mean_scatter_m / 5, place
+    # the fitted tip is in the tool frame's link (the hand), the truth's in the flange
+    q0 = nominal.neutral()[None]
+    T_hand_flange = inverse(nominal.fk(report.result.flange, q0)[0]) @ nominal.fk(truth["flange"], q0)[0]
+    tip = T_hand_flange[:3, :3] @ truth["tip_m"] + T_hand_flange[:3, 3]
+    tip_sd = np.sqrt(np.diag(report.result.fit.y_covariance())[:3])
+    assert np.all(np.abs(report.result.tip - tip) < 4 * tip_sd), (report.result.tip - tip, tip_sd)
+    # the truth's own arm puts every touch of a place within the noise of one point
+    physical = corrected_robot(nominal, _corrections(nominal, truth["corrections"]))
+    for place, points in truth["points_m"].items():
+        for k, point in enumerate(points):
+            Q = np.loadtxt(EXAMPLES / "touches" / place / f"hole_{k}.csv", delimiter=",")
+            tips = flange_points(physical, Q, truth["flange"], np.array(truth["tip_m"])).p
+            assert np.sqrt(np.mean((tips - point) ** 2)) < 2 * truth["noise_sd_m"], (place, k)
+
+
+def _corrections(robot, named: dict[str, list[float]]) -> np.ndarray:
+    corrections = np.zeros((robot.nq, 6))
+    for name, c in named.items():
+        corrections[robot.joint_names.index(name)] = c
+    return corrections
+
+
+@pytest.mark.slow
+def test_tracker_example_identifies_the_arm_it_was_made_with():
+    """``examples/tracker``: a UR10 off its URDF by 0.5 mm / 0.05° per joint-origin axis, a 6-D marker
+    read with 0.1 mm and 0.05° of noise per axis. The joints model is chosen, its noise levels are
+    the drawn ones (within 25 %: 72 residuals each, less the fitted parameters), and it predicts
+    postures it never saw as well as the noise allows."""
+    truth = json.loads((EXAMPLES / TRACKER_NAMES[2]).read_text())
+    table, columns, _ = (EXAMPLES / name for name in TRACKER_NAMES)
+    identification = identify_tracker_file(load_robot(truth["robot"]), table, columns)
+    assert identification.chosen == "joints"
+    sigma = identification.fit.sigma
+    assert sigma["position"] == pytest.approx(truth["noise_sd_m"], rel=0.25)
+    assert np.degrees(sigma["orientation"]) == pytest.approx(truth["noise_sd_deg"], rel=0.25)
+    held_out = next(s for s in identification.scores if s.model == "joints")
+    assert held_out.loo_position_mm < 1.5 * truth["noise_sd_m"] * 1e3

@@ -35,7 +35,10 @@ import pytest
 from conftest import REFERENCE, ROOT, reference
 
 from brachycal.cli.main import COMMANDS, build_parser, joined_command, main
+from brachycal.model.description_file import example_robot_data_share
+from brachycal.studies.example_files import TOUCH_PLACES, TOUCH_TOOL_FRAME, TRACKER_NAMES
 
+ROBOTS = example_robot_data_share() / "robots"
 DOCUMENTS = [ROOT / "README.md", ROOT / "docs" / "procedure.md", ROOT / "docs" / "guide.md"]
 #: Commands on outside data, in the documents and the ``--help`` examples: the folder
 #: ``BRACHYCAL_REFERENCE`` names, replaced by :data:`REFERENCE`.
@@ -44,6 +47,8 @@ OUTSIDE = "$BRACHYCAL_REFERENCE/"
 #: a job of several seconds to minutes of CPU that its own tests run; the walk stays within
 #: :data:`CPU_BUDGET_S`.
 NOT_RUN = {
+    ("stepper",): "a stepper's recordings are outside data (PLUS's iCal; no bundled twin of a stepper): "
+    "tests/test_stepper_calibration.py runs it on them",
     ("study",): "a sweep over twin sessions (5 seeds x 9 settings: minutes of CPU); tests/test_twin.py runs study",
     ("design",): "simulates and calibrates several twin sessions per design (minutes of CPU)",
     ("calibrate", "--identify-robot"): "robot identification with its cross-validation, ~24 s of CPU; "
@@ -212,9 +217,7 @@ def start_list() -> list[str]:
     text = build_parser(full=()).format_help()
     section = re.search(r"^start here:\n((?:[ \t]+.*\n)+)", text, flags=re.MULTILINE)
     assert section, "brachycal --help has no 'start here:' list"
-    # A command continued on the next line (a trailing backslash, as a shell reads it) is one line.
-    joined = re.sub(r"\\\n\s*", "", section.group(1))
-    lines = [line.strip() for line in joined.splitlines()]
+    lines = _join_continuations([line.strip() for line in section.group(1).splitlines()])
     return [re.split(r"\s{2,}", line)[0] for line in lines if line.startswith("brachycal ")]
 
 
@@ -233,8 +236,8 @@ def _variants(line: str) -> list[list[str]]:
 
 
 def _placeholder(word: str) -> bool:
-    """A word the reader replaces: LOG, SESSION, FRAMES.mha, U,V."""
-    return re.fullmatch(r"[A-Z][A-Z_,]*(\.[a-z]+)?", word) is not None
+    """A word the reader replaces: LOG, SESSION, FRAMES.mha, U,V, FOLDER... (one or more)."""
+    return re.fullmatch(r"[A-Z][A-Z_,]*(\.[a-z]+)?(\.\.\.)?", word) is not None
 
 
 def _form_name(argv: list[str]) -> str:
@@ -297,6 +300,25 @@ START_BINDINGS: dict[str, dict[str, str]] = {
         "result.json": "phantom_nwire.json",
     },
     "temporal": {"VIDEO.mha": "examples/temporal/tank_video.mha", "TRACKER.mha": "examples/temporal/tank_tracker.mha"},
+    # The arms' URDFs are example-robot-data's (installed with brachycal: the bundled panda and ur10
+    # descriptions read them); a robot named instead of a file (NAME) is the bundled description.
+    "robot identify touches": {
+        "FOLDER...": " ".join(f"examples/touches/{place}" for place in TOUCH_PLACES),
+        "URDF": str(ROBOTS / "panda_description" / "urdf" / "panda.urdf"),
+        "FILE": str(ROBOTS / "panda_description" / "urdf" / "panda.urdf"),
+        "NAME": "panda",
+        "FRAME": TOUCH_TOOL_FRAME,
+        "PLACE": next(iter(TOUCH_PLACES)),
+        "DIR": "touches_identified",
+    },
+    "robot identify tracker": {
+        "TABLE": f"examples/{TRACKER_NAMES[0]}",
+        "SPEC": f"examples/{TRACKER_NAMES[1]}",
+        "URDF": str(ROBOTS / "ur_description" / "urdf" / "ur10_robot.urdf"),
+        "FILE": str(ROBOTS / "ur_description" / "urdf" / "ur10_robot.urdf"),
+        "NAME": "ur10",
+        "DIR": "tracker_identified",
+    },
 }
 #: Run first, in the start list's folder: the example files, a recording with its frames (session
 #: build, tips) and a check session (verify).

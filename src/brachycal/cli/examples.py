@@ -12,7 +12,8 @@ Copies the example files that ship with brachycal into DIR: a joint log and a fe
 a noise-free session and the digital twin's session (each with its truth), a tracked-pointer pivot
 recording, PLUS N-wire files (segmented frames and tracked B-mode sequences), multi-wedge and
 arbitrary-wire phantom sessions and a water-tank video and tracker pair with a known lag, made by
-the twin (each with its truth), and the scripts that made them. The README's and the
+the twin, a Panda's touches of fixed points and a UR10's tracker table for robot identification
+(each with its truth), and the scripts that made them. The README's and the
 documentation's commands refer to them as examples/...: run them in the folder where DIR is
 examples (in a clone of the repository they are there already).
 

@@ -11,6 +11,10 @@
 - :func:`render_frame` — a B-mode-like frame of the needle (:class:`BModeSettings`: speckle, shaft,
   tip, beam thickness, shadow, attenuation, TGC, noise, log compression, sector; each switchable
   and seeded); :func:`render_samples` the twin's sample frames, :func:`true_tip_px` their true tips.
+- :func:`simulate_touches` / :func:`simulate_tracker` — any arm off its URDF (:func:`arm_errors`)
+  touching fixed points from many postures (:class:`TouchRecording`, written as place folders by
+  :func:`write_touch_places`) or seen by a tracker (:class:`TrackerRecording`, a table and its
+  column spec: :func:`write_tracker_table`, :func:`tracker_columns_text`), for ``brachycal robot identify``.
 
 What runs calibrations on the twin (targeting, studies, designs, the demo) is :mod:`brachycal.studies`.
 """
@@ -20,6 +24,18 @@ from typing import TYPE_CHECKING, Any
 from brachycal._lazy import attach
 
 if TYPE_CHECKING:  # imported on first use (each simulation loads the robot, SciPy and mink)
+    from brachycal.simulation.arm_touches import (
+        TouchRecording,
+        TrackerRecording,
+        arm_errors,
+        simulate_touches,
+        simulate_tracker,
+        touch_postures,
+        tracker_columns_text,
+        write_touch_places,
+        write_touch_table,
+        write_tracker_table,
+    )
     from brachycal.simulation.bmode import BModeSettings, NeedleView, render_frame, render_samples, true_tip_px
     from brachycal.simulation.exact import SessionTruth, default_truth, exact_session
     from brachycal.simulation.recording import RECORDING_FILES, Recording, RecordingConfig, record, write_recording
@@ -52,8 +68,11 @@ __all__ = [
     "Recording",
     "RecordingConfig",
     "SessionTruth",
+    "TouchRecording",
+    "TrackerRecording",
     "Twin",
     "TwinConfig",
+    "arm_errors",
     "default_truth",
     "exact_session",
     "read_twin",
@@ -61,7 +80,14 @@ __all__ = [
     "render_frame",
     "render_samples",
     "simulate",
+    "simulate_touches",
+    "simulate_tracker",
+    "touch_postures",
+    "tracker_columns_text",
     "true_tip_px",
     "write_recording",
+    "write_touch_places",
+    "write_touch_table",
+    "write_tracker_table",
     "write_twin",
 ]

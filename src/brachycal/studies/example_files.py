@@ -8,7 +8,9 @@ files that ship with brachycal (``examples/pivot``, ``examples/nwire``; the real
 outside, the documentation's reference data). ``examples/phantom`` holds a multi-wedge and an arbitrary-wire session
 of the twin in brachycal's own phantom formats (:mod:`brachycal.calibration.phantom.phantom_file`), for
 ``brachycal phantom``; ``examples/temporal`` a PLUS water-tank video and tracker pair with a known lag,
-for ``brachycal temporal``. Every file here is read back by the real readers
+for ``brachycal temporal``; ``examples/touches`` and ``examples/tracker`` a Panda's touches of fixed
+points and a UR10's tracker table (:mod:`brachycal.simulation.arm_touches`), for ``brachycal robot
+identify``. Every file here is read back by the real readers
 (:func:`~brachycal.data.pose_list.read_pose_list`, :func:`~brachycal.data.formats.plus_files.read_plus_config`,
 :func:`~brachycal.data.formats.plus_files.read_segmented_frames`,
 :func:`~brachycal.calibration.phantom.phantom_file.read_observations`) in the tests and calibrated to its truth.
@@ -35,7 +37,18 @@ from brachycal.data.formats.metaimage import write_image_sequence
 from brachycal.data.formats.plus_files import PlusConfig, SegmentedFrame
 from brachycal.data.pose_list import COLUMNS
 from brachycal.io import OutputSet, atomic_open, bundled, json_text, output_set
+from brachycal.model.description import load_robot
 from brachycal.se3 import FloatArray, inverse, make_transform
+from brachycal.simulation.arm_touches import (
+    TouchRecording,
+    TrackerRecording,
+    arm_errors,
+    simulate_touches,
+    simulate_tracker,
+    tracker_columns_text,
+    write_touch_table,
+    write_tracker_table,
+)
 from brachycal.studies.nwire_twin import FCAL2_LANDMARKS_MM, NWireSimConfig, simulate_nwire
 from brachycal.studies.phantom_twin import simulate_phantom
 from brachycal.studies.tank_recording import write_tank_files
@@ -50,10 +63,14 @@ __all__ = [
     "PIVOT_NAME",
     "TEMPORAL_LAG_S",
     "TEMPORAL_NAMES",
+    "TOUCH_PLACES",
+    "TOUCH_TRUTH_NAME",
+    "TRACKER_NAMES",
     "PivotRecording",
     "phantom_geometry_text",
     "render_wire_frame",
     "simulate_pivot_recording",
+    "simulate_robot_examples",
     "write_example_files",
     "write_plus_config",
     "write_pose_list",
@@ -88,6 +105,31 @@ _TEMPORAL_DURATION_S, _TEMPORAL_VIDEO_PERIOD_S, _TEMPORAL_TRACKER_PERIOD_S = 8.0
 PHANTOM_FRAMES = {"wedge": 50, "wire": 30}
 #: Seeds of the example files' random streams (tagged so that they never coincide with the twin's).
 _PIVOT_TAG = 0x5056
+_TOUCH_TAG, _TRACKER_TAG = 0x544F, 0x5452
+#: The touch example (``brachycal robot identify touches``): a Panda (the bundled description) with
+#: its joint origins off by 0.3 mm / 0.05 deg per axis, a ball held at the hand's tool centre point
+#: (``panda_hand_tcp``: the ball's nominal place; the true one ~1 mm off it) touching two sockets
+#: 50 mm apart at three places (base frame, metres), 8 touches each, with 0.05 mm of noise per axis
+#: at the ball. Files ``touches/<place>/hole_k.csv`` and the truth.
+TOUCH_ROBOT, TOUCH_FLANGE, TOUCH_TOOL_FRAME = "panda", "panda_link8", "panda_hand_tcp"
+TOUCH_TIP_M = (0.4e-3, -0.3e-3, 0.1042)
+TOUCH_PLACES = {
+    "front": ((0.45, 0.0, 0.10), (0.50, 0.0, 0.10)),
+    "left": ((0.40, 0.30, 0.15), (0.45, 0.30, 0.15)),
+    "right": ((0.40, -0.30, 0.15), (0.45, -0.30, 0.15)),
+}
+TOUCH_DISTANCE_MM = 50.0
+TOUCH_TRUTH_NAME = "touches/truth.json"
+_TOUCHES_PER_POINT, _TOUCH_NOISE_M = 8, 0.05e-3
+#: The tracker example (``brachycal robot identify tracker``): a UR10 (the bundled description) off
+#: by 0.5 mm / 0.05 deg per joint-origin axis, a 6-D marker on its flange seen by a tracker 2 m
+#: away, 24 random postures, 0.1 mm and 0.05 deg of noise per axis. Files: the table, its column
+#: spec and the truth.
+TRACKER_ROBOT, TRACKER_FLANGE = "ur10", "tool0"
+TRACKER_NAMES = ("tracker/table.csv", "tracker/columns.toml", "tracker/truth.json")
+TRACKER_T_TRACKER_BASE = make_transform(Rotation.from_rotvec([0.1, -0.2, 2.5]).as_matrix(), [2.1, 0.4, -0.3])
+TRACKER_T_FLANGE_MARKER = make_transform(Rotation.from_rotvec([0.3, 0.2, -0.1]).as_matrix(), [0.03, -0.02, 0.08])
+_TRACKER_POSTURES, _TRACKER_NOISE_M, _TRACKER_NOISE_DEG = 24, 0.1e-3, 0.05
 
 
 @dataclass(frozen=True)
@@ -392,6 +434,46 @@ def phantom_geometry_text(method: str, T_reference_phantom: FloatArray, *, seed:
     return header + text
 
 
+def simulate_robot_examples(seed: int = 0) -> tuple[TouchRecording, TrackerRecording]:
+    """The touch and tracker examples' recordings (:data:`TOUCH_PLACES`, :data:`TRACKER_NAMES`):
+    a Panda's touches and a UR10 seen by a tracker, each arm off its URDF by random joint-origin errors."""
+    panda = load_robot(TOUCH_ROBOT)
+    rng = np.random.default_rng([seed, _TOUCH_TAG])
+    touches = simulate_touches(
+        panda,
+        TOUCH_FLANGE,
+        np.array(TOUCH_TIP_M),
+        {name: np.array(points) for name, points in TOUCH_PLACES.items()},
+        corrections=arm_errors(panda, TOUCH_FLANGE, 0.3e-3, float(np.radians(0.05)), rng),
+        touches=_TOUCHES_PER_POINT,
+        noise_sd_m=_TOUCH_NOISE_M,
+        seed=[seed, _TOUCH_TAG, 1],
+    )
+    ur10 = load_robot(TRACKER_ROBOT)
+    rng = np.random.default_rng([seed, _TRACKER_TAG])
+    tracker = simulate_tracker(
+        ur10,
+        TRACKER_FLANGE,
+        TRACKER_T_TRACKER_BASE,
+        TRACKER_T_FLANGE_MARKER,
+        corrections=arm_errors(ur10, TRACKER_FLANGE, 0.5e-3, float(np.radians(0.05)), rng),
+        postures=_TRACKER_POSTURES,
+        noise_sd_m=_TRACKER_NOISE_M,
+        noise_sd_rad=float(np.radians(_TRACKER_NOISE_DEG)),
+        seed=[seed, _TRACKER_TAG, 1],
+    )
+    return touches, tracker
+
+
+def _corrections_json(robot_joints: Sequence[str], corrections: FloatArray) -> dict[str, list[float]]:
+    """Per joint with a correction, ``[vx, vy, vz (m), wx, wy, wz (rad)]``."""
+    return {name: c.tolist() for name, c in zip(robot_joints, corrections, strict=True) if np.any(c)}
+
+
+def _touch_names() -> list[str]:
+    return [f"touches/{place}/hole_{k}.csv" for place, points in TOUCH_PLACES.items() for k in range(len(points))]
+
+
 def write_example_files(
     folder: str | os.PathLike[str], *, seed: int = 0, force: bool = False, outputs: OutputSet | None = None
 ) -> list[Path]:
@@ -407,8 +489,10 @@ def write_example_files(
     registration, and ``phantom/truth.json``; for ``brachycal temporal`` a water-tank video and
     tracker pair with a known lag (:data:`TEMPORAL_NAMES`, :data:`TEMPORAL_LAG_S`); and for
     ``brachycal nwire segment`` the first of the N-wire frames rendered as tracked B-mode sequences
-    (:data:`NWIRE_SEQUENCE_NAMES`, :func:`write_wire_sequence`). All or nothing;
-    existing files are replaced only with ``force``.
+    (:data:`NWIRE_SEQUENCE_NAMES`, :func:`write_wire_sequence`); for ``brachycal robot identify``
+    a Panda's touches of fixed points (``touches/<place>/hole_k.csv``, :data:`TOUCH_PLACES`) and a
+    UR10 seen by a tracker (:data:`TRACKER_NAMES`), each with its truth (:func:`simulate_robot_examples`).
+    All or nothing; existing files are replaced only with ``force``.
 
     Returns:
         The paths written.
@@ -459,6 +543,34 @@ def write_example_files(
     names = [PIVOT_NAME, "pivot/truth.json", NWIRE_CONFIG_NAME, NWIRE_FRAMES_NAME, "nwire/truth.json"]
     names += [name for files in PHANTOM_FILES.values() for name in files[:2]] + [PHANTOM_TRUTH_NAME]
     names += list(TEMPORAL_NAMES) + list(NWIRE_SEQUENCE_NAMES)
+    touch_rec, tracker_rec = simulate_robot_examples(seed)
+    touch_truth = {
+        "what": "truth of the touch example (brachycal.simulation.arm_touch_rec.simulate_touches): the Panda that "
+        "touched, its joint-origin corrections T_parent_joint <- T_parent_joint @ T(exp(w), v), metres and radians",
+        "seed": seed,
+        "robot": TOUCH_ROBOT,
+        "flange": TOUCH_FLANGE,
+        "tool_frame": TOUCH_TOOL_FRAME,
+        "tip_m": touch_rec.tip.tolist(),
+        "points_m": {name: points.tolist() for name, points in touch_rec.points.items()},
+        "distance_mm": TOUCH_DISTANCE_MM,
+        "corrections": _corrections_json(touch_rec.nominal.joint_names, touch_rec.corrections),
+        "noise_sd_m": touch_rec.noise_sd_m,
+        "joints": list(touch_rec.joints),
+    }
+    tracker_truth = {
+        "what": "truth of the tracker example (brachycal.simulation.arm_touch_rec.simulate_tracker): the UR10 seen, "
+        "its joint-origin corrections (as the touch example's), the tracker's and the marker's frames (metres)",
+        "seed": seed,
+        "robot": TRACKER_ROBOT,
+        "flange": TRACKER_FLANGE,
+        "T_tracker_base": tracker_rec.T_tracker_base.tolist(),
+        "T_flange_marker": tracker_rec.T_flange_marker.tolist(),
+        "corrections": _corrections_json(tracker_rec.nominal.joint_names, tracker_rec.corrections),
+        "noise_sd_m": tracker_rec.noise_sd_m,
+        "noise_sd_deg": _TRACKER_NOISE_DEG,
+    }
+    names += [*_touch_names(), TOUCH_TRUTH_NAME, *TRACKER_NAMES]
     with output_set(outputs, force=force) as out:
         staged = {name: out.claim(folder / name, make_parents=True) for name in names}
         write_pose_list(staged[PIVOT_NAME], pivot.timestamps_ns.tolist(), pivot.T_tracker_marker_mm, key="timestamp_ns")
@@ -486,4 +598,16 @@ def write_example_files(
             NWIRE_SEQUENCE_NAMES, (calibration, validation), NWIRE_SEQUENCE_FRAMES, strict=True
         ):
             write_wire_sequence(staged[name], frames[:count], seed)
+        for place, points in TOUCH_PLACES.items():
+            for k in range(len(points)):
+                write_touch_table(staged[f"touches/{place}/hole_{k}.csv"], touch_rec, place, k)
+        staged[TOUCH_TRUTH_NAME].write_text(json_text(touch_truth))
+        table, columns, truth_name = TRACKER_NAMES
+        write_tracker_table(staged[table], tracker_rec)
+        comment = (
+            "brachycal's example (examples/tracker/table.csv): a UR10's joints and a 6-D marker on its flange as a\n"
+            "tracker reads it, position in millimetres, orientation as a rotation vector in radians."
+        )
+        staged[columns].write_text(tracker_columns_text(tracker_rec.joints, comment=comment))
+        staged[truth_name].write_text(json_text(tracker_truth))
     return [folder / name for name in names]
