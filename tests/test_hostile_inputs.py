@@ -21,6 +21,7 @@ from conftest import ROOT
 from hostile import Case, check_refusal, run_cli
 
 from brachycal.model import Robot
+from brachycal.model.description_file import example_robot_data_share
 from brachycal.simulation import RecordingConfig, TwinConfig, record, write_recording
 from brachycal.studies.tank_recording import write_tank_recording
 
@@ -97,6 +98,19 @@ USES = [
     ),
     ("stepper-template-result", "stepper template {bad} --config {stepper_config} --hole D4 --probe-position 0"),
     ("stepper-export-result", "stepper export {bad} --out {tmp}/x"),
+    (
+        "robot-touches-urdf",
+        "robot identify touches {examples}/touches/front {examples}/touches/left --urdf {bad} "
+        "--tool-frame panda_hand_tcp --train front --out {tmp}/x",
+    ),
+    (
+        "robot-tracker-table",
+        "robot identify tracker {bad} --columns {examples}/tracker/columns.toml --urdf {ur10} --out {tmp}/x",
+    ),
+    (
+        "robot-tracker-columns",
+        "robot identify tracker {examples}/tracker/table.csv --columns {bad} --urdf {ur10} --out {tmp}/x",
+    ),
 ]
 
 CASES = [
@@ -169,6 +183,7 @@ def inputs(tmp_path_factory) -> dict[str, Path]:
         "session": SESSION,
         "examples": EXAMPLES,
         "stepper_config": folder / "stepper.xml",
+        "ur10": example_robot_data_share() / "robots" / "ur_description" / "urdf" / "ur10_robot.urdf",
     }
 
 
