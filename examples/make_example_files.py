@@ -16,6 +16,10 @@ Run from the repository root: ``python examples/make_example_files.py``. Determi
   (:func:`brachycal.studies.phantom_twin.simulate_phantom`), for ``brachycal phantom``.
 - ``temporal/``: a PLUS water-tank video and tracker sequence pair with a known lag and its truth
   (:func:`brachycal.studies.tank_recording.write_tank_files`), for ``brachycal temporal``.
+- ``stepper/``: a TRUS probe on a brachytherapy stepper (PLUS's iCal set-up): the device set, the
+  probe-rotation, probe- and template-translation and random-motion recordings (PLUS ``.igs.mha``
+  with the stepper's encoder fields) and their truth (:mod:`brachycal.studies.stepper_twin`), for
+  ``brachycal stepper``.
 """
 
 from __future__ import annotations

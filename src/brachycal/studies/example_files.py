@@ -8,7 +8,8 @@ files that ship with brachycal (``examples/pivot``, ``examples/nwire``; the real
 outside, the documentation's reference data). ``examples/phantom`` holds a multi-wedge and an arbitrary-wire session
 of the twin in brachycal's own phantom formats (:mod:`brachycal.calibration.phantom.phantom_file`), for
 ``brachycal phantom``; ``examples/temporal`` a PLUS water-tank video and tracker pair with a known lag,
-for ``brachycal temporal``. Every file here is read back by the real readers
+for ``brachycal temporal``; ``examples/stepper`` PLUS iCal recordings of a TRUS probe on a brachytherapy
+stepper with its device set (:mod:`brachycal.studies.stepper_twin`), for ``brachycal stepper``. Every file here is read back by the real readers
 (:func:`~brachycal.data.pose_list.read_pose_list`, :func:`~brachycal.data.formats.plus_files.read_plus_config`,
 :func:`~brachycal.data.formats.plus_files.read_segmented_frames`,
 :func:`~brachycal.calibration.phantom.phantom_file.read_observations`) in the tests and calibrated to its truth.
@@ -38,6 +39,7 @@ from brachycal.io import OutputSet, atomic_open, bundled, json_text, output_set
 from brachycal.se3 import FloatArray, inverse, make_transform
 from brachycal.studies.nwire_twin import FCAL2_LANDMARKS_MM, NWireSimConfig, simulate_nwire
 from brachycal.studies.phantom_twin import simulate_phantom
+from brachycal.studies.stepper_twin import STEPPER_NAMES, write_stepper_files
 from brachycal.studies.tank_recording import write_tank_files
 
 __all__ = [
@@ -407,7 +409,9 @@ def write_example_files(
     registration, and ``phantom/truth.json``; for ``brachycal temporal`` a water-tank video and
     tracker pair with a known lag (:data:`TEMPORAL_NAMES`, :data:`TEMPORAL_LAG_S`); and for
     ``brachycal nwire segment`` the first of the N-wire frames rendered as tracked B-mode sequences
-    (:data:`NWIRE_SEQUENCE_NAMES`, :func:`write_wire_sequence`). All or nothing;
+    (:data:`NWIRE_SEQUENCE_NAMES`, :func:`write_wire_sequence`); for ``brachycal stepper`` a stepper's
+    device set, its five recordings and their truth
+    (:data:`~brachycal.studies.stepper_twin.STEPPER_NAMES`). All or nothing;
     existing files are replaced only with ``force``.
 
     Returns:
@@ -458,7 +462,7 @@ def write_example_files(
     }
     names = [PIVOT_NAME, "pivot/truth.json", NWIRE_CONFIG_NAME, NWIRE_FRAMES_NAME, "nwire/truth.json"]
     names += [name for files in PHANTOM_FILES.values() for name in files[:2]] + [PHANTOM_TRUTH_NAME]
-    names += list(TEMPORAL_NAMES) + list(NWIRE_SEQUENCE_NAMES)
+    names += list(TEMPORAL_NAMES) + list(NWIRE_SEQUENCE_NAMES) + list(STEPPER_NAMES.values())
     with output_set(outputs, force=force) as out:
         staged = {name: out.claim(folder / name, make_parents=True) for name in names}
         write_pose_list(staged[PIVOT_NAME], pivot.timestamps_ns.tolist(), pivot.T_tracker_marker_mm, key="timestamp_ns")
@@ -486,4 +490,5 @@ def write_example_files(
             NWIRE_SEQUENCE_NAMES, (calibration, validation), NWIRE_SEQUENCE_FRAMES, strict=True
         ):
             write_wire_sequence(staged[name], frames[:count], seed)
+        write_stepper_files({key: staged[name] for key, name in STEPPER_NAMES.items()}, seed)
     return [folder / name for name in names]

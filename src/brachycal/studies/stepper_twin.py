@@ -237,10 +237,11 @@ def _numbers(values: FloatArray) -> str:
     return " ".join(repr(float(v)) for v in np.ravel(values))
 
 
-def _mm(T: FloatArray) -> FloatArray:
-    T = np.array(T, dtype=float)
+def _pose_text(T_m: FloatArray) -> str:
+    """A pose as PLUS writes it: row-major ``(4, 4)``, millimetres, 6 significant digits."""
+    T = np.array(T_m, dtype=float)
     T[:3, 3] /= MM
-    return T
+    return " ".join(f"{v:.6g}" for v in T.ravel() + 0.0)  # + 0.0: no "-0"
 
 
 def _write_recording(path: str | os.PathLike[str], frames: Sequence[StepperFrame]) -> None:
@@ -256,12 +257,12 @@ def _write_recording(path: str | os.PathLike[str], frames: Sequence[StepperFrame
             {
                 "ProbePosition": f"{d_mm:.4f}",
                 "ProbeRotation": f"{a_deg:.4f}",
-                "ProbeToStepperHomeTransform": _numbers(_mm(stepper_pose(f.probe_m, f.rotation_rad))),
+                "ProbeToStepperHomeTransform": _pose_text(stepper_pose(f.probe_m, f.rotation_rad)),
                 "ProbeToStepperHomeTransformStatus": "OK",
-                "StepperEncoderValuesToStepperHomeTransform": _numbers(encoders),
+                "StepperEncoderValuesToStepperHomeTransform": " ".join(f"{v:.6g}" for v in encoders.ravel() + 0.0),
                 "StepperEncoderValuesToStepperHomeTransformStatus": "OK",
                 "TemplatePosition": f"{t_mm:.4f}",
-                "TemplateToStepperHomeTransform": _numbers(_mm(stepper_pose(f.template_m, 0.0))),
+                "TemplateToStepperHomeTransform": _pose_text(stepper_pose(f.template_m, 0.0)),
                 "TemplateToStepperHomeTransformStatus": "OK",
             }
         )
