@@ -357,12 +357,12 @@ def write_device_set(path: str | os.PathLike[str]) -> None:
         handle.write("\n")
 
 
-def truth(seed: int) -> dict[str, object]:
+def truth(seed: int, noise_px: float = NOISE_PX) -> dict[str, object]:
     """The twin's truth (``truth.json``): metres, radians and pixels unless a key says mm."""
     return {
         "what": "truth of the stepper example (brachycal.studies.stepper_twin)",
         "seed": seed,
-        "noise_px": NOISE_PX,
+        "noise_px": noise_px,
         "size_px": list(SIZE_PX),
         "spacing_mm": (SPACING_M / MM).tolist(),
         "centre_of_rotation_px": centre_of_rotation_px().tolist(),
@@ -379,10 +379,11 @@ def truth(seed: int) -> dict[str, object]:
     }
 
 
-def write_stepper_files(staged: dict[str, Path], seed: int = 0) -> None:
-    """Write the stepper example's files to the staged paths of :data:`STEPPER_NAMES` (keys as there)."""
-    recordings = simulate_recordings(seed)
+def write_stepper_files(staged: dict[str, Path], seed: int = 0, *, noise_px: float = NOISE_PX) -> None:
+    """Write the stepper example's files to the staged paths of :data:`STEPPER_NAMES` (keys as there;
+    straight to them: callers that need all-or-nothing outputs pass staged paths)."""
+    recordings = simulate_recordings(seed, noise_px=noise_px)
     write_device_set(staged["config"])
     for name, frames in recordings.items():
         _write_recording(staged[name], frames)
-    staged["truth"].write_text(json_text(truth(seed)))
+    staged["truth"].write_text(json_text(truth(seed, noise_px)))
