@@ -309,7 +309,10 @@ START_BINDINGS: dict[str, dict[str, str]] = {
         "VAL.mha": "examples/stepper/twin_RandomStepperMotionValidation.igs.mha",
         "DEVICE_SET.xml": "examples/stepper/PlusDeviceSet_twin_iCal.xml",
     },
-    "stepper template": {"RESULT": "stepper_image.json", "DEVICE_SET.xml": "examples/stepper/PlusDeviceSet_twin_iCal.xml"},
+    "stepper template": {
+        "RESULT": "stepper_image.json",
+        "DEVICE_SET.xml": "examples/stepper/PlusDeviceSet_twin_iCal.xml",
+    },
     "stepper export": {"RESULT": "stepper_image.json", "DIR": "stepper_exports"},
 }
 #: Run first, in the start list's folder: the example files, a recording with its frames (session

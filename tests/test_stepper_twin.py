@@ -82,7 +82,7 @@ def test_the_twin_s_files_are_a_stepper_s():
     np.testing.assert_allclose(template.holes["D4"], [0.030, 0.030, 0.0])
     for key in RECORDINGS:
         path = EXAMPLES / STEPPER_NAMES[key]
-        header, frames = read_sequence_header(path)
+        _, frames = read_sequence_header(path)
         assert len(stepper_encoder_values(frames, path)) == len(frames) >= 10
         assert all(f["ProbeToStepperHomeTransformStatus"] == "OK" for f in frames)
         assert all(f["TemplateToStepperHomeTransformStatus"] == "OK" for f in frames)
@@ -94,7 +94,9 @@ def test_the_truth_is_geometry():
     d, a, t = -0.052, np.radians(2.5), 0.004
     points = stepper_twin.wire_points(d, a, t)
     T_probe_phantom = (
-        inverse(stepper_twin.true_probe_pose(d, a)) @ stepper_twin.true_template_pose(t) @ stepper_twin.T_TEMPLATE_PHANTOM
+        inverse(stepper_twin.true_probe_pose(d, a))
+        @ stepper_twin.true_template_pose(t)
+        @ stepper_twin.T_TEMPLATE_PHANTOM
     )
     M = stepper_twin.image_to_probe()
     for wire in stepper_twin.wires():
@@ -170,7 +172,9 @@ def test_template_puts_a_hole_where_the_truth_does(bundled, capsys):
     p_phantom = np.array(truth["template_holes_mm"]["D4"]) * MM + [0.0, 0.0, 0.100]
     p_stepper = transform_points(np.array(truth["T_template_phantom"]), p_phantom[None])[0]
     T_SH_probe = stepper_pose(-0.050, np.radians(1.5), truth["probe_translation_axis"])
-    p_image = transform_points(inverse(np.array(truth["T_probe_image"])), transform_points(inverse(T_SH_probe), p_stepper[None]))[0]
+    p_image = transform_points(
+        inverse(np.array(truth["T_probe_image"])), transform_points(inverse(T_SH_probe), p_stepper[None])
+    )[0]
     spacing = np.array(truth["spacing_mm"]) * MM
     got = np.array([u * spacing[0], v * spacing[1], distance_mm * MM])
     assert np.linalg.norm(got - p_image) < 1.0 * MM  # the bundled twin's Image -> Probe bound

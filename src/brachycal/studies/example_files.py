@@ -9,7 +9,8 @@ outside, the documentation's reference data). ``examples/phantom`` holds a multi
 of the twin in brachycal's own phantom formats (:mod:`brachycal.calibration.phantom.phantom_file`), for
 ``brachycal phantom``; ``examples/temporal`` a PLUS water-tank video and tracker pair with a known lag,
 for ``brachycal temporal``; ``examples/stepper`` PLUS iCal recordings of a TRUS probe on a brachytherapy
-stepper with its device set (:mod:`brachycal.studies.stepper_twin`), for ``brachycal stepper``. Every file here is read back by the real readers
+stepper with its device set (:mod:`brachycal.studies.stepper_twin`), for ``brachycal stepper``. Every file
+here is read back by the real readers
 (:func:`~brachycal.data.pose_list.read_pose_list`, :func:`~brachycal.data.formats.plus_files.read_plus_config`,
 :func:`~brachycal.data.formats.plus_files.read_segmented_frames`,
 :func:`~brachycal.calibration.phantom.phantom_file.read_observations`) in the tests and calibrated to its truth.

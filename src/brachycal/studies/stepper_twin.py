@@ -33,6 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from brachycal.calibration.phantom.stepper_probe import stepper_pose
 from brachycal.data.formats.metaimage import write_image_sequence
@@ -233,7 +234,7 @@ def render_dots(points_px: Sequence[FloatArray]) -> np.ndarray:
     return np.clip(np.rint(image), 0, 255).astype(np.uint8)
 
 
-def _numbers(values: FloatArray) -> str:
+def _numbers(values: ArrayLike) -> str:
     return " ".join(repr(float(v)) for v in np.ravel(values))
 
 
@@ -327,7 +328,10 @@ def write_device_set(path: str | os.PathLike[str]) -> None:
         BrachyTrackerId="TrackerDevice",
     )
     ET.SubElement(
-        root, "vtkPlusBrachyStepperPhantomRegistrationAlgo", PhantomCoordinateFrame="Phantom", ReferenceCoordinateFrame="StepperHome"
+        root,
+        "vtkPlusBrachyStepperPhantomRegistrationAlgo",
+        PhantomCoordinateFrame="Phantom",
+        ReferenceCoordinateFrame="StepperHome",
     )
     ET.SubElement(
         root,
