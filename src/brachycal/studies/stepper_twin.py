@@ -37,7 +37,7 @@ from numpy.typing import ArrayLike
 
 from brachycal.calibration.phantom.stepper_probe import stepper_pose
 from brachycal.data.formats.metaimage import write_image_sequence
-from brachycal.data.formats.plus_files import Wire
+from brachycal.data.formats.plus_files import SegmentedFrame, Wire
 from brachycal.data.formats.plus_stepper import StepperAxes
 from brachycal.io import atomic_open, json_text
 from brachycal.se3 import FloatArray, from_xyz_rpy, inverse, transform_points
@@ -49,9 +49,11 @@ __all__ = [
     "SIZE_PX",
     "SPACING_M",
     "STEPPER_NAMES",
+    "STEPPER_TWIN",
     "T_PROBE_IMAGE",
     "T_TEMPLATE_PHANTOM",
     "StepperFrame",
+    "StepperSetup",
     "centre_of_rotation_px",
     "expected_axis_orientation",
     "image_to_probe",
@@ -131,26 +133,97 @@ def template_holes_mm() -> dict[str, tuple[float, float, float]]:
     return {f"{c}{r}": (5.0 * i, 5.0 * j, 0.0) for j, r in enumerate(_ROWS) for i, c in enumerate(_COLUMNS)}
 
 
+@dataclass(frozen=True)
+class StepperSetup:
+    """A probe on a stepper over an N-wire phantom on the template holder, as the truth of simulated frames.
+
+    Attributes:
+        image_to_probe: ``(4, 4)`` Image → Probe, PLUS's form (pixels → metres, the third column the
+            image normal times the mean pixel size).
+        T_template_phantom: ``(4, 4)`` the phantom in the stepper's frame with the template at home, metres.
+        axes: the stepper's axes: the probe and the template truly travel along them.
+        wires: the phantom's wires, metres, phantom frame.
+    """
+
+    image_to_probe: FloatArray
+    T_template_phantom: FloatArray
+    axes: StepperAxes
+    wires: Sequence[Wire]
+
+    def probe_pose(self, probe_m: float, rotation_rad: float) -> FloatArray:
+        """``T_SH_probe``: where the probe truly is at encoder readings (along the calibrated axis)."""
+        return stepper_pose(probe_m, rotation_rad, self.axes.probe_translation, self.axes.rotation_encoder_scale)
+
+    def template_pose(self, template_m: float) -> FloatArray:
+        """``T_SH_template``: where the template truly is at its encoder reading."""
+        return stepper_pose(template_m, 0.0, self.axes.template_translation)
+
+    def points(self, probe_m: float, rotation_rad: float, template_m: float = 0.0) -> dict[str, FloatArray]:
+        """Each wire's exact crossing of the image plane at encoder readings, ``(u, v)`` px."""
+        T_probe_phantom = inverse(self.probe_pose(probe_m, rotation_rad)) @ self.template_pose(template_m)
+        T_image_phantom = np.linalg.inv(self.image_to_probe) @ T_probe_phantom @ self.T_template_phantom
+        out = {}
+        for wire in self.wires:
+            a, b = transform_points(T_image_phantom, np.stack([wire.front_m, wire.back_m]))
+            out[wire.name] = (a + (-a[2] / (b[2] - a[2])) * (b - a))[:2]
+        return out
+
+    def noisy_points(
+        self,
+        probe_m: float,
+        rotation_rad: float,
+        template_m: float = 0.0,
+        *,
+        rng: np.random.Generator,
+        noise_px: float,
+    ) -> dict[str, FloatArray]:
+        """:meth:`points` plus Gaussian segmentation noise of SD ``noise_px`` per axis (two draws a wire,
+        in the wires' order, whatever ``noise_px``)."""
+        exact = self.points(probe_m, rotation_rad, template_m)
+        return {k: uv + rng.normal(0.0, noise_px, 2) for k, uv in exact.items()}
+
+    def segmented_frame(
+        self,
+        index: int,
+        probe_m: float,
+        rotation_rad: float,
+        template_m: float = 0.0,
+        *,
+        rng: np.random.Generator,
+        noise_px: float = NOISE_PX,
+        label: str = "frame",
+    ) -> SegmentedFrame:
+        """One segmented frame as ``brachycal stepper image`` reads it: the noisy wire points and the
+        poses as PLUS records them (the probe along the stepper's z, turned about it; the template along z)."""
+        return SegmentedFrame(
+            index,
+            True,
+            self.noisy_points(probe_m, rotation_rad, template_m, rng=rng, noise_px=noise_px),
+            stepper_pose(probe_m, rotation_rad),
+            stepper_pose(template_m, 0.0),
+            source="simulated",
+            label=label,
+            pose_names=("ProbeToStepperHomeTransform", "TemplateToStepperHomeTransform"),
+        )
+
+
+#: The twin's set-up (the truth of ``examples/stepper``).
+STEPPER_TWIN = StepperSetup(image_to_probe(), T_TEMPLATE_PHANTOM, AXES, wires())
+
+
 def true_probe_pose(probe_m: float, rotation_rad: float) -> FloatArray:
-    """``T_SH_probe``: where the probe truly is at encoder readings (along the calibrated axis)."""
-    return stepper_pose(probe_m, rotation_rad, AXES.probe_translation, AXES.rotation_encoder_scale)
+    """``T_SH_probe`` of the twin (:data:`STEPPER_TWIN`) at encoder readings."""
+    return STEPPER_TWIN.probe_pose(probe_m, rotation_rad)
 
 
 def true_template_pose(template_m: float) -> FloatArray:
-    """``T_SH_template``: where the template truly is at its encoder reading."""
-    return stepper_pose(template_m, 0.0, AXES.template_translation)
+    """``T_SH_template`` of the twin at its encoder reading."""
+    return STEPPER_TWIN.template_pose(template_m)
 
 
 def wire_points(probe_m: float, rotation_rad: float, template_m: float) -> dict[str, FloatArray]:
-    """Each wire's exact crossing of the image plane at encoder readings, ``(u, v)`` px."""
-    T_probe_phantom = inverse(true_probe_pose(probe_m, rotation_rad)) @ true_template_pose(template_m)
-    T_image_phantom = inverse(T_PROBE_IMAGE) @ T_probe_phantom @ T_TEMPLATE_PHANTOM
-    out = {}
-    for wire in wires():
-        a, b = transform_points(T_image_phantom, np.stack([wire.front_m, wire.back_m]))
-        hit = a + (-a[2] / (b[2] - a[2])) * (b - a)
-        out[wire.name] = hit[:2] / SPACING_M
-    return out
+    """Each wire's exact crossing of the twin's image plane at encoder readings, ``(u, v)`` px."""
+    return STEPPER_TWIN.points(probe_m, rotation_rad, template_m)
 
 
 def centre_of_rotation_px() -> FloatArray:
@@ -213,8 +286,7 @@ def simulate_recordings(seed: int = 0, *, noise_px: float = NOISE_PX) -> dict[st
             # PLUS writes the encoders with 4 decimals (mm, degrees): the readings are those values.
             d, t = round(d / MM, 4) * MM, round(t / MM, 4) * MM
             a = np.radians(round(float(np.degrees(a)), 4))
-            exact = wire_points(d, a, t)
-            noisy = {k: uv + rng.normal(0.0, noise_px, 2) for k, uv in exact.items()}
+            noisy = STEPPER_TWIN.noisy_points(d, a, t, rng=rng, noise_px=noise_px)
             frames.append(StepperFrame(d, a, t, noisy))
         out[name] = frames
     return out
