@@ -102,9 +102,8 @@ def test_the_truth_is_geometry():
     for wire in stepper_twin.wires():
         p_probe = M @ [*points[wire.name], 0.0, 1.0]
         p = transform_points(inverse(T_probe_phantom), p_probe[:3][None])[0]
-        along = (p - wire.front_m) / np.linalg.norm(wire.back_m - wire.front_m)
         direction = (wire.back_m - wire.front_m) / np.linalg.norm(wire.back_m - wire.front_m)
-        assert np.linalg.norm(np.cross(along, direction)) < 1e-12
+        assert np.linalg.norm(np.cross(p - wire.front_m, direction)) < 1e-12  # metres off the wire's line
     centre = M @ [*stepper_twin.centre_of_rotation_px(), 0.0, 1.0]
     np.testing.assert_allclose(centre[:2], 0.0, atol=1e-15)
     # Image axes aligned with the probe's x and -y, and wires along z: PLUS's form is the axis itself.
