@@ -21,6 +21,10 @@ Run from the repository root: ``python examples/make_example_files.py``. Determi
   ``brachycal robot identify touches``.
 - ``tracker/``: a UR10 off its URDF seen by a tracker (a 6-D marker): the table, its column spec and
   the truth (:func:`brachycal.simulation.simulate_tracker`), for ``brachycal robot identify tracker``.
+- ``stepper/``: a TRUS probe on a brachytherapy stepper (PLUS's iCal set-up): the device set, the
+  probe-rotation, probe- and template-translation and random-motion recordings (PLUS ``.igs.mha``
+  with the stepper's encoder fields) and their truth (:mod:`brachycal.studies.stepper_twin`), for
+  ``brachycal stepper``.
 """
 
 from __future__ import annotations

@@ -50,16 +50,19 @@ from brachycal.studies.example_files import (
     write_example_files,
 )
 from brachycal.studies.nwire_twin import FCAL2_LANDMARKS_MM, NWireSimConfig
+from brachycal.studies.stepper_twin import STEPPER_NAMES
 
 EXAMPLES = ROOT / "examples"
 MADE = ["joints.csv", PIVOT_NAME, "pivot/truth.json", NWIRE_CONFIG_NAME, NWIRE_FRAMES_NAME, "nwire/truth.json"]
 MADE += [name for files in PHANTOM_FILES.values() for name in files[:2]] + [PHANTOM_TRUTH_NAME]
 #: The MetaImage sequences among the made files, compared by :func:`assert_same_sequences`.
 SEQUENCES = [name for name in TEMPORAL_NAMES if name.endswith(".mha")] + list(NWIRE_SEQUENCE_NAMES)
+SEQUENCES += [name for name in STEPPER_NAMES.values() if name.endswith(".mha")]
 MADE += [name for name in TEMPORAL_NAMES if name not in SEQUENCES]
 MADE += [TOUCH_TRUTH_NAME, *TRACKER_NAMES]
 #: The touch tables (no header: compared as numbers, not as CSV with a header row).
 TOUCH_TABLES = [f"touches/{place}/hole_{k}.csv" for place, points in TOUCH_PLACES.items() for k in range(len(points))]
+MADE += [name for name in STEPPER_NAMES.values() if name not in SEQUENCES]
 
 
 def _numbers_or_text(text: str) -> list[float] | str:

@@ -249,7 +249,8 @@ def test_the_old_simulation_path_says_where_a_study_name_went(name):
 def test_every_name_brachycal_simulation_lost_is_covered():
     simulation = importlib.import_module("brachycal.simulation")
     studies = importlib.import_module("brachycal.studies")
-    assert set(simulation._MOVED_TO_STUDIES) == set(studies.__all__) == set(brachycal._MOVED_TO_STUDIES)
+    # studies offers them all (and names of its own since, such as the stepper twin's)
+    assert set(simulation._MOVED_TO_STUDIES) == set(brachycal._MOVED_TO_STUDIES) <= set(studies.__all__)
 
 
 def test_an_unknown_top_level_name_is_an_attribute_error():

@@ -47,8 +47,6 @@ OUTSIDE = "$BRACHYCAL_REFERENCE/"
 #: a job of several seconds to minutes of CPU that its own tests run; the walk stays within
 #: :data:`CPU_BUDGET_S`.
 NOT_RUN = {
-    ("stepper",): "a stepper's recordings are outside data (PLUS's iCal; no bundled twin of a stepper): "
-    "tests/test_stepper_calibration.py runs it on them",
     ("study",): "a sweep over twin sessions (5 seeds x 9 settings: minutes of CPU); tests/test_twin.py runs study",
     ("design",): "simulates and calibrates several twin sessions per design (minutes of CPU)",
     ("calibrate", "--identify-robot"): "robot identification with its cross-validation, ~24 s of CPU; "
@@ -60,10 +58,6 @@ NOT_RUN = {
     ("demo", "--images"): "a second demo (~30 s of CPU) plus 66 rendered frames; tests/test_needle_tip.py renders a "
     "twin's recording and runs brachycal tips on it",
     ("tips",): "needs the frames of demo --images (above): ~0.15 s of CPU a frame; tests/test_needle_tip.py runs it",
-    ("stepper", "image"): "a stepper's recordings are outside data (PLUS's iCal; no bundled twin of a stepper): "
-    "tests/test_trus_probe.py runs it on them and on exact frames",
-    ("stepper", "template"): "needs a stepper image result (above): tests/test_trus_probe.py runs it",
-    ("stepper", "export"): "needs a stepper image result (above): tests/test_trus_probe.py runs it",
 }
 #: CPU budget of the ordered walk in this process, seconds (measured ~40 s on a 2-core x86_64 VM).
 CPU_BUDGET_S = 60.0
@@ -319,6 +313,27 @@ START_BINDINGS: dict[str, dict[str, str]] = {
         "NAME": "ur10",
         "DIR": "tracker_identified",
     },
+    **{
+        form: {
+            "ROTATION.mha": "examples/stepper/twin_ProbeRotation.igs.mha",
+            "PROBE_TRANSLATION.mha": "examples/stepper/twin_ProbeTranslation.igs.mha",
+            "TEMPLATE_TRANSLATION.mha": "examples/stepper/twin_TemplateTranslation.igs.mha",
+            "DEVICE_SET.xml": "examples/stepper/PlusDeviceSet_twin_iCal.xml",
+            "stepper.json": out,
+        }
+        for form, out in (("stepper", "stepper.json"), ("stepper calibrate", "stepper_calibrate.json"))
+    },
+    "stepper image": {
+        "ROTATION.mha": "examples/stepper/twin_ProbeRotation.igs.mha",
+        "CAL.mha": "examples/stepper/twin_RandomStepperMotionCalibration.igs.mha",
+        "VAL.mha": "examples/stepper/twin_RandomStepperMotionValidation.igs.mha",
+        "DEVICE_SET.xml": "examples/stepper/PlusDeviceSet_twin_iCal.xml",
+    },
+    "stepper template": {
+        "RESULT": "stepper_image.json",
+        "DEVICE_SET.xml": "examples/stepper/PlusDeviceSet_twin_iCal.xml",
+    },
+    "stepper export": {"RESULT": "stepper_image.json", "DIR": "stepper_exports"},
 }
 #: Run first, in the start list's folder: the example files, a recording with its frames (session
 #: build, tips) and a check session (verify).

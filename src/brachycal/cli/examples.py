@@ -6,14 +6,15 @@ import argparse
 import filecmp
 from pathlib import Path
 
-HELP = "copy the bundled example files (joint log, sessions, pivot, N-wire, phantom and temporal files) into a folder"
+HELP = "copy the bundled example files (joint log, sessions, pivot, N-wire, phantom, temporal, stepper) into a folder"
 DESCRIPTION = """\
 Copies the example files that ship with brachycal into DIR: a joint log and a few configurations,
 a noise-free session and the digital twin's session (each with its truth), a tracked-pointer pivot
 recording, PLUS N-wire files (segmented frames and tracked B-mode sequences), multi-wedge and
-arbitrary-wire phantom sessions and a water-tank video and tracker pair with a known lag, made by
-the twin, a Panda's touches of fixed points and a UR10's tracker table for robot identification
-(each with its truth), and the scripts that made them. The README's and the
+arbitrary-wire phantom sessions, a water-tank video and tracker pair with a known lag, a TRUS
+probe on a brachytherapy stepper (PLUS's iCal device set and recordings), made by the twin, a
+Panda's touches of fixed points and a UR10's tracker table for robot identification (each with
+its truth), and the scripts that made them. The README's and the
 documentation's commands refer to them as examples/...: run them in the folder where DIR is
 examples (in a clone of the repository they are there already).
 

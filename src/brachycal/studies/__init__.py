@@ -10,6 +10,9 @@
   ``brachycal design`` (:data:`DESIGNS`); :func:`compare_excitation`, :func:`evaluate_excitation` —
   ``brachycal design --robot-error`` (excitation poses recorded on a twin with robot error by
   :func:`extended_twin_session`).
+- :class:`StepperSetup` — a TRUS probe on a brachytherapy stepper over an N-wire phantom, as the truth
+  of simulated frames (wire points, segmented frames); :data:`STEPPER_TWIN` — the set-up of the
+  bundled stepper example (``examples/stepper``).
 
 This layer sits above :mod:`brachycal.simulation` (the twin itself) and :mod:`brachycal.calibration`
 and :mod:`brachycal.planning` (what it runs on the twin).
@@ -25,6 +28,7 @@ if TYPE_CHECKING:  # imported on first use (each study loads the robot, SciPy an
     from brachycal.studies.excitation import evaluate_excitation, extended_twin_session
     from brachycal.studies.nwire_twin import NWireSimConfig, TrackerRoute, tracker_route
     from brachycal.studies.phantom_twin import PhantomSession, phantom_route, simulate_phantom
+    from brachycal.studies.stepper_twin import STEPPER_TWIN, StepperSetup
     from brachycal.studies.study import STUDY_METHODS, RunParams, run_study, summarise, sweep
     from brachycal.studies.targeting import TargetingResult, targeting_error
 
@@ -32,11 +36,13 @@ __getattr__, __dir__ = attach(__name__, __file__)
 
 __all__ = [
     "DESIGNS",
+    "STEPPER_TWIN",
     "STUDY_METHODS",
     "DemoRun",
     "NWireSimConfig",
     "PhantomSession",
     "RunParams",
+    "StepperSetup",
     "Table3",
     "TargetingResult",
     "TrackerRoute",

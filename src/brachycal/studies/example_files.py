@@ -10,7 +10,9 @@ of the twin in brachycal's own phantom formats (:mod:`brachycal.calibration.phan
 ``brachycal phantom``; ``examples/temporal`` a PLUS water-tank video and tracker pair with a known lag,
 for ``brachycal temporal``; ``examples/touches`` and ``examples/tracker`` a Panda's touches of fixed
 points and a UR10's tracker table (:mod:`brachycal.simulation.arm_touches`), for ``brachycal robot
-identify``. Every file here is read back by the real readers
+identify``; ``examples/stepper`` PLUS iCal recordings of a TRUS probe on a brachytherapy stepper with
+its device set (:mod:`brachycal.studies.stepper_twin`), for ``brachycal stepper``. Every file here is
+read back by the real readers
 (:func:`~brachycal.data.pose_list.read_pose_list`, :func:`~brachycal.data.formats.plus_files.read_plus_config`,
 :func:`~brachycal.data.formats.plus_files.read_segmented_frames`,
 :func:`~brachycal.calibration.phantom.phantom_file.read_observations`) in the tests and calibrated to its truth.
@@ -51,6 +53,7 @@ from brachycal.simulation.arm_touches import (
 )
 from brachycal.studies.nwire_twin import FCAL2_LANDMARKS_MM, NWireSimConfig, simulate_nwire
 from brachycal.studies.phantom_twin import simulate_phantom
+from brachycal.studies.stepper_twin import STEPPER_NAMES, write_stepper_files
 from brachycal.studies.tank_recording import write_tank_files
 
 __all__ = [
@@ -491,8 +494,10 @@ def write_example_files(
     ``brachycal nwire segment`` the first of the N-wire frames rendered as tracked B-mode sequences
     (:data:`NWIRE_SEQUENCE_NAMES`, :func:`write_wire_sequence`); for ``brachycal robot identify``
     a Panda's touches of fixed points (``touches/<place>/hole_k.csv``, :data:`TOUCH_PLACES`) and a
-    UR10 seen by a tracker (:data:`TRACKER_NAMES`), each with its truth (:func:`simulate_robot_examples`).
-    All or nothing; existing files are replaced only with ``force``.
+    UR10 seen by a tracker (:data:`TRACKER_NAMES`), each with its truth (:func:`simulate_robot_examples`);
+    for ``brachycal stepper`` a stepper's device set, its five recordings and their truth
+    (:data:`~brachycal.studies.stepper_twin.STEPPER_NAMES`). All or nothing; existing files are
+    replaced only with ``force``.
 
     Returns:
         The paths written.
@@ -542,7 +547,7 @@ def write_example_files(
     }
     names = [PIVOT_NAME, "pivot/truth.json", NWIRE_CONFIG_NAME, NWIRE_FRAMES_NAME, "nwire/truth.json"]
     names += [name for files in PHANTOM_FILES.values() for name in files[:2]] + [PHANTOM_TRUTH_NAME]
-    names += list(TEMPORAL_NAMES) + list(NWIRE_SEQUENCE_NAMES)
+    names += list(TEMPORAL_NAMES) + list(NWIRE_SEQUENCE_NAMES) + list(STEPPER_NAMES.values())
     touch_rec, tracker_rec = simulate_robot_examples(seed)
     touch_truth = {
         "what": "truth of the touch example (brachycal.simulation.arm_touch_rec.simulate_touches): the Panda that "
@@ -610,4 +615,5 @@ def write_example_files(
         )
         staged[columns].write_text(tracker_columns_text(tracker_rec.joints, comment=comment))
         staged[truth_name].write_text(json_text(tracker_truth))
+        write_stepper_files({key: staged[name] for key, name in STEPPER_NAMES.items()}, seed)
     return [folder / name for name in names]

@@ -29,7 +29,13 @@ does not move, whose rotation covers less than 10 degrees, whose translation cov
 5 mm, or in which another axis moves, is refused, naming the file and the field. Writes JSON
 (format brachycal-stepper/1), only if the whole calibration succeeds.
 
-example:
+The first example runs on the bundled twin of a stepper (`brachycal examples examples` copies it;
+examples/stepper/truth.json holds its truth), the second on PLUS's own iCal recordings.
+
+examples:
+  brachycal stepper calibrate examples/stepper/twin_ProbeRotation.igs.mha \\
+      examples/stepper/twin_ProbeTranslation.igs.mha examples/stepper/twin_TemplateTranslation.igs.mha \\
+      --config examples/stepper/PlusDeviceSet_twin_iCal.xml --out stepper.json
   brachycal stepper calibrate $BRACHYCAL_REFERENCE/plus_trus_stepper/USTC_3NWires_ProbeRotation.igs.mha \\
       $BRACHYCAL_REFERENCE/plus_trus_stepper/USTC_3NWires_ProbeTranslation.igs.mha \\
       $BRACHYCAL_REFERENCE/plus_trus_stepper/USTC_3NWires_TemplateTranslation.igs.mha \\

@@ -35,7 +35,14 @@ Writes JSON (brachycal-nwire/1 with a 'stepper' block: the registration T_Templa
 axes, the recorded poses' errors), which `brachycal stepper template` and `brachycal stepper
 export` read.
 
-example:
+The first example runs on the bundled twin of a stepper (`brachycal examples examples` copies it;
+examples/stepper/truth.json holds its truth), the second on PLUS's own iCal recordings.
+
+examples:
+  brachycal stepper image examples/stepper/twin_ProbeRotation.igs.mha \\
+      examples/stepper/twin_RandomStepperMotionCalibration.igs.mha \\
+      examples/stepper/twin_RandomStepperMotionValidation.igs.mha \\
+      --config examples/stepper/PlusDeviceSet_twin_iCal.xml --out stepper_image.json
   brachycal stepper image $BRACHYCAL_REFERENCE/plus_trus_stepper/USTC_3NWires_ProbeRotation.igs.mha \\
       $BRACHYCAL_REFERENCE/plus_trus_stepper/USTC_3NWires_RandomStepperMotionCalibration.igs.mha \\
       $BRACHYCAL_REFERENCE/plus_trus_stepper/USTC_3NWires_RandomStepperMotionValidation.igs.mha \\

@@ -16,7 +16,12 @@ phantom's registration and the stepper's axes); the template's holes and its pla
 (CoordinateDefinitions TemplateHolder->TemplateHome and TemplateHolder->Phantom) are read from
 the device set's TemplateModel. --hole may be given more than once; one row per hole and depth.
 
-example:
+The first example reads `brachycal stepper image`'s result on the bundled twin of a stepper (its
+--help shows it), the second a result on PLUS's own iCal recordings.
+
+examples:
+  brachycal stepper template stepper_image.json --config examples/stepper/PlusDeviceSet_twin_iCal.xml \\
+      --hole D4 --depth 100 --probe-position -50
   brachycal stepper template stepper_image.json \\
       --config $BRACHYCAL_REFERENCE/plus_trus_stepper/PlusDeviceSet_iCal_SonixTouch_BlackTargetGuideStepper_1.1.xml \\
       --hole D4 --depth 100 --probe-position -50 --probe-rotation 0
