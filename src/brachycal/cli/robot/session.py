@@ -32,8 +32,7 @@ identifiability, figures). The same identification runs in brachycal calibrate -
 --identify-robot, which also writes the image calibration.
 
 example (the twin's session in the example files, brachycal examples DIR):
-  brachycal robot identify session examples/twin_session --robot-accuracy-mm 0.5 \\
-      --robot-accuracy-deg 0.05 --out identified
+  brachycal robot identify session examples/twin_session --robot sda10f --out identified
 """
 
 
