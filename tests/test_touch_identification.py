@@ -348,7 +348,7 @@ def test_cli_takes_a_bundled_arm_and_its_tool(panda, tmp_path, capsys):
     tip = hand[:3, :3] @ tcp + hand[:3, 3]  # the tool centre point in the flange
     folders = []
     for name, centre in (("a", [0.45, -0.2, 0.15]), ("b", [0.5, 0.25, 0.3])):
-        for k, point in enumerate((np.array(centre), np.array(centre) + [0.05, 0.0, 0.0])):
+        for k, point in enumerate((np.array(centre), np.array(centre) + np.array([0.05, 0.0, 0.0]))):
             Q = touches_of(panda, point, tip, 10, rng)[:, :7] + rng.normal(0, 1e-5, (10, 7))
             write_place(tmp_path / name, {f"hole_{k}.csv": "".join(",".join(f"{v:.17g}" for v in q) + "\n" for q in Q)})
         folders.append(str(tmp_path / name))
