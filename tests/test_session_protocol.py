@@ -38,3 +38,30 @@ def test_cli_prints_held_out_first_and_writes_the_identified_robot(tmp_path, cap
     Q = np.random.default_rng(0).uniform(nominal.lower, nominal.upper, (5, nominal.nq))
     frames = [nominal.rig.needle_arm.flange, nominal.rig.probe_arm.flange]
     assert np.allclose(written.fk_frames(frames, Q), expected.fk_frames(frames, Q), atol=1e-9)
+
+
+def test_fit_arm_on_the_session_model_reproduces_the_session_estimator():
+    """The session as a ResidualModel of fit_arm (session_arm_fit) gives the corrections of the
+    session's own estimator (identify_robot) on the twin: within 0.15 of their posterior SD each
+    (measured 0.03 at the default accuracy, 0.07 at 0.3 mm / 0.03°), the SDs within 5 % (measured
+    1-4 %; the two differ in the axes moves' noise rule: pooled with the touches here, assigned
+    the touches' level there)."""
+    from brachycal.calibration import calibrate
+    from brachycal.calibration.robot.identification import identify_robot, prior_sd
+    from brachycal.calibration.robot.session_model import session_arm_fit
+    from brachycal.calibration.robot_accuracy import RobotAccuracy
+    from brachycal.data.session import read_session
+
+    robot = load_robot("sda10f")
+    session = read_session(TWIN, robot)
+    initial = calibrate(session, robot, ("scaled_uv",))
+    accuracy = RobotAccuracy(0.3e-3, float(np.radians(0.03)))
+    old = identify_robot(session, robot, initial, "sound_speed", accuracy)
+    new = session_arm_fit(session, robot, initial, "sound_speed", accuracy)
+    scale = prior_sd(robot, accuracy)
+    old_sd = (np.sqrt(np.diag(old.posterior)[-6 * robot.nq :]) * scale).reshape(-1, 6)
+    assert np.max(np.abs(old.corrections / old_sd)) > 1  # the robot is off: corrections worth comparing
+    assert np.max(np.abs(new.corrections - old.corrections) / old_sd) < 0.15
+    assert np.allclose(new.correction_sd(), old_sd, rtol=0.05)
+    assert new.identifiability.structural_rank == old.identifiability.structural_rank
+    assert abs(new.identifiability.identified - old.identifiability.identified) <= 2
