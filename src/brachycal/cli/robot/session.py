@@ -31,7 +31,9 @@ Writes DIR/robot.urdf (the identified robot) and DIR/identification.json (correc
 identifiability, figures). The same identification runs in brachycal calibrate --solve chain
 --identify-robot, which also writes the image calibration.
 
-example (the twin's session in the example files, brachycal examples DIR):
+On the twin's session of the example files (brachycal examples DIR):
+
+example:
   brachycal robot identify session examples/twin_session --robot sda10f --out identified
 """
 

@@ -36,9 +36,14 @@ too; the written URDF carries the geometry only (its figures are printed as "URD
 Writes DIR/robot.urdf (the identified joints, the tip written into the tool frame) and
 DIR/identification.json (corrections, tip, noise level, compliance, figures per place).
 
-example (MUKCa's Franka Panda touches, trained on one place, judged on two others):
-  brachycal robot identify touches data/panda_2_clean/front_center data/panda_2_clean/back_left \\
-      data/panda_2_clean/mid_right --robot urdf/panda.urdf --tool-frame ball_link \\
+On MUKCa's Franka Panda touches (trained on one place, judged on two others), from
+$BRACHYCAL_REFERENCE/mukca_touches:
+
+example:
+  brachycal robot identify touches $BRACHYCAL_REFERENCE/mukca_touches/data/panda_2_clean/front_center \\
+      $BRACHYCAL_REFERENCE/mukca_touches/data/panda_2_clean/back_left \\
+      $BRACHYCAL_REFERENCE/mukca_touches/data/panda_2_clean/mid_right \\
+      --robot $BRACHYCAL_REFERENCE/mukca_touches/urdf/panda.urdf --tool-frame ball_link \\
       --train front_center --distance-mm 50 --robot-accuracy-mm 0.3 --robot-accuracy-deg 0.1 --out panda_2
 """
 
