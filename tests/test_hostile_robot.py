@@ -1,4 +1,5 @@
-"""Hostile inputs to ``brachycal robot identify touches``: each refused in one line, exit code 2, nothing written."""
+"""Hostile inputs to ``brachycal robot identify touches`` and ``robot identify session``: each refused in one
+line, exit code 2, nothing written."""
 
 from __future__ import annotations
 
@@ -9,6 +10,9 @@ import pytest
 from hostile import Case, check_refusal
 
 from brachycal.model.description_file import example_robot_data_share
+
+ROOT = Path(__file__).resolve().parents[1]
+SESSION = ["robot", "identify", "session", str(ROOT / "examples" / "twin_session"), "--out", "{tmp}/out"]
 
 URDF = example_robot_data_share() / "robots" / "panda_description" / "urdf" / "panda.urdf"
 ROW = "0.1,0.2,0.3,-2.0,0.1,2.2,0.7\n"
@@ -87,6 +91,33 @@ CASES = [
         setup=_urdf_in_out,
     ),
     Case("unknown-protocol", ["robot", "identify", "laser", "{tmp}/a"], ("laser",)),
+    Case("tracker-option", [*RUN, "--columns", "{tmp}/c.toml"], ("unrecognized", "--columns"), setup=_places(GOOD)),
+    Case("no-train", [*BASE, "--out", "{tmp}/out"], ("--train", "required"), setup=_places(GOOD)),
+    Case(
+        "urdf-without-tool-frame",
+        [*BASE[:-2], "--train", "a", "--out", "{tmp}/out"],
+        ("--tool-frame", "required"),
+        setup=_places(GOOD),
+    ),
+    Case("robot-and-urdf", [*RUN, "--robot", "panda"], ("--robot", "--urdf", "one"), setup=_places(GOOD)),
+    Case(
+        "unknown-robot-name",
+        [*RUN[:5], "--robot", "no_such_arm", *RUN[7:]],
+        ("no_such_arm",),
+        setup=_places(GOOD),
+    ),
+    Case("session-on-a-single-arm", [*SESSION, "--robot", "panda"], ("panda", "arm")),
+    Case(
+        "session-on-a-plain-urdf",
+        [*SESSION, "--urdf", str(URDF)],
+        ("arm",),
+    ),
+    Case(
+        "session-missing",
+        ["robot", "identify", "session", "{tmp}/nothing", "--out", "{tmp}/out"],
+        ("nothing",),
+    ),
+    Case("session-touches-option", [*SESSION, "--train", "a"], ("unrecognized", "--train")),
 ]
 
 

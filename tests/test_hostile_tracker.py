@@ -47,7 +47,7 @@ RUN = [*BASE, "--columns", "{tmp}/columns.toml", "--flange", "panda_link8", "--o
 
 CASES = [
     Case("no-columns-spec", [*BASE, "--out", "{tmp}/out"], ("--columns", "required"), setup=_files()),
-    Case("two-tables", [*RUN[:4], "{tmp}/table.csv", *RUN[4:]], ("one table",), setup=_files()),
+    Case("two-tables", [*RUN[:4], "{tmp}/table.csv", *RUN[4:]], ("unrecognized", "table.csv"), setup=_files()),
     Case(
         "missing-table", RUN, ("table.csv",), setup=lambda tmp: (tmp / "columns.toml").write_text(SPEC.format(unit="m"))
     ),
@@ -68,11 +68,13 @@ CASES = [
     Case("too-few-rows", RUN, ("posture", "at least"), setup=_files(HEADER + _row(0) + _row(1))),
     Case("bad-unit-in-spec", RUN, ("position.unit",), setup=_files(unit="cm")),
     Case("unknown-flange", [*RUN[:-4], "--flange", "hand", "--out", "{tmp}/out"], ("hand",), setup=_files()),
-    Case("touches-option", [*RUN, "--train", "a"], ("--train", "touches"), setup=_files()),
+    Case("touches-option", [*RUN, "--train", "a"], ("unrecognized", "--train"), setup=_files()),
+    Case("robot-and-urdf", [*RUN, "--robot", "panda"], ("--robot", "--urdf", "one"), setup=_files()),
     Case(
-        "touches-without-tool-frame",
-        ["robot", "identify", "touches", "{tmp}", "--urdf", str(URDF), "--out", "{tmp}/out"],
-        ("--tool-frame", "required"),
+        "bundled-arm-without-the-table-joints",
+        [*RUN[:4], "--robot", "ur5", *RUN[6:]],
+        ("panda_joint1",),
+        setup=_files(),
     ),
     Case(
         "out-replaces-the-urdf",

@@ -51,6 +51,8 @@ NOT_RUN = {
     ("design",): "simulates and calibrates several twin sessions per design (minutes of CPU)",
     ("calibrate", "--identify-robot"): "robot identification with its cross-validation, ~24 s of CPU; "
     "tests/test_robot_identification.py runs it",
+    ("robot", "session"): "robot identification with its 8-fold cross-validation, ~5 s of CPU; "
+    "tests/test_session_protocol.py runs it",
     ("plan", "excitation"): "identifies the robot, then scores 364 candidate poses, ~11 s of CPU; "
     "tests/test_excitation.py runs it",
     ("demo", "--table3"): "Table III simulates and calibrates a twin per seed by seven methods (~5 s of CPU a "

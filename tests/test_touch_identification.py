@@ -315,7 +315,7 @@ def test_cli_prints_held_out_first_and_writes_a_urdf_that_reproduces_them(tmp_pa
     code = main(
         [
             "robot", "identify", "touches", *folders,
-            "--urdf", str(root / "urdf" / "panda.urdf"), "--tool-frame", "ball_link",
+            "--robot", str(root / "urdf" / "panda.urdf"), "--tool-frame", "ball_link",
             "--train", "front_center", "--distance-mm", "50",
             "--robot-accuracy-mm", "0.3", "--robot-accuracy-deg", "0.1", "--out", str(tmp_path / "out"),
         ]
@@ -323,6 +323,7 @@ def test_cli_prints_held_out_first_and_writes_a_urdf_that_reproduces_them(tmp_pa
     assert code == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].startswith("held-out places (7)") and lines[8].startswith("training places (1)")
+    assert "robot-geometry combinations identified beyond the stated accuracy" in lines[11]
     report = json.loads((tmp_path / "out" / "identification.json").read_text())
     calibrated = Robot.load(tmp_path / "out" / "robot.urdf")
     for name in ("back_left", "mid_right"):
@@ -331,3 +332,32 @@ def test_cli_prints_held_out_first_and_writes_a_urdf_that_reproduces_them(tmp_pa
         scatter = np.mean([np.mean(np.linalg.norm(p - p.mean(axis=0), axis=1)) for p in P])
         assert scatter * 1e3 == pytest.approx(report["identified"][name]["scatter_mm"], abs=1e-6)
         assert scatter < report["nominal"][name]["scatter_mm"] * 1e-3 / 5
+
+
+def test_cli_takes_a_bundled_arm_and_its_tool(panda, tmp_path, capsys):
+    """``--robot panda`` (the bundled description, fingers frozen: 7 joint columns) with no
+    --tool-frame: the arm's tool (panda_hand_tcp) touches; touches of the nominal arm (joint noise
+    1e-5 rad, the tip's ~5 µm) leave a held-out scatter of that size, and the written URDF holds the arm's 7 joints."""
+    import json
+
+    from brachycal.cli.main import main
+
+    rng = np.random.default_rng(5)
+    tcp = panda.tool_transform("panda_hand_tcp")[1][:3, 3]  # in the hand's link
+    hand = panda.transform(FLANGE, panda.tool_transform("panda_hand_tcp")[0], np.zeros(panda.nq))
+    tip = hand[:3, :3] @ tcp + hand[:3, 3]  # the tool centre point in the flange
+    folders = []
+    for name, centre in (("a", [0.45, -0.2, 0.15]), ("b", [0.5, 0.25, 0.3])):
+        for k, point in enumerate((np.array(centre), np.array(centre) + np.array([0.05, 0.0, 0.0]))):
+            Q = touches_of(panda, point, tip, 10, rng)[:, :7] + rng.normal(0, 1e-5, (10, 7))
+            write_place(tmp_path / name, {f"hole_{k}.csv": "".join(",".join(f"{v:.17g}" for v in q) + "\n" for q in Q)})
+        folders.append(str(tmp_path / name))
+    out = tmp_path / "out"
+    code = main(["robot", "identify", "touches", *folders, "--robot", "panda", "--train", "a", "--out", str(out)])
+    assert code == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("held-out places (1)") and lines[2].startswith("training places (1)")
+    document = json.loads((out / "identification.json").read_text())
+    assert document["tool_frame"] == "panda_hand_tcp"
+    assert document["identified"]["b"]["scatter_mm"] < 0.02
+    assert Robot.load(out / "robot.urdf").nq == 7  # the description's fingers stay frozen

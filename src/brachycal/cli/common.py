@@ -123,7 +123,12 @@ def progress_bar(total: int, desc: str, quiet: bool, *, unit: str) -> tqdm:
 
 
 def add_robot_accuracy_options(
-    parser: argparse.ArgumentParser | argparse._ArgumentGroup, when: str, *, zero: bool, note: str = ""
+    parser: argparse.ArgumentParser | argparse._ArgumentGroup,
+    when: str,
+    *,
+    zero: bool,
+    note: str = "",
+    default: RobotAccuracy | None = None,
 ) -> None:
     """``--robot-accuracy-mm`` and ``--robot-accuracy-deg``: the robot's stated kinematic accuracy.
 
@@ -132,6 +137,7 @@ def add_robot_accuracy_options(
         when: the option they go with, for the help (``"with --solve chain"``).
         zero: whether 0 (a perfect robot) is allowed; a prior of identification must be positive.
         note: what the accuracy is used for, appended to the millimetres' help.
+        default: the command's own default, when not the general one (DEFAULT_ROBOT_ACCURACY).
     """
     import numpy as np  # lazy: start-up (the command's run only)
 
@@ -142,14 +148,17 @@ def add_robot_accuracy_options(
     )
     from brachycal.cli.option_types import finite_float  # lazy: start-up (the command's run only)
 
+    general = default is None
+    default = DEFAULT_ROBOT_ACCURACY if default is None else default
     millimetres = finite_float(low=0.0, high=MAX_ROBOT_TRANSLATION_SD_M * 1e3, low_open=not zero, unit="mm")
     parser.add_argument(
         "--robot-accuracy-mm",
         type=millimetres,
         metavar="SD",
         help=f"{when}: the robot's stated accuracy, each joint origin's translation SD per axis, "
-        f"{millimetres.rule} (default {DEFAULT_ROBOT_ACCURACY.translation_sd_m * 1e3:g}, a well-built arm; "
-        f"real arms are often 0.1){note}",
+        f"{millimetres.rule} (default {default.translation_sd_m * 1e3:g}"
+        + (", a well-built arm; real arms are often 0.1)" if general else ")")
+        + note,
     )
     degrees = finite_float(low=0.0, high=float(np.degrees(MAX_ROBOT_ROTATION_SD_RAD)), low_open=not zero, unit="deg")
     parser.add_argument(
@@ -157,7 +166,8 @@ def add_robot_accuracy_options(
         type=degrees,
         metavar="SD",
         help=f"{when}: each joint origin's rotation SD per axis and zero-offset SD, "
-        f"{degrees.rule} (default {np.degrees(DEFAULT_ROBOT_ACCURACY.rotation_sd_rad):g}; real arms often 0.01)",
+        f"{degrees.rule} (default {np.degrees(default.rotation_sd_rad):g}"
+        + ("; real arms often 0.01)" if general else ")"),
     )
 
 

@@ -96,10 +96,12 @@ start here:
                                       a stepper result as PLUS CoordinateDefinitions and Slicer/ITK files
   brachycal temporal VIDEO.mha TRACKER.mha --out lag.json
                                       lag of the tracker (or joint log) behind the ultrasound frames
-  brachycal robot identify touches FOLDER... --urdf URDF --tool-frame FRAME --train PLACE --out DIR
+  brachycal robot identify touches FOLDER... --robot ARM --tool-frame FRAME --train PLACE --out DIR
                                       an arm's joint geometry from touches of fixed points
-  brachycal robot identify tracker TABLE --columns SPEC --urdf URDF --out DIR
+  brachycal robot identify tracker TABLE --columns SPEC --robot ARM --out DIR
                                       an arm's joint geometry from a tracker's marker measurements
+  brachycal robot identify session SESSION --out DIR
+                                      the dual-arm rig's joint geometry from its calibration session
   brachycal study --out DIR           how many samples? truth error vs LOO on the twin
   brachycal design --out DIR          which sample design gives most accuracy per robot minute
 """

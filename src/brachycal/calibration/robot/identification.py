@@ -383,6 +383,75 @@ def cross_validate_identification(
     return ErrorStats(errors[0]), ErrorStats(errors[1])
 
 
+@dataclass(frozen=True)
+class SessionIdentification:
+    """The dual-arm session as a protocol of ``robot identify``: the identified robot, judged at
+    held-out configurations (K-fold, :func:`cross_validate_identification`) and on its own samples.
+
+    Attributes:
+        model: the image model chosen (:func:`choose_and_identify`).
+        identification: the identified robot and the chain fit on it.
+        held_out: ``(chain alone, with the robot identified)`` image error at held-out configurations.
+        training: ``(chain alone on the nominal robot, with the robot identified)`` image error of the
+            samples each fit used (metres, their errors).
+        folds: the folds of ``held_out``.
+    """
+
+    model: str
+    identification: IdentificationResult
+    held_out: tuple[ErrorStats, ErrorStats]
+    training: tuple[ErrorStats, ErrorStats]
+    folds: int
+
+    def as_json(self) -> dict[str, object]:
+        """The figures (mm), held out first, and the identification (:meth:`IdentificationResult.as_json`)."""
+
+        def stats(pair: tuple[ErrorStats, ErrorStats]) -> dict[str, object]:
+            return {
+                name: {"rmse_mm": s.rmse_mm, "mae_mm": s.mae_mm, "samples": s.n}
+                for name, s in zip(("chain_alone", "robot_identified"), pair, strict=True)
+            }
+
+        noise = {g: n.sd_m * 1e3 for g, n in self.identification.fit.noise.items()}
+        return {
+            "protocol": "session",
+            "image_model": self.model,
+            "held_out": {"folds": self.folds, "image_error": stats(self.held_out)},
+            "training": {"image_error": stats(self.training)},
+            "noise_sd_mm": noise,
+            **self.identification.as_json(),
+        }
+
+
+def identify_session(
+    session: Session,
+    robot: Robot,
+    initial: SequentialResult,
+    accuracy: RobotAccuracy,
+    folds: int = IDENTIFICATION_FOLDS,
+) -> SessionIdentification:
+    """The dual-arm session's robot identification (:func:`choose_and_identify`), its K-fold image
+    error at held-out configurations (:func:`cross_validate_identification`) and its training error.
+
+    Raises:
+        DegenerateDataError: the session does not determine the chain.
+    """
+    choice, identified = choose_and_identify(session, robot, initial, accuracy)
+    held_out = cross_validate_identification(session, robot, initial, choice.model, accuracy, folds)
+    fit, corrected = identified.fit, identified.robot(robot)
+    used = ~fit.outliers
+    residuals = image_residuals(
+        ChainData.of(session, corrected), fit.T_ER_Ntip, fit.T_EL_Ptip @ fit.image.T_Ptip_I, fit.image.spacing_m
+    )
+    alone = chain_start(session, robot, initial, choice.model, np.ones(len(session.uv_px), dtype=bool), rounds=2)
+    chain_residual = alone.image_residuals(session, robot)[~alone.outliers]
+    training = (
+        ErrorStats(np.linalg.norm(chain_residual, axis=1)),
+        ErrorStats(np.linalg.norm(residuals[used], axis=1)),
+    )
+    return SessionIdentification(choice.model, identified, held_out, training, folds)
+
+
 #: Former names, given for one release with a DeprecationWarning.
 if not TYPE_CHECKING:  # type checkers see only the new names
     __getattr__ = renamed(__name__, {"RobotIdentification": "IdentificationResult"})

@@ -1,171 +1,63 @@
-"""``brachycal robot identify touches|tracker``: an arm's joint geometry identified from touches of
-fixed points, or from an external tracker's measurements (:mod:`brachycal.cli.robot.tracker`)."""
+"""``brachycal robot identify PROTOCOL``: an arm's joint geometry identified from a calibration
+protocol, each protocol a sub-command with its own options: ``touches`` (fixed points touched by
+a tool on the flange, :mod:`brachycal.cli.robot.touches`), ``tracker`` (an external tracker's
+measurements of a marker, :mod:`brachycal.cli.robot.tracker`), ``session`` (the dual-arm rig's
+session, :mod:`brachycal.cli.robot.session`)."""
 
 from __future__ import annotations
 
 import argparse
-from typing import TYPE_CHECKING
 
-from brachycal.cli.common import add_robot_accuracy_options, command_inputs
+from brachycal.cli.common import add_robot_option
+from brachycal.cli.robot import session as session_cli
+from brachycal.cli.robot import touches as touches_cli
 from brachycal.cli.robot import tracker as tracker_cli
 
-if TYPE_CHECKING:
-    from brachycal.calibration.robot.touches import TouchReport
-
 NAME = "robot"
-HELP = "identify an arm's joint geometry from touches of fixed points or a tracker (robot identify touches|tracker)"
-#: The protocols ``brachycal robot identify PROTOCOL`` knows.
-PROTOCOLS = ("touches", "tracker")
-DESCRIPTION = (
-    """\
-touches: identifies an arm's joint geometry (every joint origin's translation and rotation, and the tool's
-tip) from touches: a tool on the flange (a ball, a sharp tip) touches fixed points (sockets,
-divots) from many postures. Each FOLDER is one place (the points somewhere in the workspace):
-hole_0.csv, hole_1.csv, ... one per point, one row per touch, the arm's joint values in radians in
-the arm's joint order, no header. The fit uses the --train places; every other place is held out
-and judged: per point, the mean distance of the tool tip from its mean (forward kinematics of each
-touch), averaged over the points, and with --distance-mm the error of the distance between points
-0 and 1. Held-out places are printed first: they say how the calibrated robot does elsewhere.
+HELP = "identify a robot's joint geometry from touches, a tracker or a dual-arm session (robot identify PROTOCOL)"
+#: The protocols, each a sub-command: ``brachycal robot identify PROTOCOL ...``.
+PROTOCOLS = {"touches": touches_cli, "tracker": tracker_cli, "session": session_cli}
+DESCRIPTION = """\
+Identifies a robot's joint geometry (every joint origin's small translation and rotation) from a
+calibration protocol, with the stated accuracy as the corrections' prior, and judges it on data the
+fit did not use. The protocol is the sub-command:
 
-The stated accuracy (--robot-accuracy-mm, --robot-accuracy-deg) is the prior of the corrections:
-state the arm's own figures (a Panda's joints are off their URDF by tenths of a millimetre).
-With --dynamics (a URDF of the same arm with masses), joint compliance under gravity is fitted
-too; the written URDF carries the geometry only (its figures are printed as "URDF only").
+  brachycal robot identify touches FOLDER... --robot ARM --tool-frame FRAME --train PLACE --out DIR
+                   any arm: touches of fixed points by a tool on the flange; held-out places
+  brachycal robot identify tracker TABLE --columns SPEC --robot ARM --out DIR
+                   any arm: a tracker's 3-D or 6-D measurements of a marker; leave-one-out postures
+  brachycal robot identify session SESSION --out DIR
+                   the dual-arm rig: its calibration session; K-fold held-out configurations
 
-Writes DIR/robot.urdf (the identified joints, the tip written into --tool-frame) and
-DIR/identification.json (corrections, tip, noise level, compliance, figures per place).
-
-On MUKCa's Franka Panda touches (trained on one place, judged on two others), from
-$BRACHYCAL_REFERENCE/mukca_touches:
-
-example:
-  brachycal robot identify touches $BRACHYCAL_REFERENCE/mukca_touches/data/panda_2_clean/front_center \\
-      $BRACHYCAL_REFERENCE/mukca_touches/data/panda_2_clean/back_left \\
-      $BRACHYCAL_REFERENCE/mukca_touches/data/panda_2_clean/mid_right \\
-      --urdf $BRACHYCAL_REFERENCE/mukca_touches/urdf/panda.urdf --tool-frame ball_link \\
-      --train front_center --distance-mm 50 --robot-accuracy-mm 0.3 --robot-accuracy-deg 0.1 --out panda_2
-
+Each writes DIR/robot.urdf (the identified robot) and DIR/identification.json (corrections,
+figures), and prints the held-out figures first, the training figures second, then which
+combinations of corrections the data determine. Each protocol's --help gives its files.
 """
-    + tracker_cli.DESCRIPTION
-)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from brachycal.cli.option_types import finite_float  # lazy: start-up (the command's run only)
-
     parser = sub.add_parser(
-        NAME,
-        help=HELP,
+        NAME, help=HELP, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    actions = parser.add_subparsers(title="actions", metavar="ACTION", dest="action", required=True)
+    identify = actions.add_parser(
+        "identify",
+        help="identify the robot's joint geometry (protocols: touches, tracker, session)",
         description=DESCRIPTION,
-        prog="brachycal robot identify",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("action", choices=("identify",), help="what to do (identify)")
-    parser.add_argument("protocol", choices=PROTOCOLS, help="the protocol of the recordings (touches, tracker)")
-    parser.add_argument(
-        "folders",
-        nargs="+",
-        metavar="INPUT",
-        help="touches: place folders (hole_0.csv, hole_1.csv, ...); tracker: the tracker table (CSV)",
-    )
-    parser.add_argument("--urdf", required=True, metavar="FILE", help="the arm's nominal URDF")
-    parser.add_argument(
-        "--tool-frame",
-        metavar="FRAME",
-        help="touches (required): the touching tip's frame in the URDF (fixed to the flange)",
-    )
-    parser.add_argument(
-        "--train", metavar="PLACE[,PLACE]", help="touches (required): the places to identify from (folder names)"
-    )
-    parser.add_argument(
-        "--distance-mm",
-        type=finite_float(low=0.0, high=10_000.0, low_open=True, unit="mm"),
-        metavar="MM",
-        help="the known distance between points 0 and 1 of every place (a machined block)",
-    )
-    parser.add_argument("--dynamics", metavar="FILE", help="a URDF of the same arm with masses: fit joint compliance")
-    add_robot_accuracy_options(parser, "the prior of the corrections", zero=False)
-    parser.add_argument(
-        "--out", required=True, metavar="DIR", help="folder to write robot.urdf and identification.json to"
-    )
-    parser.add_argument("--force", action="store_true", help="replace the outputs if they exist")
-    tracker_cli.add_options(parser)
-    parser.set_defaults(run=run)
-
-
-def run(args: argparse.Namespace) -> int:
-    from pathlib import Path  # lazy: start-up (the command's run only)
-
-    from brachycal.calibration.robot.touches import identify_touch_folders  # lazy: start-up (the command's run only)
-    from brachycal.cli.common import robot_accuracy  # lazy: start-up (the command's run only)
-    from brachycal.io import OutputSet, write_json  # lazy: start-up (the command's run only)
-    from brachycal.model import Robot  # lazy: start-up (the command's run only)
-
-    if args.protocol == "tracker":
-        return tracker_cli.run(args)
-    from brachycal.errors import InputError  # lazy: start-up (the command's run only)
-
-    for option in ("tool_frame", "train"):
-        if getattr(args, option) is None:
-            raise InputError(f"touches: the following argument is required: --{option.replace('_', '-')}")
-    for option in ("columns", "flange"):
-        if getattr(args, option) is not None:
-            raise InputError(f"--{option} is for the tracker protocol, not touches")
-    out = Path(args.out)
-    with OutputSet(force=args.force, inputs=[*command_inputs(args, "dynamics"), *args.folders]) as outputs:
-        urdf_path = outputs.claim(out / "robot.urdf", make_parents=True, label="--out robot.urdf")
-        json_path = outputs.claim(out / "identification.json", make_parents=True, label="--out identification.json")
-        nominal = Robot.load(args.urdf)
-        dynamics = Robot.load(args.dynamics) if args.dynamics is not None else None
-        train = [name.strip() for name in args.train.split(",")]
-        report = identify_touch_folders(
-            nominal,
-            args.folders,
-            args.tool_frame,
-            train,
-            robot_accuracy(args),
-            distance_m=args.distance_mm * 1e-3 if args.distance_mm is not None else None,
-            dynamics=dynamics,
+    protocols = identify.add_subparsers(title="protocols", metavar="PROTOCOL", dest="protocol", required=True)
+    for name, module in PROTOCOLS.items():
+        one = protocols.add_parser(
+            name,
+            help=module.HELP,
+            description=module.DESCRIPTION,
+            formatter_class=argparse.RawDescriptionHelpFormatter,
         )
-        report.calibrated_robot(nominal).write_urdf(urdf_path, force=True)
-        write_json(json_path, report.as_json(), force=True)
-    print_report(report)
-    print(f"wrote {out / 'robot.urdf'} and {out / 'identification.json'}")
-    return 0
-
-
-def print_report(report: TouchReport) -> None:
-    """Held-out places first, then the training places: scatter (and distance error) in mm."""
-    fit = report.result.fit
-    urdf_only = bool(report.result.compliant)
-
-    def line(name: str) -> str:
-        a, b, c = report.nominal[name], report.identified[name], report.geometry_only[name]
-        text = f"  {name:16s} {a.mean_scatter_m * 1e3:8.3f} -> {b.mean_scatter_m * 1e3:6.3f} mm"
-        if urdf_only:
-            text += f" (URDF only {c.mean_scatter_m * 1e3:6.3f})"
-        for (i, j), e in b.distance_error_m.items():
-            text += f"   distance {i}-{j}: {a.distance_error_m[(i, j)] * 1e3:6.3f} -> {e * 1e3:6.3f} mm"
-        return text
-
-    held = report.held_out
-    if held:
-        mean_a = sum(report.nominal[n].mean_scatter_m for n in held) / len(held) * 1e3
-        mean_b = sum(report.identified[n].mean_scatter_m for n in held) / len(held) * 1e3
-        print(
-            f"held-out places ({len(held)}): tip scatter, nominal URDF -> identified; "
-            f"mean {mean_a:.3f} -> {mean_b:.3f} mm"
+        module.add_options(one)
+        add_robot_option(one, any_arm=module.ANY_ARM)
+        one.add_argument(
+            "--out", required=True, metavar="DIR", help="folder to write robot.urdf and identification.json to"
         )
-        for name in held:
-            print(line(name))
-    else:
-        print("held-out places: none (every place was used to identify; give --train a subset to judge)")
-    print(f"training places ({len(report.train)}):")
-    for name in report.train:
-        print(line(name))
-    print(
-        f"touch noise {fit.sigma['touch'] * 1e3:.3f} mm; "
-        f"tip {', '.join(f'{v * 1e3:.3f}' for v in report.result.tip)} mm "
-        f"in {report.result.flange}; {fit.selection.size} corrections free, "
-        f"{fit.identifiability.identified} combinations identified beyond the prior"
-    )
+        one.add_argument("--force", action="store_true", help="replace the outputs if they exist")
+        one.set_defaults(run=module.run)

@@ -1,5 +1,5 @@
 """``brachycal robot identify tracker``: an arm's joint geometry identified from an external tracker's
-measurements of a marker on it (options and run; the parser is ``robot identify``'s)."""
+measurements of a marker on it, judged by leave-one-out over postures."""
 
 from __future__ import annotations
 
@@ -9,40 +9,51 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from brachycal.calibration.robot.tracker import TrackerIdentification
 
+HELP = "any arm: a tracker's 3-D or 6-D measurements of a marker on it; judged by leave-one-out"
+#: The protocol takes any robot (a single arm, a URDF), not only the dual-arm rig.
+ANY_ARM = True
 DESCRIPTION = """\
-tracker: INPUT is one CSV table, one row per posture: the joint values and where an external tracker
-(a laser tracker, motion capture) saw a marker on the arm, its 3-D position and optionally its
-orientation. --columns names the columns (a small TOML file: format, joints, [position] columns
-and unit m or mm, optional [orientation] columns, kind rotation_vector, rpy or quaternion_xyzw,
-unit rad or deg; docs/robot_identification.md). The tracker's frame and the marker's place on the
-flange are unknown and fitted. Three models are scored by leave-one-out over postures (each
-predicted by a fit made without it): frames (the URDF as it is), offsets (joint zeros), joints
-(every joint-origin component the data can see). A richer model is kept only if it predicts
+Identifies an arm's joint geometry from TABLE, one CSV table, one row per posture: the joint values
+and where an external tracker (a laser tracker, motion capture) saw a marker on the arm, its 3-D
+position and optionally its orientation. --columns names the columns (a small TOML file: format,
+joints, [position] columns and unit m or mm, optional [orientation] columns, kind rotation_vector,
+rpy or quaternion_xyzw, unit rad or deg; docs/robots.md). The tracker's frame and the marker's
+place on the flange are unknown and fitted. Three models are scored by leave-one-out over postures
+(each predicted by a fit made without it): frames (the URDF as it is), offsets (joint zeros),
+joints (every joint-origin component the data can see). A richer model is kept only if it predicts
 held-out postures better by more than its standard error (--model forces one). Writes
 DIR/robot.urdf (the chosen model's joints) and DIR/identification.json (figures, frames,
-corrections). Default prior: 1 mm / 0.1 deg per joint origin.
+corrections). Default prior: 1 mm / 0.1 deg per joint origin. Printed: per model the held-out
+(leave-one-out) error first, the training error second; then the choice and which combinations of
+corrections the postures determine.
+
+The robot: --robot NAME|FILE (a bundled arm: panda, ur5, ur10; a brachycal-robot/1 description;
+a URDF file) or --urdf FILE.
 
 example (FIGAROH's UR10, 6-D poses):
   brachycal robot identify tracker calibration.csv --columns ur10_columns.toml \\
-      --urdf ur10_robot.urdf --flange wrist_3_link --out ur10
+      --robot ur10_robot.urdf --flange wrist_3_link --out ur10
 """
 
 
 def add_options(parser: argparse.ArgumentParser) -> None:
-    """The tracker protocol's own options."""
-    from brachycal.calibration.robot.tracker import TRACKER_MODELS  # lazy: start-up (the command's run only)
+    """The tracker protocol's own options (the robot, --out and --force: :mod:`brachycal.cli.robot.identify`)."""
+    # lazy: start-up (the command's run only)
+    from brachycal.calibration.robot.tracker import TRACKER_ACCURACY, TRACKER_MODELS
+    from brachycal.cli.common import add_robot_accuracy_options  # lazy: start-up (the command's run only)
 
-    group = parser.add_argument_group("tracker")
-    group.add_argument("--columns", metavar="FILE", help="tracker: the table's column spec (TOML)")
-    group.add_argument(
-        "--flange", metavar="FRAME", help="tracker: the frame the marker is on (default: the last joint column's)"
+    parser.add_argument("table", metavar="TABLE", help="the tracker table (CSV, one row per posture)")
+    parser.add_argument("--columns", required=True, metavar="SPEC", help="the table's column spec (TOML)")
+    parser.add_argument(
+        "--flange", metavar="FRAME", help="the frame the marker is on (default: the last joint column's)"
     )
-    group.add_argument(
+    parser.add_argument(
         "--model",
         choices=("auto", *TRACKER_MODELS),
         default="auto",
-        help="tracker: the model to return (default auto: the richest the held-out postures support)",
+        help="the model to return (default auto: the richest the held-out postures support)",
     )
+    add_robot_accuracy_options(parser, "the prior of the corrections", zero=False, default=TRACKER_ACCURACY)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -53,18 +64,9 @@ def run(args: argparse.Namespace) -> int:
     # lazy: start-up (the command's run only)
     from brachycal.calibration.robot.tracker import TRACKER_ACCURACY, identify_tracker_file
     from brachycal.calibration.robot_accuracy import RobotAccuracy  # lazy: start-up (the command's run only)
-    from brachycal.cli.common import command_inputs  # lazy: start-up (the command's run only)
-    from brachycal.errors import InputError  # lazy: start-up (the command's run only)
+    from brachycal.cli.common import command_inputs, load_robot  # lazy: start-up (the command's run only)
     from brachycal.io import OutputSet, write_json  # lazy: start-up (the command's run only)
-    from brachycal.model import Robot  # lazy: start-up (the command's run only)
 
-    if len(args.folders) != 1:
-        raise InputError(f"tracker: give one table, got {len(args.folders)} inputs")
-    if args.columns is None:
-        raise InputError("tracker: --columns FILE is required (the table's column spec)")
-    for name in ("tool_frame", "train", "distance_mm", "dynamics"):
-        if getattr(args, name, None) is not None:
-            raise InputError(f"--{name.replace('_', '-')} is for the touches protocol, not tracker")
     accuracy = TRACKER_ACCURACY
     if args.robot_accuracy_mm is not None or args.robot_accuracy_deg is not None:
         mm = args.robot_accuracy_mm if args.robot_accuracy_mm is not None else TRACKER_ACCURACY.translation_sd_m * 1e3
@@ -77,13 +79,13 @@ def run(args: argparse.Namespace) -> int:
             mm * 1e-3, float(np.radians(deg)), source=f"--robot-accuracy-mm {mm:g} --robot-accuracy-deg {deg:g}"
         )
     out = Path(args.out)
-    with OutputSet(force=args.force, inputs=[*command_inputs(args, "columns"), *args.folders]) as outputs:
+    with OutputSet(force=args.force, inputs=command_inputs(args, "columns", "table")) as outputs:
         urdf_path = outputs.claim(out / "robot.urdf", make_parents=True, label="--out robot.urdf")
         json_path = outputs.claim(out / "identification.json", make_parents=True, label="--out identification.json")
-        nominal = Robot.load(args.urdf)
+        nominal = load_robot(args, any_arm=True)
         result = identify_tracker_file(
             nominal,
-            args.folders[0],
+            args.table,
             args.columns,
             accuracy,
             flange=args.flange,
@@ -97,7 +99,10 @@ def run(args: argparse.Namespace) -> int:
 
 
 def print_report(result: TrackerIdentification) -> None:
-    """Per model: held-out (leave-one-out) first, then training; the choice and why."""
+    """Per model: held-out (leave-one-out) first, then training; the choice and why; the
+    identifiability in short."""
+    from brachycal.cli.robot.report import print_identifiability  # lazy: start-up (the command's run only)
+
     data = result.data
     print(
         f"{len(data.Q)} postures, {'6-D' if data.six_d else '3-D'} marker on {data.flange}: "
@@ -110,3 +115,4 @@ def print_report(result: TrackerIdentification) -> None:
     if "orientation" in sigma:
         noise += f", {float(sigma['orientation']) * 180 / 3.141592653589793:.3f} deg"
     print(f"{noise}; {len(result.fit.parameters)} joint corrections estimated")
+    print_identifiability(result.fit.arm.identifiability, result.fit.arm.joint_names)

@@ -1,0 +1,24 @@
+"""What every ``robot identify`` protocol prints after its figures: the identifiability in short."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from brachycal.calibration.robot.identifiability import Identifiability
+
+
+def print_identifiability(identifiability: Identifiability, joint_names: tuple[str, ...]) -> None:
+    """The identifiability report in short: the counts, then per reason how many corrections and of
+    which joints (the full list is in identification.json)."""
+    print(identifiability.summary(joint_names)[0])
+    joints: dict[str, list[str]] = {}
+    for key, why in identifiability.reasons.items():
+        joint = key.rsplit(".", 1)[0]
+        names = joints.setdefault(why, [])
+        if joint not in names:
+            names.append(joint)
+    for why, names in joints.items():
+        count = sum(1 for w in identifiability.reasons.values() if w == why)
+        shown = ", ".join(names[:4]) + (f" and {len(names) - 4} more" if len(names) > 4 else "")
+        print(f"  not identified ({count}): {why} [{shown}]")

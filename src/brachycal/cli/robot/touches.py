@@ -1,0 +1,160 @@
+"""``brachycal robot identify touches``: an arm's joint geometry (and the tool's tip) identified
+from touches of fixed points by a tool on the flange, judged on held-out places."""
+
+from __future__ import annotations
+
+import argparse
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from brachycal.calibration.robot.touches import TouchReport
+    from brachycal.model import Robot
+
+HELP = "any arm: touches of fixed points by a tool on the flange; judged on held-out places"
+#: The protocol takes any robot (a single arm, a URDF), not only the dual-arm rig.
+ANY_ARM = True
+DESCRIPTION = """\
+Identifies an arm's joint geometry (every joint origin's translation and rotation, and the tool's
+tip) from touches: a tool on the flange (a ball, a sharp tip) touches fixed points (sockets,
+divots) from many postures. Each FOLDER is one place (the points somewhere in the workspace):
+hole_0.csv, hole_1.csv, ... one per point, one row per touch, the arm's joint values in radians in
+the arm's joint order, no header. The fit uses the --train places; every other place is held out
+and judged: per point, the mean distance of the tool tip from its mean (forward kinematics of each
+touch), averaged over the points, and with --distance-mm the error of the distance between points
+0 and 1. Held-out places are printed first: they say how the calibrated robot does elsewhere;
+then the training places, then which combinations of corrections the touches determine.
+
+The robot: --robot NAME|FILE (a bundled arm: panda, ur5, ur10; a brachycal-robot/1 description;
+a URDF file) or --urdf FILE. --tool-frame names the touching tip's frame (fixed to the flange);
+default the arm's tool when the description names one.
+
+The stated accuracy (--robot-accuracy-mm, --robot-accuracy-deg) is the prior of the corrections:
+state the arm's own figures (a Panda's joints are off their URDF by tenths of a millimetre).
+With --dynamics (a URDF of the same arm with masses), joint compliance under gravity is fitted
+too; the written URDF carries the geometry only (its figures are printed as "URDF only").
+
+Writes DIR/robot.urdf (the identified joints, the tip written into the tool frame) and
+DIR/identification.json (corrections, tip, noise level, compliance, figures per place).
+
+On MUKCa's Franka Panda touches (trained on one place, judged on two others), from
+$BRACHYCAL_REFERENCE/mukca_touches:
+
+example:
+  brachycal robot identify touches $BRACHYCAL_REFERENCE/mukca_touches/data/panda_2_clean/front_center \\
+      $BRACHYCAL_REFERENCE/mukca_touches/data/panda_2_clean/back_left \\
+      $BRACHYCAL_REFERENCE/mukca_touches/data/panda_2_clean/mid_right \\
+      --robot $BRACHYCAL_REFERENCE/mukca_touches/urdf/panda.urdf --tool-frame ball_link \\
+      --train front_center --distance-mm 50 --robot-accuracy-mm 0.3 --robot-accuracy-deg 0.1 --out panda_2
+"""
+
+
+def add_options(parser: argparse.ArgumentParser) -> None:
+    """The touches protocol's own options (the robot, --out and --force: :mod:`brachycal.cli.robot.identify`)."""
+    from brachycal.cli.common import add_robot_accuracy_options  # lazy: start-up (the command's run only)
+    from brachycal.cli.option_types import finite_float  # lazy: start-up (the command's run only)
+
+    parser.add_argument("folders", nargs="+", metavar="FOLDER", help="place folders (hole_0.csv, hole_1.csv, ...)")
+    parser.add_argument(
+        "--train", required=True, metavar="PLACE[,PLACE]", help="the places to identify from (folder names)"
+    )
+    parser.add_argument(
+        "--tool-frame",
+        metavar="FRAME",
+        help="the touching tip's frame (fixed to the flange; default: the arm's tool in its description)",
+    )
+    parser.add_argument(
+        "--distance-mm",
+        type=finite_float(low=0.0, high=10_000.0, low_open=True, unit="mm"),
+        metavar="MM",
+        help="the known distance between points 0 and 1 of every place (a machined block)",
+    )
+    parser.add_argument("--dynamics", metavar="FILE", help="a URDF of the same arm with masses: fit joint compliance")
+    add_robot_accuracy_options(parser, "the prior of the corrections", zero=False)
+
+
+def tool_frame(args: argparse.Namespace, nominal: Robot) -> str:
+    """--tool-frame, else the robot's only arm's tool (a description's ``tool``)."""
+    from brachycal.errors import InputError  # lazy: start-up (the command's run only)
+
+    if args.tool_frame is not None:
+        return str(args.tool_frame)
+    arms = nominal.arms
+    if len(arms) == 1 and arms[0].tool is not None:
+        return arms[0].tool
+    raise InputError("--tool-frame is required: the robot names no single arm with a tool (the touching tip's frame)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path  # lazy: start-up (the command's run only)
+
+    from brachycal.calibration.robot.touches import identify_touch_folders  # lazy: start-up (the command's run only)
+    from brachycal.cli.common import (
+        command_inputs,
+        load_robot,
+        robot_accuracy,
+    )  # lazy: start-up (the command's run only)
+    from brachycal.io import OutputSet, write_json  # lazy: start-up (the command's run only)
+    from brachycal.model import Robot  # lazy: start-up (the command's run only)
+
+    out = Path(args.out)
+    with OutputSet(force=args.force, inputs=[*command_inputs(args, "dynamics"), *args.folders]) as outputs:
+        urdf_path = outputs.claim(out / "robot.urdf", make_parents=True, label="--out robot.urdf")
+        json_path = outputs.claim(out / "identification.json", make_parents=True, label="--out identification.json")
+        nominal = load_robot(args, any_arm=True)
+        tool = tool_frame(args, nominal)
+        dynamics = Robot.load(args.dynamics) if args.dynamics is not None else None
+        train = [name.strip() for name in args.train.split(",")]
+        report = identify_touch_folders(
+            nominal,
+            args.folders,
+            tool,
+            train,
+            robot_accuracy(args),
+            distance_m=args.distance_mm * 1e-3 if args.distance_mm is not None else None,
+            dynamics=dynamics,
+        )
+        report.calibrated_robot(nominal).write_urdf(urdf_path, force=True)
+        write_json(json_path, report.as_json(), force=True)
+    print_report(report)
+    print(f"wrote {out / 'robot.urdf'} and {out / 'identification.json'}")
+    return 0
+
+
+def print_report(report: TouchReport) -> None:
+    """Held-out places first, then the training places: scatter (and distance error) in mm; then
+    the noise, the tip and the identifiability in short."""
+    from brachycal.cli.robot.report import print_identifiability  # lazy: start-up (the command's run only)
+
+    fit = report.result.fit
+    urdf_only = bool(report.result.compliant)
+
+    def line(name: str) -> str:
+        a, b, c = report.nominal[name], report.identified[name], report.geometry_only[name]
+        text = f"  {name:16s} {a.mean_scatter_m * 1e3:8.3f} -> {b.mean_scatter_m * 1e3:6.3f} mm"
+        if urdf_only:
+            text += f" (URDF only {c.mean_scatter_m * 1e3:6.3f})"
+        for (i, j), e in b.distance_error_m.items():
+            text += f"   distance {i}-{j}: {a.distance_error_m[(i, j)] * 1e3:6.3f} -> {e * 1e3:6.3f} mm"
+        return text
+
+    held = report.held_out
+    if held:
+        mean_a = sum(report.nominal[n].mean_scatter_m for n in held) / len(held) * 1e3
+        mean_b = sum(report.identified[n].mean_scatter_m for n in held) / len(held) * 1e3
+        print(
+            f"held-out places ({len(held)}): tip scatter, nominal URDF -> identified; "
+            f"mean {mean_a:.3f} -> {mean_b:.3f} mm"
+        )
+        for name in held:
+            print(line(name))
+    else:
+        print("held-out places: none (every place was used to identify; give --train a subset to judge)")
+    print(f"training places ({len(report.train)}):")
+    for name in report.train:
+        print(line(name))
+    print(
+        f"touch noise {fit.sigma['touch'] * 1e3:.3f} mm; "
+        f"tip {', '.join(f'{v * 1e3:.3f}' for v in report.result.tip)} mm "
+        f"in {report.result.flange}; {fit.selection.size} corrections free"
+    )
+    print_identifiability(fit.identifiability, fit.joint_names)
