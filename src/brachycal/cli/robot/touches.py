@@ -66,7 +66,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         "--distance-mm",
         type=finite_float(low=0.0, high=10_000.0, low_open=True, unit="mm"),
         metavar="MM",
-        help="the known distance between points 0 and 1 of every place (a machined block)",
+        help="the known distance between points 0 and 1 of every place (a machined block), in (0, 10000] mm",
     )
     parser.add_argument("--dynamics", metavar="FILE", help="a URDF of the same arm with masses: fit joint compliance")
     add_robot_accuracy_options(parser, "the prior of the corrections", zero=False)
