@@ -303,6 +303,7 @@ START_BINDINGS: dict[str, dict[str, str]] = {
         "URDF": str(ROBOTS / "panda_description" / "urdf" / "panda.urdf"),
         "FILE": str(ROBOTS / "panda_description" / "urdf" / "panda.urdf"),
         "NAME": "panda",
+        "ARM": "panda",
         "FRAME": TOUCH_TOOL_FRAME,
         "PLACE": next(iter(TOUCH_PLACES)),
         "DIR": "touches_identified",
@@ -313,6 +314,7 @@ START_BINDINGS: dict[str, dict[str, str]] = {
         "URDF": str(ROBOTS / "ur_description" / "urdf" / "ur10_robot.urdf"),
         "FILE": str(ROBOTS / "ur_description" / "urdf" / "ur10_robot.urdf"),
         "NAME": "ur10",
+        "ARM": "ur10",
         "DIR": "tracker_identified",
     },
     **{
