@@ -525,6 +525,8 @@ class TouchReport:
                 for (j, a), k in zip(self.result.compliant, self.result.compliance, strict=True)
             },
             "prior": fit.accuracy.as_json() if fit.accuracy is not None else None,
+            "compliance_prior_sd_rad_per_nm": [float(v) if np.isfinite(v) else None for v in self.result.compliance_sd],
+            "log_evidence": fit.log_evidence,
             "identified_combinations": fit.identifiability.identified,
             "structural_rank": fit.identifiability.structural_rank,
             "nominal": figures(self.nominal),
@@ -542,6 +544,7 @@ def identify_touch_folders(
     *,
     distance_m: float | None = None,
     dynamics: Robot | None = None,
+    prior: str = "stated",
 ) -> TouchReport:
     """Identify ``nominal`` from the touch folders ``train`` names and judge it on every place.
 
@@ -554,6 +557,8 @@ def identify_touch_folders(
         distance_m: the known distance between points 0 and 1 of every place (None: unknown).
         dynamics: a URDF of the same arm with masses: joint compliance under gravity is fitted
             (each revolute arm joint that gravity loads, about its axis).
+        prior: ``"stated"`` (``accuracy``, compliance free) or ``"evidence"``: chosen by the
+            training places' evidence (:func:`evidence_prior`; the held-out places never enter).
 
     Raises:
         InputError: a folder the reader refuses, a training place not among them, a tool frame
@@ -578,7 +583,14 @@ def identify_touch_folders(
         compliant = _loaded_joints(nominal, flange, [p for p in places if p.name in train])
     fit_places = [p for p in places if p.name in train]
     result = identify_touches(
-        nominal, fit_places, flange, accuracy, tip=T_flange_tool[:3, 3], selection="chain", compliant=compliant
+        nominal,
+        fit_places,
+        flange,
+        accuracy,
+        tip=T_flange_tool[:3, 3],
+        selection="chain",
+        compliant=compliant,
+        prior=prior,
     )
     robot = result.robot(nominal)
     tip0 = T_flange_tool[:3, 3]
