@@ -50,6 +50,9 @@ def main(argv: list[str]) -> int:
         help="compliance terms: joint number (1-based) and the axes of its frame it turns about; 'none'",
     )
     parser.add_argument("--compliance-sd", type=float, default=float("inf"), help="prior SD, rad/(N m)")
+    parser.add_argument(
+        "--evidence", action="store_true", help="choose the priors by the training touches' evidence (start: --prior)"
+    )
     parser.add_argument("--no-distance", action="store_true", help="do not use the 50 mm between the sockets")
     args = parser.parse_args(argv)
     train = (args.train or ("front_center" if args.robot == "panda_2_clean" else "frontcenter")).split(",")
@@ -88,11 +91,17 @@ def main(argv: list[str]) -> int:
         selection="chain",
         compliant=compliant,
         compliance_sd=args.compliance_sd,
+        prior="evidence" if args.evidence else "stated",
     )
     seconds = time.perf_counter() - start
     robot = result.robot(nominal)
+    chosen = result.fit.accuracy
+    assert chosen is not None
     print(
-        f"{args.robot}: trained on {','.join(train)} in {seconds:.1f} s; prior {mm} mm / {deg} deg; "
+        f"{args.robot}: trained on {','.join(train)} in {seconds:.1f} s; "
+        f"prior {'chosen by evidence: ' if args.evidence else ''}"
+        f"{chosen.translation_sd_m * 1e3:.3f} mm / {np.degrees(chosen.rotation_sd_rad):.3f} deg"
+        f"{f', compliance {result.compliance_sd[0]:.2e} rad/(N m)' if len(result.compliance_sd) else ''}; "
         f"compliance {args.compliance}; "
         f"touch noise {result.fit.sigma['touch'] * 1e3:.3f} mm; tip {np.round(result.tip * 1e3, 3)} mm"
     )

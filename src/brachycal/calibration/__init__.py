@@ -83,9 +83,11 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
     )
     from brachycal.calibration.robot.observability import Criterion, Observation, base_criterion, observation_rows
     from brachycal.calibration.robot.touches import (
+        EvidencePrior,
         TouchPlace,
         TouchReport,
         TouchResult,
+        evidence_prior,
         identify_touch_folders,
         identify_touches,
         read_places,
@@ -155,6 +157,7 @@ __all__ = [
     "ChainResult",
     "Criterion",
     "ErrorStats",
+    "EvidencePrior",
     "FolderCheck",
     "HoleInImage",
     "IdentificationResult",
@@ -211,6 +214,7 @@ __all__ = [
     "corrected_robot",
     "cross_validate_identification",
     "estimate_lag",
+    "evidence_prior",
     "fit_arm",
     "fit_chain",
     "fit_tracker",

@@ -190,6 +190,9 @@ class ArmFit:
         accuracy: the stated accuracy used as the prior (``None``: no prior).
         residuals: the protocol's residuals at the estimate.
         iterations: Gauss–Newton steps taken in all.
+        log_evidence: the data's log marginal likelihood given the noise levels and priors
+            (Laplace's approximation at the estimate; :func:`log_evidence`); comparable between
+            fits of the same data with the same unknowns free of a prior.
     """
 
     corrections: FloatArray
@@ -202,6 +205,7 @@ class ArmFit:
     accuracy: RobotAccuracy | None
     residuals: Evaluation
     iterations: int
+    log_evidence: float = float("nan")
 
     def robot(self, nominal: Robot) -> Robot:
         """The corrected robot (``nominal``: the robot the fit started from)."""
@@ -279,11 +283,12 @@ def fit_arm(
         if estimated.any():
             level = _noise_levels(evaluation, A, level, estimated)
     evaluation = _evaluate(nominal, model, selection, x, y)
-    A, _ = _system(evaluation, index, x, y, scale, level, prior)
+    A, b = _system(evaluation, index, x, y, scale, level, prior)
     posterior = _inverse(A)
     units = np.concatenate([scale, np.ones(len(y))])
     covariance = posterior * np.outer(units, units)
     report = _identifiability(nominal, evaluation, level, full_scale, len(y))
+    evidence = log_evidence(A, b, level[evaluation.group], prior.y_sd, len(index) if not prior.corrections else 0)
     return ArmFit(
         selection.expand(x),
         tuple(nominal.joint_names),
@@ -295,6 +300,32 @@ def fit_arm(
         accuracy,
         evaluation,
         steps,
+        evidence,
+    )
+
+
+def log_evidence(A: FloatArray, b: FloatArray, row_sd: FloatArray, y_sd: FloatArray, flat_corrections: int) -> float:
+    """``log p(data | σ, priors)`` by Laplace's approximation at the MAP estimate (type-II likelihood).
+
+    ``A``, ``b``: :func:`_system`'s normalised system at the estimate (data rows divided by their
+    SD ``row_sd`` (metres), then the prior's rows; the corrections in prior units, so their Gaussian
+    prior is ``N(0, I)``); ``y_sd``: the protocol unknowns' prior SDs (``inf``: flat, density one
+    per unit). ``−½‖b‖² − Σ log σ_row − (M/2) log 2π − Σ log y_sd (finite) + (n_flat/2) log 2π −
+    ½ log det AᵀA``, with ``n_flat`` the unknowns without a proper prior (flat ``y`` and
+    ``flat_corrections``): it compares hyper-parameters (noise levels, prior SDs) on the same data
+    with the same flat unknowns.
+    """
+    m = len(row_sd)
+    s = np.linalg.svd(A, compute_uv=False)
+    finite = np.isfinite(y_sd)
+    n_flat = int(np.count_nonzero(~finite)) + flat_corrections
+    return float(
+        -0.5 * float(b @ b)
+        - np.sum(np.log(row_sd))
+        - 0.5 * m * np.log(2 * np.pi)
+        - np.sum(np.log(y_sd[finite]))
+        + 0.5 * n_flat * np.log(2 * np.pi)
+        - np.sum(np.log(s))
     )
 
 

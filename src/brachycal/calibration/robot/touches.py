@@ -32,9 +32,13 @@ from brachycal.calibration.robot.arm_fit import (
 )
 from brachycal.calibration.robot.identifiability import COMPONENTS
 from brachycal.calibration.robot.identification import prior_sd
-from brachycal.calibration.robot_accuracy import RobotAccuracy
+from brachycal.calibration.robot_accuracy import (
+    MAX_ROBOT_ROTATION_SD_RAD,
+    MAX_ROBOT_TRANSLATION_SD_M,
+    RobotAccuracy,
+)
 from brachycal.data.formats.touches import read_touch_folder
-from brachycal.errors import InputError
+from brachycal.errors import DegenerateDataError, InputError
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, skew
 
@@ -189,6 +193,8 @@ class TouchResult:
         tip: ``(3,)`` the tip on the flange (metres, flange frame).
         points: per place, ``(K, 3)`` its points (metres, base frame).
         places: the places' names.
+        compliant: the compliance terms ``(j, a)``; compliance: their values (rad per N·m);
+        compliance_sd: their prior SDs (``inf``: none).
     """
 
     fit: ArmFit
@@ -198,6 +204,7 @@ class TouchResult:
     places: tuple[str, ...]
     compliant: tuple[tuple[int, int], ...] = ()
     compliance: FloatArray = field(default_factory=lambda: np.zeros(0))
+    compliance_sd: FloatArray = field(default_factory=lambda: np.zeros(0))
 
     def robot(self, nominal: Robot) -> Robot:
         """The corrected robot (without the tip; :meth:`tool_robot` adds it)."""
@@ -216,7 +223,8 @@ def identify_touches(
     distance_sd_m: float = DISTANCE_SD_M,
     estimate_touch_noise: bool = True,
     compliant: Sequence[tuple[int, int]] = (),
-    compliance_sd: float = np.inf,
+    compliance_sd: float | Sequence[float] = np.inf,
+    prior: str = "stated",
 ) -> TouchResult:
     """Identify the arm from touches of fixed points (module docstring).
 
@@ -233,13 +241,36 @@ def identify_touches(
         touch_sd_m: the touches' noise level (start, re-estimated unless ``estimate_touch_noise`` is false).
         distance_sd_m: the stated tolerance of the known distances (held).
         compliant: joint compliance terms ``(j, a)`` (:func:`~brachycal.calibration.robot.arm_fit.deflection_columns`),
-            fitted with the places' ``moments``; ``compliance_sd``: their prior SD (rad per N·m; none by default).
+            fitted with the places' ``moments``; ``compliance_sd``: their prior SD (rad per N·m; one, or
+            one per term; none by default).
+        prior: ``"stated"``: ``accuracy`` and ``compliance_sd`` are the priors; ``"evidence"``:
+            the priors that maximise these touches' evidence (:func:`evidence_prior`, started
+            from them; a flat compliance prior starts at :data:`COMPLIANCE_SD_START`), recorded
+            in the result's ``fit.accuracy`` and :attr:`TouchResult.compliance_sd`.
 
     Raises:
         InputError: a place without two touches of a point, a distance between unknown points.
         DegenerateDataError: the touches do not determine the unknowns.
     """
     places = tuple(places)
+    if prior == "evidence":
+        if accuracy is None:
+            raise InputError("a prior chosen by the evidence needs a stated accuracy to start from")
+        start_sd = float(np.max(compliance_sd)) if compliant else np.inf
+        chosen_prior = evidence_prior(
+            nominal,
+            places,
+            flange,
+            accuracy,
+            tip=tip,
+            compliant=compliant,
+            compliance_sd=start_sd if np.isfinite(start_sd) else COMPLIANCE_SD_START,
+            touch_sd_m=touch_sd_m,
+            distance_sd_m=distance_sd_m,
+        )
+        accuracy, compliance_sd = chosen_prior.accuracy, chosen_prior.compliance_sd
+    elif prior != "stated":
+        raise InputError(f"unknown prior {prior!r} (stated, evidence)")
     for place in places:
         for k, Q in enumerate(place.touches):
             if len(Q) < 2:
@@ -267,6 +298,7 @@ def identify_touches(
         chosen = chosen.base_set(evaluation.J_c, evaluation.J_y, scale)
     elif selection != "chain":
         raise InputError(f"unknown parameter selection {selection!r} (base, chain)")
+    term_sd = np.broadcast_to(np.asarray(compliance_sd, dtype=float), (len(compliant),)).copy()
     fit = fit_arm(
         nominal,
         model,
@@ -275,14 +307,117 @@ def identify_touches(
         sigma,
         accuracy,
         estimate_noise=("touch",) if estimate_touch_noise else (),
-        y_prior_sd=np.concatenate([np.full(len(y) - len(compliant), np.inf), np.full(len(compliant), compliance_sd)]),
+        y_prior_sd=np.concatenate([np.full(len(y) - len(compliant), np.inf), term_sd]),
     )
     slots = model.point_slots()
     points = tuple(np.array([fit.y[at : at + 3] for at in offsets]) for offsets in slots)
     k0 = 3 + 3 * model.n_points()
     return TouchResult(
-        fit, flange, fit.y[:3].copy(), points, tuple(p.name for p in places), tuple(compliant), fit.y[k0:].copy()
+        fit,
+        flange,
+        fit.y[:3].copy(),
+        points,
+        tuple(p.name for p in places),
+        tuple(compliant),
+        fit.y[k0:].copy(),
+        term_sd,
     )
+
+
+#: The evidence search stops when its steps in the logarithm of each SD are below this (5 %).
+EVIDENCE_LOG_TOLERANCE = 0.05
+#: Start of the compliance terms' prior SD in the evidence search (rad per N·m): a joint
+#: stiffness of ~3e4 N·m/rad, a harmonic drive's with its torque sensor.
+COMPLIANCE_SD_START = 3e-5
+
+
+@dataclass(frozen=True)
+class EvidencePrior:
+    """The prior the touches' evidence chose (:func:`evidence_prior`).
+
+    Attributes:
+        accuracy: per-joint translation and rotation SDs (the encoder SD kept from the start).
+        compliance_sd: the compliance terms' prior SD (rad per N·m; ``inf`` without terms).
+        log_evidence: the touches' log evidence at the choice (:attr:`ArmFit.log_evidence`).
+        evaluations: fits the search took.
+    """
+
+    accuracy: RobotAccuracy
+    compliance_sd: float
+    log_evidence: float
+    evaluations: int
+
+
+def evidence_prior(
+    nominal: Robot,
+    places: Sequence[TouchPlace],
+    flange: str,
+    start: RobotAccuracy,
+    *,
+    tip: FloatArray | None = None,
+    compliant: Sequence[tuple[int, int]] = (),
+    compliance_sd: float = COMPLIANCE_SD_START,
+    touch_sd_m: float = TOUCH_SD_M,
+    distance_sd_m: float = DISTANCE_SD_M,
+) -> EvidencePrior:
+    """The prior SDs that maximise the evidence of ``places``' touches (type-II maximum likelihood).
+
+    The per-joint translation and rotation SDs of the corrections (``"chain"`` selection) and, with
+    compliance terms, their common SD are the hyper-parameters; the touch noise is re-estimated in
+    each fit (its own evidence maximum). Nelder–Mead on their logarithms from ``start`` (and
+    ``compliance_sd``), to :data:`EVIDENCE_LOG_TOLERANCE`, within :class:`RobotAccuracy`'s bounds.
+    Only the touches given enter: the choice is the training data's own.
+
+    Raises:
+        InputError, DegenerateDataError: as :func:`identify_touches` at the start.
+    """
+    from scipy.optimize import minimize  # lazy: start-up (scipy.optimize)
+
+    terms = tuple(compliant)
+    fits = 0
+
+    def hyper(z: FloatArray) -> tuple[RobotAccuracy, float]:
+        accuracy = RobotAccuracy(
+            float(np.exp(z[0])),
+            float(np.exp(z[1])),
+            start.encoder_sd_rad,
+            "chosen by the evidence of the training touches",
+        )
+        return accuracy, float(np.exp(z[2])) if terms else np.inf
+
+    def negative(z: FloatArray) -> float:
+        nonlocal fits
+        if z[0] > np.log(MAX_ROBOT_TRANSLATION_SD_M) or z[1] > np.log(MAX_ROBOT_ROTATION_SD_RAD):
+            return np.inf
+        accuracy, sd = hyper(z)
+        fits += 1
+        try:
+            result = identify_touches(
+                nominal,
+                places,
+                flange,
+                accuracy,
+                tip=tip,
+                selection="chain",
+                touch_sd_m=touch_sd_m,
+                distance_sd_m=distance_sd_m,
+                compliant=terms,
+                compliance_sd=sd,
+            )
+        except DegenerateDataError:
+            return np.inf
+        return -result.fit.log_evidence
+
+    z0 = np.log([start.translation_sd_m, start.rotation_sd_rad, *([compliance_sd] if terms else [])])
+    if not np.all(np.isfinite(z0)):
+        raise InputError("the evidence search starts from positive, finite prior SDs")
+    if not np.isfinite(negative(z0)):
+        raise DegenerateDataError("robot identification: the touches do not determine the unknowns at the start")
+    found = minimize(
+        negative, z0, method="Nelder-Mead", options={"xatol": EVIDENCE_LOG_TOLERANCE, "fatol": 1e-3, "maxfev": 400}
+    )
+    accuracy, sd = hyper(found.x)
+    return EvidencePrior(accuracy, sd, -float(found.fun), fits)
 
 
 @dataclass(frozen=True)
@@ -390,6 +525,8 @@ class TouchReport:
                 for (j, a), k in zip(self.result.compliant, self.result.compliance, strict=True)
             },
             "prior": fit.accuracy.as_json() if fit.accuracy is not None else None,
+            "compliance_prior_sd_rad_per_nm": [float(v) if np.isfinite(v) else None for v in self.result.compliance_sd],
+            "log_evidence": fit.log_evidence,
             "identified_combinations": fit.identifiability.identified,
             "structural_rank": fit.identifiability.structural_rank,
             "nominal": figures(self.nominal),
@@ -407,6 +544,7 @@ def identify_touch_folders(
     *,
     distance_m: float | None = None,
     dynamics: Robot | None = None,
+    prior: str = "stated",
 ) -> TouchReport:
     """Identify ``nominal`` from the touch folders ``train`` names and judge it on every place.
 
@@ -419,6 +557,8 @@ def identify_touch_folders(
         distance_m: the known distance between points 0 and 1 of every place (None: unknown).
         dynamics: a URDF of the same arm with masses: joint compliance under gravity is fitted
             (each revolute arm joint that gravity loads, about its axis).
+        prior: ``"stated"`` (``accuracy``, compliance free) or ``"evidence"``: chosen by the
+            training places' evidence (:func:`evidence_prior`; the held-out places never enter).
 
     Raises:
         InputError: a folder the reader refuses, a training place not among them, a tool frame
@@ -443,7 +583,14 @@ def identify_touch_folders(
         compliant = _loaded_joints(nominal, flange, [p for p in places if p.name in train])
     fit_places = [p for p in places if p.name in train]
     result = identify_touches(
-        nominal, fit_places, flange, accuracy, tip=T_flange_tool[:3, 3], selection="chain", compliant=compliant
+        nominal,
+        fit_places,
+        flange,
+        accuracy,
+        tip=T_flange_tool[:3, 3],
+        selection="chain",
+        compliant=compliant,
+        prior=prior,
     )
     robot = result.robot(nominal)
     tip0 = T_flange_tool[:3, 3]
