@@ -368,6 +368,7 @@ def test_cli_takes_a_bundled_arm_and_its_tool(panda, tmp_path, capsys):
 # --- the prior chosen by the touches' evidence ----------------------------------------------------
 
 
+@pytest.mark.slow  # an evidence search: tens of fits
 def test_evidence_recovers_the_prior_the_arm_was_drawn_from(panda):
     """An arm whose joint origins are drawn from 0.5 mm / 0.2° per joint, touched with 30 µm of
     noise: the evidence search, started ten times too tight, lands near the drawn SDs (one arm is
@@ -397,6 +398,7 @@ def test_evidence_recovers_the_prior_the_arm_was_drawn_from(panda):
     assert result.fit.sigma["touch"] == pytest.approx(sd, rel=0.2)
 
 
+@pytest.mark.slow  # an evidence search: tens of fits
 def test_evidence_is_highest_at_the_chosen_prior(panda):
     """The chosen prior is the evidence's maximum: a tenfold looser or tighter prior has less."""
     rng = np.random.default_rng(12)
@@ -414,6 +416,7 @@ def test_evidence_is_highest_at_the_chosen_prior(panda):
         assert fit.log_evidence < chosen.log_evidence
 
 
+@pytest.mark.slow  # an evidence search: tens of fits
 def test_evidence_prior_is_the_training_places_own():
     """MUKCa's panda_2 trained on front_center: the prior the evidence chooses is the same whether
     the held-out places are among the folders or not (they never enter the choice)."""
