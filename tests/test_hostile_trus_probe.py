@@ -16,7 +16,6 @@ import pytest
 from conftest import reference
 from hostile import Case, check_refusal
 from test_trus_probe import (
-    ICAL_WIRES,
     TILTED_AXES,
     frames,
     ical_config,
@@ -32,6 +31,7 @@ from brachycal.calibration.phantom.stepper_probe import (
     register_phantom,
     write_stepper_image,
 )
+from brachycal.studies.stepper_twin import ICAL_WIRES_MM
 
 HOLDER_TO_HOME = '<Transform From="TemplateHolder" To="TemplateHome" Matrix="1 0 0 5 0 1 0 63.5 0 0 1 0 0 0 0 1"/>'
 HOLDER_TO_PHANTOM = '<Transform From="TemplateHolder" To="Phantom" Matrix="1 0 0 5 0 1 0 63.5 0 0 1 0 0 0 0 1"/>'
@@ -43,7 +43,7 @@ def device_set(definitions: str = HOLDER_TO_HOME + HOLDER_TO_PHANTOM, stepper: b
         for lines in np.array(
             [
                 f'<Wire Name="{name}" EndPointFront="{" ".join(map(str, f))}" EndPointBack="{" ".join(map(str, b))}"/>'
-                for name, (f, b) in ICAL_WIRES.items()
+                for name, (f, b) in ICAL_WIRES_MM.items()
             ]
         ).reshape(3, 3)
     )

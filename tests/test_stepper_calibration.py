@@ -44,24 +44,13 @@ from brachycal.data.formats.plus_files import Wire, read_plus_config
 from brachycal.data.formats.plus_segmentation import read_segmentation_parameters
 from brachycal.errors import DegenerateDataError
 from brachycal.imaging import segment_sequence
+from brachycal.studies import stepper_twin
 
 STEPPER = "plus_trus_stepper"
 ICAL = "PlusDeviceSet_iCal_SonixTouch_BlackTargetGuideStepper_1.1.xml"
 
-#: PLUS's iCal 1.1 phantom (its device set's PhantomDefinition), millimetres: wires along z.
-ICAL_WIRES = (
-    (("Wire1", (49.86, 54.385)), ("Wire2", (39.86, 54.385), (19.86, 54.385)), ("Wire3", (9.86, 54.385))),
-    (("Wire4", (49.86, 34.385)), ("Wire5", (19.86, 34.385), (39.86, 34.385)), ("Wire6", (9.86, 34.385))),
-    (("Wire7", (39.86, 14.385)), ("Wire8", (29.86, 14.385), (19.86, 14.385)), ("Wire9", (9.86, 14.385))),
-)
-
-
-def _wire(name: str, front_xy, back_xy=None) -> Wire:
-    back_xy = front_xy if back_xy is None else back_xy
-    return Wire(name, np.array([*front_xy, 62.05]) * 1e-3, np.array([*back_xy, 142.05]) * 1e-3)
-
-
-PATTERNS = [tuple(_wire(*wire) for wire in pattern) for pattern in ICAL_WIRES]
+#: PLUS's iCal 1.1 phantom (its device set's PhantomDefinition): three Ns of three wires along z.
+PATTERNS = [tuple(stepper_twin.wires()[3 * k : 3 * k + 3]) for k in range(3)]
 SPACING = np.array([0.147e-3, 0.1424e-3])  # m/px, anisotropic as the SonixTouch's
 CENTRE_PX = np.array([414.09, 22.59])
 

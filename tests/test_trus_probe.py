@@ -33,22 +33,11 @@ from brachycal.calibration.phantom.stepper_probe import (
 from brachycal.data.formats.plus_files import PlusConfig, SegmentedFrame, Wire
 from brachycal.data.formats.plus_stepper import StepperAxes, TemplateGrid, read_stepper_axes, read_template
 from brachycal.se3 import from_xyz_rpy, inverse
+from brachycal.studies.stepper_twin import ICAL_WIRES_MM  # PLUS's iCal 1.1 phantom (its PhantomDefinition)
 
 MM = 1e-3
 STEPPER = "plus_trus_stepper"
 ICAL = "PlusDeviceSet_iCal_SonixTouch_BlackTargetGuideStepper_1.1.xml"
-#: The iCal phantom's three Ns (its PhantomDefinition), millimetres: (front, back) per wire.
-ICAL_WIRES = {
-    "Wire1": ((49.86, 54.385, 62.05), (49.86, 54.385, 142.05)),
-    "Wire2": ((39.86, 54.385, 62.05), (19.86, 54.385, 142.05)),
-    "Wire3": ((9.86, 54.385, 62.05), (9.86, 54.385, 142.05)),
-    "Wire4": ((49.86, 34.385, 62.05), (49.86, 34.385, 142.05)),
-    "Wire5": ((19.86, 34.385, 62.05), (39.86, 34.385, 142.05)),
-    "Wire6": ((9.86, 34.385, 62.05), (9.86, 34.385, 142.05)),
-    "Wire7": ((39.86, 14.385, 62.05), (39.86, 14.385, 142.05)),
-    "Wire8": ((29.86, 14.385, 62.05), (19.86, 14.385, 142.05)),
-    "Wire9": ((9.86, 14.385, 62.05), (9.86, 14.385, 142.05)),
-}
 #: The truth of the exact data: the rotation axis in the phantom (z = 0), mm; pixel spacing, mm/px.
 AXIS_IN_PHANTOM_MM = (29.7, 79.1)
 SPACING_MM = (0.147, 0.142)
@@ -56,7 +45,7 @@ TILTED_AXES = StepperAxes(np.array([0.004, -0.05, 1.0]), np.array([0.0, 0.0, 1.0
 
 
 def ical_config() -> PlusConfig:
-    wires = [Wire(name, np.array(f) * MM, np.array(b) * MM) for name, (f, b) in ICAL_WIRES.items()]
+    wires = [Wire(name, np.array(f) * MM, np.array(b) * MM) for name, (f, b) in ICAL_WIRES_MM.items()]
     patterns = [(wires[k], wires[k + 1], wires[k + 2]) for k in (0, 3, 6)]
     return PlusConfig(patterns, {}, 0.145 * MM)
 
@@ -178,7 +167,7 @@ def test_the_template_is_read_with_its_place_on_the_phantom():
     np.testing.assert_allclose(grid.hole("D4"), [0.030, 0.030, 0.0])
     np.testing.assert_allclose(grid.T_phantom_template, np.eye(4), atol=1e-12)  # both offsets are (5, 63.5) mm
     # the phantom's wires run through the template's grid (within 0.7 mm of a hole)
-    for front, _ in ICAL_WIRES.values():
+    for front, _ in ICAL_WIRES_MM.values():
         nearest = min(np.linalg.norm(np.array(front[:2]) * MM - h[:2]) for h in grid.holes.values())
         assert nearest < 0.7 * MM
     axes = read_stepper_axes(reference(STEPPER, ICAL))

@@ -1,11 +1,22 @@
-"""What every ``robot identify`` protocol prints after its figures: the identifiability in short."""
+"""What every ``robot identify`` protocol shares: its two outputs, and the identifiability in short
+printed after its figures."""
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
     from brachycal.calibration.robot.identifiability import Identifiability
+    from brachycal.io import OutputSet
+
+
+def claim_outputs(outputs: OutputSet, out: Path) -> tuple[Path, Path]:
+    """``out/robot.urdf`` (the identified robot) and ``out/identification.json``, claimed in ``outputs``."""
+    urdf_path = outputs.claim(out / "robot.urdf", make_parents=True, label="--out robot.urdf")
+    json_path = outputs.claim(out / "identification.json", make_parents=True, label="--out identification.json")
+    return urdf_path, json_path
 
 
 def print_identifiability(identifiability: Identifiability, joint_names: tuple[str, ...]) -> None:

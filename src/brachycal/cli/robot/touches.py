@@ -93,13 +93,13 @@ def run(args: argparse.Namespace) -> int:
         load_robot,
         robot_accuracy,
     )  # lazy: start-up (the command's run only)
+    from brachycal.cli.robot.report import claim_outputs  # lazy: start-up (the command's run only)
     from brachycal.io import OutputSet, write_json  # lazy: start-up (the command's run only)
     from brachycal.model import Robot  # lazy: start-up (the command's run only)
 
     out = Path(args.out)
     with OutputSet(force=args.force, inputs=[*command_inputs(args, "dynamics"), *args.folders]) as outputs:
-        urdf_path = outputs.claim(out / "robot.urdf", make_parents=True, label="--out robot.urdf")
-        json_path = outputs.claim(out / "identification.json", make_parents=True, label="--out identification.json")
+        urdf_path, json_path = claim_outputs(outputs, out)
         nominal = load_robot(args, any_arm=True)
         tool = tool_frame(args, nominal)
         dynamics = Robot.load(args.dynamics) if args.dynamics is not None else None

@@ -78,10 +78,11 @@ def run(args: argparse.Namespace) -> int:
         accuracy = RobotAccuracy(
             mm * 1e-3, float(np.radians(deg)), source=f"--robot-accuracy-mm {mm:g} --robot-accuracy-deg {deg:g}"
         )
+    from brachycal.cli.robot.report import claim_outputs  # lazy: start-up (the command's run only)
+
     out = Path(args.out)
     with OutputSet(force=args.force, inputs=command_inputs(args, "columns", "table")) as outputs:
-        urdf_path = outputs.claim(out / "robot.urdf", make_parents=True, label="--out robot.urdf")
-        json_path = outputs.claim(out / "identification.json", make_parents=True, label="--out identification.json")
+        urdf_path, json_path = claim_outputs(outputs, out)
         nominal = load_robot(args, any_arm=True)
         result = identify_tracker_file(
             nominal,
