@@ -149,7 +149,7 @@ def landing_map_raster(
     raster = RegularGridInterpolator((vs, us), grid)(at).reshape(height, width)
     outside = np.zeros((height, width), dtype=bool)
     if sector is not None:
-        margin = SectorFOV.of(sector).margin_to_edge(np.column_stack([u.ravel(), v.ravel()]), spacing_m)
+        margin = sector.margin_to_edge(np.column_stack([u.ravel(), v.ravel()]), spacing_m)
         outside = (margin < 0).reshape(height, width)
     return np.ma.masked_array(raster, mask=outside)
 
