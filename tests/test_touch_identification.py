@@ -435,3 +435,28 @@ def test_evidence_prior_is_the_training_places_own():
     assert len(reports[0].held_out) == 7 and reports[1].held_out == []
     held = np.mean([reports[0].identified[n].mean_scatter_m for n in reports[0].held_out])
     assert held < np.mean([reports[0].nominal[n].mean_scatter_m for n in reports[0].held_out]) / 10
+
+
+@pytest.mark.slow  # an evidence search: tens of fits
+def test_cli_prior_from_the_evidence_is_the_training_data_s_most_likely(tmp_path, capsys):
+    """``--prior evidence`` on the bundled touches: the prior written and printed is the one the
+    training place's evidence chose, and that evidence is at least the stated prior's."""
+    import json
+
+    from conftest import ROOT
+
+    from brachycal.cli.main import main
+
+    places = [str(ROOT / "examples" / "touches" / name) for name in ("front", "left", "right")]
+    common = ["robot", "identify", "touches", *places, "--robot", "panda", "--train", "front"]
+    common += ["--robot-accuracy-mm", "0.3", "--robot-accuracy-deg", "0.05"]
+    documents = {}
+    for prior in ("stated", "evidence"):
+        assert main([*common, "--prior", prior, "--out", str(tmp_path / prior)]) == 0
+        printed = [line for line in capsys.readouterr().out.splitlines() if line.startswith("prior per joint origin")]
+        assert len(printed) == 1
+        documents[prior] = json.loads((tmp_path / prior / "identification.json").read_text())
+    assert "evidence" in printed[0]
+    assert documents["stated"]["prior"]["joint_translation_sd_mm"] == pytest.approx(0.3)
+    assert documents["evidence"]["prior"]["source"] == "chosen by the evidence of the training touches"
+    assert documents["evidence"]["log_evidence"] >= documents["stated"]["log_evidence"] - 1e-6
