@@ -294,11 +294,23 @@ def _page(url: str, profile: Path, ready: Callable[[str], bool]) -> str:
     return _browse(url, profile, ["--dump-dom"], lambda out: out, ready)
 
 
-def _canvas_width(dom: str) -> int:
-    """Width in pixels of the page's 3D canvas (three.js's): the side panel docks to its right."""
+def _canvas_px(dom: str) -> int | None:
+    """Width in pixels of the page's 3D canvas (three.js's), None before there is one."""
     found = re.search(r'<canvas[^>]*data-engine="three\.js[^>]*\swidth="(\d+)"', dom)
-    assert found, "no 3D canvas in the page"
-    return int(found.group(1))
+    return None if found is None else int(found.group(1))
+
+
+def _canvas_width(dom: str) -> int:
+    """Width in pixels of the page's 3D canvas: the side panel docks to its right."""
+    width = _canvas_px(dom)
+    assert width is not None, "no 3D canvas in the page"
+    return width
+
+
+def _docked(dom: str) -> bool:
+    """The page has a 3D canvas narrower than the window: the side panel sits beside it."""
+    width = _canvas_px(dom)
+    return width is not None and width < WINDOW[0]
 
 
 def _largest_blob(mask: np.ndarray) -> np.ndarray:
@@ -357,7 +369,8 @@ def test_a_headless_browser_shows_the_legend_the_readout_the_whole_robot_and_the
             "base_link",
             f"RMS {stored.raw['fit_residuals']['kabsch']['rmse_mm']:.3f} mm",
         ]
-        dom = _page(viewer.url, tmp_path / "dom", lambda d: all(w in d for w in words))
+        # Ready once the panel has docked too: before, the canvas spans the whole window.
+        dom = _page(viewer.url, tmp_path / "dom", lambda d: all(w in d for w in words) and _docked(d))
         assert not [w for w in words if w not in dom], "missing from the page"
         width = _canvas_width(dom)
         assert 0.4 * WINDOW[0] < width < WINDOW[0]  # the panel beside the canvas, not over it
