@@ -53,6 +53,12 @@ from brachycal.simulation.arm_touches import (
 )
 from brachycal.studies.nwire_twin import FCAL2_LANDMARKS_MM, NWireSimConfig, simulate_nwire
 from brachycal.studies.phantom_twin import simulate_phantom
+from brachycal.studies.plus_device_set import (
+    add_phantom_definition,
+    add_probe_calibration_algo,
+    numbers_text,
+    write_xml,
+)
 from brachycal.studies.stepper_twin import STEPPER_NAMES, write_stepper_files
 from brachycal.studies.tank_recording import write_tank_files
 
@@ -267,15 +273,11 @@ def write_wire_sequence(path: str | os.PathLike[str], frames: Sequence[Segmented
             raise ValueError(f"frame {f.index}: no tracker readings to write")
         fields.append(
             {
-                "ProbeToTrackerTransform": _numbers(_mm(f.T_tracker_probe)),
-                "ReferenceToTrackerTransform": _numbers(_mm(f.T_tracker_reference)),
+                "ProbeToTrackerTransform": numbers_text(_mm(f.T_tracker_probe)),
+                "ReferenceToTrackerTransform": numbers_text(_mm(f.T_tracker_reference)),
             }
         )
     write_image_sequence(path, pixels, frame_fields=fields)
-
-
-def _numbers(values: FloatArray) -> str:
-    return " ".join(repr(float(v)) for v in np.ravel(values))
 
 
 def _mm(T: FloatArray) -> FloatArray:
@@ -283,13 +285,6 @@ def _mm(T: FloatArray) -> FloatArray:
     T = np.array(T, dtype=float)
     T[:3, 3] /= MM
     return T
-
-
-def _write_xml(path: str | os.PathLike[str], root: ET.Element) -> None:
-    ET.indent(root, space="  ")
-    with atomic_open(path) as handle:
-        handle.write(ET.tostring(root, encoding="unicode"))
-        handle.write("\n")
 
 
 def write_plus_config(path: str | os.PathLike[str], config: PlusConfig, *, name: str) -> Path:
@@ -317,34 +312,18 @@ def write_plus_config(path: str | os.PathLike[str], config: PlusConfig, *, name:
     )
     definitions = ET.SubElement(root, "CoordinateDefinitions")
     for (source, target), T in config.transforms.items():
-        ET.SubElement(definitions, "Transform", From=source, To=target, Matrix=_numbers(_mm(T)))
+        ET.SubElement(definitions, "Transform", From=source, To=target, Matrix=numbers_text(_mm(T)))
     if config.approximate_spacing_m is not None:
         ET.SubElement(root, "Segmentation", ApproximateSpacingMmPerPixel=repr(config.approximate_spacing_m / MM))
-    phantom = ET.SubElement(root, "PhantomDefinition")
-    ET.SubElement(phantom, "Description", Name="fCAL", Type="Multi-N", Version="2.0", WiringVersion="2.0")
-    geometry = ET.SubElement(phantom, "Geometry")
-    for pattern in config.patterns:
-        element = ET.SubElement(geometry, "Pattern", Type="NWire")
-        for wire in pattern:
-            ET.SubElement(
-                element,
-                "Wire",
-                Name=wire.name,
-                EndPointFront=_numbers(wire.front_m / MM),
-                EndPointBack=_numbers(wire.back_m / MM),
-            )
+    patterns_mm = [
+        [(wire.name, wire.front_m / MM, wire.back_m / MM) for wire in pattern] for pattern in config.patterns
+    ]
+    geometry = add_phantom_definition(root, patterns_mm, name="fCAL", version="2.0", wiring_version="2.0")
     landmarks = ET.SubElement(geometry, "Landmarks")
     for k, p in enumerate(FCAL2_LANDMARKS_MM):
-        ET.SubElement(landmarks, "Landmark", Name=f"#{k + 1}", Position=_numbers(p))
-    ET.SubElement(
-        root,
-        "vtkPlusProbeCalibrationAlgo",
-        ImageCoordinateFrame="Image",
-        ProbeCoordinateFrame="Probe",
-        PhantomCoordinateFrame="Phantom",
-        ReferenceCoordinateFrame="Reference",
-    )
-    _write_xml(path, root)
+        ET.SubElement(landmarks, "Landmark", Name=f"#{k + 1}", Position=numbers_text(p))
+    add_probe_calibration_algo(root, "Reference")
+    write_xml(path, root)
     return Path(path)
 
 
@@ -357,7 +336,7 @@ def _frames_element(parent: ET.Element, tag: str, frames: Sequence[SegmentedFram
             continue
         points = ET.SubElement(node, "SegmentedPoints")
         for wire, uv in frame.points_px.items():
-            ET.SubElement(points, "Point", WireName=wire, Position=f"{_numbers(uv)} 0")
+            ET.SubElement(points, "Point", WireName=wire, Position=f"{numbers_text(uv)} 0")
         time_s = repr(round(frame.index * period_s, 6))  # one clock over both sets
         tracked = ET.SubElement(node, "TrackedFrame", Timestamp=time_s, ImageDataValid="true")
         for field, T in (
@@ -366,7 +345,7 @@ def _frames_element(parent: ET.Element, tag: str, frames: Sequence[SegmentedFram
         ):
             if T is None:  # an OK frame carries both readings (read_segmented_frames demands them)
                 raise ValueError(f"frame {frame.index}: no {field}")
-            ET.SubElement(tracked, "CustomFrameField", Name=field, Value=_numbers(_mm(T)))
+            ET.SubElement(tracked, "CustomFrameField", Name=field, Value=numbers_text(_mm(T)))
             ET.SubElement(tracked, "CustomFrameField", Name=field + "Status", Value="OK")
         ET.SubElement(tracked, "CustomFrameField", Name="Timestamp", Value=time_s)
 
@@ -390,7 +369,7 @@ def write_segmented_frames(
     data = ET.SubElement(root, "Data")
     _frames_element(data, "ValidationData", validation, period_s)
     _frames_element(data, "CalibrationData", calibration, period_s)
-    _write_xml(path, root)
+    write_xml(path, root)
     return Path(path)
 
 

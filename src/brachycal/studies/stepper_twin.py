@@ -33,14 +33,19 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 from brachycal.calibration.phantom.stepper_probe import stepper_pose
 from brachycal.data.formats.metaimage import write_image_sequence
 from brachycal.data.formats.plus_files import SegmentedFrame, Wire
 from brachycal.data.formats.plus_stepper import StepperAxes
-from brachycal.io import atomic_open, json_text
+from brachycal.io import json_text
 from brachycal.se3 import FloatArray, from_xyz_rpy, inverse, transform_points
+from brachycal.studies.plus_device_set import (
+    add_phantom_definition,
+    add_probe_calibration_algo,
+    numbers_text,
+    write_xml,
+)
 
 __all__ = [
     "AXES",
@@ -306,10 +311,6 @@ def render_dots(points_px: Sequence[FloatArray]) -> np.ndarray:
     return np.clip(np.rint(image), 0, 255).astype(np.uint8)
 
 
-def _numbers(values: ArrayLike) -> str:
-    return " ".join(repr(float(v)) for v in np.ravel(values))
-
-
 def _pose_text(T_m: FloatArray) -> str:
     """A pose as PLUS writes it: row-major ``(4, 4)``, millimetres, 6 significant digits."""
     T = np.array(T_m, dtype=float)
@@ -359,8 +360,8 @@ def write_device_set(path: str | os.PathLike[str]) -> None:
     ET.SubElement(
         device,
         "StepperCalibration",
-        ProbeTranslationAxisOrientation=_numbers(AXES.probe_translation),
-        TemplateTranslationAxisOrientation=_numbers(AXES.template_translation),
+        ProbeTranslationAxisOrientation=numbers_text(AXES.probe_translation),
+        TemplateTranslationAxisOrientation=numbers_text(AXES.template_translation),
         ProbeRotationEncoderScale=repr(AXES.rotation_encoder_scale),
     )
     outputs = ET.SubElement(device, "OutputChannels")
@@ -387,7 +388,7 @@ def write_device_set(path: str | os.PathLike[str]) -> None:
     holder = np.eye(4)
     holder[:2, 3] = _HOLDER_MM
     for target in ("TemplateHome", "Phantom"):
-        ET.SubElement(definitions, "Transform", From="TemplateHolder", To=target, Matrix=_numbers(holder))
+        ET.SubElement(definitions, "Transform", From="TemplateHolder", To=target, Matrix=numbers_text(holder))
     ET.SubElement(
         root,
         "iCal",
@@ -405,32 +406,16 @@ def write_device_set(path: str | os.PathLike[str]) -> None:
         PhantomCoordinateFrame="Phantom",
         ReferenceCoordinateFrame="StepperHome",
     )
-    ET.SubElement(
-        root,
-        "vtkPlusProbeCalibrationAlgo",
-        ImageCoordinateFrame="Image",
-        ProbeCoordinateFrame="Probe",
-        PhantomCoordinateFrame="Phantom",
-        ReferenceCoordinateFrame="StepperHome",
-    )
-    phantom = ET.SubElement(root, "PhantomDefinition")
-    ET.SubElement(phantom, "Description", Name="iCAL", Type="Multi-N", Version="1.0", WiringVersion="1.1")
-    geometry = ET.SubElement(phantom, "Geometry")
-    names = list(ICAL_WIRES_MM)
-    for k in range(0, len(names), 3):
-        pattern = ET.SubElement(geometry, "Pattern", Type="NWire")
-        for name in names[k : k + 3]:
-            front, back = ICAL_WIRES_MM[name]
-            ET.SubElement(pattern, "Wire", Name=name, EndPointFront=_numbers(front), EndPointBack=_numbers(back))
+    add_probe_calibration_algo(root, "StepperHome")
+    wires_mm = [(name, front, back) for name, (front, back) in ICAL_WIRES_MM.items()]
+    patterns_mm = [wires_mm[k : k + 3] for k in range(0, len(wires_mm), 3)]
+    add_phantom_definition(root, patterns_mm, name="iCAL", version="1.0", wiring_version="1.1")
     template = ET.SubElement(root, "TemplateModel", version="1.0")
     ET.SubElement(template, "OriginFromTemplateHolder", OriginX=repr(_HOLDER_MM[0]), OriginY=repr(_HOLDER_MM[1]))
     holes = ET.SubElement(template, "HolePositions")
     for hole, position in template_holes_mm().items():
-        ET.SubElement(holes, "Hole", ID=hole, PositionXYZ=_numbers(position))
-    ET.indent(root, space="  ")
-    with atomic_open(path) as handle:
-        handle.write(ET.tostring(root, encoding="unicode"))
-        handle.write("\n")
+        ET.SubElement(holes, "Hole", ID=hole, PositionXYZ=numbers_text(position))
+    write_xml(path, root)
 
 
 def truth(seed: int, noise_px: float = NOISE_PX) -> dict[str, object]:
