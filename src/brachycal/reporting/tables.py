@@ -18,7 +18,6 @@ from brachycal.calibration.metrics import ErrorStats
 from brachycal.data.session import ImageSector
 from brachycal.imaging.pixels import SCANNER_SOUND_SPEED_M_S
 from brachycal.planning.robot_time import MECHANICAL_MINUTES, SECONDS_PER_SAMPLE
-from brachycal.planning.spec import SectorFOV
 
 if TYPE_CHECKING:  # types only: `brachycal plan` prints plan_text without loading the calibration
     from brachycal.calibration.sequential.method import SequentialResult
@@ -178,7 +177,7 @@ def chain_summary(
     fov = report.predicted_fov_mm
     across = f"over the image at the central pose: {fov.min():.3f}..{fov.max():.3f} mm"
     if sector is not None and spacing_m is not None:
-        inside = fov[SectorFOV.of(sector).margin_to_edge(report.fov_px, spacing_m) >= 0]
+        inside = fov[sector.margin_to_edge(report.fov_px, spacing_m) >= 0]
         if len(inside):
             across = (
                 f"over the imaging sector at the central pose: {inside.min():.3f}..{inside.max():.3f} mm "
