@@ -340,7 +340,9 @@ def test_cli_prints_held_out_first_and_writes_a_urdf_that_reproduces_them(tmp_pa
 def test_cli_takes_a_bundled_arm_and_its_tool(panda, tmp_path, capsys):
     """``--robot panda`` (the bundled description, fingers frozen: 7 joint columns) with no
     --tool-frame: the arm's tool (panda_hand_tcp) touches; touches of the nominal arm (joint noise
-    1e-5 rad, the tip's ~5 µm) leave a held-out scatter of that size, and the written URDF holds the arm's 7 joints."""
+    1e-5 rad, the tip's ~5 µm) leave a held-out scatter of that size, and the written URDF holds the arm's 7 joints.
+    With no accuracy stated the prior is the touches' own default (a collaborative arm's 0.3 mm /
+    0.1°), not the twin's well-built 0.03 mm."""
     import json
 
     from brachycal.cli.main import main
@@ -363,6 +365,8 @@ def test_cli_takes_a_bundled_arm_and_its_tool(panda, tmp_path, capsys):
     document = json.loads((out / "identification.json").read_text())
     assert document["tool_frame"] == "panda_hand_tcp"
     assert document["identified"]["b"]["scatter_mm"] < 0.02
+    assert [line for line in lines if line.startswith("prior per joint origin: 0.3 mm, 0.1 deg (touches default")]
+    assert document["prior"]["joint_translation_sd_mm"] == pytest.approx(0.3)
     assert Robot.load(out / "robot.urdf").nq == 7  # the description's fingers stay frozen
 
 

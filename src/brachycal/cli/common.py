@@ -171,16 +171,22 @@ def add_robot_accuracy_options(
     )
 
 
-def robot_accuracy(args: argparse.Namespace) -> RobotAccuracy:
-    """The stated robot accuracy: the options given, the defaults for the others."""
+def robot_accuracy(args: argparse.Namespace, default: RobotAccuracy | None = None) -> RobotAccuracy:
+    """The stated robot accuracy: the options given, the command's defaults for the others.
+
+    Args:
+        args: the parsed ``--robot-accuracy-mm`` and ``--robot-accuracy-deg``.
+        default: the command's own default (as given to :func:`add_robot_accuracy_options`);
+            None for the general one (DEFAULT_ROBOT_ACCURACY).
+    """
     import numpy as np  # lazy: start-up (the command's run only)
 
     # lazy: start-up (the command's run only)
     from brachycal.calibration.robot_accuracy import DEFAULT_ROBOT_ACCURACY, RobotAccuracy
 
+    default = DEFAULT_ROBOT_ACCURACY if default is None else default
     if args.robot_accuracy_mm is None and args.robot_accuracy_deg is None:
-        return DEFAULT_ROBOT_ACCURACY
-    default = DEFAULT_ROBOT_ACCURACY
+        return default
     mm = args.robot_accuracy_mm if args.robot_accuracy_mm is not None else default.translation_sd_m * 1e3
     deg = args.robot_accuracy_deg if args.robot_accuracy_deg is not None else float(np.degrees(default.rotation_sd_rad))
     return RobotAccuracy(

@@ -78,7 +78,9 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         "that the training places' own data make most likely, searched from the stated accuracy "
         "(the held-out places are never used; tens of fits)",
     )
-    add_robot_accuracy_options(parser, "the prior of the corrections", zero=False)
+    from brachycal.calibration.robot.touches import TOUCHES_ACCURACY  # lazy: start-up (the command's run only)
+
+    add_robot_accuracy_options(parser, "the prior of the corrections", zero=False, default=TOUCHES_ACCURACY)
 
 
 def tool_frame(args: argparse.Namespace, nominal: Robot) -> str:
@@ -96,12 +98,15 @@ def tool_frame(args: argparse.Namespace, nominal: Robot) -> str:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path  # lazy: start-up (the command's run only)
 
-    from brachycal.calibration.robot.touches import identify_touch_folders  # lazy: start-up (the command's run only)
-    from brachycal.cli.common import (
+    from brachycal.calibration.robot.touches import (  # lazy: start-up (the command's run only)
+        TOUCHES_ACCURACY,
+        identify_touch_folders,
+    )
+    from brachycal.cli.common import (  # lazy: start-up (the command's run only)
         command_inputs,
         load_robot,
         robot_accuracy,
-    )  # lazy: start-up (the command's run only)
+    )
     from brachycal.cli.robot.report import claim_outputs  # lazy: start-up (the command's run only)
     from brachycal.io import OutputSet, write_json  # lazy: start-up (the command's run only)
     from brachycal.model import Robot  # lazy: start-up (the command's run only)
@@ -118,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
             args.folders,
             tool,
             train,
-            robot_accuracy(args),
+            robot_accuracy(args, TOUCHES_ACCURACY),
             distance_m=args.distance_mm * 1e-3 if args.distance_mm is not None else None,
             dynamics=dynamics,
             prior=args.prior,
