@@ -337,6 +337,38 @@ def test_cli_prints_held_out_first_and_writes_a_urdf_that_reproduces_them(tmp_pa
         assert scatter < report["nominal"][name]["scatter_mm"] * 1e-3 / 5
 
 
+def test_with_compliance_the_written_urdf_is_the_geometry_only_fit(tmp_path, capsys):
+    """MUKCa's panda_2 with --dynamics: compliance is fitted, but the written URDF is the fit of the
+    geometry alone (the same as without --dynamics), and it reproduces the "URDF only" figures; the
+    compliance fit's own figures are printed beside them."""
+    import json
+
+    from brachycal.cli.main import main
+
+    root = reference("mukca_touches")
+    folders = [str(root / "data" / "panda_2_clean" / name) for name in ("front_center", "back_left", "mid-high")]
+    common = ["robot", "identify", "touches", *folders, "--robot", str(root / "urdf" / "panda.urdf")]
+    common += ["--tool-frame", "ball_link", "--train", "front_center"]
+    dynamics = example_robot_data_share() / "robots" / "panda_description" / "urdf" / "panda.urdf"
+    assert main([*common, "--out", str(tmp_path / "geometry")]) == 0
+    assert main([*common, "--dynamics", str(dynamics), "--out", str(tmp_path / "compliance")]) == 0
+    assert "(URDF only" in capsys.readouterr().out
+    geometry = json.loads((tmp_path / "geometry" / "identification.json").read_text())
+    compliance = json.loads((tmp_path / "compliance" / "identification.json").read_text())
+    assert compliance["compliance_rad_per_nm"] and not geometry["compliance_rad_per_nm"]
+    for joint, components in geometry["corrections"].items():
+        assert compliance["urdf_fit"]["corrections"][joint] == pytest.approx(components, abs=1e-12)
+    written = Robot.load(tmp_path / "compliance" / "robot.urdf")
+    for name in ("back_left", "mid-high"):
+        expected = geometry["identified"][name]["scatter_mm"]
+        assert compliance["urdf_only"][name]["scatter_mm"] == pytest.approx(expected, abs=1e-9)
+        assert compliance["identified"][name]["scatter_mm"] != pytest.approx(expected, abs=1e-3)
+        Q = [np.loadtxt(root / "data" / "panda_2_clean" / name / f"hole_{k}.csv", delimiter=",") for k in (0, 1)]
+        P = [written.fk("ball_link", np.c_[q, np.zeros(len(q))])[:, :3, 3] for q in Q]
+        scatter = np.mean([np.mean(np.linalg.norm(p - p.mean(axis=0), axis=1)) for p in P])
+        assert scatter * 1e3 == pytest.approx(expected, abs=1e-6)
+
+
 def test_cli_takes_a_bundled_arm_and_its_tool(panda, tmp_path, capsys):
     """``--robot panda`` (the bundled description, fingers frozen: 7 joint columns) with no
     --tool-frame: the arm's tool (panda_hand_tcp) touches; touches of the nominal arm (joint noise

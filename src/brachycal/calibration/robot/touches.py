@@ -479,9 +479,12 @@ class TouchReport:
         train: the training places' names.
         nominal: per place, MUKCa's figures on the nominal URDF with its tool frame.
         identified: per place, on the identified robot with the identified tip (and compliance).
-        geometry_only: per place, on the identified robot and tip without the compliance terms
-            (what the written URDF alone gives); equal to :attr:`identified` without compliance.
+        geometry_only: per place, what the written URDF alone gives (:attr:`urdf_result`'s robot
+            and tip); equal to :attr:`identified` without compliance.
         tool_frame: the URDF frame of the touching tip.
+        urdf_fit: with compliance, the same identification without it: the best geometry a URDF
+            can carry (the compliance fit's geometry has absorbed nothing of what compliance
+            explains, so alone it does worse); None without compliance.
     """
 
     result: TouchResult
@@ -490,18 +493,26 @@ class TouchReport:
     identified: dict[str, TouchScatter]
     geometry_only: dict[str, TouchScatter]
     tool_frame: str
+    urdf_fit: TouchResult | None = None
+
+    @property
+    def urdf_result(self) -> TouchResult:
+        """The identification the written URDF carries: :attr:`urdf_fit`, or :attr:`result`."""
+        return self.urdf_fit if self.urdf_fit is not None else self.result
 
     @property
     def held_out(self) -> list[str]:
         return [name for name in self.nominal if name not in self.train]
 
     def calibrated_robot(self, nominal: Robot) -> Robot:
-        """The corrected robot with the identified tip written into the tool frame's fixed joint."""
+        """The corrected robot (:attr:`urdf_result`, geometry only) with the identified tip
+        written into the tool frame's fixed joint."""
+        urdf = self.urdf_result
         parent, T_parent_tool = nominal.tool_transform(self.tool_frame)
-        T_flange_parent = nominal.transform(self.result.flange, parent, np.zeros(nominal.nq))
+        T_flange_parent = nominal.transform(urdf.flange, parent, np.zeros(nominal.nq))
         T = T_parent_tool.copy()
-        T[:3, 3] = np.linalg.solve(T_flange_parent[:3, :3], self.result.tip - T_flange_parent[:3, 3])
-        return self.result.robot(nominal).with_tool_transform(self.tool_frame, T)
+        T[:3, 3] = np.linalg.solve(T_flange_parent[:3, :3], urdf.tip - T_flange_parent[:3, 3])
+        return urdf.robot(nominal).with_tool_transform(self.tool_frame, T)
 
     def as_json(self) -> dict[str, object]:
         def figures(scores: dict[str, TouchScatter]) -> dict[str, object]:
@@ -541,6 +552,16 @@ class TouchReport:
             "nominal": figures(self.nominal),
             "identified": figures(self.identified),
             "urdf_only": figures(self.geometry_only),
+            "urdf_fit": None
+            if self.urdf_fit is None
+            else {
+                "tip_m": self.urdf_fit.tip.tolist(),
+                "touch_noise_sd_m": self.urdf_fit.fit.sigma["touch"],
+                "corrections": {
+                    name: dict(zip(COMPONENTS, map(float, c), strict=True))
+                    for name, c in zip(self.urdf_fit.fit.joint_names, self.urdf_fit.fit.corrections, strict=True)
+                },
+            },
         }
 
 
@@ -565,7 +586,8 @@ def identify_touch_folders(
         accuracy: the stated accuracy (the prior).
         distance_m: the known distance between points 0 and 1 of every place (None: unknown).
         dynamics: a URDF of the same arm with masses: joint compliance under gravity is fitted
-            (each revolute arm joint that gravity loads, about its axis).
+            (each revolute arm joint that gravity loads, about its axis), and the geometry alone
+            once more for the URDF (:attr:`TouchReport.urdf_fit`).
         prior: ``"stated"`` (``accuracy``, compliance free) or ``"evidence"``: chosen by the
             training places' evidence (:func:`evidence_prior`; the held-out places never enter).
 
@@ -591,25 +613,25 @@ def identify_touch_folders(
         ]
         compliant = _loaded_joints(nominal, flange, [p for p in places if p.name in train])
     fit_places = [p for p in places if p.name in train]
-    result = identify_touches(
-        nominal,
-        fit_places,
-        flange,
-        accuracy,
-        tip=T_flange_tool[:3, 3],
-        selection="chain",
-        compliant=compliant,
-        prior=prior,
-    )
-    robot = result.robot(nominal)
     tip0 = T_flange_tool[:3, 3]
+
+    def identify(terms: tuple[tuple[int, int], ...]) -> TouchResult:
+        return identify_touches(
+            nominal, fit_places, flange, accuracy, tip=tip0, selection="chain", compliant=terms, prior=prior
+        )
+
+    result = identify(compliant)
+    urdf_fit = identify(()) if compliant else None
+    urdf = urdf_fit if urdf_fit is not None else result
+    robot, urdf_robot = result.robot(nominal), urdf.robot(nominal)
     return TouchReport(
         result,
         tuple(train),
         {p.name: touch_scatter(nominal, p, flange, tip0) for p in places},
         {p.name: touch_scatter(robot, p, flange, result.tip, result.compliant, result.compliance) for p in places},
-        {p.name: touch_scatter(robot, p, flange, result.tip) for p in places},
+        {p.name: touch_scatter(urdf_robot, p, flange, urdf.tip) for p in places},
         tool_frame,
+        urdf_fit,
     )
 
 

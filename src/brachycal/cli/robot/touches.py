@@ -32,7 +32,8 @@ default the arm's tool when the description names one.
 The stated accuracy (--robot-accuracy-mm, --robot-accuracy-deg) is the prior of the corrections:
 state the arm's own figures (a Panda's joints are off their URDF by tenths of a millimetre).
 With --dynamics (a URDF of the same arm with masses), joint compliance under gravity is fitted
-too; the written URDF carries the geometry only (its figures are printed as "URDF only").
+too; a URDF cannot carry it, so the written URDF is a second fit of the geometry alone (its
+figures are printed as "URDF only").
 
 Writes DIR/robot.urdf (the identified joints, the tip written into the tool frame) and
 DIR/identification.json (corrections, tip, noise level, compliance, figures per place).
@@ -156,9 +157,10 @@ def print_report(report: TouchReport) -> None:
     if held:
         mean_a = sum(report.nominal[n].mean_scatter_m for n in held) / len(held) * 1e3
         mean_b = sum(report.identified[n].mean_scatter_m for n in held) / len(held) * 1e3
+        mean_c = sum(report.geometry_only[n].mean_scatter_m for n in held) / len(held) * 1e3
         print(
             f"held-out places ({len(held)}): tip scatter, nominal URDF -> identified; "
-            f"mean {mean_a:.3f} -> {mean_b:.3f} mm"
+            f"mean {mean_a:.3f} -> {mean_b:.3f} mm" + (f" (URDF only {mean_c:.3f})" if urdf_only else "")
         )
         for name in held:
             print(line(name))
