@@ -18,10 +18,11 @@ from conftest import ROOT, reference
 from scipy.spatial.transform import Rotation
 
 from brachycal.calibration.robot.arm_fit import ParameterSelection, _evaluate
-from brachycal.calibration.robot.identification import corrected_robot
+from brachycal.calibration.robot.identification import corrected_robot, prior_sd
 from brachycal.calibration.robot.tracker import (
     TrackerData,
     TrackerResiduals,
+    evidence_prior,
     fit_tracker,
     identify_from_tracker,
     leave_one_out,
@@ -220,6 +221,72 @@ def test_noise_level_matches_the_tracker_noise(panda):
     Q = postures(panda, 40, seed=17)
     levels = [fit_tracker(measured(panda, Q, False, 5e-4, seed=s), "frames").sigma["position"] for s in range(40)]
     assert abs(np.mean(levels) / 5e-4 - 1) < 0.04
+
+
+# --- the prior chosen by the postures' evidence -------------------------------------------------
+
+DRAWN = RobotAccuracy(5e-4, float(np.radians(0.2)))
+
+
+def drawn_arm(panda: Robot, n: int, seed: int) -> tuple[TrackerData, ParameterSelection]:
+    """A Panda whose joints model's base set is drawn from :data:`DRAWN`, seen by a 3-D tracker
+    with 20 µm of noise at ``n`` postures; the selection the draw was made on."""
+    rng = np.random.default_rng(seed)
+    Q = postures(panda, n, seed=seed + 100)
+    selection = select_parameters(measured(panda, Q, False), "joints", DRAWN)
+    drawn = rng.normal(0, 1, 6 * panda.nq) * prior_sd(panda, DRAWN)
+    true = corrected_robot(panda, selection.expand(drawn[selection.index]))
+    return with_robot(measured(true, Q, False, noise_m=2e-5, seed=seed + 200), panda), selection
+
+
+@pytest.mark.slow  # an evidence search: tens of fits
+def test_evidence_recovers_the_prior_the_arm_was_drawn_from(panda):
+    """An arm whose 22 seen joint-origin components are drawn from 0.5 mm / 0.2° per joint, 40
+    postures with 20 µm of tracker noise: the evidence search, started ten times too tight, lands
+    within a factor 2 of the drawn SDs (over six seeds both come out at 0.7–1.5 times the truth:
+    one arm is a few dozen draws), and ``prior="evidence"`` fits with that choice."""
+    data, selection = drawn_arm(panda, 40, seed=1)
+    start = RobotAccuracy(5e-5, float(np.radians(0.02)))
+    chosen = evidence_prior(data, "joints", start, selection=selection)
+    assert 0.5 < chosen.accuracy.translation_sd_m / DRAWN.translation_sd_m < 2.0
+    assert 0.5 < chosen.accuracy.rotation_sd_rad / DRAWN.rotation_sd_rad < 2.0
+    fit = fit_tracker(data, "joints", start, selection=selection, prior="evidence")
+    assert fit.arm.accuracy == chosen.accuracy
+    assert fit.arm.log_evidence == pytest.approx(chosen.log_evidence, abs=1e-6)
+
+
+@pytest.mark.slow  # an evidence search: tens of fits
+def test_tracker_evidence_is_highest_at_the_chosen_prior(panda):
+    """The chosen prior is the evidence's maximum: each SD three times looser or tighter (the
+    other held) has less evidence."""
+    data, selection = drawn_arm(panda, 30, seed=2)
+    chosen = evidence_prior(data, "joints", RobotAccuracy(1e-3, float(np.radians(0.1))), selection=selection)
+    a = chosen.accuracy
+    for t, r in ((3.0, 1.0), (1 / 3, 1.0), (1.0, 3.0), (1.0, 1 / 3)):
+        other = RobotAccuracy(a.translation_sd_m * t, a.rotation_sd_rad * r, a.encoder_sd_rad)
+        assert fit_tracker(data, "joints", other, selection=selection).arm.log_evidence < chosen.log_evidence
+
+
+@pytest.mark.slow  # an evidence search per fold
+def test_leave_one_out_chooses_each_fold_s_prior_without_the_held_out_posture(panda):
+    """With ``prior="evidence"`` a posture's held-out error is the prediction of a fit whose prior
+    its fold's postures alone chose: moving that posture's measurement by 2 cm moves its error by
+    exactly 2 cm (nothing of it entered its fold), and the error is the one of
+    ``fit_tracker(fold, prior="evidence")``, whose prior is not the stated one."""
+    data, _ = drawn_arm(panda, 9, seed=3)
+    start = RobotAccuracy(1e-3, float(np.radians(0.1)))
+    e_p, _ = leave_one_out(data, "offsets", start, prior="evidence")
+    moved_p = data.p.copy()
+    moved_p[4] += [0.02, 0.0, 0.0]
+    moved = TrackerData(data.robot, data.flange, data.Q, moved_p, None)
+    e_moved, _ = leave_one_out(moved, "offsets", start, prior="evidence")
+    assert np.allclose(e_moved[4], e_p[4] - [0.02, 0.0, 0.0], atol=1e-9, rtol=0)
+    keep = np.arange(9) != 4
+    selection = select_parameters(data, "offsets", start)
+    fold = fit_tracker(data.subset(keep), "offsets", start, selection=selection, prior="evidence")
+    assert fold.arm.accuracy is not None and fold.arm.accuracy != start
+    p, _ = fold.predict(data.subset(~keep))
+    assert np.allclose(e_p[4], p[0] - data.p[4], atol=1e-12, rtol=0)
 
 
 # --- the reader ------------------------------------------------------------------------------

@@ -4,7 +4,8 @@ A protocol's fit (:func:`~brachycal.calibration.robot.arm_fit.fit_arm`) reports 
 evidence given the prior (:attr:`~brachycal.calibration.robot.arm_fit.ArmFit.log_evidence`,
 Laplace's approximation). :func:`evidence_search` finds the per-joint translation and rotation SDs
 (and any further positive hyper-parameters a protocol has, such as the touches' compliance SD) that
-maximise it: Nelder–Mead on their logarithms, within :class:`RobotAccuracy`'s bounds. The touches
+maximise it: Nelder–Mead on their logarithms, within :class:`RobotAccuracy`'s bounds and above
+:data:`EVIDENCE_FLOOR_M`, :data:`EVIDENCE_FLOOR_RAD`. The touches
 (:func:`~brachycal.calibration.robot.touches.evidence_prior`) and the tracker
 (:func:`~brachycal.calibration.robot.tracker.evidence_prior`) use it; only the data handed to the
 protocol's fit enter, so a choice made on training data is that data's own.
@@ -31,6 +32,12 @@ EVIDENCE_LOG_TOLERANCE = 0.05
 EVIDENCE_TOLERANCE = 1e-3
 #: Fits one search may take at most.
 EVIDENCE_EVALUATIONS = 400
+#: The smallest per-joint SDs searched (metres, radians: a micrometre at a metre's reach). Where the
+#: data prefer no correction of a kind, the evidence keeps rising, ever more slowly, as its SD goes
+#: to zero; the search stops at this floor instead of walking there (a choice at the floor reads
+#: "none of this kind").
+EVIDENCE_FLOOR_M = 1e-6
+EVIDENCE_FLOOR_RAD = 1e-6
 
 
 @dataclass(frozen=True)
@@ -83,7 +90,9 @@ def evidence_search(
 
     def negative(z: FloatArray) -> float:
         nonlocal evaluations
-        if z[0] > np.log(MAX_ROBOT_TRANSLATION_SD_M) or z[1] > np.log(MAX_ROBOT_ROTATION_SD_RAD):
+        if not (np.log(EVIDENCE_FLOOR_M) <= z[0] <= np.log(MAX_ROBOT_TRANSLATION_SD_M)) or not (
+            np.log(EVIDENCE_FLOOR_RAD) <= z[1] <= np.log(MAX_ROBOT_ROTATION_SD_RAD)
+        ):
             return np.inf
         evaluations += 1
         try:
@@ -91,10 +100,11 @@ def evidence_search(
         except DegenerateDataError:
             return np.inf
 
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z0 = np.log(np.array([start.translation_sd_m, start.rotation_sd_rad, *extra], dtype=float))
-    if not np.all(np.isfinite(z0)):
+    values = np.array([start.translation_sd_m, start.rotation_sd_rad, *extra], dtype=float)
+    if not np.all(np.isfinite(values) & (values > 0)):
         raise InputError("the evidence search starts from positive, finite prior SDs")
+    z0 = np.log(values)
+    z0[:2] = np.maximum(z0[:2], np.log([EVIDENCE_FLOOR_M, EVIDENCE_FLOOR_RAD]))
     if not np.isfinite(negative(z0)):
         raise DegenerateDataError(f"robot identification: {data} do not determine the unknowns at the start")
     found = minimize(
