@@ -22,13 +22,13 @@ from brachycal.calibration.robot.identification import corrected_robot, prior_sd
 from brachycal.calibration.robot.tracker import (
     TrackerData,
     TrackerResiduals,
-    evidence_prior,
     fit_tracker,
     identify_from_tracker,
     leave_one_out,
     select_parameters,
     start_frames,
     tracker_data,
+    tracker_evidence_prior,
 )
 from brachycal.calibration.robot_accuracy import RobotAccuracy
 from brachycal.cli.main import main
@@ -40,6 +40,7 @@ from brachycal.data.formats.tracker_table import (
     read_tracker_table,
 )
 from brachycal.errors import InputError
+from brachycal.model.description import load_robot
 from brachycal.model.description_file import example_robot_data_share
 from brachycal.model.robot import Robot
 from brachycal.se3 import make_transform
@@ -247,7 +248,7 @@ def test_evidence_recovers_the_prior_the_arm_was_drawn_from(panda):
     one arm is a few dozen draws), and ``prior="evidence"`` fits with that choice."""
     data, selection = drawn_arm(panda, 40, seed=1)
     start = RobotAccuracy(5e-5, float(np.radians(0.02)))
-    chosen = evidence_prior(data, "joints", start, selection=selection)
+    chosen = tracker_evidence_prior(data, "joints", start, selection=selection)
     assert 0.5 < chosen.accuracy.translation_sd_m / DRAWN.translation_sd_m < 2.0
     assert 0.5 < chosen.accuracy.rotation_sd_rad / DRAWN.rotation_sd_rad < 2.0
     fit = fit_tracker(data, "joints", start, selection=selection, prior="evidence")
@@ -260,7 +261,7 @@ def test_tracker_evidence_is_highest_at_the_chosen_prior(panda):
     """The chosen prior is the evidence's maximum: each SD three times looser or tighter (the
     other held) has less evidence."""
     data, selection = drawn_arm(panda, 30, seed=2)
-    chosen = evidence_prior(data, "joints", RobotAccuracy(1e-3, float(np.radians(0.1))), selection=selection)
+    chosen = tracker_evidence_prior(data, "joints", RobotAccuracy(1e-3, float(np.radians(0.1))), selection=selection)
     a = chosen.accuracy
     for t, r in ((3.0, 1.0), (1 / 3, 1.0), (1.0, 3.0), (1.0, 1 / 3)):
         other = RobotAccuracy(a.translation_sd_m * t, a.rotation_sd_rad * r, a.encoder_sd_rad)
@@ -270,23 +271,47 @@ def test_tracker_evidence_is_highest_at_the_chosen_prior(panda):
 @pytest.mark.slow  # an evidence search per fold
 def test_leave_one_out_chooses_each_fold_s_prior_without_the_held_out_posture(panda):
     """With ``prior="evidence"`` a posture's held-out error is the prediction of a fit whose prior
-    its fold's postures alone chose: moving that posture's measurement by 2 cm moves its error by
-    exactly 2 cm (nothing of it entered its fold), and the error is the one of
-    ``fit_tracker(fold, prior="evidence")``, whose prior is not the stated one."""
-    data, _ = drawn_arm(panda, 9, seed=3)
+    its fold's postures alone chose: with that posture's measurement moved by 2 cm, its error is
+    (to 1e-12 m) the one of ``fit_tracker(prior="evidence")`` on the other postures, computed
+    without the moved measurement, and that fold's prior is not the stated one."""
+    data, _ = drawn_arm(panda, 8, seed=3)
     start = RobotAccuracy(1e-3, float(np.radians(0.1)))
-    e_p, _ = leave_one_out(data, "offsets", start, prior="evidence")
     moved_p = data.p.copy()
     moved_p[4] += [0.02, 0.0, 0.0]
     moved = TrackerData(data.robot, data.flange, data.Q, moved_p, None)
     e_moved, _ = leave_one_out(moved, "offsets", start, prior="evidence")
-    assert np.allclose(e_moved[4], e_p[4] - [0.02, 0.0, 0.0], atol=1e-9, rtol=0)
-    keep = np.arange(9) != 4
-    selection = select_parameters(data, "offsets", start)
-    fold = fit_tracker(data.subset(keep), "offsets", start, selection=selection, prior="evidence")
+    keep = np.arange(8) != 4
+    fold = fit_tracker(
+        data.subset(keep), "offsets", start, selection=select_parameters(moved, "offsets", start), prior="evidence"
+    )
     assert fold.arm.accuracy is not None and fold.arm.accuracy != start
     p, _ = fold.predict(data.subset(~keep))
-    assert np.allclose(e_p[4], p[0] - data.p[4], atol=1e-12, rtol=0)
+    assert np.allclose(e_moved[4], p[0] - moved_p[4], atol=1e-12, rtol=0)
+
+
+@pytest.mark.slow  # an evidence search per fold
+def test_cli_prior_from_the_evidence(tmp_path, capsys):
+    """``--prior evidence`` on the bundled tracker example (a UR10 off its URDF, 6-D marker): the
+    prior written and printed is the one the postures' evidence chose (the rule recorded), and its
+    evidence is at least the stated prior's."""
+    example = ROOT / "examples" / "tracker"
+    out = tmp_path / "out"
+    code = main(
+        [
+            "robot", "identify", "tracker", str(example / "table.csv"), "--columns", str(example / "columns.toml"),
+            "--robot", "ur10", "--model", "offsets", "--prior", "evidence", "--out", str(out),
+        ]
+    )  # fmt: skip
+    assert code == 0
+    printed = [line for line in capsys.readouterr().out.splitlines() if line.startswith("prior per joint origin")]
+    assert len(printed) == 1 and "chosen by the evidence of the training postures" in printed[0]
+    document = json.loads((out / "identification.json").read_text())
+    assert document["prior_rule"] == "evidence" and document["chosen"] == "offsets"
+    assert document["prior"]["source"] == "chosen by the evidence of the training postures"
+    assert document["models"]["offsets"]["prior"] == document["prior"]
+    table = read_tracker_table(example / "table.csv", read_tracker_columns(example / "columns.toml"))
+    data = tracker_data(load_robot("ur10"), table)
+    assert document["log_evidence"] >= fit_tracker(data, "offsets").arm.log_evidence - 1e-6
 
 
 # --- the reader ------------------------------------------------------------------------------

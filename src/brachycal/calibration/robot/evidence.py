@@ -7,7 +7,7 @@ Laplace's approximation). :func:`evidence_search` finds the per-joint translatio
 maximise it: Nelder–Mead on their logarithms, within :class:`RobotAccuracy`'s bounds and above
 :data:`EVIDENCE_FLOOR_M`, :data:`EVIDENCE_FLOOR_RAD`. The touches
 (:func:`~brachycal.calibration.robot.touches.evidence_prior`) and the tracker
-(:func:`~brachycal.calibration.robot.tracker.evidence_prior`) use it; only the data handed to the
+(:func:`~brachycal.calibration.robot.tracker.tracker_evidence_prior`) use it; only the data handed to the
 protocol's fit enter, so a choice made on training data is that data's own.
 """
 

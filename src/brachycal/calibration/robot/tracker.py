@@ -10,7 +10,7 @@ positions (metres) and, 6-D, orientations (radians), each kind with its own esti
 The headline figure is leave-one-out over postures, training second; a richer model is returned
 only if its held-out error beats the smaller one's by more than the paired differences' standard
 error (:func:`identify_from_tracker`). The prior is the stated accuracy, or (``prior="evidence"``)
-the per-joint SDs the postures' own evidence makes most likely (:func:`evidence_prior`), chosen
+the per-joint SDs the postures' own evidence makes most likely (:func:`tracker_evidence_prior`), chosen
 inside each leave-one-out fold from that fold's postures alone. Units: metres, radians; frames as named.
 
 Design: ``docs/design/robot_identification.md`` ("From an external tracker").
@@ -45,7 +45,6 @@ __all__ = [
     "TrackerFit",
     "TrackerIdentification",
     "TrackerResiduals",
-    "evidence_prior",
     "fit_tracker",
     "identify_from_tracker",
     "identify_tracker_file",
@@ -54,6 +53,7 @@ __all__ = [
     "select_parameters",
     "start_frames",
     "tracker_data",
+    "tracker_evidence_prior",
 ]
 
 #: The models, from the smallest: the URDF as it is, joint zeros, every joint-origin component.
@@ -350,7 +350,7 @@ def fit_tracker(
     ``selection``: :func:`select_parameters`' result, reused across folds (default: computed).
     ``accuracy`` ``None``: no prior (plain least squares on the base set). ``estimate_noise``
     false: the levels are held at :data:`START_SIGMA` (exact data, whose levels are rounding).
-    ``prior`` ``"evidence"``: the prior is :func:`evidence_prior` of ``data`` searched from
+    ``prior`` ``"evidence"``: the prior is :func:`tracker_evidence_prior` of ``data`` searched from
     ``accuracy`` (recorded in the fit's ``arm.accuracy``).
 
     Raises:
@@ -362,7 +362,7 @@ def fit_tracker(
         if accuracy is None:
             raise InputError("a prior chosen by the evidence needs a stated accuracy to start from")
         if chosen.size:  # without corrections the prior does not enter
-            accuracy = evidence_prior(data, model, accuracy, selection=chosen).accuracy
+            accuracy = tracker_evidence_prior(data, model, accuracy, selection=chosen).accuracy
     elif prior not in TRACKER_PRIORS:
         raise InputError(f"unknown prior {prior!r} ({', '.join(TRACKER_PRIORS)})")
     residuals = TrackerResiduals(data, *start_frames(data))
@@ -387,7 +387,7 @@ def fit_tracker(
     return TrackerFit(model, T_tb, T_fm, arm, r[: 3 * N].reshape(N, 3), r_o)
 
 
-def evidence_prior(
+def tracker_evidence_prior(
     data: TrackerData,
     model: str,
     start: RobotAccuracy = TRACKER_ACCURACY,
@@ -557,7 +557,7 @@ def identify_from_tracker(
     docstring): each richer model replaces the chosen one only if its held-out mean squared
     position error is lower by more than the paired differences' standard error. ``model``:
     return that one whatever the scores say (it is scored too, after the frames alone).
-    ``prior``: ``"stated"`` (``accuracy``) or ``"evidence"`` (per model, :func:`evidence_prior`
+    ``prior``: ``"stated"`` (``accuracy``) or ``"evidence"`` (per model, :func:`tracker_evidence_prior`
     searched from ``accuracy``: on all postures for the returned fit, on each fold's own postures
     for its held-out error)."""
     if prior not in TRACKER_PRIORS:
