@@ -40,7 +40,6 @@ from brachycal.data.formats.tracker_table import (
     read_tracker_table,
 )
 from brachycal.errors import InputError
-from brachycal.model.description import load_robot
 from brachycal.model.description_file import example_robot_data_share
 from brachycal.model.robot import Robot
 from brachycal.se3 import make_transform
@@ -290,16 +289,23 @@ def test_leave_one_out_chooses_each_fold_s_prior_without_the_held_out_posture(pa
 
 
 @pytest.mark.slow  # an evidence search per fold
-def test_cli_prior_from_the_evidence(tmp_path, capsys):
-    """``--prior evidence`` on the bundled tracker example (a UR10 off its URDF, 6-D marker): the
-    prior written and printed is the one the postures' evidence chose (the rule recorded), and its
+def test_cli_prior_from_the_evidence(panda, tmp_path, capsys):
+    """``--prior evidence`` on a table of a Panda off its URDF (8 postures, 3-D marker): the prior
+    written and printed is the one the postures' evidence chose (the rule recorded), and its
     evidence is at least the stated prior's."""
-    example = ROOT / "examples" / "tracker"
+    data, _ = drawn_arm(panda, 8, seed=3)
+    rows = np.hstack([data.Q[:, :7], data.p])
+    (tmp_path / "table.csv").write_text(
+        ",".join([*ARM, "x", "y", "z"]) + "\n" + "\n".join(",".join(map(repr, r.tolist())) for r in rows) + "\n"
+    )
+    spec = SPEC_HEAD.replace('["a"]', "[" + ", ".join(f'"{j}"' for j in ARM) + "]") + POSITION + 'unit = "m"\n'
+    (tmp_path / "columns.toml").write_text(spec)
     out = tmp_path / "out"
     code = main(
         [
-            "robot", "identify", "tracker", str(example / "table.csv"), "--columns", str(example / "columns.toml"),
-            "--robot", "ur10", "--model", "offsets", "--prior", "evidence", "--out", str(out),
+            "robot", "identify", "tracker", str(tmp_path / "table.csv"), "--columns", str(tmp_path / "columns.toml"),
+            "--urdf", str(panda.source), "--flange", FLANGE, "--model", "offsets", "--prior", "evidence",
+            "--out", str(out),
         ]
     )  # fmt: skip
     assert code == 0
@@ -309,8 +315,6 @@ def test_cli_prior_from_the_evidence(tmp_path, capsys):
     assert document["prior_rule"] == "evidence" and document["chosen"] == "offsets"
     assert document["prior"]["source"] == "chosen by the evidence of the training postures"
     assert document["models"]["offsets"]["prior"] == document["prior"]
-    table = read_tracker_table(example / "table.csv", read_tracker_columns(example / "columns.toml"))
-    data = tracker_data(load_robot("ur10"), table)
     assert document["log_evidence"] >= fit_tracker(data, "offsets").arm.log_evidence - 1e-6
 
 
