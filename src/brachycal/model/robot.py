@@ -3,10 +3,8 @@
 A :class:`Robot` is immutable. Its URDF text is the single source of truth: the Pinocchio model
 is built from it, a calibrated robot is a new :class:`Robot` whose tool joints carry new
 ``<origin>`` values (:meth:`Robot.with_tool_transform`), and :meth:`Robot.write_urdf` writes that
-text back out for ROS/MoveIt. A robot whose moving joints' origins are moved
-(:meth:`Robot.with_joint_origins`, what robot identification evaluates many times) gets its
-Pinocchio model moved directly and its text written on first use: the same text, the same poses
-(to rounding, ~1e-16), without re-reading the URDF each time.
+text back out for ROS/MoveIt (:meth:`Robot.with_joint_origins` moves a copy of the Pinocchio model
+directly and writes the text on first use: identification evaluates many such robots).
 
 A robot carries its rig (:attr:`Robot.rig`, a :class:`~brachycal.model.rig.Rig`): which arm
 holds which tool, the ready stance, the collision pairs, the controller's joint order, the
