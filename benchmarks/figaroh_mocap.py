@@ -8,8 +8,11 @@ Per robot, per model (frames only: the URDF as it is; joint zeros; the joints' b
 the default stated accuracy; the same without a prior, as FIGAROH fits): the marker position's
 leave-one-out error per coordinate (each posture predicted by a fit without it; the headline) and
 the training error, in mm; orientation in degrees for the 6-D UR10; then the model the supported-
-model rule returns and why; the joints model under other stated accuracies (the prior matters:
-the default is not the best for either robot, and which is best differs between them).
+model rule returns and why; the same with the prior chosen by the evidence (``prior="evidence"``: per
+model the SDs the postures make most likely, on all postures for the training figure and inside
+each leave-one-out fold from its own postures for the held-out one); the joints model under other
+stated accuracies (the prior matters: the default is not the best for either robot, and which is
+best differs between them).
 
 - UR10: 23 postures, the flange's 6-D pose (``ur10_columns.toml``).
 - TIAGo: 34 postures, torso lift and 7 arm joints, the first hand marker's 3-D position from a
@@ -100,6 +103,12 @@ def main() -> int:
         result = identify_from_tracker(data)
         for line in result.summary():
             print("  " + line)
+        lap = time.perf_counter()
+        evidence = identify_from_tracker(data, prior="evidence")
+        print("  prior chosen by the evidence (per model; each held-out posture's fold chose its own):")
+        for line in evidence.summary():
+            print("    " + line)
+        print(f"    ({time.perf_counter() - lap:.0f} s)")
         plain = fit_tracker(data, "joints", None)
         e_p, e_o = leave_one_out(data, "joints", None)
         o = (

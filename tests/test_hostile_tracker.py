@@ -69,6 +69,7 @@ CASES = [
     Case("bad-unit-in-spec", RUN, ("position.unit",), setup=_files(unit="cm")),
     Case("unknown-flange", [*RUN[:-4], "--flange", "hand", "--out", "{tmp}/out"], ("hand",), setup=_files()),
     Case("touches-option", [*RUN, "--train", "a"], ("unrecognized", "--train"), setup=_files()),
+    Case("unknown-prior", [*RUN, "--prior", "flat"], ("--prior", "flat"), setup=_files()),
     Case("robot-and-urdf", [*RUN, "--robot", "panda"], ("--robot", "--urdf", "one"), setup=_files()),
     Case(
         "bundled-arm-without-the-table-joints",

@@ -158,6 +158,39 @@ def test_written_files_get_the_usual_permissions(robot, tmp_path):
     assert path.stat().st_mode & 0o777 == 0o644
 
 
+def test_moved_joint_origins_are_the_reread_urdf(robot):
+    """Moving joint origins moves the Pinocchio model directly (no URDF re-read): on both back ends
+    every frame's pose is the one of the robot read back from its text to 1e-12 m, that text is
+    the one rewriting the origins gives, a second move composes on the first, and the robot still
+    carries its rig."""
+    from brachycal.model import urdf_text
+
+    rng = np.random.default_rng(5)
+
+    def moves(names: tuple[str, ...]) -> dict[str, np.ndarray]:
+        return {
+            n: robot.joint_origin(n)
+            @ make_transform(Rotation.from_rotvec(rng.normal(0, 1e-2, 3)).as_matrix(), rng.normal(0, 1e-2, 3))
+            for n in names
+        }
+
+    first, second = moves(robot.joint_names[::3]), moves(robot.joint_names[1::4])
+    moved = robot.with_joint_origins(first).with_joint_origins(second)
+    root = urdf_text.parse(robot.urdf_xml, "test")
+    for name, T in {**first, **second}.items():
+        urdf_text.set_joint_origin(root, name, T, "test")
+    assert moved.urdf_xml == urdf_text.to_text(root)
+    reread = Robot(moved.urdf_xml, base_dir=robot.base_dir)
+    Q = random_configurations(robot, 20, seed=6)
+    frames = robot.frame_names
+    assert np.abs(moved.fk_frames(frames, Q) - reread.fk_frames(frames, Q)).max() < 1e-12
+    assert np.abs(moved.fk_frames_loop(frames, Q) - reread.fk_frames_loop(frames, Q)).max() < 1e-12
+    assert np.abs(moved.fk_frames(frames, Q) - robot.fk_frames(frames, Q)).max() > 1e-3
+    for name, T in {**first, **second}.items():
+        assert np.abs(moved.joint_origin(name) - T).max() < 1e-12
+    assert moved.rig is robot.rig
+
+
 def test_joint_origin_corrections_move_the_tool_on_a_urdf_with_transmissions_first(tmp_path):
     """The UR10 description of FIGAROH's data lists its <transmission> elements (each holding a
     <joint name=...>) before the kinematic joints: a correction must land on the real joint."""

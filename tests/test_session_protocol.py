@@ -22,7 +22,7 @@ def test_cli_prints_held_out_first_and_writes_the_identified_robot(tmp_path, cap
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].startswith("held-out configurations (8-fold, 64 samples)")
     assert lines[1].startswith("training (")
-    assert "combinations identified beyond the stated accuracy" in lines[3]
+    assert "combinations identified beyond the prior" in lines[3]
     document = json.loads((out / "identification.json").read_text())
     assert document["protocol"] == "session"
     assert list(document).index("held_out") < list(document).index("training")

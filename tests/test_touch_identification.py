@@ -326,7 +326,7 @@ def test_cli_prints_held_out_first_and_writes_a_urdf_that_reproduces_them(tmp_pa
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].startswith("held-out places (7)") and lines[8].startswith("training places (1)")
     assert lines[11].startswith("prior per joint origin: 0.3 mm, 0.1 deg (--robot-accuracy-mm 0.3")
-    assert "robot-geometry combinations identified beyond the stated accuracy" in lines[12]
+    assert "robot-geometry combinations identified beyond the prior" in lines[12]
     report = json.loads((tmp_path / "out" / "identification.json").read_text())
     calibrated = Robot.load(tmp_path / "out" / "robot.urdf")
     for name in ("back_left", "mid_right"):

@@ -18,7 +18,7 @@ from conftest import ROOT, reference
 from scipy.spatial.transform import Rotation
 
 from brachycal.calibration.robot.arm_fit import ParameterSelection, _evaluate
-from brachycal.calibration.robot.identification import corrected_robot
+from brachycal.calibration.robot.identification import corrected_robot, prior_sd
 from brachycal.calibration.robot.tracker import (
     TrackerData,
     TrackerResiduals,
@@ -28,6 +28,7 @@ from brachycal.calibration.robot.tracker import (
     select_parameters,
     start_frames,
     tracker_data,
+    tracker_evidence_prior,
 )
 from brachycal.calibration.robot_accuracy import RobotAccuracy
 from brachycal.cli.main import main
@@ -220,6 +221,101 @@ def test_noise_level_matches_the_tracker_noise(panda):
     Q = postures(panda, 40, seed=17)
     levels = [fit_tracker(measured(panda, Q, False, 5e-4, seed=s), "frames").sigma["position"] for s in range(40)]
     assert abs(np.mean(levels) / 5e-4 - 1) < 0.04
+
+
+# --- the prior chosen by the postures' evidence -------------------------------------------------
+
+DRAWN = RobotAccuracy(5e-4, float(np.radians(0.2)))
+
+
+def drawn_arm(panda: Robot, n: int, seed: int) -> tuple[TrackerData, ParameterSelection]:
+    """A Panda whose joints model's base set is drawn from :data:`DRAWN`, seen by a 3-D tracker
+    with 20 µm of noise at ``n`` postures; the selection the draw was made on."""
+    rng = np.random.default_rng(seed)
+    Q = postures(panda, n, seed=seed + 100)
+    selection = select_parameters(measured(panda, Q, False), "joints", DRAWN)
+    drawn = rng.normal(0, 1, 6 * panda.nq) * prior_sd(panda, DRAWN)
+    true = corrected_robot(panda, selection.expand(drawn[selection.index]))
+    return with_robot(measured(true, Q, False, noise_m=2e-5, seed=seed + 200), panda), selection
+
+
+@pytest.mark.slow  # an evidence search: tens of fits
+def test_evidence_recovers_the_prior_the_arm_was_drawn_from(panda):
+    """An arm whose 22 seen joint-origin components are drawn from 0.5 mm / 0.2° per joint, 40
+    postures with 20 µm of tracker noise: the evidence search, started ten times too tight, lands
+    within a factor 2 of the drawn SDs (over six seeds both come out at 0.7–1.5 times the truth:
+    one arm is a few dozen draws), and ``prior="evidence"`` fits with that choice."""
+    data, selection = drawn_arm(panda, 40, seed=1)
+    start = RobotAccuracy(5e-5, float(np.radians(0.02)))
+    chosen = tracker_evidence_prior(data, "joints", start, selection=selection)
+    assert 0.5 < chosen.accuracy.translation_sd_m / DRAWN.translation_sd_m < 2.0
+    assert 0.5 < chosen.accuracy.rotation_sd_rad / DRAWN.rotation_sd_rad < 2.0
+    fit = fit_tracker(data, "joints", start, selection=selection, prior="evidence")
+    assert fit.arm.accuracy == chosen.accuracy
+    assert fit.arm.log_evidence == pytest.approx(chosen.log_evidence, abs=1e-6)
+
+
+@pytest.mark.slow  # an evidence search: tens of fits
+def test_tracker_evidence_is_highest_at_the_chosen_prior(panda):
+    """The chosen prior is the evidence's maximum: each SD three times looser or tighter (the
+    other held) has less evidence."""
+    data, selection = drawn_arm(panda, 30, seed=2)
+    chosen = tracker_evidence_prior(data, "joints", RobotAccuracy(1e-3, float(np.radians(0.1))), selection=selection)
+    a = chosen.accuracy
+    for t, r in ((3.0, 1.0), (1 / 3, 1.0), (1.0, 3.0), (1.0, 1 / 3)):
+        other = RobotAccuracy(a.translation_sd_m * t, a.rotation_sd_rad * r, a.encoder_sd_rad)
+        assert fit_tracker(data, "joints", other, selection=selection).arm.log_evidence < chosen.log_evidence
+
+
+@pytest.mark.slow  # an evidence search per fold
+def test_leave_one_out_chooses_each_fold_s_prior_without_the_held_out_posture(panda):
+    """With ``prior="evidence"`` a posture's held-out error is the prediction of a fit whose prior
+    its fold's postures alone chose: with that posture's measurement moved by 2 cm, its error is
+    (to 1e-12 m) the one of ``fit_tracker(prior="evidence")`` on the other postures, computed
+    without the moved measurement, and that fold's prior is not the stated one."""
+    data, _ = drawn_arm(panda, 8, seed=3)
+    start = RobotAccuracy(1e-3, float(np.radians(0.1)))
+    moved_p = data.p.copy()
+    moved_p[4] += [0.02, 0.0, 0.0]
+    moved = TrackerData(data.robot, data.flange, data.Q, moved_p, None)
+    e_moved, _ = leave_one_out(moved, "offsets", start, prior="evidence")
+    keep = np.arange(8) != 4
+    fold = fit_tracker(
+        data.subset(keep), "offsets", start, selection=select_parameters(moved, "offsets", start), prior="evidence"
+    )
+    assert fold.arm.accuracy is not None and fold.arm.accuracy != start
+    p, _ = fold.predict(data.subset(~keep))
+    assert np.allclose(e_moved[4], p[0] - moved_p[4], atol=1e-12, rtol=0)
+
+
+@pytest.mark.slow  # an evidence search per fold
+def test_cli_prior_from_the_evidence(panda, tmp_path, capsys):
+    """``--prior evidence`` on a table of a Panda off its URDF (8 postures, 3-D marker): the prior
+    written and printed is the one the postures' evidence chose (the rule recorded), and its
+    evidence is at least the stated prior's."""
+    data, _ = drawn_arm(panda, 8, seed=3)
+    rows = np.hstack([data.Q[:, :7], data.p])
+    (tmp_path / "table.csv").write_text(
+        ",".join([*ARM, "x", "y", "z"]) + "\n" + "\n".join(",".join(map(repr, r.tolist())) for r in rows) + "\n"
+    )
+    spec = SPEC_HEAD.replace('["a"]', "[" + ", ".join(f'"{j}"' for j in ARM) + "]") + POSITION + 'unit = "m"\n'
+    (tmp_path / "columns.toml").write_text(spec)
+    out = tmp_path / "out"
+    code = main(
+        [
+            "robot", "identify", "tracker", str(tmp_path / "table.csv"), "--columns", str(tmp_path / "columns.toml"),
+            "--urdf", str(panda.source), "--flange", FLANGE, "--model", "offsets", "--prior", "evidence",
+            "--out", str(out),
+        ]
+    )  # fmt: skip
+    assert code == 0
+    printed = [line for line in capsys.readouterr().out.splitlines() if line.startswith("prior per joint origin")]
+    assert len(printed) == 1 and "chosen by the evidence of the training postures" in printed[0]
+    document = json.loads((out / "identification.json").read_text())
+    assert document["prior_rule"] == "evidence" and document["chosen"] == "offsets"
+    assert document["prior"]["source"] == "chosen by the evidence of the training postures"
+    assert document["models"]["offsets"]["prior"] == document["prior"]
+    assert document["log_evidence"] >= fit_tracker(data, "offsets").arm.log_evidence - 1e-6
 
 
 # --- the reader ------------------------------------------------------------------------------

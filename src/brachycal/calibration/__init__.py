@@ -75,6 +75,7 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
     from brachycal.calibration.phantom.wire import WirePhantom, calibrate_wire, calibrate_wire_files, read_wire_phantom
     from brachycal.calibration.result import Calibration, ImageCalibration, PredictedUncertainty, Provenance
     from brachycal.calibration.robot.arm_fit import ArmFit, ParameterSelection, fit_arm, flange_points, gravity_moments
+    from brachycal.calibration.robot.evidence import EvidenceChoice
     from brachycal.calibration.robot.identification import (
         IdentificationResult,
         corrected_robot,
@@ -101,6 +102,7 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
         identify_from_tracker,
         identify_tracker_file,
         tracker_data,
+        tracker_evidence_prior,
     )
     from brachycal.calibration.robot_accuracy import RobotAccuracy
     from brachycal.calibration.sequential.method import (
@@ -157,6 +159,7 @@ __all__ = [
     "ChainResult",
     "Criterion",
     "ErrorStats",
+    "EvidenceChoice",
     "EvidencePrior",
     "FolderCheck",
     "HoleInImage",
@@ -256,6 +259,7 @@ __all__ = [
     "stepper_pose",
     "touch_scatter",
     "tracker_data",
+    "tracker_evidence_prior",
     "translation_axis",
     "validate_result_document",
     "verify_folder",

@@ -3,7 +3,8 @@
 A :class:`Robot` is immutable. Its URDF text is the single source of truth: the Pinocchio model
 is built from it, a calibrated robot is a new :class:`Robot` whose tool joints carry new
 ``<origin>`` values (:meth:`Robot.with_tool_transform`), and :meth:`Robot.write_urdf` writes that
-text back out for ROS/MoveIt.
+text back out for ROS/MoveIt (:meth:`Robot.with_joint_origins` moves a copy of the Pinocchio model
+directly and writes the text on first use: identification evaluates many such robots).
 
 A robot carries its rig (:attr:`Robot.rig`, a :class:`~brachycal.model.rig.Rig`): which arm
 holds which tool, the ready stance, the collision pairs, the controller's joint order, the
@@ -30,6 +31,7 @@ import copy
 import functools
 import io
 import os
+import xml.etree.ElementTree as ET
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -100,8 +102,14 @@ class Robot:
         #: For :meth:`load`: the SDA10F's rig, fetched on first use of :attr:`rig` (reading the
         #: description costs 0.03 s, which commands that never ask for it should not pay).
         self._sda10f_rig_on_demand = False
-        self._root = urdf_text.parse(urdf_xml, source)
-        self.urdf_xml = urdf_xml
+        self._tree: ET.Element | None = urdf_text.parse(urdf_xml, source)
+        self._text: str | None = urdf_xml
+        #: The text the robot was read from, and the joint origins ``T_parent_joint`` moved since on
+        #: the model directly (:meth:`with_joint_origins`); :attr:`urdf_xml` writes them in on first use.
+        self._read_text = urdf_xml
+        self._moved: dict[str, FloatArray] = {}
+        #: Joint origins read from :attr:`urdf_xml` so far (:meth:`joint_origin`).
+        self._read_origins: dict[str, FloatArray] = {}
         self.base_dir = Path(base_dir)
         self.source = source
         try:
@@ -249,6 +257,25 @@ class Robot:
         out._arms, out._described_as = None, None
         return out
 
+    @property
+    def urdf_xml(self) -> str:
+        """The URDF text (with every joint origin this robot moved)."""
+        if self._text is None:
+            root = urdf_text.parse(self._read_text, self.source)
+            for name, T in self._moved.items():
+                urdf_text.set_joint_origin(root, name, T, self.source)
+            self._text = urdf_text.to_text(root)
+            self._tree = urdf_text.parse(self._text, self.source)
+        return self._text
+
+    @property
+    def _root(self) -> ET.Element:
+        """The parsed :attr:`urdf_xml`."""
+        if self._tree is None:
+            _ = self.urdf_xml
+        assert self._tree is not None  # set by urdf_xml
+        return self._tree
+
     def _like_this(self, urdf_xml: str) -> Robot:
         """A robot of new URDF text with this one's folder, name and rig."""
         out = Robot(urdf_xml, base_dir=self.base_dir, source=self.source, rig=self._rig)
@@ -391,8 +418,17 @@ class Robot:
     def with_joint_origins(self, origins: Mapping[str, ArrayLike]) -> Robot:
         """A new robot (the same rig) whose joints ``name`` have ``<origin>`` ``T_parent_joint`` ``(4, 4)``.
 
-        Used to build a "physical" robot whose geometry differs slightly from the nominal one.
+        Used to build a "physical" robot whose geometry differs slightly from the nominal one, and by
+        robot identification at every evaluation. When every joint named is a revolute, continuous or
+        prismatic one, the Pinocchio model is copied and moved directly (a joint's placement in its
+        parent joint is the fixed joints' chain to its parent link, then its origin: the new placement
+        is the old one times ``T_old⁻¹ T_new``) and the text is written on first use (:attr:`urdf_xml`);
+        otherwise (a fixed joint's origin moves its subtree of frames) the text is re-read.
         """
+        moved = {name: np.asarray(T, dtype=float) for name, T in origins.items()}
+        one_axis = {joint.name for joint in self._coordinates.joints if joint.kind in ONE_AXIS}
+        if moved and all(name in one_axis and T.shape == (4, 4) for name, T in moved.items()):
+            return self._moved_directly(moved)
         root = urdf_text.parse(self.urdf_xml, self.source)
         for name, T in origins.items():
             urdf_text.set_joint_origin(root, name, np.asarray(T, dtype=float), self.source)
@@ -425,9 +461,28 @@ class Robot:
             origins[name] = self.joint_origin(name) @ make_transform(turn, np.zeros(3))
         return self.with_joint_origins(origins)
 
+    def _moved_directly(self, moved: Mapping[str, FloatArray]) -> Robot:
+        """:meth:`with_joint_origins` of one-axis joints, on a copy of the Pinocchio model (no URDF re-read)."""
+        model = pin.Model(self.model)
+        for name, T in moved.items():
+            jid = model.getJointId(name)
+            change = inverse(self.joint_origin(name)) @ T
+            model.jointPlacements[jid] = model.jointPlacements[jid] * pin.SE3(change[:3, :3], change[:3, 3])
+        out = copy.copy(self)  # the coordinates (names, limits, axes) do not depend on the placements
+        out.model = model
+        out._data = model.createData()
+        out._batch = BatchForwardKinematics(model) if self._batch is not None else None
+        out._moved = {**self._moved, **{name: T.copy() for name, T in moved.items()}}
+        out._text, out._tree = None, None  # written on first use; the origins read so far stay good
+        return out
+
     def joint_origin(self, name: str) -> FloatArray:
         """``T_parent_joint (4, 4)``: the ``<origin>`` of joint ``name`` in the URDF."""
-        return urdf_text.joint_origin(self._root, name, self.source)
+        if name in self._moved:
+            return self._moved[name].copy()
+        if name not in self._read_origins:  # read once: identification asks at every evaluation
+            self._read_origins[name] = urdf_text.joint_origin(self._root, name, self.source)
+        return self._read_origins[name].copy()
 
     def write_urdf(self, path: str | os.PathLike[str], *, force: bool = False) -> Path:
         """Write the URDF (with the current tool joints) atomically; mesh paths stay valid.

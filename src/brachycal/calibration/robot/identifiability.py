@@ -1,12 +1,13 @@
-"""Which robot-geometry parameters a session identifies, and why not the others (the base set).
+"""Which robot-geometry parameters the data identify, and why not the others (the base set).
 
-The identification (:mod:`brachycal.calibration.robot.identification`) estimates all ``6 nq``
-joint-origin corrections with the stated accuracy as their prior. This module says what the data
-actually determined: the robot columns of the normalised identification Jacobian, in prior units
-and projected off the span of the tool/image/reference-tip parameters (which are free), have a
-numerical rank (combinations the data see at all: the *structural* base set, as FIGAROH's QR
-reduction finds it) and singular values; those at or above 1 are combinations the data determine
-at least as well as the stated accuracy (*identified*). Per parameter, the posterior over the prior
+Every protocol (the dual-arm session, touches of fixed points, an external tracker) estimates the
+``6 nq`` joint-origin corrections with a prior (the stated accuracy, or one the evidence chose).
+This module says what the data actually determined: the robot columns of the normalised
+identification Jacobian, in prior units and projected off the span of the protocol's own unknowns
+(the session's tool/image/reference-tip parameters, the touched points, the tracker's frames; all
+free), have a numerical rank (combinations the data see at all: the *structural* base set, as
+FIGAROH's QR reduction finds it) and singular values; those at or above 1 are combinations the data
+determine at least as well as the prior (*identified*). Per parameter, the posterior over the prior
 SD says how much the data taught; for those they barely see, a pivoted QR and the projection tell
 why: absorbed by the chain's own parameters, lumped with other joints' corrections, or seen but
 too weakly.
@@ -41,12 +42,12 @@ ABSORBED_FRACTION = 0.05
 
 @dataclass(frozen=True)
 class Identifiability:
-    """Which robot parameters this session's data determine (beyond the stated accuracy).
+    """Which robot parameters the data determine (beyond the prior).
 
     Attributes:
         structural_rank: combinations of the ``6 nq`` corrections that the data see at all, once
-            the tool/image parameters are free (numerical rank of the projected Jacobian).
-        identified: combinations the data determine at least as well as the stated accuracy.
+            the protocol's own unknowns are free (numerical rank of the projected Jacobian).
+        identified: combinations the data determine at least as well as the prior.
         posterior_ratio: ``(nq, 6)`` posterior SD over prior SD per parameter (1: not seen).
         reasons: ``"joint.component"`` → why it is not identifiable, for each parameter whose ratio
             exceeds :data:`NOT_IDENTIFIED_RATIO`.
@@ -61,8 +62,8 @@ class Identifiability:
         """Lines a person can read: the counts, then the unidentified parameters grouped by joint."""
         n = 6 * len(joint_names)
         lines = [
-            f"{self.identified} of {n} robot-geometry combinations identified beyond the stated accuracy "
-            f"({self.structural_rank} seen at all by this session's data)"
+            f"{self.identified} of {n} robot-geometry combinations identified beyond the prior "
+            f"({self.structural_rank} seen at all by these data)"
         ]
         by_joint: dict[str, list[str]] = {}
         for key, why in self.reasons.items():
@@ -110,5 +111,5 @@ def identifiability(
         elif k not in independent:
             reasons[name] = "its effect equals a combination of other joints' corrections (lumped with them)"
         else:
-            reasons[name] = "seen, but less than the stated accuracy: the poses vary this joint too little"
+            reasons[name] = "seen, but less than the prior: the poses vary this joint too little"
     return Identifiability(structural, identified, ratio.reshape(-1, 6), reasons)

@@ -30,15 +30,12 @@ from brachycal.calibration.robot.arm_fit import (
     flange_points,
     gravity_moments,
 )
+from brachycal.calibration.robot.evidence import evidence_search
 from brachycal.calibration.robot.identifiability import COMPONENTS
 from brachycal.calibration.robot.identification import prior_sd
-from brachycal.calibration.robot_accuracy import (
-    MAX_ROBOT_ROTATION_SD_RAD,
-    MAX_ROBOT_TRANSLATION_SD_M,
-    RobotAccuracy,
-)
+from brachycal.calibration.robot_accuracy import RobotAccuracy
 from brachycal.data.formats.touches import read_touch_folder
-from brachycal.errors import DegenerateDataError, InputError
+from brachycal.errors import InputError
 from brachycal.model.robot import Robot
 from brachycal.se3 import FloatArray, skew
 
@@ -333,8 +330,6 @@ def identify_touches(
     )
 
 
-#: The evidence search stops when its steps in the logarithm of each SD are below this (5 %).
-EVIDENCE_LOG_TOLERANCE = 0.05
 #: Start of the compliance terms' prior SD in the evidence search (rad per N·m): a joint
 #: stiffness of ~3e4 N·m/rad, a harmonic drive's with its torque sensor.
 COMPLIANCE_SD_START = 3e-5
@@ -373,60 +368,37 @@ def evidence_prior(
 
     The per-joint translation and rotation SDs of the corrections (``"chain"`` selection) and, with
     compliance terms, their common SD are the hyper-parameters; the touch noise is re-estimated in
-    each fit (its own evidence maximum). Nelder–Mead on their logarithms from ``start`` (and
-    ``compliance_sd``), to :data:`EVIDENCE_LOG_TOLERANCE`, within :class:`RobotAccuracy`'s bounds.
-    Only the touches given enter: the choice is the training data's own.
+    each fit (its own evidence maximum). :func:`~brachycal.calibration.robot.evidence.evidence_search`
+    from ``start`` (and ``compliance_sd``). Only the touches given enter: the choice is the
+    training data's own.
 
     Raises:
         InputError, DegenerateDataError: as :func:`identify_touches` at the start.
     """
-    from scipy.optimize import minimize  # lazy: start-up (scipy.optimize)
-
     terms = tuple(compliant)
-    fits = 0
 
-    def hyper(z: FloatArray) -> tuple[RobotAccuracy, float]:
-        accuracy = RobotAccuracy(
-            float(np.exp(z[0])),
-            float(np.exp(z[1])),
-            start.encoder_sd_rad,
-            "chosen by the evidence of the training touches",
-        )
-        return accuracy, float(np.exp(z[2])) if terms else np.inf
+    def log_evidence(accuracy: RobotAccuracy, extra: tuple[float, ...]) -> float:
+        return identify_touches(
+            nominal,
+            places,
+            flange,
+            accuracy,
+            tip=tip,
+            selection="chain",
+            touch_sd_m=touch_sd_m,
+            distance_sd_m=distance_sd_m,
+            compliant=terms,
+            compliance_sd=extra[0] if terms else np.inf,
+        ).fit.log_evidence
 
-    def negative(z: FloatArray) -> float:
-        nonlocal fits
-        if z[0] > np.log(MAX_ROBOT_TRANSLATION_SD_M) or z[1] > np.log(MAX_ROBOT_ROTATION_SD_RAD):
-            return np.inf
-        accuracy, sd = hyper(z)
-        fits += 1
-        try:
-            result = identify_touches(
-                nominal,
-                places,
-                flange,
-                accuracy,
-                tip=tip,
-                selection="chain",
-                touch_sd_m=touch_sd_m,
-                distance_sd_m=distance_sd_m,
-                compliant=terms,
-                compliance_sd=sd,
-            )
-        except DegenerateDataError:
-            return np.inf
-        return -result.fit.log_evidence
-
-    z0 = np.log([start.translation_sd_m, start.rotation_sd_rad, *([compliance_sd] if terms else [])])
-    if not np.all(np.isfinite(z0)):
-        raise InputError("the evidence search starts from positive, finite prior SDs")
-    if not np.isfinite(negative(z0)):
-        raise DegenerateDataError("robot identification: the touches do not determine the unknowns at the start")
-    found = minimize(
-        negative, z0, method="Nelder-Mead", options={"xatol": EVIDENCE_LOG_TOLERANCE, "fatol": 1e-3, "maxfev": 400}
+    found = evidence_search(
+        log_evidence,
+        start,
+        (compliance_sd,) if terms else (),
+        source="chosen by the evidence of the training touches",
+        data="the touches",
     )
-    accuracy, sd = hyper(found.x)
-    return EvidencePrior(accuracy, sd, -float(found.fun), fits)
+    return EvidencePrior(found.accuracy, found.extra[0] if terms else np.inf, found.log_evidence, found.evaluations)
 
 
 @dataclass(frozen=True)

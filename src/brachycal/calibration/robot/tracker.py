@@ -9,7 +9,9 @@ positions (metres) and, 6-D, orientations (radians), each kind with its own esti
 
 The headline figure is leave-one-out over postures, training second; a richer model is returned
 only if its held-out error beats the smaller one's by more than the paired differences' standard
-error (:func:`identify_from_tracker`). Units: metres, radians; frames as named.
+error (:func:`identify_from_tracker`). The prior is the stated accuracy, or (``prior="evidence"``)
+the per-joint SDs the postures' own evidence makes most likely (:func:`tracker_evidence_prior`), chosen
+inside each leave-one-out fold from that fold's postures alone. Units: metres, radians; frames as named.
 
 Design: ``docs/design/robot_identification.md`` ("From an external tracker").
 """
@@ -24,6 +26,7 @@ from scipy.spatial.transform import Rotation
 
 from brachycal.calibration.chain.robot_terms import joint_twists, motion_rows, point_motion
 from brachycal.calibration.robot.arm_fit import ArmFit, Evaluation, ParameterSelection, fit_arm
+from brachycal.calibration.robot.evidence import EvidenceChoice, evidence_search
 from brachycal.calibration.robot.identifiability import COMPONENTS
 from brachycal.calibration.robot.identification import corrected_robot, prior_sd
 from brachycal.calibration.robot_accuracy import RobotAccuracy
@@ -36,6 +39,7 @@ from brachycal.se3 import FloatArray, left_jacobian, make_transform, rotation, s
 __all__ = [
     "TRACKER_ACCURACY",
     "TRACKER_MODELS",
+    "TRACKER_PRIORS",
     "ModelScore",
     "TrackerData",
     "TrackerFit",
@@ -49,6 +53,7 @@ __all__ = [
     "select_parameters",
     "start_frames",
     "tracker_data",
+    "tracker_evidence_prior",
 ]
 
 #: The models, from the smallest: the URDF as it is, joint zeros, every joint-origin component.
@@ -63,6 +68,8 @@ TRACKER_ACCURACY = RobotAccuracy(
     rotation_sd_rad=float(np.radians(0.1)),
     source="tracker default: an industrial arm, 1 mm / 0.1 deg per joint origin",
 )
+#: How the corrections' prior is set: the stated accuracy, or chosen by the postures' evidence.
+TRACKER_PRIORS = ("stated", "evidence")
 #: Rounds of the starting frames' alternation (registration, marker) at most.
 START_ROUNDS = 50
 #: Joint readings beyond a limit by at most this are accepted (real encoders read a little past
@@ -335,6 +342,7 @@ def fit_tracker(
     *,
     selection: ParameterSelection | None = None,
     estimate_noise: bool = True,
+    prior: str = "stated",
 ) -> TrackerFit:
     """Fit ``model`` (:data:`TRACKER_MODELS`) to ``data`` (module docstring) with
     :func:`~brachycal.calibration.robot.arm_fit.fit_arm`.
@@ -342,17 +350,27 @@ def fit_tracker(
     ``selection``: :func:`select_parameters`' result, reused across folds (default: computed).
     ``accuracy`` ``None``: no prior (plain least squares on the base set). ``estimate_noise``
     false: the levels are held at :data:`START_SIGMA` (exact data, whose levels are rounding).
+    ``prior`` ``"evidence"``: the prior is :func:`tracker_evidence_prior` of ``data`` searched from
+    ``accuracy`` (recorded in the fit's ``arm.accuracy``).
 
     Raises:
         DegenerateDataError: too few postures for the frames and noise levels.
+        InputError: an unknown ``prior``, or ``"evidence"`` without an accuracy to start from.
     """
+    chosen = selection if selection is not None else select_parameters(data, model, accuracy)
+    if prior == "evidence":
+        if accuracy is None:
+            raise InputError("a prior chosen by the evidence needs a stated accuracy to start from")
+        if chosen.size:  # without corrections the prior does not enter
+            accuracy = tracker_evidence_prior(data, model, accuracy, selection=chosen).accuracy
+    elif prior not in TRACKER_PRIORS:
+        raise InputError(f"unknown prior {prior!r} ({', '.join(TRACKER_PRIORS)})")
     residuals = TrackerResiduals(data, *start_frames(data))
     n_rows = len(data.Q) * len(residuals.groups) * 3
     if n_rows <= residuals.ny:
         raise DegenerateDataError(
             f"tracker fit: {len(data.Q)} postures give {n_rows} measurements for {residuals.ny} frame unknowns"
         )
-    chosen = selection if selection is not None else select_parameters(data, model, accuracy)
     arm = fit_arm(
         data.robot,
         residuals,
@@ -369,21 +387,54 @@ def fit_tracker(
     return TrackerFit(model, T_tb, T_fm, arm, r[: 3 * N].reshape(N, 3), r_o)
 
 
+def tracker_evidence_prior(
+    data: TrackerData,
+    model: str,
+    start: RobotAccuracy = TRACKER_ACCURACY,
+    *,
+    selection: ParameterSelection | None = None,
+) -> EvidenceChoice:
+    """The per-joint translation and rotation SDs of the corrections that maximise the evidence of
+    ``data``'s postures under ``model`` (type-II maximum likelihood;
+    :func:`~brachycal.calibration.robot.evidence.evidence_search` from ``start``, the noise levels
+    re-estimated in each fit, the free corrections ``selection``: default :func:`select_parameters`
+    at ``start``). A model without corrections (``frames``) has nothing to choose: ``start`` is
+    returned. Only ``data`` enter: a fold's choice is its training postures' own.
+
+    Raises:
+        DegenerateDataError: the postures do not determine the unknowns at ``start``.
+    """
+    chosen = selection if selection is not None else select_parameters(data, model, start)
+
+    def log_evidence(accuracy: RobotAccuracy, _: tuple[float, ...]) -> float:
+        return fit_tracker(data, model, accuracy, selection=chosen).arm.log_evidence
+
+    if not chosen.size:
+        return EvidenceChoice(start, (), log_evidence(start, ()), 1)
+    return evidence_search(
+        log_evidence, start, source="chosen by the evidence of the training postures", data="the postures"
+    )
+
+
 def leave_one_out(
     data: TrackerData,
     model: str,
     accuracy: RobotAccuracy | None = TRACKER_ACCURACY,
+    *,
+    prior: str = "stated",
 ) -> tuple[FloatArray, FloatArray | None]:
     """``(N, 3)`` position errors (metres) and, 6-D, ``(N, 3)`` orientation errors (radians) of
     each posture predicted by a fit of ``model`` made without it (the parameter selection is
-    made once on all postures: it is structural, not a fit to the values)."""
+    made once on all postures: it is structural, not a fit to the values). ``prior``
+    ``"evidence"``: each fold's prior is chosen by that fold's own postures (:func:`fit_tracker`),
+    never by the posture it predicts."""
     selection = select_parameters(data, model, accuracy)
     N = len(data.Q)
     e_p = np.zeros((N, 3))
     e_o = np.zeros((N, 3)) if data.six_d else None
     for i in range(N):
         keep = np.arange(N) != i
-        fit = fit_tracker(data.subset(keep), model, accuracy, selection=selection)
+        fit = fit_tracker(data.subset(keep), model, accuracy, selection=selection, prior=prior)
         held = data.subset(~keep)
         p, R = fit.predict(held)
         e_p[i] = p[0] - held.p[0]
@@ -398,7 +449,8 @@ class ModelScore:
 
     ``vs_chosen``: the paired comparison with the model chosen before it (mean difference of the
     held-out postures' squared position errors per coordinate, mm², and its standard error);
-    ``None`` for the first model."""
+    ``None`` for the first model. ``prior``: the prior of its fit on all postures (with
+    ``prior="evidence"``, each leave-one-out fold chose its own)."""
 
     model: str
     parameters: int
@@ -408,6 +460,7 @@ class ModelScore:
     training_orientation_deg: float | None
     loo_errors_m: FloatArray = field(repr=False)
     vs_chosen: tuple[float, float] | None = None
+    prior: RobotAccuracy | None = None
 
 
 @dataclass(frozen=True)
@@ -420,6 +473,7 @@ class TrackerIdentification:
     fit: TrackerFit
     data: TrackerData
     accuracy: RobotAccuracy | None
+    prior: str = "stated"
 
     def as_json(self) -> dict[str, object]:
         """The figures, the choice, the frames and the chosen model's corrections (mm, deg, SI matrices)."""
@@ -445,6 +499,7 @@ class TrackerIdentification:
                     "loo_orientation_deg": s.loo_orientation_deg,
                     "training_orientation_deg": s.training_orientation_deg,
                     "loo_change_vs_previous_choice_mm2": None if s.vs_chosen is None else list(s.vs_chosen),
+                    "prior": None if s.prior is None else s.prior.as_json(),
                 }
                 for s in self.scores
             },
@@ -456,7 +511,9 @@ class TrackerIdentification:
             "estimated": fit.parameters,
             "parameterisation": "per joint origin: T_parent_joint <- T_parent_joint @ T(exp(w), v); metres, radians",
             "corrections": corrections,
-            "prior": None if self.accuracy is None else self.accuracy.as_json(),
+            "prior": None if fit.arm.accuracy is None else fit.arm.accuracy.as_json(),
+            "prior_rule": self.prior,
+            "log_evidence": fit.arm.log_evidence,
         }
 
     def summary(self) -> list[str]:
@@ -467,9 +524,14 @@ class TrackerIdentification:
                 if s.loo_orientation_deg is not None
                 else ""
             )
+            p = (
+                f"; prior {s.prior.translation_sd_m * 1e3:.3g} mm / {np.degrees(s.prior.rotation_sd_rad):.3g} deg"
+                if self.prior == "evidence" and s.prior is not None and s.parameters > (12 if self.data.six_d else 9)
+                else ""
+            )
             lines.append(
                 f"{s.model:8s} {s.parameters:3d} params: position {s.loo_position_mm:.3f} mm LOO / "
-                f"{s.training_position_mm:.3f} mm training per coordinate{o}"
+                f"{s.training_position_mm:.3f} mm training per coordinate{o}{p}"
             )
         lines.append(f"chosen: {self.chosen} ({self.reason})")
         return lines
@@ -489,11 +551,17 @@ def identify_from_tracker(
     models: tuple[str, ...] = TRACKER_MODELS,
     *,
     model: str | None = None,
+    prior: str = "stated",
 ) -> TrackerIdentification:
     """Score ``models`` (smallest first) by leave-one-out and return the supported one (module
     docstring): each richer model replaces the chosen one only if its held-out mean squared
     position error is lower by more than the paired differences' standard error. ``model``:
-    return that one whatever the scores say (it is scored too, after the frames alone)."""
+    return that one whatever the scores say (it is scored too, after the frames alone).
+    ``prior``: ``"stated"`` (``accuracy``) or ``"evidence"`` (per model, :func:`tracker_evidence_prior`
+    searched from ``accuracy``: on all postures for the returned fit, on each fold's own postures
+    for its held-out error)."""
+    if prior not in TRACKER_PRIORS:
+        raise InputError(f"unknown prior {prior!r} ({', '.join(TRACKER_PRIORS)})")
     forced = model
     if forced is not None:
         if forced not in TRACKER_MODELS:
@@ -504,8 +572,8 @@ def identify_from_tracker(
     chosen, chosen_sq = "", np.zeros(0)
     reasons: list[str] = []
     for name in models:
-        fit = fit_tracker(data, name, accuracy)
-        e_p, e_o = leave_one_out(data, name, accuracy)
+        fit = fit_tracker(data, name, accuracy, prior=prior)
+        e_p, e_o = leave_one_out(data, name, accuracy, prior=prior)
         fits[name] = fit
         sq = np.sum(e_p**2, axis=1) / 3 * 1e6  # mm² per coordinate, per held-out posture
         versus = None
@@ -534,12 +602,13 @@ def identify_from_tracker(
                 _deg(fit.orientation_residuals),
                 e_p,
                 versus,
+                fit.arm.accuracy,
             )
         )
     if forced is not None and forced != chosen:
         reasons.append(f"{forced} returned as asked")
         chosen = forced
-    return TrackerIdentification(tuple(scores), chosen, "; ".join(reasons), fits[chosen], data, accuracy)
+    return TrackerIdentification(tuple(scores), chosen, "; ".join(reasons), fits[chosen], data, accuracy, prior)
 
 
 def identify_tracker_file(
@@ -550,8 +619,9 @@ def identify_tracker_file(
     *,
     flange: str | None = None,
     model: str | None = None,
+    prior: str = "stated",
 ) -> TrackerIdentification:
     """:func:`identify_from_tracker` of a tracker table file read with its column spec file
     (:func:`~brachycal.data.formats.tracker_table.read_tracker_table`)."""
     data = tracker_data(robot, read_tracker_table(table, read_tracker_columns(columns)), flange)
-    return identify_from_tracker(data, accuracy, model=model)
+    return identify_from_tracker(data, accuracy, model=model, prior=prior)

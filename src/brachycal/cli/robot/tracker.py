@@ -23,9 +23,12 @@ place on the flange are unknown and fitted. Three models are scored by leave-one
 joints (every joint-origin component the data can see). A richer model is kept only if it predicts
 held-out postures better by more than its standard error (--model forces one). Writes
 DIR/robot.urdf (the chosen model's joints) and DIR/identification.json (figures, frames,
-corrections). Default prior: 1 mm / 0.1 deg per joint origin. Printed: per model the held-out
-(leave-one-out) error first, the training error second; then the choice and which combinations of
-corrections the postures determine.
+corrections). Default prior: 1 mm / 0.1 deg per joint origin (--robot-accuracy-mm,
+--robot-accuracy-deg); --prior evidence instead chooses, per model, the SDs the postures' own
+evidence makes most likely, searched from the stated ones: on all postures for the written fit and,
+for the held-out figures, inside each leave-one-out fold from its own postures (tens of fits per
+fold). Printed: per model the held-out (leave-one-out) error first, the training error second;
+then the choice and which combinations of corrections the postures determine.
 
 The robot: --robot NAME|FILE (a bundled arm: panda, ur5, ur10; a brachycal-robot/1 description;
 a URDF file) or --urdf FILE.
@@ -39,7 +42,7 @@ example (FIGAROH's UR10, 6-D poses):
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The tracker protocol's own options (the robot, --out and --force: :mod:`brachycal.cli.robot.identify`)."""
     # lazy: start-up (the command's run only)
-    from brachycal.calibration.robot.tracker import TRACKER_ACCURACY, TRACKER_MODELS
+    from brachycal.calibration.robot.tracker import TRACKER_ACCURACY, TRACKER_MODELS, TRACKER_PRIORS
     from brachycal.cli.common import add_robot_accuracy_options  # lazy: start-up (the command's run only)
 
     parser.add_argument("table", metavar="TABLE", help="the tracker table (CSV, one row per posture)")
@@ -52,6 +55,14 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         choices=("auto", *TRACKER_MODELS),
         default="auto",
         help="the model to return (default auto: the richest the held-out postures support)",
+    )
+    parser.add_argument(
+        "--prior",
+        choices=TRACKER_PRIORS,
+        default="stated",
+        help="stated: the stated accuracy is the prior; evidence: per model, the prior's SDs the postures "
+        "make most likely, searched from the stated accuracy (each leave-one-out fold chooses its own "
+        "from its postures; tens of fits per fold)",
     )
     add_robot_accuracy_options(parser, "the prior of the corrections", zero=False, default=TRACKER_ACCURACY)
 
@@ -91,6 +102,7 @@ def run(args: argparse.Namespace) -> int:
             accuracy,
             flange=args.flange,
             model=None if args.model == "auto" else args.model,
+            prior=args.prior,
         )
         result.fit.robot(nominal).write_urdf(urdf_path, force=True)
         write_json(json_path, result.as_json(), force=True)
@@ -116,4 +128,10 @@ def print_report(result: TrackerIdentification) -> None:
     if "orientation" in sigma:
         noise += f", {float(sigma['orientation']) * 180 / 3.141592653589793:.3f} deg"
     print(f"{noise}; {len(result.fit.parameters)} joint corrections estimated")
+    accuracy = result.fit.arm.accuracy
+    if accuracy is not None and result.fit.parameters:
+        print(
+            f"prior per joint origin: {accuracy.translation_sd_m * 1e3:.3g} mm, "
+            f"{float(accuracy.rotation_sd_rad) * 180 / 3.141592653589793:.3g} deg ({accuracy.source or 'as stated'})"
+        )
     print_identifiability(result.fit.arm.identifiability, result.fit.arm.joint_names)
