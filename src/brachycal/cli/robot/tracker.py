@@ -70,25 +70,16 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path  # lazy: start-up (the command's run only)
 
-    import numpy as np  # lazy: start-up (the command's run only)
-
     # lazy: start-up (the command's run only)
     from brachycal.calibration.robot.tracker import TRACKER_ACCURACY, identify_tracker_file
-    from brachycal.calibration.robot_accuracy import RobotAccuracy  # lazy: start-up (the command's run only)
-    from brachycal.cli.common import command_inputs, load_robot  # lazy: start-up (the command's run only)
+    from brachycal.cli.common import (  # lazy: start-up (the command's run only)
+        command_inputs,
+        load_robot,
+        robot_accuracy,
+    )
     from brachycal.io import OutputSet, write_json  # lazy: start-up (the command's run only)
 
-    accuracy = TRACKER_ACCURACY
-    if args.robot_accuracy_mm is not None or args.robot_accuracy_deg is not None:
-        mm = args.robot_accuracy_mm if args.robot_accuracy_mm is not None else TRACKER_ACCURACY.translation_sd_m * 1e3
-        deg = (
-            args.robot_accuracy_deg
-            if args.robot_accuracy_deg is not None
-            else float(np.degrees(TRACKER_ACCURACY.rotation_sd_rad))
-        )
-        accuracy = RobotAccuracy(
-            mm * 1e-3, float(np.radians(deg)), source=f"--robot-accuracy-mm {mm:g} --robot-accuracy-deg {deg:g}"
-        )
+    accuracy = robot_accuracy(args, TRACKER_ACCURACY)
     from brachycal.cli.robot.report import claim_outputs  # lazy: start-up (the command's run only)
 
     out = Path(args.out)
