@@ -65,6 +65,7 @@ PIV = "tests/test_pivot.py::"
 TEMP = "tests/test_temporal.py::"
 ROBOT = "tests/test_robot_identification.py::"
 CHAIN = "tests/test_chain.py::"
+ARM = "tests/test_arm_fit_noise.py::"
 
 MUTANTS: tuple[Mutant, ...] = (
     # --- tool tips (eqs. 4-6) ---------------------------------------------------------------------
@@ -295,15 +296,23 @@ MUTANTS: tuple[Mutant, ...] = (
     # --- robot identification ---------------------------------------------------------------------
     Mutant(
         "identification-leverages",
-        "calibration/robot/identification.py",
-        "return noise_levels(r, J, data.group_rows(int(self.keep.sum())), sigma, robust=False, h=h)",
-        "return noise_levels(r, J, data.group_rows(int(self.keep.sum())), sigma, robust=False)",
+        "calibration/robot/arm_fit.py",
+        'h = np.einsum("ij,jk,ik->i", J, _inverse(A), J)',
+        'h = np.einsum("ij,jk,ik->i", J, np.linalg.pinv(J.T @ J), J)',
         (ROBOT + "test_identified_noise_levels_count_the_priors_share_of_the_leverage",),
         "the MAP's noise levels with least-squares leverages (the prior's share ignored)",
     ),
     Mutant(
+        "arm-fit-noise-pooling",
+        "calibration/robot/arm_fit.py",
+        "if rules.ruled[g] and dof[g] < MIN_NOISE_DOF:",
+        "if False:",
+        (ARM + "test_a_group_with_too_few_degrees_of_freedom_takes_its_partners_level",),
+        "a group with a noise rule estimating its level from too few degrees of freedom of its own",
+    ),
+    Mutant(
         "identification-prior-sd",
-        "calibration/robot/identification.py",
+        "calibration/robot/arm_fit.py",
         "return np.sqrt(np.diag(accuracy.covariance(robot)))",
         "return np.diag(accuracy.covariance(robot))",
         (ROBOT + "test_stated_uncertainty_includes_the_identified_robot",),

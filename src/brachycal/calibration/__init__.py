@@ -74,11 +74,17 @@ if TYPE_CHECKING:  # imported on first use: an option's choices (METHODS) need n
     )
     from brachycal.calibration.phantom.wire import WirePhantom, calibrate_wire, calibrate_wire_files, read_wire_phantom
     from brachycal.calibration.result import Calibration, ImageCalibration, PredictedUncertainty, Provenance
-    from brachycal.calibration.robot.arm_fit import ArmFit, ParameterSelection, fit_arm, flange_points, gravity_moments
+    from brachycal.calibration.robot.arm_fit import (
+        ArmFit,
+        ParameterSelection,
+        corrected_robot,
+        fit_arm,
+        flange_points,
+        gravity_moments,
+    )
     from brachycal.calibration.robot.evidence import EvidenceChoice
     from brachycal.calibration.robot.identification import (
         IdentificationResult,
-        corrected_robot,
         cross_validate_identification,
         identify_robot,
     )

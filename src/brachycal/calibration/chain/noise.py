@@ -133,21 +133,38 @@ def noise_levels(
             scale = 1.4826 * float(np.median(np.abs(raw))) * np.sqrt(raw.size / dof)
         else:
             scale = float(np.sqrt(np.sum(raw**2) / dof))
-        if scale < RESOLUTION_M:
-            note = f"below {RESOLUTION_M * 1e3:.3f} mm (resolution)"
-            out[g] = NoiseLevel(RESOLUTION_M, dof, "below resolution", note)
-        else:
-            out[g] = NoiseLevel(scale, dof, "residuals", f"{scale * 1e3:.3f} mm ({dof:.0f} residual dof)")
+        out[g] = measured_level(scale, dof)
     for g in GROUPS:
         if g in out:
             continue
         dof = float(normalised[rows[g]].size - h[rows[g]].sum())
-        if g == "axes" and "touch" in out:
-            level, why = out["touch"].sd_m, "the touches' level"
-        else:
-            level, why = INITIAL_SIGMA[g], "the prior level"
-        out[g] = NoiseLevel(level, dof, "assumed", f"{level * 1e3:.3f} mm assumed ({why}: {dof:.0f} residual dof)")
+        out[g] = assumed_level(g, out, dof)
     return out
+
+
+def measured_level(scale: float, dof: float) -> NoiseLevel:
+    """A group's level estimated from its residuals, ``scale`` (metres) on ``dof`` residual degrees
+    of freedom (at least :data:`MIN_NOISE_DOF`): at :data:`RESOLUTION_M` when at or below it."""
+    if scale <= RESOLUTION_M:
+        return NoiseLevel(RESOLUTION_M, dof, "below resolution", f"below {RESOLUTION_M * 1e3:.3f} mm (resolution)")
+    return NoiseLevel(scale, dof, "residuals", f"{scale * 1e3:.3f} mm ({dof:.0f} residual dof)")
+
+
+#: The group whose level a group with too few residual degrees of freedom takes, if that one has
+#: its own: the axes moves are measured as the touches are (the same arms, the same tips).
+POOLED_WITH = {"axes": "touch"}
+
+
+def assumed_level(group: str, measured: dict[str, NoiseLevel], dof: float) -> NoiseLevel:
+    """The level of ``group``, which has too few residual degrees of freedom (``dof``) for its own:
+    that of the group it is pooled with (:data:`POOLED_WITH`) when ``measured`` (the groups with
+    their own) has it, else :data:`INITIAL_SIGMA`'s."""
+    partner = POOLED_WITH.get(group)
+    if partner is not None and partner in measured:
+        level, why = measured[partner].sd_m, "the touches' level"
+    else:
+        level, why = INITIAL_SIGMA[group], "the prior level"
+    return NoiseLevel(level, dof, "assumed", f"{level * 1e3:.3f} mm assumed ({why}: {dof:.0f} residual dof)")
 
 
 def noise_share(

@@ -12,8 +12,10 @@ module does the rest, the same for every protocol:
 * :func:`flange_points`: a flange-fixed point's world position and its Jacobian (analytic, from
   :func:`joint_twists`).
 * :func:`fit_arm`: the MAP fit ``min ‖r/σ‖² + ‖c/s‖²`` (``s`` the stated accuracy) by
-  Levenberg–Marquardt, the free groups' noise levels re-estimated between rounds, its posterior
-  covariance and the identifiability (:func:`identifiability`) of all ``6 nq`` corrections.
+  Levenberg–Marquardt, the free groups' noise levels re-estimated between rounds (a protocol may
+  declare a :class:`NoiseRule` per group: too few degrees of freedom of its own, and it takes
+  another group's level), its posterior covariance and the identifiability
+  (:func:`identifiability`) of all ``6 nq`` corrections.
 * :func:`gravity_moments`, :func:`deflection_columns`: joint compliance under gravity (each
   joint's frame turning by ``k · m`` under its gravity moment ``m``), fitted as protocol unknowns.
 
@@ -25,19 +27,19 @@ Design: ``docs/design/robot_identification.md``.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from typing import Protocol
+from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 import scipy.linalg
 
+from brachycal.calibration.chain.noise import MIN_NOISE_DOF
 from brachycal.calibration.chain.robot_terms import joint_twists, motion_rows, point_motion
 from brachycal.calibration.robot.identifiability import COMPONENTS, Identifiability, identifiability
-from brachycal.calibration.robot.identification import corrected_robot, prior_sd
 from brachycal.calibration.robot_accuracy import RobotAccuracy
 from brachycal.errors import DegenerateDataError, InputError
 from brachycal.model.robot import Robot
-from brachycal.se3 import FloatArray, left_jacobian, rotation
+from brachycal.se3 import FloatArray, left_jacobian, make_transform, rotation
 
 #: Base set: a correction is kept when its column, prior-scaled and projected off the protocol's
 #: unknowns, adds at least this fraction of the largest pivot (pivoted QR). Exactly absorbed
@@ -52,6 +54,29 @@ COST_TOLERANCE = 1e-12
 ITERATIONS = 50
 #: Noise rounds: each re-estimates the free groups' levels from the previous round's residuals.
 ROUNDS = 4
+
+
+def corrected_robot(nominal: Robot, corrections: FloatArray) -> Robot:
+    """``nominal`` with joint ``j``'s origin moved by ``corrections[j] = (v, ω)`` (metres, radians).
+
+    ``T_parent_joint ← T_parent_joint @ T(exp(ω), v)`` for each one-axis joint, in
+    ``nominal.joint_names`` order; ``corrections`` is ``(nq, 6)``. Tool frames are untouched.
+    """
+    corrections = np.asarray(corrections, dtype=float)
+    if corrections.shape != (nominal.nq, 6) or not np.all(np.isfinite(corrections)):
+        raise InputError(f"robot corrections must be finite with shape ({nominal.nq}, 6), got {corrections.shape}")
+    origins = {
+        name: nominal.joint_origin(name) @ make_transform(rotation(c[3:]), c[:3])
+        for name, c in zip(nominal.joint_names, corrections, strict=True)
+        if np.any(c != 0.0)
+    }
+    return nominal.with_joint_origins(origins) if origins else nominal
+
+
+def prior_sd(robot: Robot, accuracy: RobotAccuracy) -> FloatArray:
+    """``(6 nq,)`` prior SD of each correction: the stated translation and rotation SDs; the rotation
+    about a joint's axis also carries its zero offset (variance doubled, as the consider covariance)."""
+    return np.sqrt(np.diag(accuracy.covariance(robot)))
 
 
 @dataclass(frozen=True)
@@ -164,7 +189,9 @@ class Evaluation:
 class ResidualModel(Protocol):
     """A protocol's residuals: ``groups`` names the noise groups; ``evaluate`` gives the
     residuals on ``robot`` (the corrected robot) at the protocol's unknowns ``y``; ``y_scale``
-    the size of a step in each unknown worth noticing (Gauss–Newton's stopping test)."""
+    the size of a step in each unknown worth noticing (Gauss–Newton's stopping test).
+
+    A protocol may also state how some groups' levels are estimated (:class:`DeclaresNoiseRules`)."""
 
     @property
     def groups(self) -> tuple[str, ...]: ...
@@ -172,6 +199,40 @@ class ResidualModel(Protocol):
     def evaluate(self, robot: Robot, y: FloatArray) -> Evaluation: ...
 
     def y_scale(self) -> FloatArray: ...
+
+
+@dataclass(frozen=True)
+class NoiseRule:
+    """How :func:`fit_arm` re-estimates one group's noise level between rounds, beyond its default
+    (the group's residual sum of squares over its residual degrees of freedom ``ν``, its rows minus
+    their leverages in the regularised problem).
+
+    With a rule, a group whose own ``ν`` is below :data:`~brachycal.calibration.chain.MIN_NOISE_DOF`
+    (its level's relative SD, ``1/√(2ν)``, above 25 %) does not estimate its own level: it takes the
+    level of the group ``pooled_with`` (that group's estimate from its own rows: the two measure
+    alike and that one has the rows), or ``assumed`` when there is no such group or that group has
+    too few degrees of freedom too. A level estimated below ``floor`` (the measurement's
+    resolution, the group's unit) is taken at ``floor``.
+
+    Attributes:
+        pooled_with: the group whose level this one takes when its own degrees of freedom are too few.
+        floor: the lowest level the group is given (its unit; 0: none).
+        assumed: the level it takes when neither it nor ``pooled_with`` has enough degrees of
+            freedom (its unit; ``None``: the level it started with).
+    """
+
+    pooled_with: str | None = None
+    floor: float = 0.0
+    assumed: float | None = None
+
+
+@runtime_checkable
+class DeclaresNoiseRules(Protocol):
+    """A :class:`ResidualModel` that states a :class:`NoiseRule` for some of its groups (by name;
+    the others follow the default rule)."""
+
+    @property
+    def noise_rules(self) -> Mapping[str, NoiseRule]: ...
 
 
 @dataclass(frozen=True)
@@ -190,6 +251,9 @@ class ArmFit:
         accuracy: the stated accuracy used as the prior (``None``: no prior).
         residuals: the protocol's residuals at the estimate.
         iterations: Gauss–Newton steps taken in all.
+        noise_dof: each estimated group's residual degrees of freedom in the last noise round (its
+            rows minus their leverages; below :data:`~brachycal.calibration.chain.MIN_NOISE_DOF`, a
+            group with a :class:`NoiseRule` took another group's level or kept its own).
         log_evidence: the data's log marginal likelihood given the noise levels and priors
             (Laplace's approximation at the estimate; :func:`log_evidence`); comparable between
             fits of the same data with the same unknowns free of a prior.
@@ -206,6 +270,7 @@ class ArmFit:
     residuals: Evaluation
     iterations: int
     log_evidence: float = float("nan")
+    noise_dof: dict[str, float] = field(default_factory=dict)
 
     def robot(self, nominal: Robot) -> Robot:
         """The corrected robot (``nominal``: the robot the fit started from)."""
@@ -248,20 +313,24 @@ def fit_arm(
         accuracy: the stated accuracy: the corrections' prior. ``None``: no prior (plain least
             squares; the selection must then be a base set).
         estimate_noise: groups whose levels are re-estimated from the residuals between rounds
-            (the others are held as given).
+            (the others are held as given), each by its :class:`NoiseRule` when ``model`` states
+            one (:class:`DeclaresNoiseRules`).
         y_prior_sd: a zero-mean Gaussian prior's SD per protocol unknown (``inf``: none; default none).
         rounds: noise rounds (one when nothing is estimated).
 
     Raises:
         DegenerateDataError: the data (with the prior) do not determine the unknowns.
-        InputError: a group without a noise level, or a level not positive.
+        InputError: a group without a noise level, or a level not positive; a noise rule naming
+            a group the model does not have.
     """
     groups = model.groups
     for g in groups:
         if not (g in sigma and np.isfinite(sigma[g]) and sigma[g] > 0):
             raise InputError(f"noise level of {g!r} must be a positive number")
     level = np.array([float(sigma[g]) for g in groups])
+    start = level.copy()
     estimated = np.array([g in estimate_noise for g in groups])
+    rules = _Rules.of(model)
     index = selection.index
     full_scale = prior_sd(nominal, accuracy) if accuracy is not None else np.ones(6 * nominal.nq)
     if accuracy is not None and np.any(full_scale[index] <= 0):
@@ -274,6 +343,7 @@ def fit_arm(
         accuracy is not None, np.full(len(y), np.inf) if y_prior_sd is None else np.asarray(y_prior_sd, dtype=float)
     )
     steps = 0
+    dof = np.full(len(groups), np.nan)
     rounds = rounds if estimated.any() else 1
     for _ in range(rounds):
         x, y, taken = _gauss_newton(nominal, model, selection, x, y, level, scale, y_scale, prior, iterations)
@@ -281,7 +351,7 @@ def fit_arm(
         evaluation = _evaluate(nominal, model, selection, x, y)
         A, _ = _system(evaluation, index, x, y, scale, level, prior)
         if estimated.any():
-            level = _noise_levels(evaluation, A, level, estimated)
+            level, dof = _noise_levels(evaluation, A, level, start, estimated, rules)
     evaluation = _evaluate(nominal, model, selection, x, y)
     A, b = _system(evaluation, index, x, y, scale, level, prior)
     posterior = _inverse(A)
@@ -301,6 +371,7 @@ def fit_arm(
         evaluation,
         steps,
         evidence,
+        {g: float(dof[k]) for k, g in enumerate(groups) if estimated[k]},
     )
 
 
@@ -436,22 +507,71 @@ def _gauss_newton(
     return x, y, iterations
 
 
-def _noise_levels(evaluation: Evaluation, A: FloatArray, level: FloatArray, estimated: np.ndarray) -> FloatArray:
+@dataclass(frozen=True)
+class _Rules:
+    """The groups' :class:`NoiseRule` s by index, each ``(G,)``: ``ruled`` whether a group has one,
+    ``partner`` the index of its ``pooled_with`` group (−1: none), ``floor`` its floor (0: none),
+    ``assumed`` its assumed level (NaN: its starting level)."""
+
+    ruled: np.ndarray
+    partner: np.ndarray
+    floor: FloatArray
+    assumed: FloatArray
+
+    @classmethod
+    def of(cls, model: ResidualModel) -> _Rules:
+        """``model``'s rules (:class:`DeclaresNoiseRules`; none: the default rule for every group), checked."""
+        groups = model.groups
+        declared = dict(model.noise_rules) if isinstance(model, DeclaresNoiseRules) else {}
+        for g, rule in declared.items():
+            if g not in groups or rule.pooled_with not in (None, *groups) or rule.pooled_with == g:
+                raise InputError(f"noise rule of {g!r}: a group pooled with another of {', '.join(groups)}")
+            if not (np.isfinite(rule.floor) and rule.floor >= 0):
+                raise InputError(f"noise rule of {g!r}: its floor must be a number ≥ 0")
+            if rule.assumed is not None and not (np.isfinite(rule.assumed) and rule.assumed > 0):
+                raise InputError(f"noise rule of {g!r}: its assumed level must be a positive number")
+        rules = [declared.get(g) for g in groups]
+        return cls(
+            np.array([r is not None for r in rules]),
+            np.array([-1 if r is None or r.pooled_with is None else groups.index(r.pooled_with) for r in rules]),
+            np.array([0.0 if r is None else float(r.floor) for r in rules]),
+            np.array([np.nan if r is None or r.assumed is None else float(r.assumed) for r in rules]),
+        )
+
+
+def _noise_levels(
+    evaluation: Evaluation, A: FloatArray, level: FloatArray, start: FloatArray, estimated: np.ndarray, rules: _Rules
+) -> tuple[FloatArray, FloatArray]:
     """Each estimated group's level from its residuals, its degrees of freedom reduced by the
-    leverages of the regularised problem (the prior's rows take their share of the fit)."""
+    leverages of the regularised problem (the prior's rows take their share of the fit), and those
+    degrees of freedom (NaN: not estimated). A group with a :class:`NoiseRule` and fewer than
+    :data:`~brachycal.calibration.chain.MIN_NOISE_DOF` takes its ``pooled_with`` group's new level
+    when that one stands on its own rows (or is held), else its assumed level (or its level at the
+    start ``start``)."""
     m = len(evaluation.r)
     J = A[:m]
     h = np.einsum("ij,jk,ik->i", J, _inverse(A), J)
     out = level.copy()
+    dof = np.full(len(level), np.nan)
+    own = ~estimated  # levels that stand on their own: held, or estimated from the group's rows
     for g in np.flatnonzero(estimated):
         rows = evaluation.group == g
-        dof = rows.sum() - h[rows].sum()
-        if dof <= 0:
+        dof[g] = rows.sum() - h[rows].sum()
+        if rules.ruled[g] and dof[g] < MIN_NOISE_DOF:
+            continue
+        if dof[g] <= 0:
             raise DegenerateDataError(f"too few data to estimate a noise level (group {g})")
-        out[g] = float(np.sqrt(np.sum(evaluation.r[rows] ** 2) / dof))
+        out[g] = max(float(np.sqrt(np.sum(evaluation.r[rows] ** 2) / dof[g])), rules.floor[g])
         if not out[g] > 0:  # exact data: keep the level given
             out[g] = level[g]
-    return out
+        own[g] = True
+    for g in np.flatnonzero(estimated & ~own):  # too few degrees of freedom, by their rule
+        partner = rules.partner[g]
+        if partner >= 0 and own[partner]:
+            out[g] = out[partner]
+        else:
+            out[g] = start[g] if np.isnan(rules.assumed[g]) else rules.assumed[g]
+    return out, dof
 
 
 def _inverse(A: FloatArray) -> FloatArray:

@@ -2,7 +2,10 @@
 
 Joint-origin corrections ``c_j``, 6 per joint (translation ``v`` in metres, rotation ``ω`` in
 radians about the origin's own axes), estimated with the chain's unknowns under the stated robot
-accuracy as prior.
+accuracy as prior: the session as a protocol of the arm identification core
+(:func:`~brachycal.calibration.robot.session_model.fit_session`, through
+:func:`~brachycal.calibration.robot.arm_fit.fit_arm`), reported in the chain's terms (a checked
+:class:`~brachycal.calibration.chain.ChainFit` on the corrected robot with the joint posterior).
 
 Design: ``docs/design/robot_identification.md``.
 """
@@ -13,69 +16,31 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from brachycal._lazy import renamed
 from brachycal.calibration.chain import (
-    INITIAL_SIGMA,
     MODELS,
     ChainData,
     ChainFit,
     ChainProblem,
     FinalStage,
     ModelChoice,
-    NoiseLevel,
-    ParameterLayout,
     RobotAccuracy,
     assemble,
-    chain_jacobian,
-    chain_residuals,
     covariance_terms,
-    final_stage,
-    fit_chain,
     image_model,
     image_residuals,
-    noise_levels,
-    robot_jacobian_at,
-    robust_stage,
     select_model,
 )
 from brachycal.calibration.metrics import ErrorStats
+from brachycal.calibration.robot.arm_fit import corrected_robot, prior_sd
 from brachycal.calibration.robot.identifiability import COMPONENTS, Identifiability, identifiability
+from brachycal.calibration.robot.session_model import SessionFit, chain_start, fit_session
 from brachycal.calibration.sequential.method import SequentialResult
 from brachycal.data.session import Session
-from brachycal.errors import DegenerateDataError, InputError
+from brachycal.errors import DegenerateDataError
 from brachycal.model.robot import Robot
-from brachycal.se3 import FloatArray, make_transform
-
-#: Noise levels per residual group (metres per coordinate).
-Sigma = dict[str, float]
-
-#: Noise-level rounds: each solves the MAP problem with the groups' levels from the previous
-#: residuals. Twin sessions settle to 1e-3 relative in 3–4 (the touches' level falls the most).
-ROUNDS = 4
-#: Gauss–Newton iterations per round; the robot Jacobian is computed once per round (it changes by
-#: ~|c| ~ 1e-4 relative over the corrections), so convergence is linear at rate ~1e-4 per step.
-ITERATIONS = 8
-#: Stop a round when the largest step in prior units is below this (1e-6 of the stated accuracy).
-STEP_TOLERANCE = 1e-6
-
-
-def corrected_robot(nominal: Robot, corrections: FloatArray) -> Robot:
-    """``nominal`` with joint ``j``'s origin moved by ``corrections[j] = (v, ω)`` (metres, radians).
-
-    ``T_parent_joint ← T_parent_joint @ T(exp(ω), v)`` for each one-axis joint, in
-    ``nominal.joint_names`` order; ``corrections`` is ``(nq, 6)``. Tool frames are untouched.
-    """
-    corrections = np.asarray(corrections, dtype=float)
-    if corrections.shape != (nominal.nq, 6) or not np.all(np.isfinite(corrections)):
-        raise InputError(f"robot corrections must be finite with shape ({nominal.nq}, 6), got {corrections.shape}")
-    origins = {
-        name: nominal.joint_origin(name) @ make_transform(Rotation.from_rotvec(c[3:]).as_matrix(), c[:3])
-        for name, c in zip(nominal.joint_names, corrections, strict=True)
-        if np.any(c != 0.0)
-    }
-    return nominal.with_joint_origins(origins) if origins else nominal
+from brachycal.se3 import FloatArray
 
 
 @dataclass(frozen=True)
@@ -117,12 +82,6 @@ class IdentificationResult:
         }
 
 
-def prior_sd(robot: Robot, accuracy: RobotAccuracy) -> FloatArray:
-    """``(6 nq,)`` prior SD of each correction: the stated translation and rotation SDs; the rotation
-    about a joint's axis also carries its zero offset (variance doubled, as the consider covariance)."""
-    return np.sqrt(np.diag(accuracy.covariance(robot)))
-
-
 def identify_robot(
     session: Session,
     robot: Robot,
@@ -148,157 +107,33 @@ def identify_robot(
     Raises:
         DegenerateDataError: the chain is not determined (as :func:`fit_chain`).
     """
-    use = np.ones(len(session.uv_px), dtype=bool) if samples is None else np.asarray(samples, dtype=bool)
-    first = chain_start(session, robot, initial, model, use, rounds)
-    problem = _Identification(
-        session, robot, first.layout, first.base, use & ~first.outliers, prior_sd(robot, accuracy)
-    )
-    solved = problem.rounds(first.x.copy(), np.zeros(6 * robot.nq), dict(first.sigma))
-    # The chain on the corrected robot: its outlier flags and its conditioning checks, in full.
-    flags = fit_chain(
-        session, problem.corrected(solved.c), initial, model, samples=use, rounds=rounds, robot_accuracy=None
-    )
-    keep = use & ~flags.outliers
-    if not np.array_equal(keep, problem.keep):  # other flags: the MAP problem again on those samples
-        problem = replace(problem, keep=keep)
-        solved = problem.rounds(solved.x, solved.c, solved.sigma, rounds=2)
-    fit, A = _final_fit(problem, solved, flags)
-    scale = problem.scale
-    posterior = _posterior(A)
-    fit = _with_posterior(fit, posterior, accuracy, len(fit.x), scale)
-    corrections = solved.c.reshape(robot.nq, 6)
+    fitted = fit_session(session, robot, initial, model, accuracy, samples=samples, rounds=rounds)
+    scale = prior_sd(robot, accuracy)
+    posterior = fitted.posterior(robot)
+    fit = _with_posterior(_final_fit(fitted, robot), posterior, accuracy, fitted.residuals.size, scale)
+    J = fitted.normalised_jacobian(robot)
     return IdentificationResult(
-        corrections,
+        fitted.arm.corrections,
         tuple(robot.joint_names),
         accuracy,
         fit,
-        identifiability(A[: -len(scale)], len(fit.x), scale, posterior, robot.joint_names),
+        identifiability(J, fitted.residuals.size, scale, posterior, tuple(robot.joint_names)),
         posterior,
     )
 
 
-@dataclass(frozen=True)
-class ChainStart:
-    """The whole chain solved on the nominal robot without its covariance and conditioning checks:
-    the start of the identification (a worn robot's scatter can leave a rotation too uncertain
-    for the chain alone to report on, which identification then resolves; the final fit on the
-    corrected robot is checked in full)."""
-
-    layout: ParameterLayout
-    base: dict[str, FloatArray]
-    x: FloatArray
-    sigma: dict[str, float]
-    outliers: np.ndarray
-
-    def image_residuals(self, session: Session, robot: Robot) -> FloatArray:
-        """``(N, 3)`` every sample's image residual (metres) at this estimate."""
-        T_ER_Ntip, T_EL_Ptip, T_Ptip_I, _, spacing = self.layout.unpack(self.x, self.base, session.spacing_m)
-        return image_residuals(ChainData.of(session, robot), T_ER_Ntip, T_EL_Ptip @ T_Ptip_I, spacing)
-
-
-def chain_start(
-    session: Session, robot: Robot, initial: SequentialResult, model: str, use: np.ndarray, rounds: int
-) -> ChainStart:
-    """:func:`fit_chain`'s robust and final stages on ``robot`` (samples ``use``), unchecked."""
-    problem, x = ChainProblem.start(session, robot, initial, ParameterLayout(model))
-    x, sigma, outliers = robust_stage(problem, x, dict(INITIAL_SIGMA), use, rounds)
-    final = final_stage(problem, x, sigma, use, outliers)
-    return ChainStart(problem.layout, problem.base, final.x, final.sigma, final.outliers)
-
-
-@dataclass(frozen=True)
-class _Identification:
-    """The MAP problem of the chain parameters ``x`` and the robot corrections ``c`` ``(6 nq,)``
-    on one session: the data's normalised residuals and the prior's rows (module docstring)."""
-
-    session: Session
-    nominal: Robot
-    layout: ParameterLayout
-    base: dict[str, FloatArray]
-    keep: np.ndarray  # (N,) the image samples in the fit
-    scale: FloatArray  # (6 nq,) prior SD of each correction
-
-    def corrected(self, c: FloatArray) -> Robot:
-        return corrected_robot(self.nominal, c.reshape(self.nominal.nq, 6))
-
-    def data(self, c: FloatArray) -> ChainData:
-        return ChainData.of(self.session, self.corrected(c))
-
-    def solve(
-        self, x: FloatArray, c: FloatArray, sigma: Sigma, iterations: int = ITERATIONS
-    ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Gauss–Newton on ``(x, c)`` with the prior rows; returns x, c and the augmented Jacobian
-        ``A`` (data rows, then the prior's; the robot columns in prior units, ``J_c · scale``)."""
-        session, layout, base, keep, scale = self.session, self.layout, self.base, self.keep, self.scale
-        corrected = self.corrected(c)
-        data = ChainData.of(session, corrected)
-        r = chain_residuals(x, layout, data, base, sigma, keep)
-        J_x = chain_jacobian(x, layout, data, base, sigma, keep)
-        J_c = robot_jacobian_at(session, corrected, layout, x, base, sigma, keep)
-        prior_rows = np.hstack([np.zeros((len(scale), len(x))), np.eye(len(scale))])
-        A = np.vstack([np.hstack([J_x, J_c * scale]), prior_rows])
-        for k in range(iterations):
-            if k:  # the robot columns change by ~|c| relative: kept for the round
-                data = self.data(c)
-                r = chain_residuals(x, layout, data, base, sigma, keep)
-                A[: len(r), : len(x)] = chain_jacobian(x, layout, data, base, sigma, keep)
-            step = np.linalg.lstsq(A, -np.concatenate([r, c / scale]), rcond=None)[0]
-            x = x + step[: len(x)]
-            c = c + step[len(x) :] * scale
-            if np.max(np.abs(step[len(x) :])) < STEP_TOLERANCE:
-                break
-        return x, c, A
-
-    def noise_levels(self, x: FloatArray, c: FloatArray, sigma: Sigma, A: FloatArray) -> dict[str, NoiseLevel]:
-        """Each group's noise level from the residuals at ``(x, c)``, degrees of freedom corrected
-        with the leverages of the regularised problem (the prior's rows take their share: the
-        chain's own least-squares leverages would leave the corrections' fit in the residuals'
-        degrees of freedom and state the touches' level ~1/1.5 too small, measured)."""
-        data = self.data(c)
-        r = chain_residuals(x, self.layout, data, self.base, sigma, self.keep)
-        J = A[: len(r)]
-        h = np.einsum("ij,jk,ik->i", J, _posterior(A), J)
-        return noise_levels(r, J, data.group_rows(int(self.keep.sum())), sigma, robust=False, h=h)
-
-    def rounds(self, x: FloatArray, c: FloatArray, sigma: Sigma, rounds: int = ROUNDS) -> _Solved:
-        """``rounds`` MAP solves, the noise levels re-estimated after each."""
-        noise: dict[str, NoiseLevel] = {}
-        for _ in range(rounds):
-            x, c, A = self.solve(x, c, sigma)
-            noise = self.noise_levels(x, c, sigma, A)
-            sigma = {g: n.sd_m for g, n in noise.items()}
-        return _Solved(x, c, sigma, noise)
-
-
-@dataclass(frozen=True)
-class _Solved:
-    x: FloatArray
-    c: FloatArray
-    sigma: Sigma
-    noise: dict[str, NoiseLevel]
-
-
-def _final_fit(problem: _Identification, solved: _Solved, flags: ChainFit) -> tuple[ChainFit, FloatArray]:
-    """The chain's fit on the corrected robot with the MAP's noise levels and samples (its estimate
-    the MAP's, solved to the last digit with the corrections held), checked in full
-    (:func:`~brachycal.calibration.chain.covariance_terms`), and the augmented Jacobian there."""
-    corrected = problem.corrected(solved.c)
-    chain = ChainProblem(
-        problem.session, corrected, ChainData.of(problem.session, corrected), problem.layout, problem.base
-    )
-    solution = chain.solve(solved.x, solved.sigma, problem.keep, "linear", tol=1e-15)
-    final = FinalStage(solution.x, solved.sigma, solved.noise, problem.keep, flags.outliers, solution.fun, solution.jac)
-    fit = assemble(chain, final, covariance_terms(chain, final, None), None)
-    _, _, A = problem.solve(solution.x, solved.c, solved.sigma, iterations=0)
-    return fit, A
-
-
-def _posterior(A: FloatArray) -> FloatArray:
-    """``(AᵀA)⁻¹`` (with the prior rows ``A`` has full column rank whenever the chain is determined)."""
-    _, s, Vt = np.linalg.svd(A, full_matrices=False)
-    if s[-1] <= s[0] * 1e-14:
-        raise DegenerateDataError("robot identification: the tools and image are not determined by the data")
-    return (Vt.T / s**2) @ Vt
+def _final_fit(fitted: SessionFit, nominal: Robot) -> ChainFit:
+    """The chain's fit on the corrected robot with the identification's noise levels and samples
+    (its estimate the identification's, solved to the last digit with the corrections held),
+    checked in full (:func:`~brachycal.calibration.chain.covariance_terms`)."""
+    corrected = fitted.arm.robot(nominal)
+    session, protocol = fitted.residuals.session, fitted.residuals
+    chain = ChainProblem(session, corrected, ChainData.of(session, corrected), protocol.layout, protocol.base)
+    noise = fitted.noise()
+    sigma = {g: n.sd_m for g, n in noise.items()}
+    solution = chain.solve(fitted.arm.y, sigma, protocol.keep, "linear", tol=1e-15)
+    final = FinalStage(solution.x, sigma, noise, protocol.keep, fitted.outliers, solution.fun, solution.jac)
+    return assemble(chain, final, covariance_terms(chain, final, None), None)
 
 
 def _with_posterior(
