@@ -98,10 +98,11 @@ def test_without_a_partner_of_its_own_the_assumed_level_or_the_start(panda):
     rng = np.random.default_rng(2)
     data = {"many": rng.normal(0, 1e-3, 5), "few": rng.normal(0, 1e-5, 4)}
     rules = {"many": NoiseRule(assumed=2e-3), "few": NoiseRule(pooled_with="many", assumed=3e-4)}
-    fit = _fit(panda, Means(data, rules), {"many": 1.0, "few": 0.5})
+    start = {"many": 1.0, "few": 0.5}
+    fit = _fit(panda, Means(data, rules), start)
     assert fit.sigma == {"many": 2e-3, "few": 3e-4}
-    fit = _fit(panda, Means(data, {"many": NoiseRule(), "few": NoiseRule(pooled_with="many")}), {"many": 1.0, "few": 0.5})
-    assert fit.sigma == {"many": 1.0, "few": 0.5}
+    fit = _fit(panda, Means(data, {"many": NoiseRule(), "few": NoiseRule(pooled_with="many")}), start)
+    assert fit.sigma == start
 
 
 def test_a_level_is_not_taken_below_its_floor(panda):
