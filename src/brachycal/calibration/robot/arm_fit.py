@@ -253,7 +253,7 @@ class ArmFit:
         iterations: Gauss–Newton steps taken in all.
         noise_dof: each estimated group's residual degrees of freedom in the last noise round (its
             rows minus their leverages; below :data:`~brachycal.calibration.chain.MIN_NOISE_DOF`, a
-            group with a :class:`NoiseRule` took another group's level or kept its own).
+            group with a :class:`NoiseRule` took another group's level or its assumed one).
         log_evidence: the data's log marginal likelihood given the noise levels and priors
             (Laplace's approximation at the estimate; :func:`log_evidence`); comparable between
             fits of the same data with the same unknowns free of a prior.
@@ -321,7 +321,7 @@ def fit_arm(
     Raises:
         DegenerateDataError: the data (with the prior) do not determine the unknowns.
         InputError: a group without a noise level, or a level not positive; a noise rule naming
-            a group the model does not have.
+            a group the model does not have, or with a negative floor or a level not positive.
     """
     groups = model.groups
     for g in groups:
