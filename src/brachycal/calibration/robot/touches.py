@@ -362,8 +362,9 @@ def evidence_prior(
 ) -> EvidencePrior:
     """The prior SDs that maximise the evidence of ``places``' touches (type-II maximum likelihood).
 
-    The per-joint translation and rotation SDs of the corrections (``"chain"`` selection) and, with
-    compliance terms, their common SD are the hyper-parameters; the touch noise is re-estimated in
+    The per-joint translation and rotation SDs of the corrections (``"chain"`` selection), the axis
+    tilt's SD when ``start`` states one (:attr:`RobotAccuracy.tilt_sd_rad`) and, with compliance
+    terms, their common SD are the hyper-parameters; the touch noise is re-estimated in
     each fit (its own evidence maximum). Nelder–Mead on their logarithms from ``start`` (and
     ``compliance_sd``), to :data:`EVIDENCE_LOG_TOLERANCE`, within :class:`RobotAccuracy`'s bounds.
     Only the touches given enter: the choice is the training data's own.
@@ -374,6 +375,7 @@ def evidence_prior(
     from scipy.optimize import minimize  # lazy: start-up (scipy.optimize)
 
     terms = tuple(compliant)
+    tilted = start.tilt_sd_rad is not None
     fits = 0
 
     def hyper(z: FloatArray) -> tuple[RobotAccuracy, float]:
@@ -382,12 +384,14 @@ def evidence_prior(
             float(np.exp(z[1])),
             start.encoder_sd_rad,
             "chosen by the evidence of the training touches",
+            float(np.exp(z[2])) if tilted else None,
         )
-        return accuracy, float(np.exp(z[2])) if terms else np.inf
+        return accuracy, float(np.exp(z[-1])) if terms else np.inf
 
     def negative(z: FloatArray) -> float:
         nonlocal fits
-        if z[0] > np.log(MAX_ROBOT_TRANSLATION_SD_M) or z[1] > np.log(MAX_ROBOT_ROTATION_SD_RAD):
+        rotations = z[1 : 3 if tilted else 2]
+        if z[0] > np.log(MAX_ROBOT_TRANSLATION_SD_M) or np.any(rotations > np.log(MAX_ROBOT_ROTATION_SD_RAD)):
             return np.inf
         accuracy, sd = hyper(z)
         fits += 1
@@ -408,7 +412,14 @@ def evidence_prior(
             return np.inf
         return -result.fit.log_evidence
 
-    z0 = np.log([start.translation_sd_m, start.rotation_sd_rad, *([compliance_sd] if terms else [])])
+    z0 = np.log(
+        [
+            start.translation_sd_m,
+            start.rotation_sd_rad,
+            *([start.tilt_sd_rad] if start.tilt_sd_rad is not None else []),
+            *([compliance_sd] if terms else []),
+        ]
+    )
     if not np.all(np.isfinite(z0)):
         raise InputError("the evidence search starts from positive, finite prior SDs")
     if not np.isfinite(negative(z0)):
