@@ -1,7 +1,8 @@
 """Robot identification from touches on MUKCa's real Franka Panda arms, held-out places first.
 
-Run: ``.venv/bin/python benchmarks/mukca.py [ROBOT [TRAIN]] [--prior MM,DEG] [--compliance JOINTS]``
-(default ``panda_2_clean front_center``, prior 0.3 mm / 0.1° per joint, compliance of joints 2–7
+Run: ``.venv/bin/python benchmarks/mukca.py [ROBOT [TRAIN]] [--prior MM,DEG[,TILT]] [--compliance JOINTS]``
+(default ``panda_2_clean front_center``, prior 0.3 mm / 0.1° per joint (a third figure: the axes'
+tilt apart), compliance of joints 2–7
 under gravity, masses from example-robot-data's Panda). Needs the MUKCa data (outside data,
 ``BRACHYCAL_REFERENCE``/``mukca_touches``).
 
@@ -43,7 +44,11 @@ def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("robot", nargs="?", default="panda_2_clean")
     parser.add_argument("train", nargs="?", default=None, help="training place(s), comma-separated")
-    parser.add_argument("--prior", default="0.3,0.1", help="per-joint prior SD: millimetres,degrees")
+    parser.add_argument(
+        "--prior",
+        default="0.3,0.1",
+        help="per-joint prior SD: millimetres,degrees[,tilt degrees] (the tilt: about the axes across the joint's)",
+    )
     parser.add_argument(
         "--compliance",
         default="2z,3z,4z,5z,6z,7z",
@@ -56,7 +61,7 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--no-distance", action="store_true", help="do not use the 50 mm between the sockets")
     args = parser.parse_args(argv)
     train = (args.train or ("front_center" if args.robot == "panda_2_clean" else "frontcenter")).split(",")
-    mm, deg = (float(v) for v in args.prior.split(","))
+    mm, deg, *tilt = (float(v) for v in args.prior.split(","))
     compliant = tuple(
         (int(term[0]) - 1, "xyz".index(a)) for term in args.compliance.split(",") if term != "none" for a in term[1:]
     )
@@ -86,7 +91,7 @@ def main(argv: list[str]) -> int:
         nominal,
         fit_places,
         FLANGE,
-        RobotAccuracy(mm * 1e-3, float(np.radians(deg))),
+        RobotAccuracy(mm * 1e-3, float(np.radians(deg)), tilt_sd_rad=float(np.radians(tilt[0])) if tilt else None),
         tip=tip0,
         selection="chain",
         compliant=compliant,
@@ -101,6 +106,7 @@ def main(argv: list[str]) -> int:
         f"{args.robot}: trained on {','.join(train)} in {seconds:.1f} s; "
         f"prior {'chosen by evidence: ' if args.evidence else ''}"
         f"{chosen.translation_sd_m * 1e3:.3f} mm / {np.degrees(chosen.rotation_sd_rad):.3f} deg"
+        f"{f' / tilt {np.degrees(chosen.tilt_sd_rad):.3f} deg' if chosen.tilt_sd_rad is not None else ''}"
         f"{f', compliance {result.compliance_sd[0]:.2e} rad/(N m)' if len(result.compliance_sd) else ''}; "
         f"compliance {args.compliance}; "
         f"touch noise {result.fit.sigma['touch'] * 1e3:.3f} mm; tip {np.round(result.tip * 1e3, 3)} mm"

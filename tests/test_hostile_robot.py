@@ -118,6 +118,9 @@ CASES = [
         ("nothing",),
     ),
     Case("session-touches-option", [*SESSION, "--train", "a"], ("unrecognized", "--train")),
+    Case("tilt-zero", [*RUN, "--robot-tilt-deg", "0"], ("--robot-tilt-deg",), setup=_places(GOOD)),
+    Case("tilt-huge", [*RUN, "--robot-tilt-deg", "5"], ("--robot-tilt-deg", "1"), setup=_places(GOOD)),
+    Case("tilt-nan", [*RUN, "--robot-tilt-deg", "nan"], ("--robot-tilt-deg",), setup=_places(GOOD)),
 ]
 
 

@@ -3,10 +3,10 @@
 A protocol's fit (:func:`~brachycal.calibration.robot.arm_fit.fit_arm`) reports the data's log
 evidence given the prior (:attr:`~brachycal.calibration.robot.arm_fit.ArmFit.log_evidence`,
 Laplace's approximation). :func:`evidence_search` finds the per-joint translation and rotation SDs
-(and any further positive hyper-parameters a protocol has, such as the touches' compliance SD) that
-maximise it: Nelder–Mead on their logarithms, within :class:`RobotAccuracy`'s bounds and above
-:data:`EVIDENCE_FLOOR_M`, :data:`EVIDENCE_FLOOR_RAD`. The touches
-(:func:`~brachycal.calibration.robot.touches.evidence_prior`) and the tracker
+(the axes' tilt SD too when the start states one, and any further positive hyper-parameters a
+protocol has, such as the touches' compliance SD) that maximise it: Nelder–Mead on their
+logarithms, within :class:`RobotAccuracy`'s bounds and above :data:`EVIDENCE_FLOOR_M`,
+:data:`EVIDENCE_FLOOR_RAD`. The touches (:func:`~brachycal.calibration.robot.touches.evidence_prior`) and the tracker
 (:func:`~brachycal.calibration.robot.tracker.tracker_evidence_prior`) use it; only the data handed to the
 protocol's fit enter, so a choice made on training data is that data's own.
 """
@@ -71,7 +71,8 @@ def evidence_search(
     Args:
         log_evidence: the protocol's fit at these priors, its log evidence; raising
             :class:`DegenerateDataError` where the data do not determine the unknowns.
-        start: where the search starts (its translation and rotation SDs), and the encoder SD kept.
+        start: where the search starts (its translation and rotation SDs, and its axis tilt SD
+            when it states one: then the tilt is searched too), and the encoder SD kept.
         extra: starts of further positive hyper-parameters (searched on their logarithms, unbounded).
         source: the chosen accuracy's :attr:`RobotAccuracy.source`.
         data: what the data are, for the refusal at the start.
@@ -83,15 +84,17 @@ def evidence_search(
     from scipy.optimize import minimize  # lazy: start-up (scipy.optimize)
 
     evaluations = 0
+    n = 3 if start.tilt_sd_rad is not None else 2  # the accuracy's own hyper-parameters
 
     def hyper(z: FloatArray) -> tuple[RobotAccuracy, tuple[float, ...]]:
-        accuracy = RobotAccuracy(float(np.exp(z[0])), float(np.exp(z[1])), start.encoder_sd_rad, source)
-        return accuracy, tuple(float(v) for v in np.exp(z[2:]))
+        tilt = float(np.exp(z[2])) if n == 3 else None
+        accuracy = RobotAccuracy(float(np.exp(z[0])), float(np.exp(z[1])), start.encoder_sd_rad, source, tilt)
+        return accuracy, tuple(float(v) for v in np.exp(z[n:]))
 
     def negative(z: FloatArray) -> float:
         nonlocal evaluations
-        if not (np.log(EVIDENCE_FLOOR_M) <= z[0] <= np.log(MAX_ROBOT_TRANSLATION_SD_M)) or not (
-            np.log(EVIDENCE_FLOOR_RAD) <= z[1] <= np.log(MAX_ROBOT_ROTATION_SD_RAD)
+        if not (np.log(EVIDENCE_FLOOR_M) <= z[0] <= np.log(MAX_ROBOT_TRANSLATION_SD_M)) or not np.all(
+            (np.log(EVIDENCE_FLOOR_RAD) <= z[1:n]) & (z[1:n] <= np.log(MAX_ROBOT_ROTATION_SD_RAD))
         ):
             return np.inf
         evaluations += 1
@@ -100,11 +103,12 @@ def evidence_search(
         except DegenerateDataError:
             return np.inf
 
-    values = np.array([start.translation_sd_m, start.rotation_sd_rad, *extra], dtype=float)
+    tilt = [start.tilt_sd_rad] if start.tilt_sd_rad is not None else []
+    values = np.array([start.translation_sd_m, start.rotation_sd_rad, *tilt, *extra], dtype=float)
     if not np.all(np.isfinite(values) & (values > 0)):
         raise InputError("the evidence search starts from positive, finite prior SDs")
     z0 = np.log(values)
-    z0[:2] = np.maximum(z0[:2], np.log([EVIDENCE_FLOOR_M, EVIDENCE_FLOOR_RAD]))
+    z0[:n] = np.maximum(z0[:n], np.log([EVIDENCE_FLOOR_M, *[EVIDENCE_FLOOR_RAD] * (n - 1)]))
     if not np.isfinite(negative(z0)):
         raise DegenerateDataError(f"robot identification: {data} do not determine the unknowns at the start")
     found = minimize(

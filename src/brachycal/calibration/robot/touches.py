@@ -366,11 +366,12 @@ def evidence_prior(
 ) -> EvidencePrior:
     """The prior SDs that maximise the evidence of ``places``' touches (type-II maximum likelihood).
 
-    The per-joint translation and rotation SDs of the corrections (``"chain"`` selection) and, with
-    compliance terms, their common SD are the hyper-parameters; the touch noise is re-estimated in
-    each fit (its own evidence maximum). :func:`~brachycal.calibration.robot.evidence.evidence_search`
-    from ``start`` (and ``compliance_sd``). Only the touches given enter: the choice is the
-    training data's own.
+    The per-joint translation and rotation SDs of the corrections (``"chain"`` selection), the axis
+    tilt's SD when ``start`` states one (:attr:`RobotAccuracy.tilt_sd_rad`) and, with compliance
+    terms, their common SD are the hyper-parameters; the touch noise is re-estimated in each fit
+    (its own evidence maximum). :func:`~brachycal.calibration.robot.evidence.evidence_search` from
+    ``start`` (and ``compliance_sd``). Only the touches given enter: the choice is the training
+    data's own.
 
     Raises:
         InputError, DegenerateDataError: as :func:`identify_touches` at the start.

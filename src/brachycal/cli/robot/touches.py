@@ -31,6 +31,8 @@ default the arm's tool when the description names one.
 
 The stated accuracy (--robot-accuracy-mm, --robot-accuracy-deg) is the prior of the corrections:
 state the arm's own figures (a Panda's joints are off their URDF by tenths of a millimetre).
+--robot-tilt-deg gives the tilt of the joints' axes a prior of its own (machined bearing seats
+tilt less than encoders are off their zero).
 With --dynamics (a URDF of the same arm with masses), joint compliance under gravity is fitted
 too; a URDF cannot carry it, so the written URDF is a second fit of the geometry alone (its
 figures are printed as "URDF only").
@@ -82,6 +84,14 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     from brachycal.calibration.robot.touches import TOUCHES_ACCURACY  # lazy: start-up (the command's run only)
 
     add_robot_accuracy_options(parser, "the prior of the corrections", zero=False, default=TOUCHES_ACCURACY)
+    parser.add_argument(
+        "--robot-tilt-deg",
+        type=finite_float(low=0.0, high=1.0, low_open=True, unit="deg"),
+        metavar="SD",
+        help="the tilt of each joint's axis (its origin's rotation about the two axes across it) its own "
+        "prior SD, in (0, 1] deg (default: --robot-accuracy-deg's); --robot-accuracy-deg keeps the "
+        "rotation about the axis and the zero offset",
+    )
 
 
 def tool_frame(args: argparse.Namespace, nominal: Robot) -> str:
@@ -97,6 +107,7 @@ def tool_frame(args: argparse.Namespace, nominal: Robot) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from dataclasses import replace  # lazy: start-up (the command's run only)
     from pathlib import Path  # lazy: start-up (the command's run only)
 
     from brachycal.calibration.robot.touches import (  # lazy: start-up (the command's run only)
@@ -119,12 +130,19 @@ def run(args: argparse.Namespace) -> int:
         tool = tool_frame(args, nominal)
         dynamics = Robot.load(args.dynamics) if args.dynamics is not None else None
         train = [name.strip() for name in args.train.split(",")]
+        accuracy = robot_accuracy(args, TOUCHES_ACCURACY)
+        if args.robot_tilt_deg is not None:
+            accuracy = replace(
+                accuracy,
+                tilt_sd_rad=math.radians(args.robot_tilt_deg),
+                source=f"{accuracy.source}; --robot-tilt-deg {args.robot_tilt_deg:g}",
+            )
         report = identify_touch_folders(
             nominal,
             args.folders,
             tool,
             train,
-            robot_accuracy(args, TOUCHES_ACCURACY),
+            accuracy,
             distance_m=args.distance_mm * 1e-3 if args.distance_mm is not None else None,
             dynamics=dynamics,
             prior=args.prior,
@@ -178,6 +196,12 @@ def print_report(report: TouchReport) -> None:
         source = fit.accuracy.source or "as stated"
         print(
             f"prior per joint origin: {fit.accuracy.translation_sd_m * 1e3:.3g} mm, "
-            f"{math.degrees(fit.accuracy.rotation_sd_rad):.3g} deg ({source})"
+            f"{math.degrees(fit.accuracy.rotation_sd_rad):.3g} deg"
+            + (
+                f", axis tilt {math.degrees(fit.accuracy.tilt_sd_rad):.3g} deg"
+                if fit.accuracy.tilt_sd_rad is not None
+                else ""
+            )
+            + f" ({source})"
         )
     print_identifiability(fit.identifiability, fit.joint_names)
