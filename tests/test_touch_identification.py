@@ -77,6 +77,19 @@ def synthetic_places(true: Robot, rng: np.random.Generator) -> list[TouchPlace]:
     return places
 
 
+def noisy_places(true: Robot, rng: np.random.Generator, sd: float) -> list[TouchPlace]:
+    """:func:`synthetic_places` with ``sd`` (metres) of touch noise per coordinate at the tip,
+    put into the joints through the tip Jacobian's pseudo-inverse."""
+    places = []
+    for place in synthetic_places(true, rng):
+        touches = []
+        for Q in place.touches:
+            J = position_jacobian(true, Q, TIP)
+            touches.append(Q + np.einsum("nij,nj->ni", np.linalg.pinv(J), rng.normal(0, sd, (len(Q), 3))))
+        places.append(TouchPlace(place.name, tuple(touches), place.distances))
+    return places
+
+
 def test_point_jacobian_matches_central_differences(panda):
     rng = np.random.default_rng(3)
     Q = rng.uniform(panda.lower, panda.upper, (4, panda.nq))
@@ -445,13 +458,7 @@ def test_evidence_recovers_the_prior_the_arm_was_drawn_from(panda):
     chain = ParameterSelection.chain(panda, FLANGE)
     true_robot = corrected_robot(panda, chain.expand(drawn[chain.index]))
     sd = 3e-5
-    places = []
-    for place in synthetic_places(true_robot, rng):
-        touches = []
-        for Q in place.touches:
-            J = position_jacobian(true_robot, Q, TIP)
-            touches.append(Q + np.einsum("nij,nj->ni", np.linalg.pinv(J), rng.normal(0, sd, (len(Q), 3))))
-        places.append(TouchPlace(place.name, tuple(touches), place.distances))
+    places = noisy_places(true_robot, rng, sd)
     start = RobotAccuracy(5e-5, float(np.radians(0.02)))
     chosen = evidence_prior(panda, places, FLANGE, start, tip=[0, 0, 0.13])
     assert 0.4 < chosen.accuracy.translation_sd_m / truth.translation_sd_m < 2.5
@@ -567,14 +574,7 @@ def test_evidence_recovers_a_tilt_apart_from_the_turn_about_the_axis(panda):
         drawn[j, :3] = rng.normal(0, 2e-4, 3)
         drawn[j, 3:] = np.sqrt(2) * about * rng.normal() * a + tilt * rng.normal(0, 1, 2) @ across
     true_robot = corrected_robot(panda, drawn)
-    sd = 3e-5
-    places = []
-    for place in synthetic_places(true_robot, rng):
-        touches = []
-        for Q in place.touches:
-            J = position_jacobian(true_robot, Q, TIP)
-            touches.append(Q + np.einsum("nij,nj->ni", np.linalg.pinv(J), rng.normal(0, sd, (len(Q), 3))))
-        places.append(TouchPlace(place.name, tuple(touches), place.distances))
+    places = noisy_places(true_robot, rng, 3e-5)
     start = RobotAccuracy(2e-4, float(np.radians(0.1)), tilt_sd_rad=float(np.radians(0.1)))
     chosen = evidence_prior(panda, places, FLANGE, start, tip=[0, 0, 0.13])
     assert chosen.accuracy.tilt_sd_rad is not None
