@@ -121,6 +121,13 @@ CASES = [
     Case("tilt-zero", [*RUN, "--robot-tilt-deg", "0"], ("--robot-tilt-deg",), setup=_places(GOOD)),
     Case("tilt-huge", [*RUN, "--robot-tilt-deg", "5"], ("--robot-tilt-deg", "1"), setup=_places(GOOD)),
     Case("tilt-nan", [*RUN, "--robot-tilt-deg", "nan"], ("--robot-tilt-deg",), setup=_places(GOOD)),
+    Case(
+        "dynamics-unknown-name",
+        [*RUN, "--dynamics", "pandas"],
+        ("--dynamics", "unknown robot 'pandas'", "panda"),
+        setup=_places(GOOD),
+    ),
+    Case("dynamics-a-folder", [*RUN, "--dynamics", "{tmp}/a"], ("--dynamics", "is a folder"), setup=_places(GOOD)),
 ]
 
 

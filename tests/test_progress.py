@@ -19,17 +19,35 @@ import pytest
 from conftest import ROOT, random_configurations
 from tqdm import tqdm
 
+from brachycal.calibration import calibrate
+from brachycal.calibration.robot.evidence import evidence_search
+from brachycal.calibration.robot.identification import identify_session
+from brachycal.calibration.robot.touches import (
+    TOUCHES_ACCURACY,
+    evidence_prior,
+    identify_touch_folders,
+    identify_touches,
+    read_places,
+)
+from brachycal.calibration.robot.tracker import identify_from_tracker, tracker_data, tracker_fits
+from brachycal.calibration.robot_accuracy import RobotAccuracy
 from brachycal.calibration.session.calibrate import calibrate_folder
 from brachycal.data import write_bag_log
 from brachycal.data.formats.bags import bag_log_blocks
 from brachycal.data.formats.csv_log import csv_log_blocks
+from brachycal.data.formats.tracker_table import read_tracker_columns, read_tracker_table
+from brachycal.data.session import read_session
+from brachycal.errors import DegenerateDataError
 from brachycal.imaging.needle_tip import detect_tips
+from brachycal.model.description import load_robot
 from brachycal.studies import run_demo, run_study
 from brachycal.studies.demo import DEMO_STAGES
 from brachycal.studies.study import sweep
 
 TWIN_SESSION = ROOT / "examples" / "twin_session"
 JOINT_LOG = ROOT / "examples" / "joint_log.csv"
+TRACKER = ROOT / "examples" / "tracker"
+TOUCHES = ROOT / "examples" / "touches"
 
 
 def test_study_counts_one_per_run():
@@ -59,6 +77,75 @@ def test_bootstrap_counts_one_per_resample(robot):
     assert calls == [1, 1, 1, 1]
     assert calibrated.chain is not None and calibrated.chain.bootstrap is not None
     assert all(len(values) == 4 for values in calibrated.chain.bootstrap.values.values())
+
+
+def test_tracker_counts_each_model_s_fit_and_its_folds():
+    """Per model scored, its fit on all postures and one leave-one-out fold per posture: with
+    --model offsets the frames and the offsets, 2 × (N + 1) calls; the figures those without a
+    callback give."""
+    table = read_tracker_table(TRACKER / "table.csv", read_tracker_columns(TRACKER / "columns.toml"))
+    data = tracker_data(load_robot("ur10"), table)
+    calls: list[int] = []
+    counted = identify_from_tracker(data, model="offsets", progress=calls.append)
+    assert tracker_fits(len(data.Q), model="offsets") == 2 * (len(data.Q) + 1)
+    assert calls == [1] * tracker_fits(len(data.Q), model="offsets")
+    plain = identify_from_tracker(data, model="offsets")
+    assert [s.model for s in counted.scores] == [s.model for s in plain.scores] == ["frames", "offsets"]
+    for a, b in zip(counted.scores, plain.scores, strict=True):
+        assert np.allclose(a.loo_errors_m, b.loo_errors_m, rtol=0, atol=1e-12)
+    assert np.allclose(counted.fit.corrections, plain.fit.corrections, rtol=0, atol=1e-12)
+
+
+def test_evidence_search_counts_each_fit_refused_or_not():
+    """One call per fit the search makes (a fit the data refuse too), however many it takes; the
+    choice the one without a callback makes."""
+    fits: list[int] = []
+
+    def log_evidence(accuracy: RobotAccuracy, extra: tuple[float, ...]) -> float:
+        fits.append(1)
+        if accuracy.translation_sd_m > 3e-3:
+            raise DegenerateDataError("refused")
+        t, r = np.log(accuracy.translation_sd_m / 2e-4), np.log(accuracy.rotation_sd_rad / 3e-3)
+        return -(t**2) - r**2 - np.log(extra[0] / 2.0) ** 2
+
+    start = RobotAccuracy(1e-3, 1e-2)
+    calls: list[int] = []
+    counted = evidence_search(log_evidence, start, (1.0,), source="test", progress=calls.append)
+    assert len(fits) > 10 and calls == [1] * len(fits) == [1] * counted.evaluations
+    assert counted == evidence_search(log_evidence, start, (1.0,), source="test")
+
+
+def test_touches_count_each_fit_of_the_evidence_search_and_the_last():
+    """With the evidence, one call per fit of the search and one for the fit at its choice (the
+    search's own count and one); the prior chosen the one without a callback."""
+    robot = load_robot("panda")
+    flange, T_flange_tool = robot.tool_transform("panda_hand_tcp")
+    places = read_places(robot, flange, [TOUCHES / "front"], {(0, 1): 0.05})
+    tip = T_flange_tool[:3, 3]
+    calls: list[int] = []
+    result = identify_touches(robot, places, flange, TOUCHES_ACCURACY, tip=tip, prior="evidence", progress=calls.append)
+    chosen = evidence_prior(robot, places, flange, TOUCHES_ACCURACY, tip=tip)
+    assert chosen.evaluations > 1 and calls == [1] * (chosen.evaluations + 1)
+    assert result.fit.accuracy == chosen.accuracy
+
+
+def test_touch_folders_count_the_compliance_fit_and_the_urdf_fit():
+    """--dynamics with the stated prior: two fits (geometry with compliance, geometry alone)."""
+    robot = load_robot("panda")
+    folders = [TOUCHES / name for name in ("front", "left")]
+    calls: list[int] = []
+    args = (robot, folders, "panda_hand_tcp", ["front"], TOUCHES_ACCURACY)
+    report = identify_touch_folders(*args, dynamics=robot, progress=calls.append)
+    assert report.urdf_fit is not None and calls == [1, 1]
+
+
+def test_session_identification_counts_itself_and_each_fold(robot):
+    session = read_session(TWIN_SESSION, robot)
+    initial = calibrate(session, robot, ("scaled_uv",))
+    calls: list[int] = []
+    accuracy = RobotAccuracy(3e-5, 5e-5)
+    result = identify_session(session, robot, initial, accuracy, folds=3, progress=calls.append)
+    assert result.folds == 3 and calls == [1] * 4
 
 
 def _csv_log(path: Path, robot, n: int, *, end: str = "\n") -> Path:
@@ -182,7 +269,29 @@ def test_calibrate_bar_counts_resamples_on_a_terminal(tmp_path):
     assert re.search(r"bootstrap: +\d+%\|.*\| \d/3 \[", terminal) and "resample/s" in terminal, terminal
 
 
+TRACKER_RUN = ["robot", "identify", "tracker", str(TRACKER / "table.csv"), "--columns", str(TRACKER / "columns.toml")]
+TRACKER_RUN += ["--robot", "ur10", "--model", "offsets", "--out", "tracker"]
+TOUCHES_RUN = ["robot", "identify", "touches", *(str(TOUCHES / n) for n in ("front", "left"))]
+TOUCHES_RUN += ["--robot", "panda", "--train", "front", "--dynamics", "panda", "--out", "touches"]
+
+
+def test_robot_identify_bars_on_a_terminal(tmp_path):
+    """The tracker counts its fits to a known total (2 models × 25); the touches count theirs without one."""
+    code, _, terminal = run_on_a_terminal(TRACKER_RUN, tmp_path)
+    assert code == 0, terminal
+    assert re.search(r"leave-one-out: +\d+%\|.*\| \d+/50 \[", terminal) and "fit/s" in terminal, terminal
+    code, _, terminal = run_on_a_terminal(TOUCHES_RUN, tmp_path)
+    assert code == 0, terminal
+    assert re.search(r"identifying: \d+fit \[", terminal) and "fit/s" in terminal, terminal
+
+
 QUIET = [
+    pytest.param([*TRACKER_RUN, "--quiet"], id="robot-identify-tracker"),
+    pytest.param([*TOUCHES_RUN, "--quiet"], id="robot-identify-touches"),
+    pytest.param(
+        ["robot", "identify", "session", str(TWIN_SESSION), "--robot", "sda10f", "--out", "session", "--quiet"],
+        id="robot-identify-session",
+    ),
     pytest.param([*STUDY, "--quiet"], id="study"),
     pytest.param(["fk", str(JOINT_LOG), "--frames", "needle_tip", "--out", "poses.csv", "--quiet"], id="fk"),
     pytest.param(

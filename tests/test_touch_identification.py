@@ -397,6 +397,31 @@ def tcp_places(panda: Robot, tmp_path: Path, rng: np.random.Generator) -> list[s
     return folders
 
 
+def test_dynamics_by_name_is_the_bundled_arm_s_urdf(panda, tmp_path):
+    """``--dynamics panda`` (the bundled arm, fingers frozen) gives the compliance and figures of
+    ``--dynamics`` example-robot-data's Panda URDF file: the same masses; the compliance is fitted."""
+    import json
+
+    from brachycal.cli.main import main
+
+    touches = Path(__file__).resolve().parents[1] / "examples" / "touches"
+    common = ["robot", "identify", "touches", *(str(touches / n) for n in ("front", "left", "right"))]
+    common += ["--robot", "panda", "--train", "front", "--distance-mm", "50", "--quiet"]
+    urdf = example_robot_data_share() / "robots" / "panda_description" / "urdf" / "panda.urdf"
+    assert main([*common, "--dynamics", "panda", "--out", str(tmp_path / "name")]) == 0
+    assert main([*common, "--dynamics", str(urdf), "--out", str(tmp_path / "file")]) == 0
+    by_name, by_file = (json.loads((tmp_path / d / "identification.json").read_text()) for d in ("name", "file"))
+    assert (
+        by_name["compliance_rad_per_nm"]
+        and by_name["compliance_rad_per_nm"].keys() == by_file["compliance_rad_per_nm"].keys()
+    )
+    for term, k in by_file["compliance_rad_per_nm"].items():
+        assert by_name["compliance_rad_per_nm"][term] == pytest.approx(k, rel=1e-6, abs=1e-12)
+    for figures in ("identified", "urdf_only"):
+        for place, values in by_file[figures].items():
+            assert by_name[figures][place]["scatter_mm"] == pytest.approx(values["scatter_mm"], rel=1e-6)
+
+
 def test_cli_tilt_prior_is_the_one_fitted_printed_and_written(panda, tmp_path, capsys):
     """``--robot-tilt-deg`` gives the axes' tilt a prior of its own beside the stated rotation: the
     fit's prior (printed, and written in the document) carries both."""

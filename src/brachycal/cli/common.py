@@ -106,9 +106,10 @@ def load_robot(args: argparse.Namespace, *, any_arm: bool = False) -> Robot:
     return robot
 
 
-def progress_bar(total: int, desc: str, quiet: bool, *, unit: str) -> tqdm:
+def progress_bar(total: int | None, desc: str, quiet: bool, *, unit: str) -> tqdm:
     """A progress bar on stderr counting ``total`` ``unit`` (whole counts: "3/10 twin"; bytes, unit
-    ``"B"``, in kB/MB); hidden with --quiet and when stderr is not a terminal."""
+    ``"B"``, in kB/MB; ``total`` ``None``: a count without an end, for work of unknown size); hidden
+    with --quiet and when stderr is not a terminal."""
     from tqdm import tqdm  # lazy: start-up (the command's run only)
 
     return tqdm(

@@ -65,6 +65,7 @@ def evidence_search(
     *,
     source: str,
     data: str = "the data",
+    progress: Callable[[int], None] | None = None,
 ) -> EvidenceChoice:
     """The hyper-parameters that maximise ``log_evidence(accuracy, extra)`` (module docstring).
 
@@ -76,6 +77,8 @@ def evidence_search(
         extra: starts of further positive hyper-parameters (searched on their logarithms, unbounded).
         source: the chosen accuracy's :attr:`RobotAccuracy.source`.
         data: what the data are, for the refusal at the start.
+        progress: called with 1 after each fit (their number is not known ahead; the search's
+            bound is :data:`EVIDENCE_EVALUATIONS`).
 
     Raises:
         InputError: a start that is not positive and finite.
@@ -102,6 +105,9 @@ def evidence_search(
             return -log_evidence(*hyper(z))
         except DegenerateDataError:
             return np.inf
+        finally:
+            if progress is not None:
+                progress(1)
 
     tilt = [start.tilt_sd_rad] if start.tilt_sd_rad is not None else []
     values = np.array([start.translation_sd_m, start.rotation_sd_rad, *tilt, *extra], dtype=float)

@@ -12,6 +12,7 @@ Design: ``docs/design/robot_identification.md``.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
@@ -190,6 +191,7 @@ def cross_validate_identification(
     accuracy: RobotAccuracy,
     folds: int = IDENTIFICATION_FOLDS,
     seed: int = 0,
+    progress: Callable[[int], None] | None = None,
 ) -> tuple[ErrorStats, ErrorStats]:
     """Image error at held-out configurations, without and with robot identification.
 
@@ -197,6 +199,7 @@ def cross_validate_identification(
     each fold's samples are predicted by a chain fit, and by a chain-plus-robot identification,
     made without them. Returns ``(chain alone, with the robot identified)``: an identified robot
     that over-fits its session predicts held-out configurations worse, not better.
+    ``progress``: called with 1 after each fold.
 
     Raises:
         DegenerateDataError: a fold's training samples do not determine the chain.
@@ -215,6 +218,8 @@ def cross_validate_identification(
             ChainData.of(session, corrected), fit.T_ER_Ntip, fit.T_EL_Ptip @ fit.image.T_Ptip_I, fit.image.spacing_m
         )
         errors[1, held] = np.linalg.norm(residuals[held], axis=1)
+        if progress is not None:
+            progress(1)
     return ErrorStats(errors[0]), ErrorStats(errors[1])
 
 
@@ -264,15 +269,19 @@ def identify_session(
     initial: SequentialResult,
     accuracy: RobotAccuracy,
     folds: int = IDENTIFICATION_FOLDS,
+    progress: Callable[[int], None] | None = None,
 ) -> SessionIdentification:
     """The dual-arm session's robot identification (:func:`choose_and_identify`), its K-fold image
     error at held-out configurations (:func:`cross_validate_identification`) and its training error.
+    ``progress``: called with 1 after the identification and after each fold (``folds + 1`` in all).
 
     Raises:
         DegenerateDataError: the session does not determine the chain.
     """
     choice, identified = choose_and_identify(session, robot, initial, accuracy)
-    held_out = cross_validate_identification(session, robot, initial, choice.model, accuracy, folds)
+    if progress is not None:
+        progress(1)
+    held_out = cross_validate_identification(session, robot, initial, choice.model, accuracy, folds, progress=progress)
     fit, corrected = identified.fit, identified.robot(robot)
     used = ~fit.outliers
     residuals = image_residuals(

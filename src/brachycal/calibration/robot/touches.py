@@ -16,7 +16,7 @@ and the error of the known distances. A calibration is judged on places it did n
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -231,6 +231,7 @@ def identify_touches(
     compliant: Sequence[tuple[int, int]] = (),
     compliance_sd: float | Sequence[float] = np.inf,
     prior: str = "stated",
+    progress: Callable[[int], None] | None = None,
 ) -> TouchResult:
     """Identify the arm from touches of fixed points (module docstring).
 
@@ -253,6 +254,8 @@ def identify_touches(
             the priors that maximise these touches' evidence (:func:`evidence_prior`, started
             from them; a flat compliance prior starts at :data:`COMPLIANCE_SD_START`), recorded
             in the result's ``fit.accuracy`` and :attr:`TouchResult.compliance_sd`.
+        progress: called with 1 after each fit: the evidence search's (their number is not known
+            ahead) and the last.
 
     Raises:
         InputError: a place without two touches of a point, a distance between unknown points.
@@ -273,6 +276,7 @@ def identify_touches(
             compliance_sd=start_sd if np.isfinite(start_sd) else COMPLIANCE_SD_START,
             touch_sd_m=touch_sd_m,
             distance_sd_m=distance_sd_m,
+            progress=progress,
         )
         accuracy, compliance_sd = chosen_prior.accuracy, chosen_prior.compliance_sd
     elif prior != "stated":
@@ -315,6 +319,8 @@ def identify_touches(
         estimate_noise=("touch",) if estimate_touch_noise else (),
         y_prior_sd=np.concatenate([np.full(len(y) - len(compliant), np.inf), term_sd]),
     )
+    if progress is not None:
+        progress(1)
     slots = model.point_slots()
     points = tuple(np.array([fit.y[at : at + 3] for at in offsets]) for offsets in slots)
     k0 = 3 + 3 * model.n_points()
@@ -363,6 +369,7 @@ def evidence_prior(
     compliance_sd: float = COMPLIANCE_SD_START,
     touch_sd_m: float = TOUCH_SD_M,
     distance_sd_m: float = DISTANCE_SD_M,
+    progress: Callable[[int], None] | None = None,
 ) -> EvidencePrior:
     """The prior SDs that maximise the evidence of ``places``' touches (type-II maximum likelihood).
 
@@ -371,7 +378,7 @@ def evidence_prior(
     terms, their common SD are the hyper-parameters; the touch noise is re-estimated in each fit
     (its own evidence maximum). :func:`~brachycal.calibration.robot.evidence.evidence_search` from
     ``start`` (and ``compliance_sd``). Only the touches given enter: the choice is the training
-    data's own.
+    data's own. ``progress``: called with 1 after each fit.
 
     Raises:
         InputError, DegenerateDataError: as :func:`identify_touches` at the start.
@@ -398,6 +405,7 @@ def evidence_prior(
         (compliance_sd,) if terms else (),
         source="chosen by the evidence of the training touches",
         data="the touches",
+        progress=progress,
     )
     return EvidencePrior(found.accuracy, found.extra[0] if terms else np.inf, found.log_evidence, found.evaluations)
 
@@ -548,6 +556,7 @@ def identify_touch_folders(
     distance_m: float | None = None,
     dynamics: Robot | None = None,
     prior: str = "stated",
+    progress: Callable[[int], None] | None = None,
 ) -> TouchReport:
     """Identify ``nominal`` from the touch folders ``train`` names and judge it on every place.
 
@@ -563,6 +572,9 @@ def identify_touch_folders(
             once more for the URDF (:attr:`TouchReport.urdf_fit`).
         prior: ``"stated"`` (``accuracy``, compliance free) or ``"evidence"``: chosen by the
             training places' evidence (:func:`evidence_prior`; the held-out places never enter).
+        progress: called with 1 after each fit (:func:`identify_touches`; with the evidence their
+            number is not known ahead: tens per search, one search per fit of :attr:`TouchReport.result`
+            and :attr:`TouchReport.urdf_fit`).
 
     Raises:
         InputError: a folder the reader refuses, a training place not among them, a tool frame
@@ -590,7 +602,15 @@ def identify_touch_folders(
 
     def identify(terms: tuple[tuple[int, int], ...]) -> TouchResult:
         return identify_touches(
-            nominal, fit_places, flange, accuracy, tip=tip0, selection="chain", compliant=terms, prior=prior
+            nominal,
+            fit_places,
+            flange,
+            accuracy,
+            tip=tip0,
+            selection="chain",
+            compliant=terms,
+            prior=prior,
+            progress=progress,
         )
 
     result = identify(compliant)

@@ -19,6 +19,7 @@ Design: ``docs/design/robot_identification.md`` ("From an external tracker").
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -54,6 +55,7 @@ __all__ = [
     "start_frames",
     "tracker_data",
     "tracker_evidence_prior",
+    "tracker_fits",
 ]
 
 #: The models, from the smallest: the URDF as it is, joint zeros, every joint-origin component.
@@ -422,12 +424,13 @@ def leave_one_out(
     accuracy: RobotAccuracy | None = TRACKER_ACCURACY,
     *,
     prior: str = "stated",
+    progress: Callable[[int], None] | None = None,
 ) -> tuple[FloatArray, FloatArray | None]:
     """``(N, 3)`` position errors (metres) and, 6-D, ``(N, 3)`` orientation errors (radians) of
     each posture predicted by a fit of ``model`` made without it (the parameter selection is
     made once on all postures: it is structural, not a fit to the values). ``prior``
     ``"evidence"``: each fold's prior is chosen by that fold's own postures (:func:`fit_tracker`),
-    never by the posture it predicts."""
+    never by the posture it predicts. ``progress``: called with 1 after each fold."""
     selection = select_parameters(data, model, accuracy)
     N = len(data.Q)
     e_p = np.zeros((N, 3))
@@ -440,6 +443,8 @@ def leave_one_out(
         e_p[i] = p[0] - held.p[0]
         if e_o is not None and held.R is not None:
             e_o[i] = _log(R @ np.swapaxes(held.R, 1, 2))[0]
+        if progress is not None:
+            progress(1)
     return e_p, e_o
 
 
@@ -545,6 +550,22 @@ def _deg(e: FloatArray | None) -> float | None:
     return None if e is None else float(np.degrees(np.sqrt(np.mean(e**2))))
 
 
+def _scored_models(models: tuple[str, ...], forced: str | None) -> tuple[str, ...]:
+    """The models :func:`identify_from_tracker` scores: ``models``, or with ``forced`` the frames and it."""
+    if forced is None:
+        return models
+    if forced not in TRACKER_MODELS:
+        raise InputError(f"unknown model {forced!r}; expected one of {', '.join(TRACKER_MODELS)}")
+    return ("frames",) if forced == "frames" else ("frames", forced)
+
+
+def tracker_fits(postures: int, models: tuple[str, ...] = TRACKER_MODELS, *, model: str | None = None) -> int:
+    """The units of work :func:`identify_from_tracker` reports to its ``progress`` for ``postures``
+    postures: per model scored, its fit on all postures and one leave-one-out fold per posture
+    (with ``prior="evidence"`` each of them an evidence search)."""
+    return len(_scored_models(models, model)) * (postures + 1)
+
+
 def identify_from_tracker(
     data: TrackerData,
     accuracy: RobotAccuracy | None = TRACKER_ACCURACY,
@@ -552,6 +573,7 @@ def identify_from_tracker(
     *,
     model: str | None = None,
     prior: str = "stated",
+    progress: Callable[[int], None] | None = None,
 ) -> TrackerIdentification:
     """Score ``models`` (smallest first) by leave-one-out and return the supported one (module
     docstring): each richer model replaces the chosen one only if its held-out mean squared
@@ -559,21 +581,21 @@ def identify_from_tracker(
     return that one whatever the scores say (it is scored too, after the frames alone).
     ``prior``: ``"stated"`` (``accuracy``) or ``"evidence"`` (per model, :func:`tracker_evidence_prior`
     searched from ``accuracy``: on all postures for the returned fit, on each fold's own postures
-    for its held-out error)."""
+    for its held-out error). ``progress``: called with 1 after each model's fit on all postures
+    and after each of its leave-one-out folds (:func:`tracker_fits` of them in all)."""
     if prior not in TRACKER_PRIORS:
         raise InputError(f"unknown prior {prior!r} ({', '.join(TRACKER_PRIORS)})")
     forced = model
-    if forced is not None:
-        if forced not in TRACKER_MODELS:
-            raise InputError(f"unknown model {forced!r}; expected one of {', '.join(TRACKER_MODELS)}")
-        models = ("frames",) if forced == "frames" else ("frames", forced)
+    models = _scored_models(models, forced)
     scores: list[ModelScore] = []
     fits: dict[str, TrackerFit] = {}
     chosen, chosen_sq = "", np.zeros(0)
     reasons: list[str] = []
     for name in models:
         fit = fit_tracker(data, name, accuracy, prior=prior)
-        e_p, e_o = leave_one_out(data, name, accuracy, prior=prior)
+        if progress is not None:
+            progress(1)
+        e_p, e_o = leave_one_out(data, name, accuracy, prior=prior, progress=progress)
         fits[name] = fit
         sq = np.sum(e_p**2, axis=1) / 3 * 1e6  # mm² per coordinate, per held-out posture
         versus = None
@@ -620,8 +642,9 @@ def identify_tracker_file(
     flange: str | None = None,
     model: str | None = None,
     prior: str = "stated",
+    progress: Callable[[int], None] | None = None,
 ) -> TrackerIdentification:
     """:func:`identify_from_tracker` of a tracker table file read with its column spec file
     (:func:`~brachycal.data.formats.tracker_table.read_tracker_table`)."""
     data = tracker_data(robot, read_tracker_table(table, read_tracker_columns(columns)), flange)
-    return identify_from_tracker(data, accuracy, model=model, prior=prior)
+    return identify_from_tracker(data, accuracy, model=model, prior=prior, progress=progress)

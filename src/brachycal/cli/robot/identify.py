@@ -60,4 +60,5 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "--out", required=True, metavar="DIR", help="folder to write robot.urdf and identification.json to"
         )
         one.add_argument("--force", action="store_true", help="replace the outputs if they exist")
+        one.add_argument("--quiet", action="store_true", help="no progress bar")
         one.set_defaults(run=module.run)

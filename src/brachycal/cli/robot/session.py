@@ -50,10 +50,14 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path  # lazy: start-up (the command's run only)
 
     from brachycal.calibration import calibrate  # lazy: start-up (the command's run only)
-    from brachycal.calibration.robot.identification import identify_session  # lazy: start-up (the command's run only)
+    from brachycal.calibration.robot.identification import (  # lazy: start-up (the command's run only)
+        IDENTIFICATION_FOLDS,
+        identify_session,
+    )
     from brachycal.cli.common import (
         command_inputs,
         load_robot,
+        progress_bar,
         robot_accuracy,
     )  # lazy: start-up (the command's run only)
     from brachycal.cli.robot.report import claim_outputs  # lazy: start-up (the command's run only)
@@ -66,7 +70,8 @@ def run(args: argparse.Namespace) -> int:
         nominal = load_robot(args)  # refuses a single arm in one line
         session = read_session(args.session, nominal)
         initial = calibrate(session, nominal, ("scaled_uv",))
-        result = identify_session(session, nominal, initial, robot_accuracy(args))
+        with progress_bar(IDENTIFICATION_FOLDS + 1, "identifying, then K-fold", args.quiet, unit="fit") as bar:
+            result = identify_session(session, nominal, initial, robot_accuracy(args), progress=bar.update)
         result.identification.robot(nominal).write_urdf(urdf_path, force=True)
         write_json(json_path, {"session": str(args.session), **result.as_json()}, force=True)
     print_report(result, nominal)

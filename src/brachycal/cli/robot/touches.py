@@ -33,9 +33,9 @@ The stated accuracy (--robot-accuracy-mm, --robot-accuracy-deg) is the prior of 
 state the arm's own figures (a Panda's joints are off their URDF by tenths of a millimetre).
 --robot-tilt-deg gives the tilt of the joints' axes a prior of its own (machined bearing seats
 tilt less than encoders are off their zero).
-With --dynamics (a URDF of the same arm with masses), joint compliance under gravity is fitted
-too; a URDF cannot carry it, so the written URDF is a second fit of the geometry alone (its
-figures are printed as "URDF only").
+With --dynamics NAME|FILE (the same arm with masses: a bundled arm such as panda, whose URDF has
+them, or a URDF file), joint compliance under gravity is fitted too; a URDF cannot carry it, so
+the written URDF is a second fit of the geometry alone (its figures are printed as "URDF only").
 
 Writes DIR/robot.urdf (the identified joints, the tip written into the tool frame) and
 DIR/identification.json (corrections, tip, noise level, compliance, figures per place).
@@ -72,7 +72,12 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         metavar="MM",
         help="the known distance between points 0 and 1 of every place (a machined block), in (0, 10000] mm",
     )
-    parser.add_argument("--dynamics", metavar="FILE", help="a URDF of the same arm with masses: fit joint compliance")
+    parser.add_argument(
+        "--dynamics",
+        metavar="NAME|FILE",
+        help="the same arm with masses, to fit joint compliance under gravity: a bundled arm "
+        "(panda, ur5, ur10: their URDFs have the masses), a brachycal-robot/1 description or a URDF file",
+    )
     parser.add_argument(
         "--prior",
         choices=("stated", "evidence"),
@@ -106,6 +111,18 @@ def tool_frame(args: argparse.Namespace, nominal: Robot) -> str:
     raise InputError("--tool-frame is required: the robot names no single arm with a tool (the touching tip's frame)")
 
 
+def dynamics_robot(name: str) -> Robot:
+    """The robot of --dynamics, resolved as --robot resolves its NAME|FILE (a bundled arm, a
+    description, a URDF file); a refusal names the option."""
+    from brachycal.errors import InputError  # lazy: start-up (the command's run only)
+    from brachycal.model.description import load_robot  # lazy: start-up (the command's run only)
+
+    try:
+        return load_robot(name)
+    except InputError as exc:
+        raise InputError(f"--dynamics: {exc}") from None
+
+
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace  # lazy: start-up (the command's run only)
     from pathlib import Path  # lazy: start-up (the command's run only)
@@ -117,18 +134,18 @@ def run(args: argparse.Namespace) -> int:
     from brachycal.cli.common import (  # lazy: start-up (the command's run only)
         command_inputs,
         load_robot,
+        progress_bar,
         robot_accuracy,
     )
     from brachycal.cli.robot.report import claim_outputs  # lazy: start-up (the command's run only)
     from brachycal.io import OutputSet, write_json  # lazy: start-up (the command's run only)
-    from brachycal.model import Robot  # lazy: start-up (the command's run only)
 
     out = Path(args.out)
     with OutputSet(force=args.force, inputs=[*command_inputs(args, "dynamics"), *args.folders]) as outputs:
         urdf_path, json_path = claim_outputs(outputs, out)
         nominal = load_robot(args, any_arm=True)
         tool = tool_frame(args, nominal)
-        dynamics = Robot.load(args.dynamics) if args.dynamics is not None else None
+        dynamics = dynamics_robot(args.dynamics) if args.dynamics is not None else None
         train = [name.strip() for name in args.train.split(",")]
         accuracy = robot_accuracy(args, TOUCHES_ACCURACY)
         if args.robot_tilt_deg is not None:
@@ -137,16 +154,19 @@ def run(args: argparse.Namespace) -> int:
                 tilt_sd_rad=math.radians(args.robot_tilt_deg),
                 source=f"{accuracy.source}; --robot-tilt-deg {args.robot_tilt_deg:g}",
             )
-        report = identify_touch_folders(
-            nominal,
-            args.folders,
-            tool,
-            train,
-            accuracy,
-            distance_m=args.distance_mm * 1e-3 if args.distance_mm is not None else None,
-            dynamics=dynamics,
-            prior=args.prior,
-        )
+        # The fits' number is not known ahead with the evidence (tens per search): a count, no end.
+        with progress_bar(None, "identifying", args.quiet, unit="fit") as bar:
+            report = identify_touch_folders(
+                nominal,
+                args.folders,
+                tool,
+                train,
+                accuracy,
+                distance_m=args.distance_mm * 1e-3 if args.distance_mm is not None else None,
+                dynamics=dynamics,
+                prior=args.prior,
+                progress=bar.update,
+            )
         report.calibrated_robot(nominal).write_urdf(urdf_path, force=True)
         write_json(json_path, report.as_json(), force=True)
     print_report(report)

@@ -71,11 +71,16 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path  # lazy: start-up (the command's run only)
 
     # lazy: start-up (the command's run only)
-    from brachycal.calibration.robot.tracker import TRACKER_ACCURACY, identify_tracker_file
+    from brachycal.calibration.robot.tracker import TRACKER_ACCURACY, identify_from_tracker, tracker_data, tracker_fits
     from brachycal.cli.common import (  # lazy: start-up (the command's run only)
         command_inputs,
         load_robot,
+        progress_bar,
         robot_accuracy,
+    )
+    from brachycal.data.formats.tracker_table import (  # lazy: start-up (the command's run only)
+        read_tracker_columns,
+        read_tracker_table,
     )
     from brachycal.io import OutputSet, write_json  # lazy: start-up (the command's run only)
 
@@ -86,15 +91,13 @@ def run(args: argparse.Namespace) -> int:
     with OutputSet(force=args.force, inputs=command_inputs(args, "columns", "table")) as outputs:
         urdf_path, json_path = claim_outputs(outputs, out)
         nominal = load_robot(args, any_arm=True)
-        result = identify_tracker_file(
-            nominal,
-            args.table,
-            args.columns,
-            accuracy,
-            flange=args.flange,
-            model=None if args.model == "auto" else args.model,
-            prior=args.prior,
-        )
+        data = tracker_data(nominal, read_tracker_table(args.table, read_tracker_columns(args.columns)), args.flange)
+        model = None if args.model == "auto" else args.model
+        # Per model, its fit on all postures and one leave-one-out fold per posture; with the
+        # evidence each of them is a search of tens of fits.
+        unit = "search" if args.prior == "evidence" else "fit"
+        with progress_bar(tracker_fits(len(data.Q), model=model), "leave-one-out", args.quiet, unit=unit) as bar:
+            result = identify_from_tracker(data, accuracy, model=model, prior=args.prior, progress=bar.update)
         result.fit.robot(nominal).write_urdf(urdf_path, force=True)
         write_json(json_path, result.as_json(), force=True)
     print_report(result)
