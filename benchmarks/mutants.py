@@ -66,6 +66,9 @@ TEMP = "tests/test_temporal.py::"
 ROBOT = "tests/test_robot_identification.py::"
 CHAIN = "tests/test_chain.py::"
 ARM = "tests/test_arm_fit_noise.py::"
+TOUCH = "tests/test_touch_identification.py::"
+TRACK = "tests/test_tracker_identification.py::"
+EVID = "tests/test_evidence_search.py::"
 
 MUTANTS: tuple[Mutant, ...] = (
     # --- tool tips (eqs. 4-6) ---------------------------------------------------------------------
@@ -309,6 +312,30 @@ MUTANTS: tuple[Mutant, ...] = (
         "if False:",
         (ARM + "test_a_group_with_too_few_degrees_of_freedom_takes_its_partners_level",),
         "a group with a noise rule estimating its level from too few degrees of freedom of its own",
+    ),
+    Mutant(
+        "tilt-prior-turn-variance",
+        "calibration/robot_accuracy.py",
+        "+ 2 * self.rotation_sd_rad**2 * along",
+        "+ self.rotation_sd_rad**2 * along",
+        (TOUCH + "test_tilt_prior_is_across_the_axis_and_leaves_the_turn_about_it",),
+        "the turn about the axis without its zero offset's share (variance not doubled) once the tilt is apart",
+    ),
+    Mutant(
+        "evidence-translation-floor",
+        "calibration/robot/evidence.py",
+        "if not (np.log(EVIDENCE_FLOOR_M) <= z[0] <= np.log(MAX_ROBOT_TRANSLATION_SD_M))",
+        "if not (z[0] <= np.log(MAX_ROBOT_TRANSLATION_SD_M))",
+        (EVID + "test_search_stops_at_the_floor_where_the_data_want_no_correction",),
+        "the evidence search walking the translation SD below its floor, towards zero",
+    ),
+    Mutant(
+        "tracker-fold-prior-leak",
+        "calibration/robot/tracker.py",
+        "fit = fit_tracker(data.subset(keep), model, accuracy, selection=selection, prior=prior)",
+        "fit = fit_tracker(data, model, accuracy, selection=selection, prior=prior)",
+        (TRACK + "test_leave_one_out_predicts_each_posture_without_it",),
+        "a leave-one-out fold fitted with the posture it predicts",
     ),
     Mutant(
         "identification-prior-sd",
