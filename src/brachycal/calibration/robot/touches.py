@@ -614,15 +614,21 @@ def identify_touch_folders(
         )
 
     result = identify(compliant)
+    robot = result.robot(nominal)
+    identified = {
+        p.name: touch_scatter(robot, p, flange, result.tip, result.compliant, result.compliance) for p in places
+    }
     urdf_fit = identify(()) if compliant else None
-    urdf = urdf_fit if urdf_fit is not None else result
-    robot, urdf_robot = result.robot(nominal), urdf.robot(nominal)
+    geometry_only = identified  # without compliance the written URDF is the fit itself
+    if urdf_fit is not None:
+        urdf_robot = urdf_fit.robot(nominal)
+        geometry_only = {p.name: touch_scatter(urdf_robot, p, flange, urdf_fit.tip) for p in places}
     return TouchReport(
         result,
         tuple(train),
         {p.name: touch_scatter(nominal, p, flange, tip0) for p in places},
-        {p.name: touch_scatter(robot, p, flange, result.tip, result.compliant, result.compliance) for p in places},
-        {p.name: touch_scatter(urdf_robot, p, flange, urdf.tip) for p in places},
+        identified,
+        geometry_only,
         tool_frame,
         urdf_fit,
     )
