@@ -207,8 +207,10 @@ def check_range(
     unit: str = "",
     file: str | PathLike[str] | None = None,
     row: int | None = None,
+    column: str | None = None,
 ) -> float:
-    """A finite number within ``[low, high]`` (open ends with ``low_open``/``high_open``).
+    """A finite number within ``[low, high]`` (open ends with ``low_open``/``high_open``); a
+    refusal names ``file``, ``row`` and ``column`` when given.
 
     NaN and ±infinity are always refused (a NaN would otherwise pass every ``<`` test).
     """
@@ -217,13 +219,13 @@ def check_range(
     except OverflowError:  # an int beyond float range (10**400)
         x = math.inf
     except (TypeError, ValueError):
-        raise InputError(f"{_where(name)}must be a number, got {value!r}", file=file, row=row) from None
+        raise InputError(f"{_where(name)}must be a number, got {value!r}", file=file, row=row, column=column) from None
     unit_text = f" {unit}" if unit else ""
     if not math.isfinite(x):
-        raise InputError(f"{_where(name)}must be a finite number, got {x}", file=file, row=row)
+        raise InputError(f"{_where(name)}must be a finite number, got {x}", file=file, row=row, column=column)
     if not _inside(x, low, high, low_open, high_open):
         rule = interval_text(low, high, low_open, high_open, unit)
-        raise InputError(f"{_where(name)}must be {rule}, got {x:g}{unit_text}", file=file, row=row)
+        raise InputError(f"{_where(name)}must be {rule}, got {x:g}{unit_text}", file=file, row=row, column=column)
     return x
 
 

@@ -35,9 +35,9 @@ from brachycal.validate import (
     MAX_IMAGE_PX,
     TOOL_LENGTH_M_RANGE,
     check_positions,
+    check_range,
     check_spacing_mm,
     check_token,
-    interval_text,
 )
 
 if TYPE_CHECKING:  # annotations only: reading a file needs no Pinocchio
@@ -210,9 +210,9 @@ def _read_sector(table: object, path: Path) -> ImageSector | None:
     )
     for key, low, high, low_open, unit in rules:
         for v in values[key]:
-            if not (low < v if low_open else low <= v) or v > high:
-                rule = interval_text(low, high, low_open, False, unit)
-                raise InputError(f"must be {rule}, got {v:g} {unit}", file=path, column=f"image.sector.{key}")
+            check_range(
+                v, "", low=low, high=high, low_open=low_open, unit=unit, file=path, column=f"image.sector.{key}"
+            )
     u, v = values["apex_px"]
     return ImageSector((u, v), values["depth_mm"][0] * 1e-3, float(np.radians(values["angle_deg"][0])))
 

@@ -47,6 +47,12 @@ class StatsRow:
         s = self.stats
         return () if s is None else tuple(f"{x:.2f}" for x in (s.mae_mm, s.rmse_mm, s.sd_mm, s.max_mm))
 
+    def line(self, width: int) -> str:
+        """The row as printed text, the label ``width`` characters wide."""
+        if self.stats is None:
+            return f"{self.label:<{width}} refused: {self.note}"
+        return _row(self.label, self.stats, width) + (f"   {self.note}" if self.note else "")
+
 
 @dataclass(frozen=True)
 class StatsTable:
@@ -60,12 +66,7 @@ class StatsTable:
 
     def text(self, width: int = 26) -> str:
         """The table as printed text, the first column ``width`` characters wide."""
-        lines = [self.title, _header(self.first, width)]
-        for row in self.rows:
-            if row.stats is None:
-                lines.append(f"{row.label:<{width}} refused: {row.note}")
-            else:
-                lines.append(_row(row.label, row.stats, width) + (f"   {row.note}" if row.note else ""))
+        lines = [self.title, _header(self.first, width), *(row.line(width) for row in self.rows)]
         return "\n".join([*lines, *self.notes])
 
 
@@ -133,7 +134,7 @@ def _refused(result: SequentialResult) -> list[StatsRow]:
 def refused_rows(result: SequentialResult, width: int) -> list[str]:
     """One row per method that refused the samples (:attr:`SequentialResult.refused`): its label
     and the reason, in Table II's order."""
-    return [f"{row.label:<{width}} refused: {row.note}" for row in _refused(result)]
+    return [row.line(width) for row in _refused(result)]
 
 
 def chain_summary(

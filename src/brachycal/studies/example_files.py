@@ -529,7 +529,7 @@ def write_example_files(
     names += list(TEMPORAL_NAMES) + list(NWIRE_SEQUENCE_NAMES) + list(STEPPER_NAMES.values())
     touch_rec, tracker_rec = simulate_robot_examples(seed)
     touch_truth = {
-        "what": "truth of the touch example (brachycal.simulation.arm_touch_rec.simulate_touches): the Panda that "
+        "what": "truth of the touch example (brachycal.simulation.arm_touches.simulate_touches): the Panda that "
         "touched, its joint-origin corrections T_parent_joint <- T_parent_joint @ T(exp(w), v), metres and radians",
         "seed": seed,
         "robot": TOUCH_ROBOT,
@@ -543,7 +543,7 @@ def write_example_files(
         "joints": list(touch_rec.joints),
     }
     tracker_truth = {
-        "what": "truth of the tracker example (brachycal.simulation.arm_touch_rec.simulate_tracker): the UR10 seen, "
+        "what": "truth of the tracker example (brachycal.simulation.arm_touches.simulate_tracker): the UR10 seen, "
         "its joint-origin corrections (as the touch example's), the tracker's and the marker's frames (metres)",
         "seed": seed,
         "robot": TRACKER_ROBOT,

@@ -99,12 +99,14 @@ def _scan_rows(
     line_offset: int,
     limit: int | None = None,
     lines: _Lines | None = None,
+    expected: str = "the header has",
 ) -> tuple[list[int], list[list[str]]]:
     """The row scan: up to ``limit`` records of ``reader`` (a :func:`csv.reader` of ``lines``) and their file rows.
 
     ``line_offset`` is the number of file lines before the reader's first line. Blank lines are
     skipped; a row with another number of fields than the header is refused, naming its row (as
-    :data:`TRUNCATED` when it is the file's last line and has no newline: a row cut short).
+    :data:`TRUNCATED` when it is the file's last line and has no newline: a row cut short), the
+    message saying ``expected`` before the header's count.
     """
     rows: list[int] = []
     records: list[list[str]] = []
@@ -116,7 +118,7 @@ def _scan_rows(
             if len(fields) != len(header):
                 if lines is not None and _unterminated(lines.last):
                     raise InputError(TRUNCATED, file=path, row=row)
-                raise InputError(f"has {len(fields)} fields, the header has {len(header)}", file=path, row=row)
+                raise InputError(f"has {len(fields)} fields, {expected} {len(header)}", file=path, row=row)
             rows.append(row)
             records.append(fields)
             if limit is not None and len(records) >= limit:
@@ -154,24 +156,10 @@ def read_bare_table(path: Path, columns: list[str]) -> tuple[list[int], FloatArr
     with _open(path) as handle:
         lines = _Lines(handle)
         reader = csv.reader(lines)
-        rows: list[int] = []
-        records: list[list[str]] = []
-        try:
-            for fields in reader:
-                if not fields or (len(fields) == 1 and not fields[0].strip()):
-                    continue
-                if len(fields) != len(columns):
-                    if _unterminated(lines.last):
-                        raise InputError(TRUNCATED, file=path, row=reader.line_num)
-                    raise InputError(
-                        f"has {len(fields)} fields, expected {len(columns)}", file=path, row=reader.line_num
-                    )
-                rows.append(reader.line_num)
-                records.append([f.strip() for f in fields])
-        except (csv.Error, UnicodeDecodeError) as exc:
-            raise InputError(f"not a readable CSV file ({exc})", file=path) from None
+        rows, records = _scan_rows(path, reader, columns, 0, lines=lines, expected="expected")
         if _unterminated(lines.last):
             raise InputError(TRUNCATED, file=path, row=reader.line_num)
+    records = [[f.strip() for f in fields] for fields in records]
     return rows, to_float(path, columns, rows, records, columns)
 
 
