@@ -12,8 +12,8 @@ centre of rotation, rotation axis and encoder, both translation axes, each with 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Iterator
-from contextlib import AbstractContextManager, contextmanager, nullcontext
+from collections.abc import Callable
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -38,6 +38,7 @@ from brachycal.calibration.phantom.stepper import (
     rotation_encoder,
     translation_axis,
 )
+from brachycal.calibration.sequential.method import naming_file
 from brachycal.data.formats.metaimage import read_image_sequence, read_sequence_header
 from brachycal.data.formats.plus_files import (
     STEPPER_ENCODER_FIELDS,
@@ -261,17 +262,6 @@ def read_stepper_recording(
     )
 
 
-@contextmanager
-def _naming(recording: StepperRecording) -> Iterator[None]:
-    """A DegenerateDataError raised inside, re-raised naming the recording's file."""
-    try:
-        yield
-    except DegenerateDataError as exc:
-        if exc.file is not None:
-            raise
-        raise DegenerateDataError(exc.problem, file=recording.path) from None
-
-
 def calibrate_stepper_files(
     config: str | os.PathLike[str],
     rotation: str | os.PathLike[str],
@@ -315,17 +305,17 @@ def calibrate_stepper_files(
         for name, path in paths.items()
     }
     rot = recordings["rotation"]
-    with _naming(rot):
+    with naming_file(rot.path):
         spacing = pixel_spacing(rot.frames, phantom.patterns)
         spacing_sd = jackknife_spacing_sd(rot.frames, phantom.patterns)
         axis = rotation_axis(rot.frames, rot.encoders[:, 1], rot.encoders[:, 0], phantom.patterns, spacing.value)
         encoder = rotation_encoder(rot.frames, rot.encoders[:, 1], phantom.patterns, spacing.value)
     spacing_all = pixel_spacing([points for r in recordings.values() for points in r.frames], phantom.patterns)
     probe = recordings["probe_translation"]
-    with _naming(probe):
+    with naming_file(probe.path):
         probe_axis = translation_axis(probe.frames, probe.encoders[:, 0], phantom.patterns, spacing.value)
     template = recordings["template_translation"]
-    with _naming(template):
+    with naming_file(template.path):
         template_axis = translation_axis(template.frames, template.encoders[:, 2], phantom.patterns, spacing.value)
     return StepperFileResult(
         spacing, spacing_sd, spacing_all, axis, encoder, probe_axis, template_axis, recordings, str(config)
