@@ -48,7 +48,14 @@ from brachycal.data.formats.plus_files import (
     stepper_encoder_values,
 )
 from brachycal.data.formats.plus_segmentation import read_segmentation_parameters
-from brachycal.data.formats.plus_stepper import STRAIGHT_AXES, StepperAxes, TemplateGrid, read_stepper_axes
+from brachycal.data.formats.plus_stepper import (
+    STRAIGHT_AXES,
+    StepperAxes,
+    TemplateGrid,
+    is_encoder_scale,
+    is_stepper_axis,
+    read_stepper_axes,
+)
 from brachycal.data.json_files import read_format_json
 from brachycal.errors import DegenerateDataError, InputError
 from brachycal.imaging.nwire_segmentation import segment_sequence
@@ -199,7 +206,7 @@ def read_calibrated_axes(path: str | os.PathLike[str]) -> StepperAxes:
             axis: FloatArray = np.asarray(entry["plus_orientation"], dtype=np.float64).reshape(3)  # type: ignore[index]
         except (KeyError, TypeError, ValueError):
             axis = np.full(3, np.nan)
-        if not (np.all(np.isfinite(axis)) and axis[2] == 1.0 and np.hypot(axis[0], axis[1]) <= 0.2):
+        if not is_stepper_axis(axis):
             raise InputError(
                 "must be PLUS's axis 'Tx Ty 1' within 0.2 of z", file=path, column=f"{key}.plus_orientation"
             )
@@ -208,7 +215,7 @@ def read_calibrated_axes(path: str | os.PathLike[str]) -> StepperAxes:
         scale = float(raw["rotation_encoder"]["plus_scale"])
     except (KeyError, TypeError, ValueError):
         scale = float("nan")
-    if not 0.5 <= scale <= 2.0:
+    if not is_encoder_scale(scale):
         raise InputError("must be a scale within 0.5-2", file=path, column="rotation_encoder.plus_scale")
     return StepperAxes(axes[0], axes[1], scale, f"brachycal stepper calibrate ({Path(path).name})")
 
@@ -397,7 +404,7 @@ def read_stepper_image(path: str | os.PathLike[str]) -> StepperImageFile:
             file=path,
             column="stepper.axes",
         ) from None
-    if not (np.all(np.isfinite(probe)) and np.all(np.isfinite(template)) and 0.5 <= scale <= 2.0):
+    if not (np.all(np.isfinite(probe)) and np.all(np.isfinite(template)) and is_encoder_scale(scale)):
         raise InputError("axes must be finite and the scale near 1", file=path, column="stepper.axes")
     return StepperImageFile(nwire, T, StepperAxes(probe, template, scale, str(raw_axes.get("source", ""))))
 
