@@ -29,10 +29,10 @@ from numpy.typing import ArrayLike
 
 from brachycal.calibration.phantom.nwire_file import (
     FORMAT,
-    NWIRE_MODELS,
     NWireFile,
     NWireFileResult,
     calibrate_nwire_frames,
+    check_model,
     read_nwire,
 )
 from brachycal.calibration.phantom.stepper import StepperFit, centre_of_rotation, pixel_spacing
@@ -295,8 +295,7 @@ def calibrate_stepper_image_files(
             that are not encoder poses (with ``correct_axes``), an unknown model.
         DegenerateDataError: frames that cannot determine the registration or the fit.
     """
-    if model is not None and model not in NWIRE_MODELS:
-        raise InputError(f"no N-wire model {model!r}: expected one of {', '.join(NWIRE_MODELS)}")
+    check_model(model)  # before any frame is segmented
     streams = read_pose_streams(config_path)
     if streams.source != "stepper":
         raise InputError(
