@@ -46,7 +46,7 @@ from brachycal.data.formats.plus_files import (
     read_plus_config,
     stepper_encoder_values,
 )
-from brachycal.data.formats.plus_segmentation import read_segmentation_parameters
+from brachycal.data.formats.plus_segmentation import NWireSegmentationParameters, read_segmentation_parameters
 from brachycal.errors import DegenerateDataError
 from brachycal.imaging.nwire_segmentation import segment_sequence
 from brachycal.io import sha256_file, write_json
@@ -233,20 +233,20 @@ def read_stepper_recording(
     path: str | os.PathLike[str],
     encoders: FloatArray,
     config: PlusConfig,
-    config_path: str | os.PathLike[str],
+    params: NWireSegmentationParameters,
     *,
     minimum: int,
     progress: Progress | None = None,
 ) -> StepperRecording:
     """Segment a stepper recording (its frames' ``encoders`` read and checked already); the
-    segmented frames with their encoder values.
+    segmented frames with their encoder values. ``config``, ``params``: the device set's phantom
+    and segmentation settings.
 
     Raises:
         InputError: frames that are not 8-bit.
         DegenerateDataError: fewer than ``minimum`` frames segmented (naming the file).
     """
     sequence = read_image_sequence(path)
-    params = read_segmentation_parameters(config_path)
     with progress(Path(path).name, len(sequence)) if progress is not None else nullcontext() as bar:
         result = segment_sequence(
             sequence, config, params, source=path, poses=None, progress=None if bar is None else bar.update
@@ -293,12 +293,13 @@ def calibrate_stepper_files(
     for name, path in paths.items():
         encoders[name] = stepper_encoder_values(read_sequence_header(path)[1], path)
         check_recording(name, path, encoders[name])
+    params = read_segmentation_parameters(config)
     recordings = {
         name: read_stepper_recording(
             path,
             encoders[name],
             phantom,
-            config,
+            params,
             minimum=MIN_ROTATION_FRAMES if name == "rotation" else MIN_TRANSLATION_FRAMES,
             progress=progress,
         )

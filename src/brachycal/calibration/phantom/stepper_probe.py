@@ -311,10 +311,10 @@ def calibrate_stepper_image_files(
     # The rotation recording's encoders (its header only) are checked before any frame is segmented.
     encoders = stepper_encoder_values(read_sequence_header(rotation_path)[1], rotation_path)
     check_recording("rotation", rotation_path, encoders)
+    params = read_segmentation_parameters(config_path)
     if validation_path is None:
         calibration, validation = read_segmented_frames(calibration_path, poses=streams.fields)
     else:
-        params = read_segmentation_parameters(config_path)
         calibration, validation = (
             segment_sequence(
                 read_image_sequence(path),
@@ -327,7 +327,7 @@ def calibrate_stepper_image_files(
             ).frames
             for label, path in (("CalibrationData", calibration_path), ("ValidationData", validation_path))
         )
-    rotation = read_stepper_recording(rotation_path, encoders, config, config_path, minimum=MIN_ROTATION_FRAMES)
+    rotation = read_stepper_recording(rotation_path, encoders, config, params, minimum=MIN_ROTATION_FRAMES)
     plus_registration = register_phantom(rotation.frames, config.patterns)
     paths = [p for p in (config_path, rotation_path, calibration_path, validation_path) if p is not None]
     inputs = {Path(p).name: sha256_file(p) for p in paths}
