@@ -101,12 +101,12 @@ def run(args: argparse.Namespace) -> int:
     from brachycal.errors import InputError  # lazy: start-up (the command's run only)
     from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
 
+    if args.stepper is not None and args.recorded_poses:
+        raise InputError("--recorded-poses uses no axes: give it without --stepper")
     with OutputSet(
         force=args.force, inputs=command_inputs(args, "rotation", "calibration", "validation", "config", "stepper")
     ) as outputs:
         staged = outputs.claim(args.out, label="--out")
-        if args.stepper is not None and args.recorded_poses:
-            raise InputError("--recorded-poses uses no axes: give it without --stepper")
         axes = read_calibrated_axes(args.stepper) if args.stepper is not None else None
         result = calibrate_stepper_image_files(
             args.config,
