@@ -5,10 +5,9 @@ from __future__ import annotations
 import argparse
 
 from brachycal.cli.common import command_inputs, output_file
+from brachycal.cli.nwire.calibrate import MODELS
 
 NAME = "stepper-image"
-#: The image models (:data:`brachycal.calibration.phantom.nwire_file.NWIRE_MODELS`, here so --help imports nothing).
-MODELS = ("affine", "rigid", "3d-aniso", "3d-iso", "2d-aniso", "2d-iso")
 HELP = "Image -> Probe of a TRUS probe on a stepper, from random stepper motion (N-wire phantom)"
 DESCRIPTION = """\
 Calibrates Image -> Probe of a transrectal probe on a brachytherapy stepper (PLUS's iCal set-up:
