@@ -94,8 +94,8 @@ def test_the_truth_is_geometry():
     d, a, t = -0.052, np.radians(2.5), 0.004
     points = stepper_twin.wire_points(d, a, t)
     T_probe_phantom = (
-        inverse(stepper_twin.true_probe_pose(d, a))
-        @ stepper_twin.true_template_pose(t)
+        inverse(stepper_twin.STEPPER_TWIN.probe_pose(d, a))
+        @ stepper_twin.STEPPER_TWIN.template_pose(t)
         @ stepper_twin.T_TEMPLATE_PHANTOM
     )
     M = stepper_twin.image_to_probe()

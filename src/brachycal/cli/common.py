@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from collections.abc import Collection, Sequence
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
@@ -30,6 +31,18 @@ def output_file(text: str) -> str:
 def spelling_note(old: str, new: str) -> None:
     """Say on stderr, in one line, that an earlier release's spelling ``old`` of a command is now ``new``."""
     print(f"brachycal: note: '{old}' is now '{new}'; the old spelling goes in the next release", file=sys.stderr)
+
+
+def earlier_spelling(arguments: Sequence[str], command: str, current: Collection[str]) -> int | None:
+    """Where ``command`` is in ``arguments`` (after ``brachycal``, an index) when they run it without one
+    of its ``current`` sub-command words right after it (perhaps an earlier release's spelling); None
+    when they run another command or spell it the current way."""
+    words = [k for k, word in enumerate(arguments) if not word.startswith("-")]
+    if not words or arguments[words[0]] != command:
+        return None
+    if len(words) > 1 and words[1] == words[0] + 1 and arguments[words[1]] in current:
+        return None  # the current spelling
+    return words[0]
 
 
 def add_urdf_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup, *, any_arm: bool = False) -> None:

@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 
-from brachycal.cli.common import command_inputs, output_file, spelling_note
+from brachycal.cli.common import command_inputs, earlier_spelling, output_file, spelling_note
 
 HELP = "tracked-probe calibration with a multi-wedge, arbitrary-wire or N-wire phantom (Table III's phantom routes)"
 #: The phantom kinds, each a sub-command: ``brachycal phantom KIND GEOMETRY OBSERVATIONS``.
@@ -133,12 +133,10 @@ def current_spelling(arguments: Sequence[str]) -> list[str]:
     """``arguments`` (after ``brachycal``) with an earlier release's ``phantom --method KIND …`` replaced by
     ``phantom KIND …``; says so on stderr, in one line, when KIND is a phantom kind. Anything else: unchanged."""
     arguments = list(arguments)
-    words = [k for k, word in enumerate(arguments) if not word.startswith("-")]
-    if not words or arguments[words[0]] != "phantom":
+    at = earlier_spelling(arguments, "phantom", KINDS)
+    if at is None:
         return arguments
-    if len(words) > 1 and words[1] == words[0] + 1 and arguments[words[1]] in KINDS:
-        return arguments  # the current spelling
-    head, rest = arguments[: words[0] + 1], arguments[words[0] + 1 :]
+    head, rest = arguments[: at + 1], arguments[at + 1 :]
     for k, word in enumerate(rest):
         if word == "--method" and k + 1 < len(rest):
             kind, rest = rest[k + 1], rest[:k] + rest[k + 2 :]

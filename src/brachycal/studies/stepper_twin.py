@@ -216,16 +216,6 @@ class StepperSetup:
 STEPPER_TWIN = StepperSetup(image_to_probe(), T_TEMPLATE_PHANTOM, AXES, wires())
 
 
-def true_probe_pose(probe_m: float, rotation_rad: float) -> FloatArray:
-    """``T_SH_probe`` of the twin (:data:`STEPPER_TWIN`) at encoder readings."""
-    return STEPPER_TWIN.probe_pose(probe_m, rotation_rad)
-
-
-def true_template_pose(template_m: float) -> FloatArray:
-    """``T_SH_template`` of the twin at its encoder reading."""
-    return STEPPER_TWIN.template_pose(template_m)
-
-
 def wire_points(probe_m: float, rotation_rad: float, template_m: float) -> dict[str, FloatArray]:
     """Each wire's exact crossing of the twin's image plane at encoder readings, ``(u, v)`` px."""
     return STEPPER_TWIN.points(probe_m, rotation_rad, template_m)

@@ -193,6 +193,16 @@ def _stats_json(stats: ErrorStats) -> dict[str, float | int]:
     }
 
 
+def check_model(model: str | None) -> None:
+    """Refuse a ``model`` that is not None nor a :data:`NWIRE_MODELS` name.
+
+    Raises:
+        InputError: an unknown model, naming the known ones.
+    """
+    if model is not None and model not in NWIRE_MODELS:
+        raise InputError(f"no N-wire model {model!r}: expected one of {', '.join(NWIRE_MODELS)}")
+
+
 def calibrate_nwire_files(
     config_path: str | os.PathLike[str], frames_path: str | os.PathLike[str], *, model: str | None = None
 ) -> NWireFileResult:
@@ -213,8 +223,7 @@ def calibrate_nwire_files(
         InputError: a file is unreadable or malformed, or has no usable validation frame; an unknown model.
         DegenerateDataError: the middle-wire points cannot determine a fit.
     """
-    if model is not None and model not in NWIRE_MODELS:
-        raise InputError(f"no N-wire model {model!r}: expected one of {', '.join(NWIRE_MODELS)}")
+    check_model(model)  # before the files are read
     config = read_plus_config(config_path)
     calibration_frames, validation_frames = read_segmented_frames(frames_path)
     return calibrate_nwire_frames(
@@ -243,8 +252,7 @@ def calibrate_nwire_frames(
         InputError: an unknown model, no usable validation frame, a frame the fits refuse.
         DegenerateDataError: the middle-wire points cannot determine a fit.
     """
-    if model is not None and model not in NWIRE_MODELS:
-        raise InputError(f"no N-wire model {model!r}: expected one of {', '.join(NWIRE_MODELS)}")
+    check_model(model)
     uv, p_probe, _ = wire_point_pairs(config, calibration_frames)
     start_spacing = config.approximate_spacing_m or FALLBACK_SPACING_M
     calibration = calibrate_nwire(uv, p_probe, start_spacing)

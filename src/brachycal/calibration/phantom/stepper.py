@@ -136,11 +136,7 @@ def rotation_equations(
 
     The side wires' dots of frame ``i`` and of frames ``i + 1, i + 3, i + 5, …`` (PLUS's pairing).
     """
-    s = np.asarray(spacing_m_per_px, dtype=float).reshape(2)
-    sides = [wire for pattern in patterns for wire in (pattern[0], pattern[2])]
-    P = np.array([[_uv(points, wire) * s for wire in sides] for points in frames], dtype=float).reshape(
-        -1, len(sides), 2
-    )
+    P = _side_dots(frames, _sides(patterns), np.asarray(spacing_m_per_px, dtype=float).reshape(2))
     rows, target = [], []
     for i in range(len(P) - 1):
         for j in range(i + 1, len(P), 2):
@@ -176,6 +172,13 @@ def centre_of_rotation(
 def _sides(patterns: Sequence[tuple[Wire, Wire, Wire]]) -> list[Wire]:
     """The still (side) wires of each N: first and last."""
     return [wire for pattern in patterns for wire in (pattern[0], pattern[2])]
+
+
+def _side_dots(frames: Sequence[Points], sides: Sequence[Wire], spacing: FloatArray) -> FloatArray:
+    """``(F, W, 2)``: each frame's dots of the side wires ``sides`` in image metres (``(u·s_u, v·s_v)``)."""
+    return np.array([[_uv(points, wire) * spacing for wire in sides] for points in frames], dtype=float).reshape(
+        -1, len(sides), 2
+    )
 
 
 def _covariance(design: FloatArray, residual: FloatArray, unknowns: int) -> tuple[FloatArray, float]:
@@ -313,7 +316,7 @@ def relative_axis(probe: TranslationAxisFit, template: TranslationAxisFit) -> tu
 
 def _radial_sd(frames: Sequence[Points], sides: Sequence[Wire], spacing: FloatArray, centre_m: FloatArray) -> float:
     """The dots' noise SD (metres) from their distances to the centre: one radius per side wire."""
-    P = np.array([[_uv(points, wire) * spacing for wire in sides] for points in frames])
+    P = _side_dots(frames, sides, spacing)
     r = np.linalg.norm(P - centre_m, axis=2)
     e = r - r.mean(axis=0)
     dof = e.size - len(sides) - 2

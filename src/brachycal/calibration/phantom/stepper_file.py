@@ -12,8 +12,8 @@ centre of rotation, rotation axis and encoder, both translation axes, each with 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Iterator
-from contextlib import AbstractContextManager, contextmanager, nullcontext
+from collections.abc import Callable
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -38,6 +38,7 @@ from brachycal.calibration.phantom.stepper import (
     rotation_encoder,
     translation_axis,
 )
+from brachycal.calibration.sequential.method import naming_file
 from brachycal.data.formats.metaimage import read_image_sequence, read_sequence_header
 from brachycal.data.formats.plus_files import (
     STEPPER_ENCODER_FIELDS,
@@ -45,7 +46,7 @@ from brachycal.data.formats.plus_files import (
     read_plus_config,
     stepper_encoder_values,
 )
-from brachycal.data.formats.plus_segmentation import read_segmentation_parameters
+from brachycal.data.formats.plus_segmentation import NWireSegmentationParameters, read_segmentation_parameters
 from brachycal.errors import DegenerateDataError
 from brachycal.imaging.nwire_segmentation import segment_sequence
 from brachycal.io import sha256_file, write_json
@@ -232,20 +233,20 @@ def read_stepper_recording(
     path: str | os.PathLike[str],
     encoders: FloatArray,
     config: PlusConfig,
-    config_path: str | os.PathLike[str],
+    params: NWireSegmentationParameters,
     *,
     minimum: int,
     progress: Progress | None = None,
 ) -> StepperRecording:
     """Segment a stepper recording (its frames' ``encoders`` read and checked already); the
-    segmented frames with their encoder values.
+    segmented frames with their encoder values. ``config``, ``params``: the device set's phantom
+    and segmentation settings.
 
     Raises:
         InputError: frames that are not 8-bit.
         DegenerateDataError: fewer than ``minimum`` frames segmented (naming the file).
     """
     sequence = read_image_sequence(path)
-    params = read_segmentation_parameters(config_path)
     with progress(Path(path).name, len(sequence)) if progress is not None else nullcontext() as bar:
         result = segment_sequence(
             sequence, config, params, source=path, poses=None, progress=None if bar is None else bar.update
@@ -259,17 +260,6 @@ def read_stepper_recording(
     return StepperRecording(
         str(path), [result.frames[k].points_px for k in kept], encoders[kept].reshape(-1, 3), len(sequence)
     )
-
-
-@contextmanager
-def _naming(recording: StepperRecording) -> Iterator[None]:
-    """A DegenerateDataError raised inside, re-raised naming the recording's file."""
-    try:
-        yield
-    except DegenerateDataError as exc:
-        if exc.file is not None:
-            raise
-        raise DegenerateDataError(exc.problem, file=recording.path) from None
 
 
 def calibrate_stepper_files(
@@ -303,29 +293,30 @@ def calibrate_stepper_files(
     for name, path in paths.items():
         encoders[name] = stepper_encoder_values(read_sequence_header(path)[1], path)
         check_recording(name, path, encoders[name])
+    params = read_segmentation_parameters(config)
     recordings = {
         name: read_stepper_recording(
             path,
             encoders[name],
             phantom,
-            config,
+            params,
             minimum=MIN_ROTATION_FRAMES if name == "rotation" else MIN_TRANSLATION_FRAMES,
             progress=progress,
         )
         for name, path in paths.items()
     }
     rot = recordings["rotation"]
-    with _naming(rot):
+    with naming_file(rot.path):
         spacing = pixel_spacing(rot.frames, phantom.patterns)
         spacing_sd = jackknife_spacing_sd(rot.frames, phantom.patterns)
         axis = rotation_axis(rot.frames, rot.encoders[:, 1], rot.encoders[:, 0], phantom.patterns, spacing.value)
         encoder = rotation_encoder(rot.frames, rot.encoders[:, 1], phantom.patterns, spacing.value)
     spacing_all = pixel_spacing([points for r in recordings.values() for points in r.frames], phantom.patterns)
     probe = recordings["probe_translation"]
-    with _naming(probe):
+    with naming_file(probe.path):
         probe_axis = translation_axis(probe.frames, probe.encoders[:, 0], phantom.patterns, spacing.value)
     template = recordings["template_translation"]
-    with _naming(template):
+    with naming_file(template.path):
         template_axis = translation_axis(template.frames, template.encoders[:, 2], phantom.patterns, spacing.value)
     return StepperFileResult(
         spacing, spacing_sd, spacing_all, axis, encoder, probe_axis, template_axis, recordings, str(config)

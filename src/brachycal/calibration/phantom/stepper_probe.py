@@ -29,10 +29,10 @@ from numpy.typing import ArrayLike
 
 from brachycal.calibration.phantom.nwire_file import (
     FORMAT,
-    NWIRE_MODELS,
     NWireFile,
     NWireFileResult,
     calibrate_nwire_frames,
+    check_model,
     read_nwire,
 )
 from brachycal.calibration.phantom.stepper import StepperFit, centre_of_rotation, pixel_spacing
@@ -48,7 +48,14 @@ from brachycal.data.formats.plus_files import (
     stepper_encoder_values,
 )
 from brachycal.data.formats.plus_segmentation import read_segmentation_parameters
-from brachycal.data.formats.plus_stepper import STRAIGHT_AXES, StepperAxes, TemplateGrid, read_stepper_axes
+from brachycal.data.formats.plus_stepper import (
+    STRAIGHT_AXES,
+    StepperAxes,
+    TemplateGrid,
+    is_encoder_scale,
+    is_stepper_axis,
+    read_stepper_axes,
+)
 from brachycal.data.json_files import read_format_json
 from brachycal.errors import DegenerateDataError, InputError
 from brachycal.imaging.nwire_segmentation import segment_sequence
@@ -199,7 +206,7 @@ def read_calibrated_axes(path: str | os.PathLike[str]) -> StepperAxes:
             axis: FloatArray = np.asarray(entry["plus_orientation"], dtype=np.float64).reshape(3)  # type: ignore[index]
         except (KeyError, TypeError, ValueError):
             axis = np.full(3, np.nan)
-        if not (np.all(np.isfinite(axis)) and axis[2] == 1.0 and np.hypot(axis[0], axis[1]) <= 0.2):
+        if not is_stepper_axis(axis):
             raise InputError(
                 "must be PLUS's axis 'Tx Ty 1' within 0.2 of z", file=path, column=f"{key}.plus_orientation"
             )
@@ -208,7 +215,7 @@ def read_calibrated_axes(path: str | os.PathLike[str]) -> StepperAxes:
         scale = float(raw["rotation_encoder"]["plus_scale"])
     except (KeyError, TypeError, ValueError):
         scale = float("nan")
-    if not 0.5 <= scale <= 2.0:
+    if not is_encoder_scale(scale):
         raise InputError("must be a scale within 0.5-2", file=path, column="rotation_encoder.plus_scale")
     return StepperAxes(axes[0], axes[1], scale, f"brachycal stepper calibrate ({Path(path).name})")
 
@@ -288,8 +295,7 @@ def calibrate_stepper_image_files(
             that are not encoder poses (with ``correct_axes``), an unknown model.
         DegenerateDataError: frames that cannot determine the registration or the fit.
     """
-    if model is not None and model not in NWIRE_MODELS:
-        raise InputError(f"no N-wire model {model!r}: expected one of {', '.join(NWIRE_MODELS)}")
+    check_model(model)  # before any frame is segmented
     streams = read_pose_streams(config_path)
     if streams.source != "stepper":
         raise InputError(
@@ -305,10 +311,10 @@ def calibrate_stepper_image_files(
     # The rotation recording's encoders (its header only) are checked before any frame is segmented.
     encoders = stepper_encoder_values(read_sequence_header(rotation_path)[1], rotation_path)
     check_recording("rotation", rotation_path, encoders)
+    params = read_segmentation_parameters(config_path)
     if validation_path is None:
         calibration, validation = read_segmented_frames(calibration_path, poses=streams.fields)
     else:
-        params = read_segmentation_parameters(config_path)
         calibration, validation = (
             segment_sequence(
                 read_image_sequence(path),
@@ -321,7 +327,7 @@ def calibrate_stepper_image_files(
             ).frames
             for label, path in (("CalibrationData", calibration_path), ("ValidationData", validation_path))
         )
-    rotation = read_stepper_recording(rotation_path, encoders, config, config_path, minimum=MIN_ROTATION_FRAMES)
+    rotation = read_stepper_recording(rotation_path, encoders, config, params, minimum=MIN_ROTATION_FRAMES)
     plus_registration = register_phantom(rotation.frames, config.patterns)
     paths = [p for p in (config_path, rotation_path, calibration_path, validation_path) if p is not None]
     inputs = {Path(p).name: sha256_file(p) for p in paths}
@@ -397,7 +403,7 @@ def read_stepper_image(path: str | os.PathLike[str]) -> StepperImageFile:
             file=path,
             column="stepper.axes",
         ) from None
-    if not (np.all(np.isfinite(probe)) and np.all(np.isfinite(template)) and 0.5 <= scale <= 2.0):
+    if not (np.all(np.isfinite(probe)) and np.all(np.isfinite(template)) and is_encoder_scale(scale)):
         raise InputError("axes must be finite and the scale near 1", file=path, column="stepper.axes")
     return StepperImageFile(nwire, T, StepperAxes(probe, template, scale, str(raw_axes.get("source", ""))))
 

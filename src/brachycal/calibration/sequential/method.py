@@ -137,8 +137,8 @@ class SequentialResult:
 
 
 @contextmanager
-def _data_of(file: str) -> Iterator[None]:
-    """Name the session file in a refusal that does not name one yet."""
+def naming_file(file: str) -> Iterator[None]:
+    """A DegenerateDataError raised inside, re-raised naming ``file`` when it names no file yet."""
     try:
         yield
     except DegenerateDataError as exc:
@@ -159,7 +159,7 @@ def _tool(session: Session, robot: Robot, tool: str, rtip1: TipEstimate) -> Tool
         session.p_ER_Mtip,
     )
     axes = session.axes[tool]
-    with _data_of("axes.csv"):
+    with naming_file("axes.csv"):
         T_R_E_p1, T_R_E_p2, T_R_E_p3 = (robot.fk(flange, axes[p]) for p in ("p1", "p2", "p3"))
         rotation = tool_rotation(T_R_E_p1, T_R_E_p2, T_R_E_p3, p_E_tool, tool=tool)
     return ToolCalibration(make_transform(rotation.R_E_tool, p_E_tool), validation, rotation, tip)
@@ -232,7 +232,7 @@ class SequentialPlan:
             DegenerateDataError: a tool step's conditioning check failed (names the session file).
         """
         needle_flange, probe_flange = robot.rig.needle_flange, robot.rig.probe_flange
-        with _data_of("touches.csv"):
+        with naming_file("touches.csv"):
             check_distinct_touches(session.touches)
             reference_tips = {
                 ref: reference_tip_estimate(
@@ -275,7 +275,7 @@ class SequentialPlan:
 
     def full_fit(self, method: str) -> ImageCalibration:
         """``method``'s fit on all samples (warns in the grey zone, as :func:`image_to_probe.fit`)."""
-        with _data_of("samples.csv"):
+        with naming_file("samples.csv"):
             return image_to_probe.fit(
                 method, self.session.uv_px, self.p_Ptip, self.session.spacing_m, self.T_Ptip_I_init
             )
@@ -286,7 +286,7 @@ class SequentialPlan:
             return self.start_refusals[method]
         try:
             full = self.start[1] if self.start is not None and self.start[0] == method else self.full_fit(method)
-            with _data_of("samples.csv"):
+            with naming_file("samples.csv"):
                 loo = image_to_probe.leave_one_out(
                     method,
                     self.session.uv_px,

@@ -207,7 +207,6 @@ def segment_files(
     lines = []
     for label, path, sequence in sequences:
         with progress_bar(len(sequence), Path(path).name, quiet, unit="frame") as bar:
-            bar.unit = "frame"
             result = segment_sequence(
                 sequence,
                 phantom,

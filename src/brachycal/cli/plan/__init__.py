@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from brachycal.cli.common import spelling_note
+from brachycal.cli.common import earlier_spelling, spelling_note
 
 #: ``brachycal plan WORD``: the command each word names.
 SUBCOMMANDS = {"check": "plan-check", "excitation": "plan-excitation"}
@@ -25,12 +25,10 @@ def current_spelling(arguments: Sequence[str]) -> list[str]:
     ``plan check [--poses N] [--touches T] …`` and ``plan --excitation SESSION …`` is
     ``plan excitation SESSION …``. Says so on stderr, in one line. Anything else: unchanged."""
     arguments = list(arguments)
-    words = [k for k, word in enumerate(arguments) if not word.startswith("-")]
-    if not words or arguments[words[0]] != "plan":
+    at = earlier_spelling(arguments, "plan", SUBCOMMANDS)
+    if at is None:
         return arguments
-    if len(words) > 1 and words[1] == words[0] + 1 and arguments[words[1]] in SUBCOMMANDS:
-        return arguments  # the current spelling
-    head, rest = arguments[: words[0]], arguments[words[0] + 1 :]
+    head, rest = arguments[:at], arguments[at + 1 :]
     if "--verify" in rest:
         rest.remove("--verify")
         renamed = []

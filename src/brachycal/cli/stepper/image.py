@@ -5,10 +5,9 @@ from __future__ import annotations
 import argparse
 
 from brachycal.cli.common import command_inputs, output_file
+from brachycal.cli.nwire.calibrate import MODELS
 
 NAME = "stepper-image"
-#: The image models (:data:`brachycal.calibration.phantom.nwire_file.NWIRE_MODELS`, here so --help imports nothing).
-MODELS = ("affine", "rigid", "3d-aniso", "3d-iso", "2d-aniso", "2d-iso")
 HELP = "Image -> Probe of a TRUS probe on a stepper, from random stepper motion (N-wire phantom)"
 DESCRIPTION = """\
 Calibrates Image -> Probe of a transrectal probe on a brachytherapy stepper (PLUS's iCal set-up:
@@ -101,12 +100,12 @@ def run(args: argparse.Namespace) -> int:
     from brachycal.errors import InputError  # lazy: start-up (the command's run only)
     from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
 
+    if args.stepper is not None and args.recorded_poses:
+        raise InputError("--recorded-poses uses no axes: give it without --stepper")
     with OutputSet(
         force=args.force, inputs=command_inputs(args, "rotation", "calibration", "validation", "config", "stepper")
     ) as outputs:
         staged = outputs.claim(args.out, label="--out")
-        if args.stepper is not None and args.recorded_poses:
-            raise InputError("--recorded-poses uses no axes: give it without --stepper")
         axes = read_calibrated_axes(args.stepper) if args.stepper is not None else None
         result = calibrate_stepper_image_files(
             args.config,

@@ -32,6 +32,20 @@ MM = 1e-3
 TEMPLATE_FRAME = "TemplateHome"
 HOLDER_FRAME = "TemplateHolder"
 PHANTOM_FRAME = "Phantom"
+#: Largest lateral drift ``hypot(Tx, Ty)`` of a plausible axis ``(Tx, Ty, 1)`` (about 11 degrees off z).
+MAX_AXIS_DRIFT = 0.2
+#: Range of a plausible rotation encoder scale.
+ENCODER_SCALE_RANGE = (0.5, 2.0)
+
+
+def is_stepper_axis(axis: FloatArray) -> bool:
+    """``axis`` is PLUS's ``(Tx, Ty, 1)``: finite, its z 1, within :data:`MAX_AXIS_DRIFT` of the stepper's z."""
+    return bool(np.all(np.isfinite(axis)) and axis[2] == 1.0 and np.hypot(axis[0], axis[1]) <= MAX_AXIS_DRIFT)
+
+
+def is_encoder_scale(scale: float) -> bool:
+    """``scale`` is a rotation encoder scale within :data:`ENCODER_SCALE_RANGE` (NaN is not)."""
+    return ENCODER_SCALE_RANGE[0] <= scale <= ENCODER_SCALE_RANGE[1]
 
 
 @dataclass(frozen=True)
@@ -71,7 +85,7 @@ def _axis(text: str | None, place: str, path: Path) -> FloatArray:
     if values is None or len(values) != 3 or not np.all(np.isfinite(values)):
         raise InputError(f"{place}: expected three numbers 'Tx Ty 1', got {text!r}", file=path)
     axis = np.array(values, dtype=float)
-    if axis[2] != 1.0 or np.hypot(axis[0], axis[1]) > 0.2:
+    if not is_stepper_axis(axis):
         raise InputError(
             f"{place}: expected an axis 'Tx Ty 1' within 0.2 of the stepper's z (about 11 degrees), got {text!r}",
             file=path,
@@ -99,7 +113,7 @@ def read_stepper_axes(path: str | os.PathLike[str]) -> StepperAxes:
         axes.append(np.array([0.0, 0.0, 1.0]) if not (text or "").strip() else _axis(text, f"{place}/@{name}", path))
     scale_text = (element.get("ProbeRotationEncoderScale") or "").strip()
     scale_values = numbers_from_text(scale_text) if scale_text else [1.0]
-    if scale_values is None or len(scale_values) != 1 or not 0.5 <= scale_values[0] <= 2.0:
+    if scale_values is None or len(scale_values) != 1 or not is_encoder_scale(scale_values[0]):
         raise InputError(
             f"{place}/@ProbeRotationEncoderScale: expected a positive scale near 1, got {scale_text!r}", file=path
         )
