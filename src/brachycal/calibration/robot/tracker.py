@@ -26,10 +26,16 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from brachycal.calibration.chain.robot_terms import joint_twists, motion_rows, point_motion
-from brachycal.calibration.robot.arm_fit import ArmFit, Evaluation, ParameterSelection, fit_arm
+from brachycal.calibration.robot.arm_fit import (
+    ArmFit,
+    Evaluation,
+    ParameterSelection,
+    corrected_robot,
+    fit_arm,
+    prior_sd,
+)
 from brachycal.calibration.robot.evidence import EvidenceChoice, evidence_search
 from brachycal.calibration.robot.identifiability import COMPONENTS
-from brachycal.calibration.robot.identification import corrected_robot, prior_sd
 from brachycal.calibration.robot_accuracy import RobotAccuracy
 from brachycal.calibration.sequential.registration import kabsch
 from brachycal.data.formats.tracker_table import TrackerTable, read_tracker_columns, read_tracker_table
