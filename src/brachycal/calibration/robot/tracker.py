@@ -25,13 +25,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from brachycal.calibration.chain.robot_terms import joint_twists, motion_rows, point_motion
+from brachycal.calibration.chain.robot_terms import joint_twists
 from brachycal.calibration.robot.arm_fit import (
     ArmFit,
     Evaluation,
     ParameterSelection,
     corrected_robot,
     fit_arm,
+    flange_points,
     prior_sd,
 )
 from brachycal.calibration.robot.evidence import EvidenceChoice, evidence_search
@@ -205,13 +206,12 @@ class TrackerResiduals:
         d = self.data
         N, nc = len(d.Q), 6 * robot.nq
         T_tb, T_fm = self.frames(y)
-        T_bf = robot.fk(d.flange, d.Q)
-        W = joint_twists(robot, d.Q, d.flange)
+        marker = flange_points(robot, d.Q, d.flange, T_fm[:3, 3])  # the marker in the base frame
+        x_b, W = marker.p, marker.W
         R_tb = T_tb[:3, :3]
-        x_b = T_bf[:, :3, :3] @ T_fm[:3, 3] + T_bf[:, :3, 3]  # the marker in the base frame
-        R_tf = R_tb @ T_bf[:, :3, :3]
+        R_tf = R_tb @ marker.R
         r_p = x_b @ R_tb.T + T_tb[:3, 3] - d.p
-        J_c = (R_tb @ motion_rows(point_motion(x_b), W).reshape(N, 3, nc)).reshape(3 * N, nc)
+        J_c = (R_tb @ marker.J_c).reshape(3 * N, nc)
         J_y = np.zeros((N, 3, self.ny))
         J_y[:, :, :3] = self.T0_base[:3, :3]
         J_y[:, :, 3:6] = -R_tb @ skew(x_b) @ left_jacobian(-y[3:6])
