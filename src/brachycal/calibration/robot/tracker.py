@@ -42,7 +42,7 @@ from brachycal.calibration.sequential.registration import kabsch
 from brachycal.data.formats.tracker_table import TrackerTable, read_tracker_columns, read_tracker_table
 from brachycal.errors import DegenerateDataError, InputError
 from brachycal.model.robot import Robot
-from brachycal.se3 import FloatArray, left_jacobian, make_transform, rotation, skew
+from brachycal.se3 import FloatArray, left_jacobian, make_transform, nearest_rotation, rotation, skew
 
 __all__ = [
     "TRACKER_ACCURACY",
@@ -256,9 +256,7 @@ def start_frames(data: TrackerData) -> tuple[FloatArray, FloatArray]:
             break
     R_fm = np.eye(3)
     if data.R is not None:
-        M = np.sum(np.swapaxes(T_tb[:3, :3] @ T_bf[:, :3, :3], 1, 2) @ data.R, axis=0)
-        U, _, Vt = np.linalg.svd(M)
-        R_fm = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+        R_fm = nearest_rotation(np.sum(np.swapaxes(T_tb[:3, :3] @ T_bf[:, :3, :3], 1, 2) @ data.R, axis=0))
     return T_tb, make_transform(R_fm, p_fm)
 
 
