@@ -316,7 +316,7 @@ def fit_arm(
             (the others are held as given), each by its :class:`NoiseRule` when ``model`` states
             one (:class:`DeclaresNoiseRules`).
         y_prior_sd: a zero-mean Gaussian prior's SD per protocol unknown (``inf``: none; default none).
-        rounds: noise rounds (one when nothing is estimated).
+        rounds: noise rounds, at least one (one when nothing is estimated).
 
     Raises:
         DegenerateDataError: the data (with the prior) do not determine the unknowns.
@@ -344,16 +344,17 @@ def fit_arm(
     )
     steps = 0
     dof = np.full(len(groups), np.nan)
+    if rounds < 1:
+        raise InputError(f"robot identification: {rounds} noise rounds; at least one is needed")
     rounds = rounds if estimated.any() else 1
     for _ in range(rounds):
         x, y, taken = _gauss_newton(nominal, model, selection, x, y, level, scale, y_scale, prior, iterations)
         steps += taken
         evaluation = _evaluate(nominal, model, selection, x, y)
-        A, _ = _system(evaluation, index, x, y, scale, level, prior)
         if estimated.any():
+            A, _ = _system(evaluation, index, x, y, scale, level, prior)
             level, dof = _noise_levels(evaluation, A, level, start, estimated, rules)
-    evaluation = _evaluate(nominal, model, selection, x, y)
-    A, b = _system(evaluation, index, x, y, scale, level, prior)
+    A, b = _system(evaluation, index, x, y, scale, level, prior)  # at the last round's estimate and levels
     posterior = _inverse(A)
     units = np.concatenate([scale, np.ones(len(y))])
     covariance = posterior * np.outer(units, units)
