@@ -31,6 +31,7 @@ from brachycal.calibration.robot.arm_fit import (
     gravity_moments,
     prior_sd,
 )
+from brachycal.calibration.robot.defaults import TOUCHES_ACCURACY as TOUCHES_ACCURACY  # the protocol's default
 from brachycal.calibration.robot.evidence import evidence_search
 from brachycal.calibration.robot.identifiability import COMPONENTS
 from brachycal.calibration.robot_accuracy import RobotAccuracy
@@ -44,15 +45,6 @@ TOUCH_SD_M = 1e-4
 #: Default tolerance of a stated distance between points (metres): a printed or machined block.
 DISTANCE_SD_M = 5e-5
 GROUPS = ("touch", "distance")
-#: Default prior of the corrections: a collaborative arm off its URDF by tenths of a millimetre
-#: and a tenth of a degree per joint origin (the twin's 0.03 mm / 0.003° is a well-built arm's
-#: and would force a real arm's millimetres of error into the tip). State the arm's own figures
-#: when known, or let the training touches choose (``prior="evidence"``).
-TOUCHES_ACCURACY = RobotAccuracy(
-    translation_sd_m=3e-4,
-    rotation_sd_rad=float(np.radians(0.1)),
-    source="touches default: a collaborative arm, 0.3 mm / 0.1 deg per joint origin",
-)
 
 
 @dataclass(frozen=True)

@@ -35,6 +35,7 @@ from brachycal.calibration.robot.arm_fit import (
     flange_points,
     prior_sd,
 )
+from brachycal.calibration.robot.defaults import TRACKER_ACCURACY, TRACKER_MODELS, TRACKER_PRIORS
 from brachycal.calibration.robot.evidence import EvidenceChoice, evidence_search
 from brachycal.calibration.robot.identifiability import COMPONENTS
 from brachycal.calibration.robot_accuracy import RobotAccuracy
@@ -65,20 +66,6 @@ __all__ = [
     "tracker_fits",
 ]
 
-#: The models, from the smallest: the URDF as it is, joint zeros, every joint-origin component.
-TRACKER_MODELS = ("frames", "offsets", "joints")
-#: Default prior of the corrections: an industrial arm off its URDF by ~1 mm / 0.1° per joint
-#: origin (the twin's default 0.03 mm / 0.003° is a well-built arm's and would hold real errors in
-#: the frames). It matters: held out, FIGAROH's UR10 does best at 0.3 mm / 0.03° (2.24 mm per
-#: coordinate; 2.28 mm at the default) and its TIAGo at 3 mm / 0.3° (2.16 mm; 2.42 mm at the
-#: default): state the arm's own figures when known.
-TRACKER_ACCURACY = RobotAccuracy(
-    translation_sd_m=1e-3,
-    rotation_sd_rad=float(np.radians(0.1)),
-    source="tracker default: an industrial arm, 1 mm / 0.1 deg per joint origin",
-)
-#: How the corrections' prior is set: the stated accuracy, or chosen by the postures' evidence.
-TRACKER_PRIORS = ("stated", "evidence")
 #: Rounds of the starting frames' alternation (registration, marker) at most.
 START_ROUNDS = 50
 #: Joint readings beyond a limit by at most this are accepted (real encoders read a little past

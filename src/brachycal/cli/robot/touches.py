@@ -86,7 +86,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         "that the training places' own data make most likely, searched from the stated accuracy "
         "(the held-out places are never used; tens of fits)",
     )
-    from brachycal.calibration.robot.touches import TOUCHES_ACCURACY  # lazy: start-up (the command's run only)
+    from brachycal.calibration.robot.defaults import TOUCHES_ACCURACY  # lazy: start-up (the command's run only)
 
     add_robot_accuracy_options(parser, "the prior of the corrections", zero=False, default=TOUCHES_ACCURACY)
     parser.add_argument(

@@ -43,7 +43,7 @@ example (FIGAROH's UR10, 6-D poses):
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The tracker protocol's own options (the robot, --out and --force: :mod:`brachycal.cli.robot.identify`)."""
     # lazy: start-up (the command's run only)
-    from brachycal.calibration.robot.tracker import TRACKER_ACCURACY, TRACKER_MODELS, TRACKER_PRIORS
+    from brachycal.calibration.robot.defaults import TRACKER_ACCURACY, TRACKER_MODELS, TRACKER_PRIORS
     from brachycal.cli.common import add_robot_accuracy_options  # lazy: start-up (the command's run only)
 
     parser.add_argument("table", metavar="TABLE", help="the tracker table (CSV, one row per posture)")
