@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
 import numpy as np
+import pinocchio as pin
 import scipy.linalg
 
 from brachycal.calibration.chain.noise import MIN_NOISE_DOF
@@ -603,8 +604,6 @@ def gravity_moments(dynamics: Robot, robot: Robot, Q: FloatArray) -> FloatArray:
     ``dynamics`` (a URDF of the same arm with ``<inertial>`` elements; joints matched by name,
     others zero). Joint compliance under these moments (:func:`deflection_columns`) is a
     non-geometric error a protocol may fit."""
-    import pinocchio as pin  # lazy: start-up (pinocchio)
-
     Q = np.atleast_2d(np.asarray(Q, dtype=float))
     names = [n for n in robot.joint_names if n in dynamics.joint_names]
     full = np.zeros((len(Q), dynamics.nq))
