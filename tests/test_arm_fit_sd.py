@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_touch_identification import FLANGE, TIP, position_jacobian, touches_of
+from test_touch_identification import FLANGE, TIP, touches_of, with_touch_noise
 
 from brachycal.calibration.robot.arm_fit import ParameterSelection, flange_points
 from brachycal.calibration.robot.identification import corrected_robot
@@ -31,18 +31,6 @@ def _places(robot: Robot, rng: np.random.Generator) -> list[TouchPlace]:
     ]
 
 
-def _noisy(robot: Robot, places: list[TouchPlace], rng: np.random.Generator) -> list[TouchPlace]:
-    """The touches with joint noise that moves the tip by ``NOISE_M`` per coordinate (isotropic)."""
-    out = []
-    for place in places:
-        touches = []
-        for Q in place.touches:
-            J = position_jacobian(robot, Q, TIP)
-            touches.append(Q + np.einsum("nij,nj->ni", np.linalg.pinv(J), rng.normal(0, NOISE_M, (len(Q), 3))))
-        out.append(TouchPlace(place.name, tuple(touches), place.distances))
-    return out
-
-
 def test_stated_posterior_sd_is_the_spread_of_the_estimates():
     """Whitened by each draw's own stated covariance, the corrections' errors have unit RMS (band
     0.75–1.33 over 30 draws × the base set's size; its standard error is ~3 %). A stated SD scaled
@@ -62,7 +50,8 @@ def test_stated_posterior_sd_is_the_spread_of_the_estimates():
     exact = _places(true_robot, rng)
     z, errors, sds, levels = [], [], [], []
     for _ in range(DRAWS):
-        fit = identify_touches(panda, _noisy(true_robot, exact, rng), FLANGE, None, tip=[0, 0, 0.13], selection=base)
+        places = with_touch_noise(true_robot, exact, rng, NOISE_M)
+        fit = identify_touches(panda, places, FLANGE, None, tip=[0, 0, 0.13], selection=base)
         covariance = fit.fit.covariance[: base.size, : base.size]  # the free corrections' posterior, SI
         error = (fit.fit.corrections - truth).reshape(-1)[base.index]
         z.append(np.linalg.solve(np.linalg.cholesky(covariance), error))

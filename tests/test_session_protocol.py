@@ -41,7 +41,7 @@ def test_cli_prints_held_out_first_and_writes_the_identified_robot(tmp_path, cap
 
 
 def test_identify_robot_is_fit_arm_on_the_session_model():
-    """The session's identification is the arm core's fit of the session model (session_arm_fit):
+    """The session's identification is the arm core's fit of the session model (fit_session):
     identify_robot's corrections are its estimate and its posterior its covariance, reordered to
     (chain, corrections) and in prior units. The axes moves' few rows (2 residual degrees of
     freedom on the twin) take the touches' level, by the model's noise rule; the chain's fit on
@@ -49,7 +49,7 @@ def test_identify_robot_is_fit_arm_on_the_session_model():
     from brachycal.calibration import calibrate
     from brachycal.calibration.chain import MIN_NOISE_DOF
     from brachycal.calibration.robot.identification import identify_robot, prior_sd
-    from brachycal.calibration.robot.session_model import session_arm_fit
+    from brachycal.calibration.robot.session_model import fit_session
     from brachycal.calibration.robot_accuracy import RobotAccuracy
     from brachycal.data.session import read_session
 
@@ -58,7 +58,7 @@ def test_identify_robot_is_fit_arm_on_the_session_model():
     initial = calibrate(session, robot, ("scaled_uv",))
     accuracy = RobotAccuracy(0.3e-3, float(np.radians(0.03)))
     identified = identify_robot(session, robot, initial, "sound_speed", accuracy)
-    arm = session_arm_fit(session, robot, initial, "sound_speed", accuracy)
+    arm = fit_session(session, robot, initial, "sound_speed", accuracy).arm
     sd = arm.correction_sd()
     assert np.max(np.abs(arm.corrections / sd)) > 1  # the robot is off: corrections worth comparing
     assert np.max(np.abs(identified.corrections - arm.corrections) / sd) < 1e-6

@@ -78,10 +78,15 @@ def synthetic_places(true: Robot, rng: np.random.Generator) -> list[TouchPlace]:
 
 
 def noisy_places(true: Robot, rng: np.random.Generator, sd: float) -> list[TouchPlace]:
-    """:func:`synthetic_places` with ``sd`` (metres) of touch noise per coordinate at the tip,
-    put into the joints through the tip Jacobian's pseudo-inverse."""
+    """:func:`synthetic_places` with ``sd`` (metres) of touch noise (:func:`with_touch_noise`)."""
+    return with_touch_noise(true, synthetic_places(true, rng), rng, sd)
+
+
+def with_touch_noise(true: Robot, exact: list[TouchPlace], rng: np.random.Generator, sd: float) -> list[TouchPlace]:
+    """The touches with ``sd`` (metres) of noise per coordinate at the tip (isotropic), put into the
+    joints through the tip Jacobian's pseudo-inverse on ``true``."""
     places = []
-    for place in synthetic_places(true, rng):
+    for place in exact:
         touches = []
         for Q in place.touches:
             J = position_jacobian(true, Q, TIP)

@@ -30,8 +30,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from brachycal.calibration.robot.arm_fit import ParameterSelection, flange_points
-from brachycal.calibration.robot.identification import corrected_robot
+from brachycal.calibration.robot.arm_fit import ParameterSelection, corrected_robot, flange_points
 from brachycal.calibration.robot.touches import arm_joints
 from brachycal.data.formats.tracker_table import COLUMNS_FORMAT
 from brachycal.io import atomic_open

@@ -110,8 +110,6 @@ def noise_levels(
     rows: dict[str, slice],
     sigma: dict[str, float],
     robust: bool,
-    *,
-    h: FloatArray | None = None,
 ) -> dict[str, NoiseLevel]:
     """Each group's noise level from its residuals, with the degrees-of-freedom correction.
 
@@ -119,10 +117,8 @@ def noise_levels(
     by ``sigma``). Final stage: ``σ_g² = Σ_g r_raw² / (n_g − Σ_g h_ii)``; robust stage: the same
     correction applied to 1.4826 × the median absolute residual. Groups with fewer than
     :data:`MIN_NOISE_DOF` residual degrees of freedom take an assumed level (see the module).
-    ``h`` are the rows' leverages when the problem is regularised (a prior's rows make them
-    ``J (JᵀJ + P)⁻¹ Jᵀ``, smaller than the least-squares ones :func:`leverages` gives from ``J``).
     """
-    h = leverages(J) if h is None else np.asarray(h, dtype=float)
+    h = leverages(J)
     out: dict[str, NoiseLevel] = {}
     for g in GROUPS:
         raw = normalised[rows[g]] * sigma[g]

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
 import numpy as np
+import pinocchio as pin
 import scipy.linalg
 
 from brachycal.calibration.chain.noise import MIN_NOISE_DOF
@@ -316,7 +317,7 @@ def fit_arm(
             (the others are held as given), each by its :class:`NoiseRule` when ``model`` states
             one (:class:`DeclaresNoiseRules`).
         y_prior_sd: a zero-mean Gaussian prior's SD per protocol unknown (``inf``: none; default none).
-        rounds: noise rounds (one when nothing is estimated).
+        rounds: noise rounds, at least one (one when nothing is estimated).
 
     Raises:
         DegenerateDataError: the data (with the prior) do not determine the unknowns.
@@ -344,16 +345,17 @@ def fit_arm(
     )
     steps = 0
     dof = np.full(len(groups), np.nan)
+    if rounds < 1:
+        raise InputError(f"robot identification: {rounds} noise rounds; at least one is needed")
     rounds = rounds if estimated.any() else 1
     for _ in range(rounds):
         x, y, taken = _gauss_newton(nominal, model, selection, x, y, level, scale, y_scale, prior, iterations)
         steps += taken
         evaluation = _evaluate(nominal, model, selection, x, y)
-        A, _ = _system(evaluation, index, x, y, scale, level, prior)
         if estimated.any():
+            A, _ = _system(evaluation, index, x, y, scale, level, prior)
             level, dof = _noise_levels(evaluation, A, level, start, estimated, rules)
-    evaluation = _evaluate(nominal, model, selection, x, y)
-    A, b = _system(evaluation, index, x, y, scale, level, prior)
+    A, b = _system(evaluation, index, x, y, scale, level, prior)  # at the last round's estimate and levels
     posterior = _inverse(A)
     units = np.concatenate([scale, np.ones(len(y))])
     covariance = posterior * np.outer(units, units)
@@ -602,8 +604,6 @@ def gravity_moments(dynamics: Robot, robot: Robot, Q: FloatArray) -> FloatArray:
     ``dynamics`` (a URDF of the same arm with ``<inertial>`` elements; joints matched by name,
     others zero). Joint compliance under these moments (:func:`deflection_columns`) is a
     non-geometric error a protocol may fit."""
-    import pinocchio as pin  # lazy: start-up (pinocchio)
-
     Q = np.atleast_2d(np.asarray(Q, dtype=float))
     names = [n for n in robot.joint_names if n in dynamics.joint_names]
     full = np.zeros((len(Q), dynamics.nq))

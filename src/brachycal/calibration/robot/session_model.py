@@ -215,10 +215,3 @@ def fit_session(
             robot, residuals, arm.y, selection, arm.sigma, accuracy, estimate_noise=SESSION_GROUPS, rounds=REFLAG_ROUNDS
         )
     return SessionFit(residuals, arm, flags.outliers)
-
-
-def session_arm_fit(
-    session: Session, robot: Robot, initial: SequentialResult, model: str, accuracy: RobotAccuracy
-) -> ArmFit:
-    """:func:`fit_session`'s :class:`~brachycal.calibration.robot.arm_fit.ArmFit` on all the samples."""
-    return fit_session(session, robot, initial, model, accuracy).arm

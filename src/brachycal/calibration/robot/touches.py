@@ -29,11 +29,11 @@ from brachycal.calibration.robot.arm_fit import (
     fit_arm,
     flange_points,
     gravity_moments,
+    prior_sd,
 )
+from brachycal.calibration.robot.defaults import TOUCHES_ACCURACY as TOUCHES_ACCURACY  # the protocol's default
 from brachycal.calibration.robot.evidence import evidence_search
 from brachycal.calibration.robot.identifiability import COMPONENTS
-from brachycal.calibration.robot.identification import prior_sd
-from brachycal.calibration.robot_accuracy import TOUCHES_ACCURACY as TOUCHES_ACCURACY
 from brachycal.calibration.robot_accuracy import RobotAccuracy
 from brachycal.data.formats.touches import read_touch_folder
 from brachycal.errors import InputError

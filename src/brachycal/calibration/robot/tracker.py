@@ -25,17 +25,25 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from brachycal.calibration.chain.robot_terms import joint_twists, motion_rows, point_motion
-from brachycal.calibration.robot.arm_fit import ArmFit, Evaluation, ParameterSelection, fit_arm
+from brachycal.calibration.chain.robot_terms import joint_twists
+from brachycal.calibration.robot.arm_fit import (
+    ArmFit,
+    Evaluation,
+    ParameterSelection,
+    corrected_robot,
+    fit_arm,
+    flange_points,
+    prior_sd,
+)
+from brachycal.calibration.robot.defaults import TRACKER_ACCURACY, TRACKER_MODELS, TRACKER_PRIORS
 from brachycal.calibration.robot.evidence import EvidenceChoice, evidence_search
 from brachycal.calibration.robot.identifiability import COMPONENTS
-from brachycal.calibration.robot.identification import corrected_robot, prior_sd
-from brachycal.calibration.robot_accuracy import TRACKER_ACCURACY, RobotAccuracy
+from brachycal.calibration.robot_accuracy import RobotAccuracy
 from brachycal.calibration.sequential.registration import kabsch
 from brachycal.data.formats.tracker_table import TrackerTable, read_tracker_columns, read_tracker_table
 from brachycal.errors import DegenerateDataError, InputError
 from brachycal.model.robot import Robot
-from brachycal.se3 import FloatArray, left_jacobian, make_transform, rotation, skew
+from brachycal.se3 import FloatArray, left_jacobian, make_transform, nearest_rotation, rotation, skew
 
 __all__ = [
     "TRACKER_ACCURACY",
@@ -58,10 +66,6 @@ __all__ = [
     "tracker_fits",
 ]
 
-#: The models, from the smallest: the URDF as it is, joint zeros, every joint-origin component.
-TRACKER_MODELS = ("frames", "offsets", "joints")
-#: How the corrections' prior is set: the stated accuracy, or chosen by the postures' evidence.
-TRACKER_PRIORS = ("stated", "evidence")
 #: Rounds of the starting frames' alternation (registration, marker) at most.
 START_ROUNDS = 50
 #: Joint readings beyond a limit by at most this are accepted (real encoders read a little past
@@ -189,13 +193,12 @@ class TrackerResiduals:
         d = self.data
         N, nc = len(d.Q), 6 * robot.nq
         T_tb, T_fm = self.frames(y)
-        T_bf = robot.fk(d.flange, d.Q)
-        W = joint_twists(robot, d.Q, d.flange)
+        marker = flange_points(robot, d.Q, d.flange, T_fm[:3, 3])  # the marker in the base frame
+        x_b, W = marker.p, marker.W
         R_tb = T_tb[:3, :3]
-        x_b = T_bf[:, :3, :3] @ T_fm[:3, 3] + T_bf[:, :3, 3]  # the marker in the base frame
-        R_tf = R_tb @ T_bf[:, :3, :3]
+        R_tf = R_tb @ marker.R
         r_p = x_b @ R_tb.T + T_tb[:3, 3] - d.p
-        J_c = (R_tb @ motion_rows(point_motion(x_b), W).reshape(N, 3, nc)).reshape(3 * N, nc)
+        J_c = (R_tb @ marker.J_c).reshape(3 * N, nc)
         J_y = np.zeros((N, 3, self.ny))
         J_y[:, :, :3] = self.T0_base[:3, :3]
         J_y[:, :, 3:6] = -R_tb @ skew(x_b) @ left_jacobian(-y[3:6])
@@ -240,9 +243,7 @@ def start_frames(data: TrackerData) -> tuple[FloatArray, FloatArray]:
             break
     R_fm = np.eye(3)
     if data.R is not None:
-        M = np.sum(np.swapaxes(T_tb[:3, :3] @ T_bf[:, :3, :3], 1, 2) @ data.R, axis=0)
-        U, _, Vt = np.linalg.svd(M)
-        R_fm = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+        R_fm = nearest_rotation(np.sum(np.swapaxes(T_tb[:3, :3] @ T_bf[:, :3, :3], 1, 2) @ data.R, axis=0))
     return T_tb, make_transform(R_fm, p_fm)
 
 

@@ -1,14 +1,16 @@
-"""What every ``robot identify`` protocol shares: its two outputs, and the identifiability in short
-printed after its figures."""
+"""What every ``robot identify`` protocol shares: its two outputs, the prior and the identifiability
+in short printed after its figures."""
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from pathlib import Path
 
     from brachycal.calibration.robot.identifiability import Identifiability
+    from brachycal.calibration.robot_accuracy import RobotAccuracy
     from brachycal.io import OutputSet
 
 
@@ -17,6 +19,15 @@ def claim_outputs(outputs: OutputSet, out: Path) -> tuple[Path, Path]:
     urdf_path = outputs.claim(out / "robot.urdf", make_parents=True, label="--out robot.urdf")
     json_path = outputs.claim(out / "identification.json", make_parents=True, label="--out identification.json")
     return urdf_path, json_path
+
+
+def print_prior(accuracy: RobotAccuracy) -> None:
+    """The corrections' prior per joint origin (mm, deg; the axis tilt's when it has its own) and its source."""
+    tilt = f", axis tilt {math.degrees(accuracy.tilt_sd_rad):.3g} deg" if accuracy.tilt_sd_rad is not None else ""
+    print(
+        f"prior per joint origin: {accuracy.translation_sd_m * 1e3:.3g} mm, "
+        f"{math.degrees(accuracy.rotation_sd_rad):.3g} deg{tilt} ({accuracy.source or 'as stated'})"
+    )
 
 
 def print_identifiability(identifiability: Identifiability, joint_names: tuple[str, ...]) -> None:

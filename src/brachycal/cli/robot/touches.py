@@ -86,7 +86,7 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         "that the training places' own data make most likely, searched from the stated accuracy "
         "(the held-out places are never used; tens of fits)",
     )
-    from brachycal.calibration.robot_accuracy import TOUCHES_ACCURACY  # lazy: start-up (the command's run only)
+    from brachycal.calibration.robot.defaults import TOUCHES_ACCURACY  # lazy: start-up (the command's run only)
 
     add_robot_accuracy_options(parser, "the prior of the corrections", zero=False, default=TOUCHES_ACCURACY)
     parser.add_argument(
@@ -177,7 +177,8 @@ def run(args: argparse.Namespace) -> int:
 def print_report(report: TouchReport) -> None:
     """Held-out places first, then the training places: scatter (and distance error) in mm; then
     the noise, the tip and the identifiability in short."""
-    from brachycal.cli.robot.report import print_identifiability  # lazy: start-up (the command's run only)
+    # lazy: start-up (the command's run only)
+    from brachycal.cli.robot.report import print_identifiability, print_prior
 
     fit = report.result.fit
     urdf_only = bool(report.result.compliant)
@@ -213,15 +214,5 @@ def print_report(report: TouchReport) -> None:
         f"in {report.result.flange}; {fit.selection.size} corrections free"
     )
     if fit.accuracy is not None:
-        source = fit.accuracy.source or "as stated"
-        print(
-            f"prior per joint origin: {fit.accuracy.translation_sd_m * 1e3:.3g} mm, "
-            f"{math.degrees(fit.accuracy.rotation_sd_rad):.3g} deg"
-            + (
-                f", axis tilt {math.degrees(fit.accuracy.tilt_sd_rad):.3g} deg"
-                if fit.accuracy.tilt_sd_rad is not None
-                else ""
-            )
-            + f" ({source})"
-        )
+        print_prior(fit.accuracy)
     print_identifiability(fit.identifiability, fit.joint_names)

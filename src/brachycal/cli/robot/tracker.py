@@ -4,6 +4,7 @@ measurements of a marker on it, judged by leave-one-out over postures."""
 from __future__ import annotations
 
 import argparse
+import math
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
@@ -42,7 +43,7 @@ example (FIGAROH's UR10, 6-D poses):
 def add_options(parser: argparse.ArgumentParser) -> None:
     """The tracker protocol's own options (the robot, --out and --force: :mod:`brachycal.cli.robot.identify`)."""
     # lazy: start-up (the command's run only)
-    from brachycal.calibration.robot.tracker import TRACKER_ACCURACY, TRACKER_MODELS, TRACKER_PRIORS
+    from brachycal.calibration.robot.defaults import TRACKER_ACCURACY, TRACKER_MODELS, TRACKER_PRIORS
     from brachycal.cli.common import add_robot_accuracy_options  # lazy: start-up (the command's run only)
 
     parser.add_argument("table", metavar="TABLE", help="the tracker table (CSV, one row per posture)")
@@ -108,7 +109,8 @@ def run(args: argparse.Namespace) -> int:
 def print_report(result: TrackerIdentification) -> None:
     """Per model: held-out (leave-one-out) first, then training; the choice and why; the
     identifiability in short."""
-    from brachycal.cli.robot.report import print_identifiability  # lazy: start-up (the command's run only)
+    # lazy: start-up (the command's run only)
+    from brachycal.cli.robot.report import print_identifiability, print_prior
 
     data = result.data
     print(
@@ -120,12 +122,9 @@ def print_report(result: TrackerIdentification) -> None:
     sigma = result.fit.sigma
     noise = f"tracker noise {sigma['position'] * 1e3:.3f} mm"
     if "orientation" in sigma:
-        noise += f", {float(sigma['orientation']) * 180 / 3.141592653589793:.3f} deg"
+        noise += f", {math.degrees(sigma['orientation']):.3f} deg"
     print(f"{noise}; {len(result.fit.parameters)} joint corrections estimated")
     accuracy = result.fit.arm.accuracy
     if accuracy is not None and result.fit.parameters:
-        print(
-            f"prior per joint origin: {accuracy.translation_sd_m * 1e3:.3g} mm, "
-            f"{float(accuracy.rotation_sd_rad) * 180 / 3.141592653589793:.3g} deg ({accuracy.source or 'as stated'})"
-        )
+        print_prior(accuracy)
     print_identifiability(result.fit.arm.identifiability, result.fit.arm.joint_names)
