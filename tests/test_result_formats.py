@@ -73,7 +73,7 @@ def test_pivot_reader_refuses_other_files(tmp_path):
     payload["tip_in_tool"] = [0.0, None, 1.0]
     broken = tmp_path / "broken.json"
     broken.write_text(json.dumps(payload))
-    with pytest.raises(InputError, match=r"broken\.json, column 'tip_in_tool': must be three finite numbers"):
+    with pytest.raises(InputError, match=r"broken\.json, column 'tip_in_tool\[1\]': must be a number, got null"):
         read_pivot(broken)
 
 
@@ -106,5 +106,5 @@ def test_nwire_reader_refuses_a_transform_that_is_not_rigid(tmp_path):
     }
     path = tmp_path / "scaled.json"
     path.write_text(json.dumps(payload))
-    with pytest.raises(InputError, match=r"scaled\.json, column 'T_Probe_Image': matrix is not a rigid transform"):
+    with pytest.raises(InputError, match=r"scaled\.json, column 'T_Probe_Image': 4x4 matrix is not a rigid transform"):
         read_nwire(path)

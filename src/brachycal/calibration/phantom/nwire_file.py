@@ -39,11 +39,20 @@ from brachycal.calibration.phantom.nwire import (
 )
 from brachycal.calibration.phantom.nwire_refine import PLUS_NAMES, REFINEMENTS, Refinement, observations, refine_all
 from brachycal.data.formats.plus_files import PlusConfig, SegmentedFrame, read_plus_config, read_segmented_frames
-from brachycal.data.json_files import read_format_json
+from brachycal.data.json_schema import (
+    Obj,
+    array,
+    image_to_probe_mm,
+    mapping,
+    number,
+    read_document,
+    spacing,
+    text,
+    transform,
+)
 from brachycal.errors import InputError
 from brachycal.io import sha256_file, write_json
 from brachycal.se3 import FloatArray
-from brachycal.validate import check_spacing_mm, check_transform
 
 FORMAT = "brachycal-nwire/1"
 #: The image models fitted and validated: PLUS's affine matrix, a rotation with two spacings, and
@@ -302,6 +311,23 @@ def write_nwire(run: NWireFileResult, path: str | os.PathLike[str], *, force: bo
     return write_json(path, run.to_json(), force=force)
 
 
+#: The schema of a ``brachycal-nwire/1`` document (:mod:`brachycal.data.json_schema`): the keys
+#: :func:`read_nwire` uses, in metres (``T_Probe_Image``) and PLUS's pixels → mm (``*_mm`` matrices).
+NWIRE_DOCUMENT = Obj(
+    required={"T_Probe_Image": transform, "spacing_mm": spacing, "affine_mm": image_to_probe_mm},
+    optional={
+        "affine_spacing_mm": array(number(0.0, unit="mm/px"), length=2),
+        "rigid_vs_affine_deg": number(0.0, 180.0, "deg"),
+        "model": text(nonempty=True),
+        "models": mapping(
+            Obj(required={"image_to_probe_mm": image_to_probe_mm}, optional={"spacing_mm": spacing}),
+            keys=NWIRE_MODELS,
+        ),
+        "inputs": mapping(text()),
+    },
+)
+
+
 @dataclass(frozen=True)
 class NWireFile:
     """What a ``brachycal-nwire/1`` file holds.
@@ -342,48 +368,23 @@ def read_nwire(path: str | os.PathLike[str]) -> NWireFile:
     """Read a ``brachycal-nwire/1`` file back.
 
     Raises:
-        InputError: not readable JSON, another format, a ``T_Probe_Image`` that is not rigid, a
-            spacing that is not plausible, or an affine matrix that is not 4×4 finite numbers
-            (naming the file and the key).
+        InputError: not readable JSON, another format, or a value :data:`NWIRE_DOCUMENT` refuses: a
+            ``T_Probe_Image`` that is not rigid, a spacing that is not plausible, an Image→Probe
+            matrix that is sheared or out of range (naming the file and the key).
     """
     path = Path(path)
-    raw = read_format_json(path, FORMAT)
-
-    def matrix(key: str) -> FloatArray:
-        try:
-            M = np.array(raw.get(key), dtype=float)
-        except (TypeError, ValueError):
-            M = np.empty(0)
-        if M.shape != (4, 4) or not np.all(np.isfinite(M)):
-            raise InputError("must be a 4x4 matrix of finite numbers", file=path, column=key)
-        return M
-
-    try:
-        T = check_transform(matrix("T_Probe_Image"), "matrix")
-    except InputError as exc:  # restated with the file and the key
-        raise InputError(exc.problem, file=path, column="T_Probe_Image") from None
-    spacing_mm = raw.get("spacing_mm")
-    if spacing_mm is None:
-        raise InputError("missing: expected the pixel spacing (s_u, s_v) in mm", file=path, column="spacing_mm")
-    spacing_m = check_spacing_mm(spacing_mm, "pixel spacing", file=path, column="spacing_mm") * 1e-3
-    affine = matrix("affine_mm")
+    raw = read_document(path, FORMAT, NWIRE_DOCUMENT)
+    T = np.array(raw["T_Probe_Image"], dtype=float)
+    spacing_m = np.array(raw["spacing_mm"], dtype=float) * 1e-3
+    affine = np.array(raw["affine_mm"], dtype=float)
     affine[:3, :] *= 1e-3
     models: dict[str, FloatArray] = {}
-    stored_models = raw.get("models", {})
-    if not isinstance(stored_models, dict):
-        raise InputError("must be an object of models", file=path, column="models")
-    for name, entry in stored_models.items():
-        key = f"models.{name}.image_to_probe_mm"
-        try:
-            M = np.array(entry.get("image_to_probe_mm") if isinstance(entry, dict) else None, dtype=float)
-        except (TypeError, ValueError):
-            M = np.empty(0)
-        if M.shape != (4, 4) or not np.all(np.isfinite(M)) or abs(np.linalg.det(M[:3, :3])) == 0.0:
-            raise InputError("must be an invertible 4x4 matrix of finite numbers", file=path, column=key)
+    for name, entry in raw.get("models", {}).items():
+        M = np.array(entry["image_to_probe_mm"], dtype=float)
         M[:3, :] *= 1e-3
         models[str(name)] = M
     model = raw.get("model", "rigid")
-    if not isinstance(model, str) or (models and model not in models):
+    if models and model not in models:
         raise InputError(f"must name one of the file's models, got {model!r}", file=path, column="model")
     return NWireFile(T, spacing_m, affine, raw, model, models)
 

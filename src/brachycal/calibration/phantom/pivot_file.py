@@ -12,7 +12,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -20,7 +20,7 @@ from brachycal._lazy import renamed
 from brachycal.calibration.labels import PIVOT_METHODS as PIVOT_METHOD_NAMES
 from brachycal.calibration.labels import POSE_UNITS
 from brachycal.calibration.phantom.pivot import PivotResult, pivot_algebraic, pivot_robust
-from brachycal.data.json_files import read_format_json
+from brachycal.data.json_schema import MAX_TRANSLATION_M, Obj, Where, array, number, one_of, read_document
 from brachycal.data.pose_list import read_pose_list
 from brachycal.errors import DegenerateDataError, InputError
 from brachycal.io import sha256_file, write_json
@@ -150,28 +150,38 @@ class PivotFile:
     raw: dict
 
 
+def pivot_document(raw: Any, where: Where) -> None:
+    """The schema of a ``brachycal-pivot/1`` document (:mod:`brachycal.data.json_schema`): ``units``
+    ``m`` or ``mm``, the tip and the pivot three numbers within
+    :data:`~brachycal.data.json_schema.MAX_TRANSLATION_M` of their frames, and the tip as far from
+    the tool's origin as a tool is long (:data:`~brachycal.validate.TOOL_LENGTH_M_RANGE`: a pivot
+    written in the other unit than its ``units`` say is refused)."""
+    Obj(required={"units": one_of(UNITS)})(raw, where)
+    scale = 1.0 if raw["units"] == "m" else 1e-3  # metres per unit
+    point = array(number(-MAX_TRANSLATION_M / scale, MAX_TRANSLATION_M / scale, raw["units"]), length=3)
+    Obj(required={"tip_in_tool": point, "pivot_in_reference": point})(raw, where)
+    length_m = float(np.linalg.norm(raw["tip_in_tool"])) * scale
+    low, high = TOOL_LENGTH_M_RANGE
+    if not low <= length_m <= high:
+        other = "mm" if raw["units"] == "m" else "m"
+        raise where.at("tip_in_tool").refuse(
+            f"the tip is {length_m / scale:.4g} {raw['units']} from the tool's origin: no tool is shorter than "
+            f"{low / scale:g} or longer than {high / scale:g} {raw['units']}; is it in {other}?"
+        )
+
+
 def read_pivot(path: str | os.PathLike[str]) -> PivotFile:
     """Read a ``brachycal-pivot/1`` file back.
 
     Raises:
-        InputError: not readable JSON, another format, or a point that is not three finite numbers
+        InputError: not readable JSON, another format, or a value :func:`pivot_document` refuses
             (naming the file and the key).
     """
     path = Path(path)
-    raw = read_format_json(path, FORMAT)
-    if raw.get("units") not in UNITS:
-        raise InputError(
-            f"units must be one of {', '.join(UNITS)}, got {raw.get('units')!r}", file=path, column="units"
-        )
+    raw = read_document(path, FORMAT, pivot_document)
 
     def point(key: str) -> FloatArray:
-        try:
-            p = np.array(raw.get(key), dtype=float)
-        except (TypeError, ValueError):
-            p = np.empty(0)
-        if p.shape != (3,) or not np.all(np.isfinite(p)):
-            raise InputError("must be three finite numbers", file=path, column=key)
-        return p
+        return np.array(raw[key], dtype=float)
 
     return PivotFile(point("tip_in_tool"), point("pivot_in_reference"), raw["units"], raw)
 

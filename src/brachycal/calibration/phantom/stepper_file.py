@@ -47,10 +47,13 @@ from brachycal.data.formats.plus_files import (
     stepper_encoder_values,
 )
 from brachycal.data.formats.plus_segmentation import NWireSegmentationParameters, read_segmentation_parameters
+from brachycal.data.formats.plus_stepper import ENCODER_SCALE_RANGE, encoder_scale, stepper_axis
+from brachycal.data.json_schema import Obj, array, number, spacing
 from brachycal.errors import DegenerateDataError
 from brachycal.imaging.nwire_segmentation import segment_sequence
 from brachycal.io import sha256_file, write_json
 from brachycal.se3 import FloatArray
+from brachycal.validate import MAX_IMAGE_PX
 
 FORMAT = "brachycal-stepper/1"
 #: Fewest segmented frames a translation recording needs (a line through the encoder's positions
@@ -177,6 +180,25 @@ class StepperFileResult:
                 **{f"{name}_sha256": sha256_file(r.path) for name, r in self.recordings.items()},
             },
         }
+
+
+#: The schema of a ``brachycal-stepper/1`` document (:mod:`brachycal.data.json_schema`): the axes
+#: and the scale ``brachycal stepper image --stepper`` reads (PLUS's form), and the spacing and the
+#: centre of rotation (metres and millimetres per pixel, pixels).
+STEPPER_DOCUMENT = Obj(
+    required={
+        "probe_translation_axis": Obj(required={"plus_orientation": stepper_axis}),
+        "template_translation_axis": Obj(required={"plus_orientation": stepper_axis}),
+        "rotation_encoder": Obj(
+            required={"plus_scale": encoder_scale},
+            optional={"scale": number(-ENCODER_SCALE_RANGE[1], -ENCODER_SCALE_RANGE[0])},
+        ),
+    },
+    optional={
+        "pixel_spacing": Obj(optional={"value_mm_per_px": spacing}),
+        "centre_of_rotation": Obj(optional={"value_px": array(number(-MAX_IMAGE_PX, MAX_IMAGE_PX, "px"), length=2)}),
+    },
+)
 
 
 def _axis_json(axis: TranslationAxisFit) -> dict:

@@ -37,7 +37,12 @@ from brachycal.calibration.phantom.nwire_file import (
 )
 from brachycal.calibration.phantom.stepper import StepperFit, centre_of_rotation, pixel_spacing
 from brachycal.calibration.phantom.stepper_file import FORMAT as STEPPER_FORMAT
-from brachycal.calibration.phantom.stepper_file import MIN_ROTATION_FRAMES, check_recording, read_stepper_recording
+from brachycal.calibration.phantom.stepper_file import (
+    MIN_ROTATION_FRAMES,
+    STEPPER_DOCUMENT,
+    check_recording,
+    read_stepper_recording,
+)
 from brachycal.data.formats.metaimage import read_image_sequence, read_sequence_header
 from brachycal.data.formats.plus_files import (
     SegmentedFrame,
@@ -52,16 +57,27 @@ from brachycal.data.formats.plus_stepper import (
     STRAIGHT_AXES,
     StepperAxes,
     TemplateGrid,
-    is_encoder_scale,
-    is_stepper_axis,
+    encoder_scale,
     read_stepper_axes,
+    stepper_axis,
 )
-from brachycal.data.json_files import read_format_json
+from brachycal.data.json_schema import (
+    MAX_TRANSLATION_M,
+    Obj,
+    Where,
+    array,
+    integer,
+    number,
+    read_document,
+    spacing,
+    text,
+    transform,
+)
 from brachycal.errors import DegenerateDataError, InputError
 from brachycal.imaging.nwire_segmentation import segment_sequence
 from brachycal.io import sha256_file, write_json
 from brachycal.se3 import FloatArray, inverse, rotation, transform_points
-from brachycal.validate import check_transform
+from brachycal.validate import MAX_IMAGE_PX
 
 MM = 1e-3
 #: Largest lateral translation or tilt (metres, radians) a recorded encoder pose may carry: the
@@ -195,28 +211,16 @@ def read_calibrated_axes(path: str | os.PathLike[str]) -> StepperAxes:
     """The stepper's axes from a ``brachycal stepper calibrate`` result (``brachycal-stepper/1``), PLUS's form.
 
     Raises:
-        InputError: another format, or an axis or scale that is missing or not PLUS's ``Tx Ty 1``
-            within 0.2 of the stepper's z (a scale within 0.5–2), naming the key.
+        InputError: another format, or a value :data:`~brachycal.calibration.phantom.stepper_file.STEPPER_DOCUMENT`
+            refuses: an axis or scale that is missing or not PLUS's ``Tx Ty 1`` within 0.2 of the
+            stepper's z (a scale within 0.5–2), naming the key.
     """
-    raw = read_format_json(path, STEPPER_FORMAT)
-    axes: list[FloatArray] = []
-    for key in ("probe_translation_axis", "template_translation_axis"):
-        entry = raw.get(key)
-        try:
-            axis: FloatArray = np.asarray(entry["plus_orientation"], dtype=np.float64).reshape(3)  # type: ignore[index]
-        except (KeyError, TypeError, ValueError):
-            axis = np.full(3, np.nan)
-        if not is_stepper_axis(axis):
-            raise InputError(
-                "must be PLUS's axis 'Tx Ty 1' within 0.2 of z", file=path, column=f"{key}.plus_orientation"
-            )
-        axes.append(axis)
-    try:
-        scale = float(raw["rotation_encoder"]["plus_scale"])
-    except (KeyError, TypeError, ValueError):
-        scale = float("nan")
-    if not is_encoder_scale(scale):
-        raise InputError("must be a scale within 0.5-2", file=path, column="rotation_encoder.plus_scale")
+    raw = read_document(path, STEPPER_FORMAT, STEPPER_DOCUMENT)
+    axes = [
+        np.array(raw[key]["plus_orientation"], dtype=float)
+        for key in ("probe_translation_axis", "template_translation_axis")
+    ]
+    scale = float(raw["rotation_encoder"]["plus_scale"])
     return StepperAxes(axes[0], axes[1], scale, f"brachycal stepper calibrate ({Path(path).name})")
 
 
@@ -352,6 +356,35 @@ def write_stepper_image(result: StepperImageResult, path: str | os.PathLike[str]
     return write_json(path, result.to_json(), force=force)
 
 
+#: The schema of the ``stepper`` block of a stepper Image → Probe file (:mod:`brachycal.data.json_schema`):
+#: the phantom's registration (metres) and the stepper axes the poses were rebuilt along.
+STEPPER_BLOCK = Obj(
+    required={
+        "T_Template_Phantom": transform,
+        "axes": Obj(
+            required={
+                "probe_translation": stepper_axis,
+                "template_translation": stepper_axis,
+                "rotation_encoder_scale": encoder_scale,
+            },
+            optional={"source": text(), "poses": text()},
+        ),
+    },
+    optional={
+        "pose_source": text(),
+        "registration": Obj(
+            optional={
+                "frames": integer(),
+                "spacing_mm": spacing,
+                "centre_of_rotation_px": array(number(-MAX_IMAGE_PX, MAX_IMAGE_PX, "px"), length=2),
+                "vertical_distance_mm": number(0.0, MAX_TRANSLATION_M * 1e3, "mm"),
+                "horizontal_distance_mm": number(0.0, MAX_TRANSLATION_M * 1e3, "mm"),
+            }
+        ),
+    },
+)
+
+
 @dataclass(frozen=True)
 class StepperImageFile:
     """What a stepper Image → Probe file holds: the N-wire result, the registration and the axes.
@@ -387,24 +420,11 @@ def read_stepper_image(path: str | os.PathLike[str]) -> StepperImageFile:
             file=path,
             column="stepper",
         )
-    try:
-        T = check_transform(np.array(stepper.get("T_Template_Phantom"), dtype=float), "matrix")
-    except (InputError, TypeError, ValueError) as exc:
-        problem = exc.problem if isinstance(exc, InputError) else "must be a 4x4 rigid transform"
-        raise InputError(problem, file=path, column="stepper.T_Template_Phantom") from None
-    raw_axes = stepper.get("axes", {})
-    try:
-        probe = np.array(raw_axes["probe_translation"], dtype=float).reshape(3)
-        template = np.array(raw_axes["template_translation"], dtype=float).reshape(3)
-        scale = float(raw_axes["rotation_encoder_scale"])
-    except (KeyError, TypeError, ValueError):
-        raise InputError(
-            "must hold probe_translation, template_translation (3 numbers each) and rotation_encoder_scale",
-            file=path,
-            column="stepper.axes",
-        ) from None
-    if not (np.all(np.isfinite(probe)) and np.all(np.isfinite(template)) and is_encoder_scale(scale)):
-        raise InputError("axes must be finite and the scale near 1", file=path, column="stepper.axes")
+    STEPPER_BLOCK(stepper, Where(path, "stepper"))
+    T = np.array(stepper["T_Template_Phantom"], dtype=float)
+    raw_axes = stepper["axes"]
+    probe, template = (np.array(raw_axes[key], dtype=float) for key in ("probe_translation", "template_translation"))
+    scale = float(raw_axes["rotation_encoder_scale"])
     return StepperImageFile(nwire, T, StepperAxes(probe, template, scale, str(raw_axes.get("source", ""))))
 
 

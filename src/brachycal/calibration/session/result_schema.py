@@ -1,5 +1,6 @@
 """The schema of a ``brachycal-result/1`` document: every key the writer lays out, its type, shape
-and physical range, checked before anything in the file is used.
+and physical range, checked before anything in the file is used (the building blocks and the one
+check every result file goes through: :mod:`brachycal.data.json_schema`).
 
 Design: ``docs/design/files.md``, "The result file's schema".
 """
@@ -8,26 +9,31 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
 from brachycal.calibration.labels import METHODS
-from brachycal.data.json_files import check_json_tree, json_place, shown
-from brachycal.errors import InputError
-from brachycal.validate import MAX_IMAGE_PX, check_int, check_range, check_spacing_mm, check_transform
+from brachycal.data.json_schema import (
+    MAX_TRANSLATION_M,
+    Obj,
+    Spec,
+    Where,
+    array,
+    image_size,
+    integer,
+    mapping,
+    nullable,
+    number,
+    spacing,
+    text,
+    transform,
+    validate_document,
+)
+from brachycal.validate import MAX_IMAGE_PX
 
 FORMAT = "brachycal-result/1"
 
 #: Registration methods a result stores an image calibration for: Table II's and the whole chain's.
 RESULT_METHODS = (*METHODS, "chain")
-
-#: Largest translation of a stored transform (and of a reference tip, a joint-origin correction),
-#: metres: the tools, the image and the joint origins are within a metre of their parent frames
-#: (the SDA10F's arms reach 0.7 m); 5 m is no robot cell's, and a value in millimetres is refused.
-MAX_TRANSLATION_M = 5.0
 
 #: Largest joint zero offset and joint-origin rotation correction, radians: beyond a half turn an
 #: angle is another zero plus whole turns, never a correction (1e6 rad would move a point by cm).
@@ -36,190 +42,6 @@ MAX_JOINT_CORRECTION_RAD = math.pi
 #: Plausible speeds of sound, m/s: from air-filled foams (~340) to bone (~4000); soft tissue and
 #: water are near 1500.
 SOUND_SPEED_RANGE_M_S = (300.0, 5000.0)
-
-#: Largest number of samples, folds or replicates a result counts (a day at the robot is ~1e4 poses).
-MAX_COUNT = 10**7
-
-
-@dataclass(frozen=True)
-class Where:
-    """The file being checked and a place inside its document."""
-
-    file: str | os.PathLike[str] | None
-    place: str
-
-    def at(self, key: str | int) -> Where:
-        return Where(self.file, json_place(self.place, key))
-
-    def refuse(self, problem: str) -> InputError:
-        return InputError(problem, file=self.file, column=self.place or None)
-
-
-#: A check of one value at a place: returns nothing, raises :class:`InputError` naming the place.
-Spec = Callable[[Any, Where], None]
-
-
-def _kind(value: Any) -> str:
-    if value is None:
-        return "null"
-    if isinstance(value, bool):
-        return "true/false"
-    if isinstance(value, int | float):
-        return "a number"
-    if isinstance(value, str):
-        return "a string"
-    return "a list" if isinstance(value, list) else "an object" if isinstance(value, dict) else type(value).__name__
-
-
-def _is_number(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool)
-
-
-# ---------------------------------------------------------------------------------------------
-# The building blocks
-
-
-def number(low: float | None = None, high: float | None = None, unit: str = "", *, low_open: bool = False) -> Spec:
-    """A finite JSON number within ``[low, high]`` (:func:`~brachycal.validate.check_range`)."""
-
-    def check(value: Any, where: Where) -> None:
-        if not _is_number(value):
-            raise where.refuse(f"must be a number, got {_kind(value)}")
-        try:
-            check_range(value, "", low=low, high=high, low_open=low_open, unit=unit)
-        except InputError as exc:
-            raise where.refuse(exc.problem) from None
-
-    return check
-
-
-def integer(low: int = 0, high: int = MAX_COUNT) -> Spec:
-    """A whole JSON number within ``[low, high]`` (:func:`~brachycal.validate.check_int`)."""
-
-    def check(value: Any, where: Where) -> None:
-        if not _is_number(value):
-            raise where.refuse(f"must be a whole number, got {_kind(value)}")
-        try:
-            check_int(value, "", low=low, high=high)
-        except InputError as exc:
-            raise where.refuse(exc.problem) from None
-
-    return check
-
-
-def text(*, nonempty: bool = False) -> Spec:
-    """A JSON string (not empty with ``nonempty``)."""
-
-    def check(value: Any, where: Where) -> None:
-        what = "a non-empty string" if nonempty else "a string"
-        if not isinstance(value, str):
-            raise where.refuse(f"must be {what}, got {_kind(value)}")
-        if nonempty and not value:
-            raise where.refuse(f"must be {what}, got an empty one")
-
-    return check
-
-
-def nullable(spec: Spec) -> Spec:
-    """``null`` or what ``spec`` accepts."""
-
-    def check(value: Any, where: Where) -> None:
-        if value is not None:
-            spec(value, where)
-
-    return check
-
-
-def array(item: Spec, *, length: int | None = None, nonempty: bool = False) -> Spec:
-    """A JSON list whose every item ``item`` accepts (of ``length`` items when given)."""
-
-    def check(value: Any, where: Where) -> None:
-        if not isinstance(value, list):
-            raise where.refuse(f"must be a list, got {_kind(value)}")
-        if length is not None and len(value) != length:
-            raise where.refuse(f"must hold {length} values, got {len(value)}")
-        if nonempty and not value:
-            raise where.refuse("must not be empty")
-        for k, entry in enumerate(value):
-            item(entry, where.at(k))
-
-    return check
-
-
-def mapping(value: Spec, *, keys: tuple[str, ...] | None = None, nonempty: bool = False) -> Spec:
-    """A JSON object of names (each among ``keys`` when given) to values ``value`` accepts."""
-
-    def check(raw: Any, where: Where) -> None:
-        if not isinstance(raw, dict):
-            raise where.refuse(f"must be an object (name: value), got {_kind(raw)}")
-        if nonempty and not raw:
-            raise where.refuse("must not be empty")
-        for key, entry in raw.items():
-            if not key or (keys is not None and key not in keys):
-                known = f" (known: {', '.join(keys)})" if keys is not None else ""
-                raise where.refuse(f"unknown name {shown(key)}{known}")
-            value(entry, where.at(key))
-
-    return check
-
-
-@dataclass(frozen=True)
-class Obj:
-    """A JSON object with the ``required`` and ``optional`` keys (others are accepted unchecked,
-    unless ``closed``)."""
-
-    required: Mapping[str, Spec] = field(default_factory=dict)
-    optional: Mapping[str, Spec] = field(default_factory=dict)
-    closed: bool = False
-
-    def __call__(self, raw: Any, where: Where) -> None:
-        if not isinstance(raw, dict):
-            raise where.refuse(f"must be an object, got {_kind(raw)}")
-        for key, spec in self.required.items():
-            if key not in raw:
-                raise where.at(key).refuse("missing")
-            spec(raw[key], where.at(key))
-        for key, spec in self.optional.items():
-            if key in raw:
-                spec(raw[key], where.at(key))
-        if self.closed:
-            extra = sorted(set(raw) - set(self.required) - set(self.optional))
-            if extra:
-                raise where.refuse(
-                    f"unknown key {shown(extra[0])} (it holds {', '.join([*self.required, *self.optional])})"
-                )
-
-
-def transform(value: Any, where: Where) -> None:
-    """A rigid 4x4 transform (rows of numbers, metres): finite, last row 0 0 0 1, a proper rotation
-    (:func:`~brachycal.validate.check_transform`), its translation within :data:`MAX_TRANSLATION_M`."""
-    array(array(number(), length=4), length=4)(value, where)
-    try:
-        T = check_transform(np.array(value, dtype=float), "4x4 matrix")
-    except InputError as exc:
-        raise where.refuse(exc.problem) from None
-    reach = float(np.max(np.abs(T[:3, 3])))
-    if reach > MAX_TRANSLATION_M:
-        raise where.refuse(
-            f"translation of {reach:g} m: beyond {MAX_TRANSLATION_M:g} m from its parent frame "
-            "(millimetres given as metres?)"
-        )
-
-
-def spacing(value: Any, where: Where) -> None:
-    """A pixel spacing ``[s_u, s_v]``, mm/px (:func:`~brachycal.validate.check_spacing_mm`)."""
-    array(number(), length=2)(value, where)
-    check_spacing_mm(value, "", file=where.file, column=where.place)
-
-
-def image_size(value: Any, where: Where) -> None:
-    """``[width, height]``: whole pixels in ``[1, MAX_IMAGE_PX]``."""
-    try:
-        array(integer(1, MAX_IMAGE_PX), length=2)(value, where)
-    except InputError:
-        raise where.refuse(
-            f"must be two whole numbers of pixels in [1, {MAX_IMAGE_PX}] (width, height), got {shown(value)}"
-        ) from None
 
 
 # ---------------------------------------------------------------------------------------------
@@ -397,12 +219,8 @@ def validate_result_document(doc: Any, path: str | os.PathLike[str] | None = Non
         InputError: the first problem, naming ``path`` and the place in the document
             (``column 'transforms.Ptip_T_I.kabsch'``).
     """
-    check_json_tree(doc, path)
+    validate_document(doc, path, FORMAT, DOCUMENT)
     top = Where(path, "")
-    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
-        found = doc.get("format") if isinstance(doc, dict) else None
-        raise top.at("format").refuse(f"format is {shown(found)}, expected {FORMAT!r}")
-    DOCUMENT(doc, top)
     images = doc["transforms"]["Ptip_T_I"]
     spacings = doc.get("spacing_mm", {})
     for method in images:

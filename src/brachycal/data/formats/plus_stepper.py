@@ -19,10 +19,12 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from brachycal.data.formats.plus_files import find_section, parse_xml, read_coordinate_definitions
+from brachycal.data.json_schema import Where, array, number
 from brachycal.errors import InputError
 from brachycal.se3 import FloatArray, inverse
 from brachycal.validate import check_transform, numbers_from_text
@@ -46,6 +48,20 @@ def is_stepper_axis(axis: FloatArray) -> bool:
 def is_encoder_scale(scale: float) -> bool:
     """``scale`` is a rotation encoder scale within :data:`ENCODER_SCALE_RANGE` (NaN is not)."""
     return ENCODER_SCALE_RANGE[0] <= scale <= ENCODER_SCALE_RANGE[1]
+
+
+def stepper_axis(value: Any, where: Where) -> None:
+    """Schema check (:mod:`brachycal.data.json_schema`): PLUS's axis ``Tx Ty 1`` (:func:`is_stepper_axis`)."""
+    array(number(), length=3)(value, where)
+    if not is_stepper_axis(np.array(value, dtype=float)):
+        raise where.refuse(
+            f"must be PLUS's axis 'Tx Ty 1' within {MAX_AXIS_DRIFT:g} of the stepper's z (about 11 degrees), "
+            f"got {value}"
+        )
+
+
+#: Schema check of a rotation encoder scale (:func:`is_encoder_scale`).
+encoder_scale = number(*ENCODER_SCALE_RANGE)
 
 
 @dataclass(frozen=True)
