@@ -79,19 +79,45 @@ def stepper_result(path: Path) -> None:
     write_stepper_image(StepperImageResult(nwire, None, registration, TILTED_AXES), path)
 
 
-def files(config: str | None = None, result: bool = True, plain_nwire: bool = False):
+def files(config: str | None = None, result: bool = True, plain_nwire: bool = False, edit=None):
+    """Setup: ``config.xml``, a stepper result ``result.json`` (without its stepper block with
+    ``plain_nwire``; changed by ``edit(document)``) and empty recordings."""
+
     def setup(tmp: Path) -> None:
         (tmp / "config.xml").write_text(config if config is not None else device_set())
         if result:
             stepper_result(tmp / "result.json")
-        if plain_nwire:
+        if plain_nwire or edit is not None:
             raw = json.loads((tmp / "result.json").read_text())
-            raw.pop("stepper")
+            if plain_nwire:
+                raw.pop("stepper")
+            if edit is not None:
+                edit(raw)
             (tmp / "result.json").write_text(json.dumps(raw))
         for name in ("rotation.mha", "calibration.mha", "validation.mha"):
             (tmp / name).write_bytes(b"")
 
     return setup
+
+
+def chosen(key: str, row: int, column: int, value: float):
+    """An edit: element ``[row][column]`` of the chosen model's ``key`` (``image_to_probe_mm``) set to ``value``."""
+
+    def edit(raw: dict) -> None:
+        raw["models"][raw["model"]][key][row][column] = value
+
+    return edit
+
+
+def set_in(value: object, *keys: str | int):
+    """An edit: ``raw[keys[0]][keys[1]]...`` set to ``value``."""
+
+    def edit(raw: dict) -> None:
+        for key in keys[:-1]:
+            raw = raw[key]
+        raw[keys[-1]] = value
+
+    return edit
 
 
 TEMPLATE = ["stepper", "template", "{tmp}/result.json", "--config", "{tmp}/config.xml", "--probe-position", "-50"]
@@ -138,6 +164,66 @@ CASES = [
         ["no stepper registration"],
         files(plain_nwire=True),
     ),
+    # A result file is checked whole before it is used (brachycal.data.json_schema), by every reader.
+    *(
+        Case(
+            f"{command}-{name}",
+            argv,
+            ["result.json", *expect],
+            files(edit=edit),
+        )
+        for command, argv in (
+            ("template", [*TEMPLATE, "--hole", "B2"]),
+            ("export", ["stepper", "export", "{tmp}/result.json", "--out", "{tmp}/exports"]),
+        )
+        for name, edit, expect in (
+            (
+                "sheared-image-to-probe",
+                chosen("image_to_probe_mm", 0, 1, 5.0),
+                ["models.", ".image_to_probe_mm", "v column", "not a pixel spacing"],
+            ),
+            (
+                "slightly-sheared-image-to-probe",
+                chosen("image_to_probe_mm", 0, 1, 0.02),
+                ["image_to_probe_mm", "off a right angle", "sheared"],
+            ),
+            (
+                "image-to-probe-a-terametre-away",
+                chosen("image_to_probe_mm", 0, 3, 1e12),
+                ["image_to_probe_mm", "translation of 1e+12 mm", "beyond 5 m"],
+            ),
+            (
+                "mirrored-image-to-probe",
+                lambda raw: [row.__setitem__(2, -row[2]) for row in raw["models"][raw["model"]]["image_to_probe_mm"]],
+                ["image_to_probe_mm", "left-handed"],
+            ),
+            (
+                "phantom-a-terametre-away",
+                set_in(1e12, "stepper", "T_Template_Phantom", 0, 3),
+                ["stepper.T_Template_Phantom", "beyond 5 m"],
+            ),
+            (
+                "sheared-phantom-registration",
+                set_in(0.5, "stepper", "T_Template_Phantom", 0, 1),
+                ["stepper.T_Template_Phantom", "not a rigid transform"],
+            ),
+            (
+                "probe-axis-far-off-z",
+                set_in([0.5, 0.0, 1.0], "stepper", "axes", "probe_translation"),
+                ["stepper.axes.probe_translation", "Tx Ty 1"],
+            ),
+            (
+                "encoder-scale-in-degrees-per-radian",
+                set_in(57.3, "stepper", "axes", "rotation_encoder_scale"),
+                ["stepper.axes.rotation_encoder_scale", "0.5", "2"],
+            ),
+            (
+                "spacing-in-metres",
+                set_in([1.5e-4, 1.5e-4], "spacing_mm"),
+                ["spacing_mm", "metres"],
+            ),
+        )
+    ),
     Case(
         "image-stepper-file-of-another-format",
         [*IMAGE, "--stepper", "{tmp}/result.json"],
@@ -149,6 +235,12 @@ CASES = [
         [*IMAGE, "--stepper", "{tmp}/result.json", "--recorded-poses"],
         ["--recorded-poses", "--stepper"],
         files(),
+    ),
+    Case(
+        "image-device-set-without-stepper-calibration",
+        IMAGE,
+        ["config.xml", "no StepperCalibration", "--stepper", "--recorded-poses"],
+        files(result=False),
     ),
     Case(
         "image-tracker-device-set",

@@ -183,3 +183,23 @@ def test_export_writes_plus_and_slicer_files(bundled, tmp_path):
     _, _, image = bundled
     assert main(["stepper", "export", str(image), "--out", str(tmp_path / "ex")]) == 0
     assert {p.name for p in (tmp_path / "ex").iterdir()} >= {"ImageToProbe.tfm", "PlusCoordinateDefinitions.xml"}
+
+
+def test_poses_as_recorded_are_asked_for_and_said(tmp_path, capsys):
+    """Without the device set's StepperCalibration, `stepper image` takes the poses as recorded only
+    when asked (--recorded-poses), and says that the axes are then not corrected."""
+    s = {key: str(EXAMPLES / name) for key, name in STEPPER_NAMES.items()}
+    config = tmp_path / "no_axes.xml"
+    lines = Path(s["config"]).read_text().splitlines()
+    config.write_text("\n".join(line for line in lines if "<StepperCalibration" not in line))
+    assert read_stepper_axes(config) is None
+    image = ["stepper", "image", s["rotation"], s["calibration"], s["validation"], "--config", str(config)]
+    assert main([*image, "--out", str(tmp_path / "out.json")]) == 2
+    assert "--recorded-poses" in capsys.readouterr().err and not (tmp_path / "out.json").exists()
+    assert main([*image, "--out", str(tmp_path / "out.json"), "--recorded-poses"]) == 0
+    poses = [line for line in capsys.readouterr().out.splitlines() if line.startswith("poses:")]
+    assert poses == [
+        "poses: as recorded (--recorded-poses): the probe and the template taken to move along the stepper's z "
+        "exactly; a stepper axis off z is not corrected and its error goes into Image -> Probe"
+    ]
+    assert read_stepper_image(tmp_path / "out.json").axes.straight

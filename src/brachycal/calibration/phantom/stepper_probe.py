@@ -177,7 +177,7 @@ def encoder_readings(T_SH_probe: ArrayLike, *, what: str = "pose") -> tuple[floa
     if np.abs(T[:2, 3]).max() > ENCODER_POSE_TOLERANCE or np.abs(T[2, :2]).max() > ENCODER_POSE_TOLERANCE:
         raise InputError(
             f"the {what} is not a stepper encoder pose (a translation along z and a turn about z): "
-            "it is already corrected, or not a stepper's; give straight axes to use it as recorded"
+            "it is already corrected, or not a stepper's; use the poses as recorded (--recorded-poses)"
         )
     return float(T[2, 3]), float(np.arctan2(T[1, 0], T[0, 0]))
 
@@ -292,11 +292,13 @@ def calibrate_stepper_image_files(
         model: a :data:`~brachycal.calibration.phantom.nwire_file.NWIRE_MODELS` name, or None (lowest
             best-95 % validation mean).
         correct_axes: rebuild the poses along the calibrated axes (False: as recorded).
-        axes: the stepper's axes to rebuild them along; None: the device set's ``StepperCalibration``.
+        axes: the stepper's axes to rebuild them along; None: the device set's ``StepperCalibration``
+            (refused when it has none: the poses as recorded are asked for with ``correct_axes=False``).
 
     Raises:
-        InputError: unreadable or malformed files, a device set without a stepper, recorded poses
-            that are not encoder poses (with ``correct_axes``), an unknown model.
+        InputError: unreadable or malformed files, a device set without a stepper, or without a
+            ``StepperCalibration`` (with ``correct_axes`` and no ``axes``), recorded poses that are
+            not encoder poses (with ``correct_axes``), an unknown model.
         DegenerateDataError: frames that cannot determine the registration or the fit.
     """
     check_model(model)  # before any frame is segmented
@@ -312,6 +314,13 @@ def calibrate_stepper_image_files(
         axes = STRAIGHT_AXES
     elif axes is None:
         axes = read_stepper_axes(config_path)
+        if axes is None:
+            raise InputError(
+                "no StepperCalibration in the device set: the axes the stepper moves along are unknown; give "
+                "--stepper STEPPER.json (from `brachycal stepper calibrate`), or --recorded-poses to take the "
+                "poses as recorded (the probe moving along the stepper's z exactly: a tilted axis is not corrected)",
+                file=config_path,
+            )
     # The rotation recording's encoders (its header only) are checked before any frame is segmented.
     encoders = stepper_encoder_values(read_sequence_header(rotation_path)[1], rotation_path)
     check_recording("rotation", rotation_path, encoders)

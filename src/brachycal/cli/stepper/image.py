@@ -26,9 +26,11 @@ The recorded poses move the probe along the stepper's z exactly; the device set'
 StepperCalibration (ProbeTranslationAxisOrientation, 'Tx Ty 1') says along which axis it really
 travels, and each pose is rebuilt from its encoder values along it (as PLUS's stepper device does
 when it compensates); --stepper takes the axes (and the rotation encoder's scale) from
-`brachycal stepper calibrate`'s result instead. The fit on the poses as recorded, PLUS's own, is
-validated beside it; --recorded-poses uses only those. CALIBRATION may also be a segmented-frames XML holding both
-frame sets (PLUS's results file, or `brachycal nwire segment`'s output); then leave out VALIDATION.
+`brachycal stepper calibrate`'s result instead; a device set without StepperCalibration needs one
+of them. The fit on the poses as recorded, PLUS's own, is validated beside it; --recorded-poses
+uses only those (a stepper axis off z then goes uncorrected into Image -> Probe). CALIBRATION may
+also be a segmented-frames XML holding both frame sets (PLUS's results file, or `brachycal nwire
+segment`'s output); then leave out VALIDATION.
 
 Writes JSON (brachycal-nwire/1 with a 'stepper' block: the registration T_Template_Phantom, the
 axes, the recorded poses' errors), which `brachycal stepper template` and `brachycal stepper
@@ -77,7 +79,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--recorded-poses",
         action="store_true",
-        help="use the poses as recorded (PLUS's fit), not rebuilt along the device set's calibrated axes",
+        help="use the poses as recorded (PLUS's fit), not rebuilt along the device set's calibrated axes "
+        "(needed when it has no StepperCalibration and no --stepper is given)",
     )
     parser.add_argument(
         "--stepper",
@@ -126,11 +129,15 @@ def run(args: argparse.Namespace) -> int:
         f"Phantom->StepperHome translation {t[0]:.3f} {t[1]:.3f} {t[2]:.3f} mm"
     )
     a = result.axes.probe_translation
-    poses = (
-        "as recorded"
-        if result.recorded is None
-        else f"along the probe axis {a[0]:.6f} {a[1]:.6f} 1 (from {result.axes.source})"
-    )
+    if args.recorded_poses:
+        poses = (
+            "as recorded (--recorded-poses): the probe and the template taken to move along the stepper's z "
+            "exactly; a stepper axis off z is not corrected and its error goes into Image -> Probe"
+        )
+    elif result.recorded is None:
+        poses = f"as recorded: the axes of {result.axes.source} are the stepper's z (0 0 1), nothing to correct"
+    else:
+        poses = f"along the probe axis {a[0]:.6f} {a[1]:.6f} 1 (from {result.axes.source})"
     print(f"poses: {poses}")
     n = result.nwire
     print(

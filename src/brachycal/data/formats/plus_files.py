@@ -634,4 +634,77 @@ def stepper_encoder_values(frame_fields: list[dict[str, str]], path: str | os.Pa
             if value is None or not np.isfinite(value):
                 raise fail(f"not a finite number: {text!r}")
             values[k, j] = value * scale[j]
+    check_encoder_units(values, frame_fields, path)
     return values
+
+
+#: PLUS's stepper poses each encoder drives (``vtkPlusBrachyTracker``'s frames), by encoder index:
+#: the probe's translation along its z and turn about it, the template's translation along z.
+STEPPER_POSE_FIELDS = ("ProbeToStepperHomeTransform", "ProbeToStepperHomeTransform", "TemplateToStepperHomeTransform")
+#: Accepted ratio of a pose's travel to its translation encoder's (PLUS's poses move by ``(Tx, Ty, 1) · d``:
+#: exactly 1 along z), and of a pose's turn to the rotation encoder's (PLUS's encoder scale, 0.5-2).
+ENCODER_RATIO_RANGE = ((0.8, 1.25), (0.5, 2.0), (0.8, 1.25))
+#: Units an encoder may have been written in instead of the field's, and their size in the field's unit.
+OTHER_ENCODER_UNITS = (
+    {"cm": 10.0, "m": 1e3, "inches": 25.4, "µm": 1e-3},
+    {"radians": 180.0 / np.pi, "turns": 360.0},
+    {"cm": 10.0, "m": 1e3, "inches": 25.4, "µm": 1e-3},
+)
+#: Smallest travel (m, rad) of an encoder or its pose for their ratio to be measured.
+MIN_ENCODER_TRAVEL = (1e-4, 1e-3, 1e-4)
+
+
+def _pose_travel(frame_fields: list[dict[str, str]], name: str, j: int) -> tuple[np.ndarray, FloatArray] | None:
+    """Frames carrying pose ``name`` (status OK), and what encoder ``j`` moves in each: its z
+    translation (m, from PLUS's mm) or its turn about z (rad, unwrapped); None if no frame has it."""
+    keep, travel = [], []
+    for k, fields in enumerate(frame_fields):
+        values = numbers_from_text(fields.get(name, ""))
+        if values is None or len(values) != 16 or fields.get(f"{name}Status", "OK").strip() != "OK":
+            continue
+        T = np.array(values).reshape(4, 4)
+        if not np.all(np.isfinite(T)):
+            continue
+        keep.append(k)
+        travel.append(float(np.arctan2(T[1, 0], T[0, 0])) if j == 1 else T[2, 3] * 1e-3)
+    if len(keep) < 2:
+        return None
+    moved = np.unwrap(np.array(travel)) if j == 1 else np.array(travel)
+    return np.array(keep), moved
+
+
+def check_encoder_units(values: FloatArray, frame_fields: list[dict[str, str]], path: str | os.PathLike[str]) -> None:
+    """Refuse encoder values (``(N, 3)``, m, rad, m: :func:`stepper_encoder_values`) in another unit
+    than their field's, found from the data: where the frames also carry PLUS's stepper poses
+    (:data:`STEPPER_POSE_FIELDS`, millimetres), each encoder's travel must be the pose's
+    (:data:`ENCODER_RATIO_RANGE`: an encoder written in cm moves a tenth of its pose).
+
+    Raises:
+        InputError: naming the file and the encoder field, the two travels and the likely unit.
+    """
+    for j, (name, pose) in enumerate(zip(STEPPER_ENCODER_FIELDS, STEPPER_POSE_FIELDS, strict=True)):
+        found = _pose_travel(frame_fields, pose, j)
+        if found is None:
+            continue
+        keep, moved = found
+        readings = values[keep, j]
+        spread, pose_spread = float(np.ptp(readings)), float(np.ptp(moved))
+        if max(spread, pose_spread) < MIN_ENCODER_TRAVEL[j]:
+            continue
+        ratio = float(np.polyfit(readings, moved, 1)[0]) if spread > 0 else np.inf
+        low, high = ENCODER_RATIO_RANGE[j]
+        if low <= abs(ratio) <= high:
+            continue
+        unit, show = ("degrees", np.degrees) if j == 1 else ("mm", lambda x: x * 1e3)
+        likely = [
+            other
+            for other, size in OTHER_ENCODER_UNITS[j].items()
+            if ratio != np.inf and abs(np.log(abs(ratio) / size)) < 0.1
+        ]
+        guess = f"{name} looks like {likely[0]} ({unit} expected)" if likely else f"{name} is not in {unit}"
+        raise InputError(
+            f"{name} moves {show(spread):.4g} {unit} where the frames' {pose} moves {show(pose_spread):.4g} "
+            f"{unit} (ratio {abs(ratio):.3g}, 1 expected): {guess}",
+            file=path,
+            column=name,
+        )

@@ -109,8 +109,9 @@ def _axis(text: str | None, place: str, path: Path) -> FloatArray:
     return axis
 
 
-def read_stepper_axes(path: str | os.PathLike[str]) -> StepperAxes:
-    """The ``StepperCalibration`` of a PLUS device set's stepper, or straight axes if it has none.
+def read_stepper_axes(path: str | os.PathLike[str]) -> StepperAxes | None:
+    """The ``StepperCalibration`` of a PLUS device set's stepper, or None if it has none (its axes
+    are then unknown: not the stepper's z, which a real stepper's axes are 1-3 degrees off).
 
     Attributes left empty take PLUS's defaults (``0 0 1``, scale 1).
 
@@ -122,7 +123,7 @@ def read_stepper_axes(path: str | os.PathLike[str]) -> StepperAxes:
     root = parse_xml(path)
     element, place = find_section(root, "StepperCalibration")
     if element is None:
-        return STRAIGHT_AXES
+        return None
     axes = []
     for name in ("ProbeTranslationAxisOrientation", "TemplateTranslationAxisOrientation"):
         text = element.get(name)
