@@ -60,6 +60,27 @@ def recordings(config: str = CONFIG, **changed: list[dict[str, str]]):
     return setup
 
 
+def with_poses(fields: list[dict[str, str]], **units: float) -> list[dict[str, str]]:
+    """``fields`` with PLUS's stepper poses (mm) added from the encoder values, then the encoder
+    fields named in ``units`` rewritten in another unit (keyword: the field, value: the new unit's
+    size in the field's, e.g. ``ProbePosition=10.0`` for centimetres)."""
+    out = []
+    for frame in fields:
+        d, theta, t = (float(frame[name]) for name in ("ProbePosition", "ProbeRotation", "TemplatePosition"))
+        c, s = np.cos(np.radians(theta)), np.sin(np.radians(theta))
+        probe = [c, -s, 0, 0, s, c, 0, 0, 0, 0, 1, d, 0, 0, 0, 1]
+        template = [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, t, 0, 0, 0, 1]
+        poses = {
+            "ProbeToStepperHomeTransform": " ".join(f"{v:.6g}" for v in probe),
+            "ProbeToStepperHomeTransformStatus": "OK",
+            "TemplateToStepperHomeTransform": " ".join(f"{v:.6g}" for v in template),
+            "TemplateToStepperHomeTransformStatus": "OK",
+        }
+        changed = {name: f"{float(frame[name]) / size:.6g}" for name, size in units.items()}
+        out.append({**frame, **poses, **changed})
+    return out
+
+
 def without(field: str, fields: list[dict[str, str]]) -> list[dict[str, str]]:
     return [{k: v for k, v in frame.items() if k != field} for frame in fields]
 
@@ -115,6 +136,37 @@ CASES = [
         [*STEPPER, *OUT],
         ("pt.mha", "TemplatePosition", "not a finite number"),
         recordings(pt=[{**frame, "TemplatePosition": "nan"} for frame in GOOD["pt.mha"]]),
+    ),
+    # An encoder in another unit than its field's, found from the poses the frames also carry (mm, degrees).
+    Case(
+        "probe-encoder-in-cm",
+        [*STEPPER, *OUT],
+        ("pt.mha", "ProbePosition", "ratio 10", "looks like cm (mm expected)"),
+        recordings(pt=with_poses(GOOD["pt.mha"], ProbePosition=10.0)),
+    ),
+    Case(
+        "template-encoder-in-metres",
+        [*STEPPER, *OUT],
+        ("tt.mha", "TemplatePosition", "looks like m (mm expected)"),
+        recordings(tt=with_poses(GOOD["tt.mha"], TemplatePosition=1000.0)),
+    ),
+    Case(
+        "rotation-encoder-in-radians",
+        [*STEPPER, *OUT],
+        ("rot.mha", "ProbeRotation", "looks like radians (degrees expected)"),
+        recordings(rot=with_poses(GOOD["rot.mha"], ProbeRotation=float(np.degrees(1.0)))),
+    ),
+    Case(
+        "probe-encoder-in-no-known-unit",
+        [*STEPPER, *OUT],
+        ("pt.mha", "ProbePosition", "ratio 3", "not in mm"),
+        recordings(pt=with_poses(GOOD["pt.mha"], ProbePosition=3.0)),
+    ),
+    Case(
+        "encoders-and-poses-agree",  # the same recordings with poses in the field's units: only the blank frames refused
+        [*STEPPER, *OUT, "--quiet"],
+        ("rot.mha", "only 0 of 12 frames segmented"),
+        recordings(**{name.removesuffix(".mha"): with_poses(fields) for name, fields in GOOD.items()}),
     ),
     Case(
         "no-frame-segmented",  # blank frames: no N found
