@@ -163,7 +163,8 @@ CASES = [
         recordings(pt=with_poses(GOOD["pt.mha"], ProbePosition=3.0)),
     ),
     Case(
-        "encoders-and-poses-agree",  # the same recordings with poses in the field's units: only the blank frames refused
+        # the same recordings with poses in the fields' units: only their blank frames are refused
+        "encoders-and-poses-agree",
         [*STEPPER, *OUT, "--quiet"],
         ("rot.mha", "only 0 of 12 frames segmented"),
         recordings(**{name.removesuffix(".mha"): with_poses(fields) for name, fields in GOOD.items()}),

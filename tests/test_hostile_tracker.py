@@ -36,6 +36,27 @@ def _files(table: str = GOOD, unit: str = "m") -> Callable[[Path], None]:
     return setup
 
 
+#: A 6-D marker: the position's spec with a rotation vector in degrees, and a table whose angles are
+#: radians (within ±π) while the first joint turns by 1.5 rad.
+SPEC_6D = (
+    SPEC.format(unit="m") + '[orientation]\ncolumns = ["rx", "ry", "rz"]\nkind = "rotation_vector"\nunit = "deg"\n'
+)
+TABLE_6D = (
+    ",".join([*JOINTS, "x", "y", "z", "rx", "ry", "rz"])
+    + "\n"
+    + "".join(
+        ",".join(map(str, [0.3 * k, 0.2, 0.3, -2.0, 0.1, 2.2, 0.7, 0.5 + 0.05 * k, 0.2, 0.3, 0.1 * k, 1.2, -0.4]))
+        + "\n"
+        for k in range(6)
+    )
+)
+
+
+def _six_d(tmp: Path) -> None:
+    (tmp / "table.csv").write_text(TABLE_6D)
+    (tmp / "columns.toml").write_text(SPEC_6D)
+
+
 def _urdf_in_out(tmp: Path) -> None:
     _files()(tmp)
     (tmp / "out").mkdir()
@@ -65,6 +86,7 @@ CASES = [
         setup=_files(HEADER + "".join(_row(k, scale=1e3) for k in range(6))),
     ),
     Case("metres-as-millimetres", RUN, ("'x'", "metres"), setup=_files(unit="mm")),
+    Case("radians-stated-as-degrees", RUN, ("'ry'", "within ±π", "radians", "unit = 'rad'"), setup=_six_d),
     Case("too-few-rows", RUN, ("posture", "at least"), setup=_files(HEADER + _row(0) + _row(1))),
     Case("bad-unit-in-spec", RUN, ("position.unit",), setup=_files(unit="cm")),
     Case("unknown-flange", [*RUN[:-4], "--flange", "hand", "--out", "{tmp}/out"], ("hand",), setup=_files()),

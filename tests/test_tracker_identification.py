@@ -9,6 +9,7 @@ tracker tables reads FIGAROH's two files by a column spec and refuses mixed-up u
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -334,6 +335,34 @@ def test_figaroh_files_read_with_their_column_specs():
         read_tracker_columns(SPECS / "tiago_columns.toml"),
     )
     assert len(tiago) == 34 and tiago.R_tracker_marker is None and tiago.Q.shape == (34, 8)
+
+
+@pytest.mark.parametrize("origin", ["figaroh_ur10", "brachycal_example"])
+def test_radians_stated_as_degrees_are_refused_from_the_data(origin, tmp_path):
+    """Orientation angles in radians under ``unit = "deg"`` are refused, naming the column, on a real
+    table (FIGAROH's UR10, roll-pitch-yaw) and on brachycal's example (rotation vectors); the same
+    angles truly in degrees (each multiplied by 180/π) are read."""
+    if origin == "figaroh_ur10":
+        table, spec = reference(*FIGAROH, "ur10", "data", "calibration.csv"), SPECS / "ur10_columns.toml"
+    else:
+        table, spec = ROOT / "examples" / "tracker" / "table.csv", ROOT / "examples" / "tracker" / "columns.toml"
+    columns = read_tracker_columns(spec)
+    assert columns.angle_unit == "rad"
+    as_rad = read_tracker_table(table, columns)
+    stated_deg = dataclasses.replace(columns, angle_unit="deg")
+    with pytest.raises(InputError, match=r"column '.*these look like radians \(set unit = 'rad'\)"):
+        read_tracker_table(table, stated_deg)
+    header, *rows = table.read_text().splitlines()
+    at = [header.split(",").index(c) for c in columns.orientation]
+    converted = []
+    for row in rows:
+        values = row.split(",")
+        for k in at:
+            values[k] = repr(float(np.degrees(float(values[k]))))
+        converted.append(",".join(values))
+    (tmp_path / "deg.csv").write_text("\n".join([header, *converted]) + "\n")
+    as_deg = read_tracker_table(tmp_path / "deg.csv", stated_deg)
+    assert np.allclose(as_deg.R_tracker_marker, as_rad.R_tracker_marker, atol=1e-12)
 
 
 def _write(path: Path, rows: list[list[float]], header: list[str]) -> Path:

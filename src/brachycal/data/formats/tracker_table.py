@@ -20,7 +20,8 @@ x, y, z axes: ``R = Rz(yaw) Ry(pitch) Rx(roll)``. Positions and orientations are
 
 Units mixed up are refused by magnitude, naming the field: a position beyond ±10 m stated in metres
 (millimetres?), every position within ±10 mm stated in millimetres (metres?), a rotation beyond
-2π rad stated in radians (degrees?), a quaternion not of unit norm.
+2π rad stated in radians (degrees?), every angle within ±π stated in degrees while the joints turn
+by half a radian or more (radians?), a quaternion not of unit norm.
 """
 
 from __future__ import annotations
@@ -60,6 +61,10 @@ MIN_TRACKER_ROWS = 4
 MIN_EXTENT_MM = 10.0
 #: Largest rotation angle (radians) or joint value accepted in radians: beyond, degrees.
 MAX_ANGLE_RAD = 2 * np.pi
+#: Joint travel (radians) past which a marker's orientation must turn by more than a few degrees: a
+#: joint turned by 0.5 rad (29°) turns everything beyond it by as much, so orientations stated in
+#: degrees that all lie within ±π (at most 6.3° apart) while a joint turns that far are radians.
+MIN_JOINT_TURN_RAD = 0.5
 #: Largest departure of a quaternion's norm from 1 (trackers write 6 or more digits).
 QUATERNION_NORM_TOL = 1e-3
 
@@ -227,6 +232,8 @@ def read_tracker_table(path: str | os.PathLike[str], columns: TrackerColumns) ->
                 column=columns.position[0],
             )
         p = p * 1e-3
+    if columns.six_d and columns.angle_unit == "deg" and columns.orientation_kind != "quaternion_xyzw":
+        _check_degrees(path, o, Q, columns)
     R = _rotations(path, rows, o, columns) if columns.six_d else None
     return TrackerTable(tuple(columns.joints), Q, p, R, tuple(rows), str(path))
 
@@ -242,6 +249,23 @@ def _check_angles(path: Path, rows: list[int], values: FloatArray, names: list[s
             row=rows[k],
             column=names[c],
         )
+
+
+def _check_degrees(path: Path, o: FloatArray, Q: FloatArray, columns: TrackerColumns) -> None:
+    """Refuse orientation angles ``o`` stated in degrees that are radians, from the data: every one
+    within ±π while a joint of ``Q`` turns by :data:`MIN_JOINT_TURN_RAD` or more (the marker would
+    have turned by a few degrees at most), naming the column of the largest angle."""
+    largest = np.abs(o).max(axis=0)
+    joint_turn = float(np.ptp(Q, axis=0).max()) if Q.size else 0.0
+    if largest.max() > np.pi or joint_turn < MIN_JOINT_TURN_RAD:
+        return
+    c = int(np.argmax(largest))
+    raise InputError(
+        f"orientation stated in degrees (unit = 'deg'), but every angle is within ±π (largest {largest[c]:.4g}) "
+        f"while the joints turn by up to {joint_turn:.3g} rad: these look like radians (set unit = 'rad')",
+        file=path,
+        column=columns.orientation[c],
+    )
 
 
 def _rotations(path: Path, rows: list[int], o: FloatArray, columns: TrackerColumns) -> FloatArray:
