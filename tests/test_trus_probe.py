@@ -288,3 +288,16 @@ def test_the_axes_of_a_stepper_calibration_are_plus_s(tmp_path):
     np.testing.assert_allclose(axes.template_translation, [-0.0036, 0.0017, 1.0])
     assert axes.rotation_encoder_scale == 0.96
     assert not axes.straight
+
+
+def test_a_pose_that_is_not_a_stepper_s_names_recorded_poses():
+    """A recorded pose that moves across z is not an encoder pose: the refusal names the option that
+    takes the poses as recorded."""
+    from brachycal.calibration.phantom.stepper_probe import encoder_readings, stepper_pose
+    from brachycal.errors import InputError
+
+    T = stepper_pose(-0.04, 0.1)
+    assert encoder_readings(T) == pytest.approx((-0.04, 0.1))
+    T[0, 3] = 1e-3
+    with pytest.raises(InputError, match=r"not a stepper encoder pose.*--recorded-poses"):
+        encoder_readings(T, what="ProbeToStepperHome")

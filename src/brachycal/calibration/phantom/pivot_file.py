@@ -157,9 +157,10 @@ def pivot_document(raw: Any, where: Where) -> None:
     the tool's origin as a tool is long (:data:`~brachycal.validate.TOOL_LENGTH_M_RANGE`: a pivot
     written in the other unit than its ``units`` say is refused)."""
     Obj(required={"units": one_of(UNITS)})(raw, where)
+    Obj(required={"tip_in_tool": array(number(), length=3), "pivot_in_reference": array(number(), length=3)})(
+        raw, where
+    )
     scale = 1.0 if raw["units"] == "m" else 1e-3  # metres per unit
-    point = array(number(-MAX_TRANSLATION_M / scale, MAX_TRANSLATION_M / scale, raw["units"]), length=3)
-    Obj(required={"tip_in_tool": point, "pivot_in_reference": point})(raw, where)
     length_m = float(np.linalg.norm(raw["tip_in_tool"])) * scale
     low, high = TOOL_LENGTH_M_RANGE
     if not low <= length_m <= high:
@@ -168,6 +169,8 @@ def pivot_document(raw: Any, where: Where) -> None:
             f"the tip is {length_m / scale:.4g} {raw['units']} from the tool's origin: no tool is shorter than "
             f"{low / scale:g} or longer than {high / scale:g} {raw['units']}; is it in {other}?"
         )
+    reach = MAX_TRANSLATION_M / scale
+    array(number(-reach, reach, raw["units"]), length=3)(raw["pivot_in_reference"], where.at("pivot_in_reference"))
 
 
 def read_pivot(path: str | os.PathLike[str]) -> PivotFile:
