@@ -69,6 +69,8 @@ ARM = "tests/test_arm_fit_noise.py::"
 TOUCH = "tests/test_touch_identification.py::"
 TRACK = "tests/test_tracker_identification.py::"
 EVID = "tests/test_evidence_search.py::"
+HTP = "tests/test_hostile_trus_probe.py::test_stepper_probe_refusals"
+HST = "tests/test_hostile_stepper.py::test_stepper_calibrate_refuses"
 
 MUTANTS: tuple[Mutant, ...] = (
     # --- tool tips (eqs. 4-6) ---------------------------------------------------------------------
@@ -401,6 +403,93 @@ MUTANTS: tuple[Mutant, ...] = (
         "dof = len(r)",
         ("tests/test_verify.py::test_a_part_fit_recovers_the_change_that_made_the_residuals",),
         "the check's remaining chi-square without the part's fitted parameters",
+    ),
+    # --- result files read back: the one schema check, units from the data -----------------------
+    Mutant(
+        "schema-image-to-probe-skew",
+        "data/json_schema.py",
+        "if worst > MAX_SKEW_DEG:",
+        "if worst > 90.0:",
+        (HTP + "[template-slightly-sheared-image-to-probe]",),
+        "an Image -> Probe matrix's columns not held at right angles (a shear within the spacing range)",
+    ),
+    Mutant(
+        "schema-image-to-probe-spacing",
+        "data/json_schema.py",
+        "if not low <= length <= high:",
+        "if not low <= length:",
+        (HTP + "[template-sheared-image-to-probe]", HTP + "[export-sheared-image-to-probe]"),
+        "an Image -> Probe column of 5 mm per pixel (one element set to 5) accepted",
+    ),
+    Mutant(
+        "schema-image-to-probe-reach",
+        "data/json_schema.py",
+        "reach = float(np.max(np.abs(M[:3, 3]))) * 1e-3",
+        "reach = 0.0",
+        (HTP + "[template-image-to-probe-a-terametre-away]",),
+        "an Image -> Probe translation of 1e12 mm accepted",
+    ),
+    Mutant(
+        "schema-image-to-probe-handedness",
+        "data/json_schema.py",
+        "if np.linalg.det(U) <= 0.0:",
+        "if np.linalg.det(U) <= -2.0:",
+        (HTP + "[template-mirrored-image-to-probe]",),
+        "a mirrored (left-handed) Image -> Probe accepted",
+    ),
+    Mutant(
+        "schema-nwire-unchecked",
+        "calibration/phantom/nwire_file.py",
+        "raw = read_document(path, FORMAT, NWIRE_DOCUMENT)",
+        "raw = read_document(path, FORMAT, Obj())",
+        (HTP + "[template-sheared-image-to-probe]", HTP + "[export-image-to-probe-a-terametre-away]"),
+        "an N-wire result read without its schema",
+    ),
+    Mutant(
+        "schema-stepper-block-unchecked",
+        "calibration/phantom/stepper_probe.py",
+        'STEPPER_BLOCK(stepper, Where(path, "stepper"))',
+        'Where(path, "stepper")',
+        (HTP + "[template-phantom-a-terametre-away]", HTP + "[export-probe-axis-far-off-z]"),
+        "a stepper result's registration and axes read without their schema",
+    ),
+    Mutant(
+        "schema-pivot-tool-length",
+        "calibration/phantom/pivot_file.py",
+        "if not low <= length_m <= high:",
+        "if False:",
+        ("tests/test_result_formats.py::test_pivot_reader_refuses_a_tip_in_the_other_unit",),
+        "a pivot result whose tip is in the other unit than its units say accepted",
+    ),
+    Mutant(
+        "stepper-encoder-units",
+        "data/formats/plus_files.py",
+        "if low <= abs(ratio) <= high:",
+        "if True:",
+        (HST + "[probe-encoder-in-cm]", HST + "[rotation-encoder-in-radians]"),
+        "a stepper encoder in cm (or radians) beside its poses in mm (degrees) accepted",
+    ),
+    Mutant(
+        "stepper-image-without-axes",
+        "data/formats/plus_stepper.py",
+        "        return None",
+        "        return STRAIGHT_AXES",
+        (
+            HTP + "[image-device-set-without-stepper-calibration]",
+            "tests/test_stepper_twin.py::test_poses_as_recorded_are_asked_for_and_said",
+        ),
+        "a device set without StepperCalibration taken as straight axes, silently",
+    ),
+    Mutant(
+        "tracker-degrees-from-data",
+        "data/formats/tracker_table.py",
+        "if largest.max() > np.pi or joint_turn < MIN_JOINT_TURN_RAD:",
+        "if True:",
+        (
+            TRACK + "test_radians_stated_as_degrees_are_refused_from_the_data",
+            "tests/test_hostile_tracker.py::test_refused_in_one_line_with_nothing_written[radians-stated-as-degrees]",
+        ),
+        "tracker orientation in radians stated as degrees accepted",
     ),
 )
 
