@@ -77,7 +77,6 @@ def test_pivot_reader_refuses_other_files(tmp_path):
         read_pivot(broken)
 
 
-
 @pytest.mark.parametrize(("units", "scale", "other"), [("m", 1e3, "mm"), ("mm", 1e-3, "m")])
 def test_pivot_reader_refuses_a_tip_in_the_other_unit(tmp_path, units, scale, other):
     """A pivot whose lengths are in the other unit than its ``units`` says: the tip is then as far
@@ -89,14 +88,15 @@ def test_pivot_reader_refuses_a_tip_in_the_other_unit(tmp_path, units, scale, ot
     if units == "mm":
         payload["tip_in_tool"] = [1e3 * v for v in payload["tip_in_tool"]]
         payload["pivot_in_reference"] = [1e3 * v for v in payload["pivot_in_reference"]]
-    read_pivot_ok = tmp_path / "ok.json"
-    read_pivot_ok.write_text(json.dumps(payload))
-    assert read_pivot(read_pivot_ok).units == units
+    accepted = tmp_path / "ok.json"
+    accepted.write_text(json.dumps(payload))
+    assert read_pivot(accepted).units == units
     payload["tip_in_tool"] = [scale * v for v in payload["tip_in_tool"]]
     broken = tmp_path / "broken.json"
     broken.write_text(json.dumps(payload))
     with pytest.raises(InputError, match=rf"broken\.json, column 'tip_in_tool': .*is it in {other}\?"):
         read_pivot(broken)
+
 
 def test_nwire_file_round_trip(tmp_path):
     folder = reference("plus_fcal_nwire")

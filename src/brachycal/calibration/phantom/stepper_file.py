@@ -47,7 +47,7 @@ from brachycal.data.formats.plus_files import (
     stepper_encoder_values,
 )
 from brachycal.data.formats.plus_segmentation import NWireSegmentationParameters, read_segmentation_parameters
-from brachycal.data.formats.plus_stepper import ENCODER_SCALE_RANGE, encoder_scale, stepper_axis
+from brachycal.data.formats.plus_stepper import encoder_scale, stepper_axis
 from brachycal.data.json_schema import Obj, array, number, spacing
 from brachycal.errors import DegenerateDataError
 from brachycal.imaging.nwire_segmentation import segment_sequence
@@ -189,10 +189,7 @@ STEPPER_DOCUMENT = Obj(
     required={
         "probe_translation_axis": Obj(required={"plus_orientation": stepper_axis}),
         "template_translation_axis": Obj(required={"plus_orientation": stepper_axis}),
-        "rotation_encoder": Obj(
-            required={"plus_scale": encoder_scale},
-            optional={"scale": number(-ENCODER_SCALE_RANGE[1], -ENCODER_SCALE_RANGE[0])},
-        ),
+        "rotation_encoder": Obj(required={"plus_scale": encoder_scale}),
     },
     optional={
         "pixel_spacing": Obj(optional={"value_mm_per_px": spacing}),
