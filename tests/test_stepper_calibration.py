@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -39,10 +40,10 @@ from brachycal.calibration.phantom.stepper import (
     spacing_equations,
     translation_axis,
 )
-from brachycal.data.formats.metaimage import read_image_sequence
-from brachycal.data.formats.plus_files import Wire, read_plus_config
+from brachycal.data.formats.metaimage import read_image_sequence, read_sequence_header
+from brachycal.data.formats.plus_files import Wire, read_plus_config, stepper_encoder_values
 from brachycal.data.formats.plus_segmentation import read_segmentation_parameters
-from brachycal.errors import DegenerateDataError
+from brachycal.errors import DegenerateDataError, InputError
 from brachycal.imaging import segment_sequence
 from brachycal.studies import stepper_twin
 
@@ -334,3 +335,25 @@ def test_tilt_sd_matches_the_spread_over_noise_draws():
         stated.append(axis.tilt_sd)
     spread = np.std(tilts, axis=0, ddof=1)
     np.testing.assert_array_less(np.abs(np.mean(stated, axis=0) / spread - 1.0), 0.35)
+
+
+@pytest.mark.parametrize(
+    ("recording", "field", "size", "unit"),
+    [("ProbeTranslation", "ProbePosition", 10.0, "cm"), ("ProbeRotation", "ProbeRotation", 180 / math.pi, "radians")],
+)
+def test_an_encoder_in_another_unit_than_its_poses_is_refused(tmp_path, recording, field, size, unit):
+    """PLUS's own recordings carry each encoder and the pose it drives (mm, degrees): read as they are,
+    and refused naming the field and the likely unit when the encoder is rewritten in cm or radians
+    (the header only: the frames are never decoded)."""
+    source = reference(STEPPER, f"USTC_3NWires_{recording}.igs.mha")
+    values = stepper_encoder_values(read_sequence_header(source)[1], source)
+    assert np.ptp(values[:, 0 if field == "ProbePosition" else 1]) > 0.01  # it moves (m or rad)
+    marker = b"ElementDataFile = LOCAL\n"
+    head, _, body = source.read_bytes().partition(marker)
+    text = re.sub(
+        rf"(Seq_Frame\d+_{field} = )(\S+)", lambda m: f"{m.group(1)}{float(m.group(2)) / size:.6g}", head.decode()
+    )
+    rewritten = tmp_path / f"{recording}_{unit}.mha"
+    rewritten.write_bytes(text.encode() + marker + body)
+    with pytest.raises(InputError, match=rf"column '{field}': .*looks like {unit}"):
+        stepper_encoder_values(read_sequence_header(rewritten)[1], rewritten)
