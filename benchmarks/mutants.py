@@ -466,7 +466,11 @@ MUTANTS: tuple[Mutant, ...] = (
         "data/formats/plus_files.py",
         "if low <= abs(ratio) <= high:",
         "if True:",
-        (HST + "[probe-encoder-in-cm]", HST + "[rotation-encoder-in-radians]"),
+        (
+            HST + "[probe-encoder-in-cm]",
+            HST + "[rotation-encoder-in-radians]",
+            "tests/test_stepper_calibration.py::test_an_encoder_in_another_unit_than_its_poses_is_refused",
+        ),
         "a stepper encoder in cm (or radians) beside its poses in mm (degrees) accepted",
     ),
     Mutant(
