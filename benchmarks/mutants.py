@@ -338,6 +338,14 @@ MUTANTS: tuple[Mutant, ...] = (
         "a leave-one-out fold fitted with the posture it predicts",
     ),
     Mutant(
+        "touch-folder-one-point-twice",
+        "data/formats/touches.py",
+        "        if k in by_number:",
+        "        if False:",
+        (TOUCH + "test_reader_refuses_in_one_line_naming_the_place",),
+        "hole_1.csv and hole_01.csv both read as point 1 (one silently dropped)",
+    ),
+    Mutant(
         "identification-prior-sd",
         "calibration/robot/arm_fit.py",
         "return np.sqrt(np.diag(accuracy.covariance(robot)))",

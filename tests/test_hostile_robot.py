@@ -47,6 +47,12 @@ CASES = [
         ("hole_1.csv is missing",),
         setup=_places({"hole_0.csv": ROW * 3, "hole_2.csv": ROW * 3}),
     ),
+    Case(
+        "one-point-twice",
+        RUN,
+        ("hole_01.csv and hole_1.csv", "point 1"),
+        setup=_places({"hole_0.csv": ROW * 3, "hole_1.csv": ROW * 3, "hole_01.csv": ROW * 3}),
+    ),
     Case("short-row", RUN, ("hole_0.csv", "row 2", "expected 7"), setup=_places({"hole_0.csv": ROW + "0.1,0.2\n"})),
     Case(
         "text-field",

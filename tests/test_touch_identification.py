@@ -247,8 +247,24 @@ def test_reader_reads_points_in_order_and_ignores_other_files(tmp_path):
         ({"hole_0.csv": ROW}, ["1 touch", "at least 2"]),
         ({"hole_0.csv": ROW + ROW.strip()}, ["truncated"]),
         ({"hole_0.csv": ""}, ["0 touch"]),
+        (
+            {"hole_0.csv": ROW * 2, "hole_1.csv": ROW * 2, "hole_01.csv": ROW * 2},
+            ["hole_01.csv and hole_1.csv", "point 1"],
+        ),
     ],
-    ids=["empty", "no-zero", "gap", "short-row", "text", "nan", "degrees", "one-touch", "truncated", "empty-table"],
+    ids=[
+        "empty",
+        "no-zero",
+        "gap",
+        "short-row",
+        "text",
+        "nan",
+        "degrees",
+        "one-touch",
+        "truncated",
+        "empty-table",
+        "one-point-twice",
+    ],  # fmt: skip
 )
 def test_reader_refuses_in_one_line_naming_the_place(tmp_path, tables, words):
     folder = write_place(tmp_path / "place", tables)
@@ -258,6 +274,13 @@ def test_reader_refuses_in_one_line_naming_the_place(tmp_path, tables, words):
     assert "\n" not in message
     for word in words:
         assert word.lower() in message.lower(), message
+
+
+def test_reader_reads_a_point_numbered_with_a_leading_zero(tmp_path):
+    """``hole_01.csv`` is point 1 (its number, not its spelling, places it)."""
+    folder = write_place(tmp_path / "front", {"hole_0.csv": ROW * 2, "hole_01.csv": ROW * 3})
+    read = read_touch_folder(folder, JOINTS)
+    assert [t.shape for t in read.tables] == [(2, 7), (3, 7)] and read.files[1].name == "hole_01.csv"
 
 
 def test_reader_refuses_a_file_for_a_folder(tmp_path):
