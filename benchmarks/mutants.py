@@ -69,6 +69,7 @@ ARM = "tests/test_arm_fit_noise.py::"
 TOUCH = "tests/test_touch_identification.py::"
 TRACK = "tests/test_tracker_identification.py::"
 EVID = "tests/test_evidence_search.py::"
+HOSTILE_ROBOT = "tests/test_hostile_robot.py::"
 
 MUTANTS: tuple[Mutant, ...] = (
     # --- tool tips (eqs. 4-6) ---------------------------------------------------------------------
@@ -344,6 +345,33 @@ MUTANTS: tuple[Mutant, ...] = (
         "        if False:",
         (TOUCH + "test_reader_refuses_in_one_line_naming_the_place",),
         "hole_1.csv and hole_01.csv both read as point 1 (one silently dropped)",
+    ),
+    Mutant(
+        "dynamics-joint-names",
+        "calibration/robot/arm_fit.py",
+        "    if missing:",
+        "    if False:",
+        (
+            TOUCH + "test_dynamics_of_another_arm_are_refused_naming_the_option",
+            HOSTILE_ROBOT + "test_refused_in_one_line_with_nothing_written[dynamics-of-another-arm]",
+        ),
+        "--dynamics of another arm (none of its joints the arm's) taken: no moments, compliance silently dropped",
+    ),
+    Mutant(
+        "dynamics-joint-origins",
+        "calibration/robot/arm_fit.py",
+        "if offset > SAME_ORIGIN_M or turn > SAME_ORIGIN_RAD or axis > SAME_ORIGIN_RAD:",
+        "if False:",
+        (TOUCH + "test_dynamics_with_the_arm_s_joint_names_but_another_geometry_are_refused",),
+        "--dynamics of another arm under the arm's joint names taken: moments in another arm's frames",
+    ),
+    Mutant(
+        "dynamics-masses",
+        "calibration/robot/arm_fit.py",
+        "    if not moved > 0:",
+        "    if False:",
+        (HOSTILE_ROBOT + "test_refused_in_one_line_with_nothing_written[dynamics-without-masses]",),
+        "--dynamics without masses taken: no joint loaded, compliance silently dropped",
     ),
     Mutant(
         "identification-prior-sd",

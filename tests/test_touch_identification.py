@@ -410,6 +410,43 @@ def test_with_compliance_the_written_urdf_is_the_geometry_only_fit(tmp_path, cap
         assert scatter * 1e3 == pytest.approx(expected, abs=1e-6)
 
 
+def test_dynamics_of_another_arm_are_refused_naming_the_option(tmp_path, capsys):
+    """A KUKA iiwa identified with a Panda's masses (``--dynamics panda``), and a Panda with the
+    iiwa's URDF as its masses: refused in one line naming --dynamics and the joints it lacks,
+    nothing written; not a fit without compliance that says nothing."""
+    from brachycal.cli.main import main
+
+    root = reference("mukca_touches")
+    row = "0.1,0.2,0.3,-1.5,0.1,1.2,0.7\n"
+    folders = [str(write_place(tmp_path / name, {"hole_0.csv": row * 3, "hole_1.csv": row * 3})) for name in "ab"]
+    common = ["robot", "identify", "touches", *folders, "--tool-frame", "ball_link", "--train", "a"]
+    for robot, dynamics, lacks in (
+        (root / "urdf" / "iiwa14.urdf", "panda", "joint_a1"),
+        (root / "urdf" / "panda.urdf", str(root / "urdf" / "iiwa14.urdf"), "panda_joint1"),
+    ):
+        assert main([*common, "--urdf", str(robot), "--dynamics", dynamics, "--out", str(tmp_path / "out")]) == 2
+        message = capsys.readouterr().err.strip()
+        assert "\n" not in message and "--dynamics" in message and f"no joint {lacks}" in message, message
+        assert not (tmp_path / "out").exists()
+
+
+def test_dynamics_with_the_arm_s_joint_names_but_another_geometry_are_refused(panda):
+    """The iiwa's URDF with its joints renamed as the Panda's: the names fit, the joint origins do
+    not (moments in another arm's frames); the Panda's own masses fit."""
+    from brachycal.calibration.robot.arm_fit import check_dynamics
+    from brachycal.calibration.robot.touches import arm_joints
+
+    root = reference("mukca_touches")
+    text = (root / "urdf" / "iiwa14.urdf").read_text()
+    for k in range(7, 0, -1):
+        text = text.replace(f'"joint_a{k}"', f'"panda_joint{k}"')
+    renamed = Robot(text, base_dir=root / "urdf", source="iiwa14_renamed.urdf")
+    joints = arm_joints(panda, FLANGE)
+    check_dynamics(panda, Robot.load(root / "urdf" / "panda.urdf"), joints)
+    with pytest.raises(InputError, match=r"iiwa14_renamed\.urdf: joint panda_joint\d's origin is .* the same arm's"):
+        check_dynamics(renamed, panda, joints)
+
+
 def tcp_places(panda: Robot, tmp_path: Path, rng: np.random.Generator) -> list[str]:
     """Place folders ``a`` and ``b``: two points 50 mm apart each, touched 10 times by the nominal
     Panda's tool centre point (7 joint columns, joint noise 1e-5 rad)."""

@@ -25,6 +25,7 @@ from brachycal.calibration.robot.arm_fit import (
     ArmFit,
     Evaluation,
     ParameterSelection,
+    check_dynamics,
     deflection_columns,
     fit_arm,
     flange_points,
@@ -570,7 +571,8 @@ def identify_touch_folders(
 
     Raises:
         InputError: a folder the reader refuses, a training place not among them, a tool frame
-            not fixed to a link.
+            not fixed to a link; ``dynamics`` not the same arm or without masses
+            (:func:`~brachycal.calibration.robot.arm_fit.check_dynamics`).
     """
     flange, T_flange_tool = nominal.tool_transform(tool_frame)
     # The tip's link may be several fixed joints from the last moving one: the tip lives in it.
@@ -584,11 +586,14 @@ def identify_touch_folders(
         raise InputError("a training place is named twice")
     compliant: tuple[tuple[int, int], ...] = ()
     if dynamics is not None:
+        check_dynamics(dynamics, nominal, arm_joints(nominal, flange))
         places = [
             TouchPlace(p.name, p.touches, p.distances, tuple(gravity_moments(dynamics, nominal, Q) for Q in p.touches))
             for p in places
         ]
         compliant = _loaded_joints(nominal, flange, [p for p in places if p.name in train])
+        if not compliant:
+            raise InputError("the masses put no torque on any joint of the arm at the training touches")
     fit_places = [p for p in places if p.name in train]
     tip0 = T_flange_tool[:3, 3]
 

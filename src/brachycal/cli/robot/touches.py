@@ -111,16 +111,23 @@ def tool_frame(args: argparse.Namespace, nominal: Robot) -> str:
     raise InputError("--tool-frame is required: the robot names no single arm with a tool (the touching tip's frame)")
 
 
-def dynamics_robot(name: str) -> Robot:
+def dynamics_robot(name: str, nominal: Robot, tool: str) -> Robot:
     """The robot of --dynamics, resolved as --robot resolves its NAME|FILE (a bundled arm, a
-    description, a URDF file); a refusal names the option."""
-    from brachycal.errors import InputError  # lazy: start-up (the command's run only)
-    from brachycal.model.description import load_robot  # lazy: start-up (the command's run only)
+    description, a URDF file), checked to be ``nominal``'s arm to ``tool`` with its masses
+    (:func:`~brachycal.calibration.robot.arm_fit.check_dynamics`); a refusal names the option."""
+    # lazy: start-up (the command's run only)
+    from brachycal.calibration.robot.arm_fit import check_dynamics
+    from brachycal.calibration.robot.touches import arm_joints
+    from brachycal.errors import InputError
+    from brachycal.model.description import load_robot
 
+    joints = arm_joints(nominal, nominal.tool_transform(tool)[0])  # an unknown tool is --tool-frame's
     try:
-        return load_robot(name)
+        dynamics = load_robot(name)
+        check_dynamics(dynamics, nominal, joints)
     except InputError as exc:
         raise InputError(f"--dynamics: {exc}") from None
+    return dynamics
 
 
 def run(args: argparse.Namespace) -> int:
@@ -145,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
         urdf_path, json_path = claim_outputs(outputs, out)
         nominal = load_robot(args, any_arm=True)
         tool = tool_frame(args, nominal)
-        dynamics = dynamics_robot(args.dynamics) if args.dynamics is not None else None
+        dynamics = dynamics_robot(args.dynamics, nominal, tool) if args.dynamics is not None else None
         train = [name.strip() for name in args.train.split(",")]
         accuracy = robot_accuracy(args, TOUCHES_ACCURACY)
         if args.robot_tilt_deg is not None:
