@@ -264,7 +264,7 @@ def test_reader_reads_points_in_order_and_ignores_other_files(tmp_path):
         "truncated",
         "empty-table",
         "one-point-twice",
-    ],  # fmt: skip
+    ],
 )
 def test_reader_refuses_in_one_line_naming_the_place(tmp_path, tables, words):
     folder = write_place(tmp_path / "place", tables)

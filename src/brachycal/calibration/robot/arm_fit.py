@@ -614,9 +614,9 @@ def check_dynamics(dynamics: Robot, robot: Robot, joints: Sequence[str]) -> None
     """
     missing = [n for n in joints if n not in dynamics.joint_names]
     if missing:
+        has = ", ".join(dynamics.joint_names) or "none"
         raise InputError(
-            f"its robot has no joint {', '.join(missing)} of the arm (it has {', '.join(dynamics.joint_names) or 'none'}): "
-            "the masses must be the same arm's",
+            f"its robot has no joint {', '.join(missing)} of the arm (it has {has}): the masses must be the same arm's",
             file=dynamics.source,
         )
     for name in joints:
