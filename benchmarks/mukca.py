@@ -29,7 +29,16 @@ from pathlib import Path
 import numpy as np
 
 from brachycal.calibration.robot.arm_fit import gravity_moments
-from brachycal.calibration.robot.touches import TouchPlace, identify_touches, read_places, touch_scatter
+from brachycal.calibration.robot.defaults import TOUCHES_ACCURACY
+from brachycal.calibration.robot.touches import (
+    TOUCH_SETTINGS,
+    TouchPlace,
+    choose_touch_setting,
+    identify_touches,
+    read_places,
+    setting_prior,
+    touch_scatter,
+)
 from brachycal.calibration.robot_accuracy import RobotAccuracy
 from brachycal.model.description_file import example_robot_data_share
 from brachycal.model.robot import Robot
@@ -59,7 +68,15 @@ def main(argv: list[str]) -> int:
         "--evidence", action="store_true", help="choose the priors by the training touches' evidence (start: --prior)"
     )
     parser.add_argument("--no-distance", action="store_true", help="do not use the 50 mm between the sockets")
+    parser.add_argument(
+        "--choose",
+        action="store_true",
+        help="every shared robot, each place in turn the training place: the setting chosen by cross-validation "
+        "inside it against the defaults, on the written URDF (geometry), judged on the robot's other places",
+    )
     args = parser.parse_args(argv)
+    if args.choose:
+        return choose_all()
     train = (args.train or ("front_center" if args.robot == "panda_2_clean" else "frontcenter")).split(",")
     mm, deg, *tilt = (float(v) for v in args.prior.split(","))
     compliant = tuple(
@@ -128,6 +145,61 @@ def main(argv: list[str]) -> int:
         f"held-out mean scatter: nominal {means[0]:.3f}  brachycal {means[1]:.3f}  MUKCa URDF {means[2]:.3f} mm; "
         f"places where brachycal > MUKCa: {', '.join(worse) or 'none'}"
     )
+    return 0
+
+
+def choose_all() -> int:
+    """Per robot, per training place: the held-out mean scatter of the written URDF (geometry only)
+    fitted with each setting of ``TOUCH_SETTINGS``, and with the one the training place's own
+    cross-validation chooses; then per robot the chosen-minus-defaults difference, its mean over
+    the training places and that mean's standard error."""
+    robots = sorted(p.name for p in (DATA / "data").iterdir() if p.is_dir()) if (DATA / "data").is_dir() else []
+    if not robots:
+        print(f"skipped: {DATA / 'data'} is not there (MUKCa's public data)", file=sys.stderr)
+        return 1
+    nominal = Robot.load(DATA / "urdf" / "panda.urdf")
+    tip0 = nominal.transform(FLANGE, "ball_link", np.zeros(nominal.nq))[:3, 3]
+    accuracy = TOUCHES_ACCURACY
+    print(
+        f"prior (defaults): {accuracy.translation_sd_m * 1e3:.3g} mm / {np.degrees(accuracy.rotation_sd_rad):.3g} deg; "
+        f"settings {', '.join(TOUCH_SETTINGS)}; written URDF (geometry only); held-out mean scatter, mm"
+    )
+    summary = []
+    for name in robots:
+        folders = sorted(p for p in (DATA / "data" / name).iterdir() if p.is_dir())
+        places = {p.name: p for p in read_places(nominal, FLANGE, folders, {(0, 1): 0.05})}
+        print(
+            f"{name}: {'train':14s}"
+            + "".join(f" {s:>14s}" for s in TOUCH_SETTINGS)
+            + "  chosen (CV inside the training place)"
+        )
+        diffs = []
+        for train in places:
+            start = time.perf_counter()
+            held = [p for n, p in places.items() if n != train]
+            figures = {}
+            for setting in TOUCH_SETTINGS:
+                prior, start_accuracy = setting_prior(setting, accuracy)
+                fit = identify_touches(
+                    nominal, [places[train]], FLANGE, start_accuracy, tip=tip0, selection="chain", prior=prior
+                )
+                robot = fit.robot(nominal)
+                figures[setting] = (
+                    float(np.mean([touch_scatter(robot, p, FLANGE, fit.tip).mean_scatter_m for p in held])) * 1e3
+                )
+            choice = choose_touch_setting(nominal, [places[train]], FLANGE, accuracy, tip=tip0)
+            diffs.append(figures[choice.chosen] - figures[TOUCH_SETTINGS[0]])
+            print(
+                f"  {train:20s}"
+                + "".join(f" {figures[s]:14.4f}" for s in TOUCH_SETTINGS)
+                + f"  {choice.chosen} ({time.perf_counter() - start:.0f} s)"
+            )
+        d = np.array(diffs)
+        se = float(np.std(d, ddof=1) / np.sqrt(len(d))) if len(d) > 1 else float("nan")
+        summary.append((name, len(d), d.mean(), se))
+    print("robot           trainings  chosen - defaults (mean over training places ± SE), mm")
+    for name, n, mean, se in summary:
+        print(f"{name:16s} {n:9d}  {mean:+.4f} ± {se:.4f}")
     return 0
 
 

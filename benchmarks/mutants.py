@@ -374,6 +374,14 @@ MUTANTS: tuple[Mutant, ...] = (
         "--dynamics without masses taken: no joint loaded, compliance silently dropped",
     ),
     Mutant(
+        "touches-headline-written-urdf",
+        "calibration/robot/touches.py",
+        '"written_urdf_mm": mean(self.geometry_only),',
+        '"written_urdf_mm": mean(self.identified),',
+        (TOUCH + "test_headline_is_the_written_urdf_s_held_out_scatter",),
+        "the headline taken from the compliance fit, which the written URDF cannot hold",
+    ),
+    Mutant(
         "identification-prior-sd",
         "calibration/robot/arm_fit.py",
         "return np.sqrt(np.diag(accuracy.covariance(robot)))",

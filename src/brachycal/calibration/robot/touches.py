@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -403,6 +403,176 @@ def evidence_prior(
     return EvidencePrior(found.accuracy, found.extra[0] if terms else np.inf, found.log_evidence, found.evaluations)
 
 
+#: The settings ``prior="choose"`` scores, the default first (:func:`choose_touch_setting`):
+#: the stated accuracy; the per-joint SDs by the evidence; the same with the axes' tilt apart.
+TOUCH_SETTINGS = ("stated", "evidence", "evidence+tilt")
+#: Folds of the training touches' cross-validation: each point's touches in contiguous blocks
+#: (postures recorded one after the other are alike: a block leaves its neighbours out with it).
+CV_FOLDS = 5
+#: Touches of each point a fold's fit keeps at least (a block of ``N / folds`` left out).
+MIN_FOLD_TOUCHES = 2
+
+
+def setting_prior(setting: str, accuracy: RobotAccuracy) -> tuple[str, RobotAccuracy]:
+    """The prior rule and the (start) accuracy of a :data:`TOUCH_SETTINGS` setting, from the stated ``accuracy``."""
+    if setting == "stated":
+        return "stated", accuracy
+    if setting == "evidence":
+        return "evidence", replace(accuracy, tilt_sd_rad=None)
+    if setting == "evidence+tilt":
+        tilt = accuracy.tilt_sd_rad if accuracy.tilt_sd_rad is not None else accuracy.rotation_sd_rad
+        return "evidence", replace(accuracy, tilt_sd_rad=tilt)
+    raise InputError(f"unknown setting {setting!r} ({', '.join(TOUCH_SETTINGS)})")
+
+
+def touch_cv_errors(
+    nominal: Robot,
+    places: Sequence[TouchPlace],
+    flange: str,
+    accuracy: RobotAccuracy,
+    *,
+    setting: str = "stated",
+    tip: FloatArray | None = None,
+    folds: int = CV_FOLDS,
+    progress: Callable[[int], None] | None = None,
+) -> tuple[FloatArray, np.ndarray]:
+    """Cross-validation of a setting inside ``places`` (the training touches; ``progress``: called
+    with 1 after each fit, :func:`identify_touches`): each point's touches
+    cut into ``folds`` contiguous blocks; fold ``f`` fits the geometry (no compliance: what a URDF
+    holds) on every block but the ``f``-th, and each left-out touch's error is the distance of its
+    tip (forward kinematics on the fold's robot and tip) from its point as the fold fitted it.
+
+    Returns:
+        ``(errors_m, block)``: per left-out touch its error (metres) and its block's number (one per
+        place, point and fold): the units of the paired comparison's standard error.
+
+    Raises:
+        InputError: a point with fewer than ``folds`` + :data:`MIN_FOLD_TOUCHES` touches; a setting
+            not in :data:`TOUCH_SETTINGS`.
+    """
+    prior, start = setting_prior(setting, accuracy)
+    cuts = []
+    for place in places:
+        for k, Q in enumerate(place.touches):
+            if len(Q) < folds + MIN_FOLD_TOUCHES:
+                raise InputError(
+                    f"place {place.name!r}: point {k} has {len(Q)} touches; {folds + MIN_FOLD_TOUCHES} "
+                    f"are needed to choose the setting by {folds}-fold cross-validation"
+                )
+            cuts.append(np.array_split(np.arange(len(Q)), folds))
+    errors, blocks = [], []
+    for f in range(folds):
+        at = 0
+        kept = []
+        for place in places:
+            touches = []
+            for Q in place.touches:
+                touches.append(np.delete(Q, cuts[at][f], axis=0))
+                at += 1
+            kept.append(TouchPlace(place.name, tuple(touches), place.distances))
+        fit = identify_touches(nominal, kept, flange, start, tip=tip, selection="chain", prior=prior, progress=progress)
+        robot = fit.robot(nominal)
+        at = 0
+        for p_index, place in enumerate(places):
+            for k, Q in enumerate(place.touches):
+                p = flange_points(robot, Q[cuts[at][f]], flange, fit.tip).p
+                errors.append(np.linalg.norm(p - fit.points[p_index][k], axis=1))
+                blocks.append(np.full(len(p), at * folds + f))
+                at += 1
+    return np.concatenate(errors), np.concatenate(blocks)
+
+
+@dataclass(frozen=True)
+class SettingScore:
+    """One setting's cross-validation inside the training touches (:func:`touch_cv_errors`).
+
+    Attributes:
+        setting: its name (:data:`TOUCH_SETTINGS`).
+        cv_error_mm: the left-out touches' mean distance from their points (mm).
+        vs_chosen: against the setting chosen before it, the mean paired difference of the
+            left-out touches' distances (mm; negative: better) and its standard error (over the
+            blocks); ``None`` for the first.
+    """
+
+    setting: str
+    cv_error_mm: float
+    vs_chosen: tuple[float, float] | None = None
+
+
+@dataclass(frozen=True)
+class SettingChoice:
+    """The setting the training touches chose (:func:`choose_touch_setting`), and why."""
+
+    scores: tuple[SettingScore, ...]
+    chosen: str
+    reason: str
+    folds: int
+
+    def as_json(self) -> dict[str, object]:
+        return {
+            "rule": f"{self.folds}-fold cross-validation over the training touches (contiguous blocks per point); "
+            "a setting replaces the one chosen before it only if it is better by more than the standard "
+            "error of the paired difference",
+            "scores": {
+                s.setting: {
+                    "cv_error_mm": s.cv_error_mm,
+                    "vs_previous_choice_mm": None if s.vs_chosen is None else list(s.vs_chosen),
+                }
+                for s in self.scores
+            },
+            "chosen": self.chosen,
+            "reason": self.reason,
+        }
+
+    def summary(self) -> list[str]:
+        lines = [
+            f"setting chosen by {self.folds}-fold cross-validation over the training touches: {self.chosen} "
+            f"({self.reason})"
+        ]
+        lines += [f"  {s.setting:14s} left-out touches {s.cv_error_mm:.4f} mm from their points" for s in self.scores]
+        return lines
+
+
+def choose_touch_setting(
+    nominal: Robot,
+    places: Sequence[TouchPlace],
+    flange: str,
+    accuracy: RobotAccuracy,
+    *,
+    tip: FloatArray | None = None,
+    settings: Sequence[str] = TOUCH_SETTINGS,
+    folds: int = CV_FOLDS,
+    progress: Callable[[int], None] | None = None,
+) -> SettingChoice:
+    """The setting (:data:`TOUCH_SETTINGS`, the first the default) the training touches ``places``
+    support: each scored by :func:`touch_cv_errors`, and taken in turn in place of the one chosen
+    before it only if its left-out touches are nearer their points by more than the standard error
+    of the paired differences (per block means: touches of one block are not independent). Only
+    the touches given enter; held-out places never do."""
+    scores: list[SettingScore] = []
+    chosen, chosen_e, reasons = "", np.zeros(0), []
+    block = np.zeros(0, dtype=int)
+    for setting in settings:
+        e, block = touch_cv_errors(
+            nominal, places, flange, accuracy, setting=setting, tip=tip, folds=folds, progress=progress
+        )
+        versus = None
+        if not chosen:
+            chosen, chosen_e = setting, e
+            reasons.append(f"{setting}: the default")
+        else:
+            d = np.array([np.mean((e - chosen_e)[block == b]) for b in np.unique(block)]) * 1e3
+            mean, se = float(np.mean(d)), float(np.std(d, ddof=1) / np.sqrt(len(d)))
+            versus = (mean, se)
+            if mean < -se:
+                reasons.append(f"{setting} beats {chosen} by {-mean:.4f} ± {se:.4f} mm")
+                chosen, chosen_e = setting, e
+            else:
+                reasons.append(f"{setting} not better than {chosen} by more than its SE ({mean:+.4f} ± {se:.4f} mm)")
+        scores.append(SettingScore(setting, float(np.mean(e)) * 1e3, versus))
+    return SettingChoice(tuple(scores), chosen, "; ".join(reasons), folds)
+
+
 @dataclass(frozen=True)
 class TouchScatter:
     """MUKCa's figures of one place.
@@ -459,6 +629,7 @@ class TouchReport:
         urdf_fit: with compliance, the same identification without it: the best geometry a URDF
             can carry (the compliance fit's geometry has absorbed nothing of what compliance
             explains, so alone it does worse); None without compliance.
+        choice: with ``prior="choose"``, the setting the training touches chose and why.
     """
 
     result: TouchResult
@@ -468,6 +639,7 @@ class TouchReport:
     geometry_only: dict[str, TouchScatter]
     tool_frame: str
     urdf_fit: TouchResult | None = None
+    choice: SettingChoice | None = None
 
     @property
     def urdf_result(self) -> TouchResult:
@@ -477,6 +649,21 @@ class TouchReport:
     @property
     def held_out(self) -> list[str]:
         return [name for name in self.nominal if name not in self.train]
+
+    def headline(self) -> dict[str, float | None]:
+        """The held-out places' mean tip scatter (mm): of the written URDF (the headline: what the
+        user gets), of the nominal URDF, and with compliance (not in the URDF; ``None`` without
+        it). All ``None`` without held-out places."""
+        held = self.held_out
+
+        def mean(scores: dict[str, TouchScatter]) -> float | None:
+            return float(np.mean([scores[n].mean_scatter_m for n in held])) * 1e3 if held else None
+
+        return {
+            "written_urdf_mm": mean(self.geometry_only),
+            "nominal_urdf_mm": mean(self.nominal),
+            "with_compliance_not_in_urdf_mm": mean(self.identified) if self.result.compliant else None,
+        }
 
     def calibrated_robot(self, nominal: Robot) -> Robot:
         """The corrected robot (:attr:`urdf_result`, geometry only) with the identified tip
@@ -501,6 +688,11 @@ class TouchReport:
         fit = self.result.fit
         return {
             "protocol": "touches of fixed points",
+            "headline": {
+                "figure": "the held-out places' mean tip scatter (MUKCa's figure), mm",
+                **self.headline(),
+            },
+            "setting_choice": None if self.choice is None else self.choice.as_json(),
             "train": list(self.train),
             "held_out": list(self.held_out),
             "flange": self.result.flange,
@@ -564,7 +756,9 @@ def identify_touch_folders(
             (each revolute arm joint that gravity loads, about its axis), and the geometry alone
             once more for the URDF (:attr:`TouchReport.urdf_fit`).
         prior: ``"stated"`` (``accuracy``, compliance free) or ``"evidence"``: chosen by the
-            training places' evidence (:func:`evidence_prior`; the held-out places never enter).
+            training places' evidence (:func:`evidence_prior`; the held-out places never enter);
+            ``"choose"``: the setting of :data:`TOUCH_SETTINGS` the training touches' own
+            cross-validation supports (:func:`choose_touch_setting`; :attr:`TouchReport.choice`).
         progress: called with 1 after each fit (:func:`identify_touches`; with the evidence their
             number is not known ahead: tens per search, one search per fit of :attr:`TouchReport.result`
             and :attr:`TouchReport.urdf_fit`).
@@ -596,6 +790,10 @@ def identify_touch_folders(
             raise InputError("the masses put no torque on any joint of the arm at the training touches")
     fit_places = [p for p in places if p.name in train]
     tip0 = T_flange_tool[:3, 3]
+    choice = None
+    if prior == "choose":
+        choice = choose_touch_setting(nominal, fit_places, flange, accuracy, tip=tip0, progress=progress)
+        prior, accuracy = setting_prior(choice.chosen, accuracy)
 
     def identify(terms: tuple[tuple[int, int], ...]) -> TouchResult:
         return identify_touches(
@@ -628,6 +826,7 @@ def identify_touch_folders(
         geometry_only,
         tool_frame,
         urdf_fit,
+        choice,
     )
 
 
