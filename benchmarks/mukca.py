@@ -70,13 +70,16 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--no-distance", action="store_true", help="do not use the 50 mm between the sockets")
     parser.add_argument(
         "--choose",
-        action="store_true",
-        help="every shared robot, each place in turn the training place: the setting chosen by cross-validation "
-        "inside it against the defaults, on the written URDF (geometry), judged on the robot's other places",
+        type=int,
+        metavar="K",
+        help="every shared robot, each place in turn with the K - 1 after it the training places: the setting "
+        "chosen by "
+        "cross-validation inside them (K = 1: over the postures; K >= 2: leave one place out) against the "
+        "defaults, on the written URDF (geometry only), judged on the robot's other places",
     )
     args = parser.parse_args(argv)
-    if args.choose:
-        return choose_all()
+    if args.choose is not None:
+        return choose_all(args.choose)
     train = (args.train or ("front_center" if args.robot == "panda_2_clean" else "frontcenter")).split(",")
     mm, deg, *tilt = (float(v) for v in args.prior.split(","))
     compliant = tuple(
@@ -148,11 +151,12 @@ def main(argv: list[str]) -> int:
     return 0
 
 
-def choose_all() -> int:
-    """Per robot, per training place: the held-out mean scatter of the written URDF (geometry only)
-    fitted with each setting of ``TOUCH_SETTINGS``, and with the one the training place's own
-    cross-validation chooses; then per robot the chosen-minus-defaults difference, its mean over
-    the training places and that mean's standard error."""
+def choose_all(k: int) -> int:
+    """Per robot, per set of ``k`` training places: the held-out mean scatter of the written URDF
+    (geometry only) fitted with each setting of ``TOUCH_SETTINGS`` and with the one chosen by
+    cross-validation inside the training places (over the postures with one place, over the places
+    with more); then per robot the chosen-minus-defaults difference, its mean over the training
+    sets and that mean's standard error."""
     robots = sorted(p.name for p in (DATA / "data").iterdir() if p.is_dir()) if (DATA / "data").is_dir() else []
     if not robots:
         print(f"skipped: {DATA / 'data'} is not there (MUKCa's public data)", file=sys.stderr)
@@ -160,46 +164,50 @@ def choose_all() -> int:
     nominal = Robot.load(DATA / "urdf" / "panda.urdf")
     tip0 = nominal.transform(FLANGE, "ball_link", np.zeros(nominal.nq))[:3, 3]
     accuracy = TOUCHES_ACCURACY
+    over = "postures" if k == 1 else "places"
     print(
-        f"prior (defaults): {accuracy.translation_sd_m * 1e3:.3g} mm / {np.degrees(accuracy.rotation_sd_rad):.3g} deg; "
-        f"settings {', '.join(TOUCH_SETTINGS)}; written URDF (geometry only); held-out mean scatter, mm"
+        f"defaults: prior {accuracy.translation_sd_m * 1e3:.3g} mm / {np.degrees(accuracy.rotation_sd_rad):.3g} deg; "
+        f"settings {', '.join(TOUCH_SETTINGS)}; chosen by cross-validation over the training {over}; "
+        "written URDF (geometry only); held-out places' mean scatter, mm"
     )
     summary = []
     for name in robots:
         folders = sorted(p for p in (DATA / "data" / name).iterdir() if p.is_dir())
         places = {p.name: p for p in read_places(nominal, FLANGE, folders, {(0, 1): 0.05})}
-        print(
-            f"{name}: {'train':14s}"
-            + "".join(f" {s:>14s}" for s in TOUCH_SETTINGS)
-            + "  chosen (CV inside the training place)"
-        )
+        print(f"{name}: {'train':30s}" + "".join(f" {s:>14s}" for s in TOUCH_SETTINGS) + "  chosen")
         diffs = []
-        for train in places:
+        names = list(places)
+        # Each place in turn with the k - 1 after it (cyclic, sorted): as many training sets as places.
+        sets = (
+            [tuple(names[(i + j) % len(names)] for j in range(k)) for i in range(len(names))] if k < len(names) else []
+        )
+        for train in sets:
             start = time.perf_counter()
-            held = [p for n, p in places.items() if n != train]
+            held = [p for n, p in places.items() if n not in train]
+            fit_places = [places[n] for n in train]
             figures = {}
             for setting in TOUCH_SETTINGS:
                 prior, start_accuracy = setting_prior(setting, accuracy)
                 fit = identify_touches(
-                    nominal, [places[train]], FLANGE, start_accuracy, tip=tip0, selection="chain", prior=prior
+                    nominal, fit_places, FLANGE, start_accuracy, tip=tip0, selection="chain", prior=prior
                 )
                 robot = fit.robot(nominal)
-                figures[setting] = (
-                    float(np.mean([touch_scatter(robot, p, FLANGE, fit.tip).mean_scatter_m for p in held])) * 1e3
-                )
-            choice = choose_touch_setting(nominal, [places[train]], FLANGE, accuracy, tip=tip0)
+                scatter = [touch_scatter(robot, p, FLANGE, fit.tip).mean_scatter_m for p in held]
+                figures[setting] = float(np.mean(scatter)) * 1e3
+            choice = choose_touch_setting(nominal, fit_places, FLANGE, accuracy, tip=tip0, over=over)
             diffs.append(figures[choice.chosen] - figures[TOUCH_SETTINGS[0]])
             print(
-                f"  {train:20s}"
+                f"  {','.join(train):36s}"
                 + "".join(f" {figures[s]:14.4f}" for s in TOUCH_SETTINGS)
-                + f"  {choice.chosen} ({time.perf_counter() - start:.0f} s)"
+                + f"  {choice.chosen} ({time.perf_counter() - start:.0f} s)",
+                flush=True,
             )
         d = np.array(diffs)
         se = float(np.std(d, ddof=1) / np.sqrt(len(d))) if len(d) > 1 else float("nan")
         summary.append((name, len(d), d.mean(), se))
-    print("robot           trainings  chosen - defaults (mean over training places ± SE), mm")
+    print("robot           training sets  chosen - defaults: mean over the training sets ± its SE, mm")
     for name, n, mean, se in summary:
-        print(f"{name:16s} {n:9d}  {mean:+.4f} ± {se:.4f}")
+        print(f"{name:16s} {n:13d}  {mean:+.4f} ± {se:.4f}")
     return 0
 
 

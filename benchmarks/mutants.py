@@ -382,6 +382,22 @@ MUTANTS: tuple[Mutant, ...] = (
         "the headline taken from the compliance fit, which the written URDF cannot hold",
     ),
     Mutant(
+        "touches-choice-se-rule",
+        "calibration/robot/touches.py",
+        "            if mean < -se:",
+        "            if True:",
+        (TOUCH + "test_choice_leaves_the_default_only_for_a_setting_better_by_more_than_its_se",),
+        "a setting replaces the one chosen before it whatever its cross-validated error",
+    ),
+    Mutant(
+        "touches-cv-place-leak",
+        "calibration/robot/touches.py",
+        "nominal, [p for j, p in enumerate(places) if j != i], flange, start,",
+        "nominal, list(places), flange, start,",
+        (TOUCH + "test_cross_validation_over_places_predicts_each_from_the_others_only",),
+        "a left-out place predicted by a fit that used it",
+    ),
+    Mutant(
         "identification-prior-sd",
         "calibration/robot/arm_fit.py",
         "return np.sqrt(np.diag(accuracy.covariance(robot)))",

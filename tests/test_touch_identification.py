@@ -705,3 +705,87 @@ def test_evidence_recovers_a_tilt_apart_from_the_turn_about_the_axis(panda):
     assert 0.5 < chosen.accuracy.rotation_sd_rad / about < 2.0
     assert 0.3 < chosen.accuracy.tilt_sd_rad / tilt < 3.0
     assert chosen.accuracy.tilt_sd_rad < chosen.accuracy.rotation_sd_rad / 3
+
+
+# --- the setting chosen by cross-validation inside the training places ---------------------------
+
+
+@pytest.fixture(scope="module")
+def far_off_arm(panda):
+    """A Panda off its URDF by 0.5 mm / 0.2° per joint-origin component, touched at two places
+    (30 µm of touch noise): a stated accuracy of 0.02 mm / 0.002° is far too tight for it."""
+    rng = np.random.default_rng(11)
+    free = ParameterSelection.chain(panda, FLANGE).free
+    c = rng.normal(0, 1, (panda.nq, 6)) * np.r_[[5e-4] * 3, [np.radians(0.2)] * 3] * free
+    return noisy_places(corrected_robot(panda, c), rng, 3e-5)[:2]
+
+
+@pytest.mark.slow  # four evidence searches
+def test_choice_leaves_the_default_only_for_a_setting_better_by_more_than_its_se(panda, far_off_arm):
+    """Leave-one-place-out inside the training places: with a stated accuracy far too tight, the
+    evidence's prior predicts each training place from the other ~10 times better and replaces the
+    stated one; listed the other way round, the stated accuracy does not replace the evidence's."""
+    from brachycal.calibration.robot.touches import choose_touch_setting
+
+    tight = RobotAccuracy(2e-5, float(np.radians(0.002)))
+    choice = choose_touch_setting(panda, far_off_arm, FLANGE, tight, tip=TIP, settings=("stated", "evidence"))
+    assert choice.over == "places" and choice.chosen == "evidence", choice.reason
+    stated, evidence = choice.scores
+    assert evidence.cv_error_mm < stated.cv_error_mm / 5
+    mean, se = evidence.vs_chosen
+    assert mean < -3 * se
+    reverse = choose_touch_setting(panda, far_off_arm, FLANGE, tight, tip=TIP, settings=("evidence", "stated"))
+    assert reverse.chosen == "evidence" and reverse.scores[1].vs_chosen[0] > 0, reverse.reason
+
+
+def test_one_training_place_keeps_the_defaults_unscored(panda, far_off_arm):
+    """With one training place there is no place to leave out: the default, with the reason."""
+    from brachycal.calibration.robot.touches import choose_touch_setting
+
+    choice = choose_touch_setting(panda, far_off_arm[:1], FLANGE, RobotAccuracy(3e-4, float(np.radians(0.1))))
+    assert choice.chosen == "stated" and choice.scores == () and "one training place" in choice.reason
+
+
+def test_cross_validation_over_places_predicts_each_from_the_others_only(panda, far_off_arm):
+    """Leave-one-place-out errors are those of the fit of the other place alone (an independent
+    fit here), per touch the distance of its tip from its point's mean tip."""
+    from brachycal.calibration.robot.touches import touch_cv_errors
+
+    accuracy = RobotAccuracy(3e-4, float(np.radians(0.1)))
+    errors, block = touch_cv_errors(panda, far_off_arm, FLANGE, accuracy, tip=TIP)
+    fit = identify_touches(panda, [far_off_arm[1]], FLANGE, accuracy, tip=TIP, selection="chain")
+    expected = []
+    for Q in far_off_arm[0].touches:
+        p = fit.robot(panda).fk(FLANGE, Q)
+        tips = p[:, :3, :3] @ fit.tip + p[:, :3, 3]
+        expected.append(np.linalg.norm(tips - tips.mean(axis=0), axis=1))
+    expected = np.concatenate(expected)
+    assert errors[: len(expected)] == pytest.approx(expected, abs=1e-12)
+    assert len(errors) == sum(len(Q) for p in far_off_arm for Q in p.touches)
+    assert len(np.unique(block)) == 2 * 2 * 5  # places x points x contiguous fifths
+
+
+@pytest.mark.slow  # three settings, two folds each, evidence searches
+def test_cli_prior_choose_prints_and_writes_the_choice_and_why(tmp_path, capsys):
+    """``--prior choose`` with two training places: the setting left at the default (the bundled
+    touches' arm is off by about the stated accuracy), each setting's cross-validated error and the
+    rule printed and written; the prior written is the stated one."""
+    import json
+
+    from brachycal.cli.main import main
+
+    touches = Path(__file__).resolve().parents[1] / "examples" / "touches"
+    out = tmp_path / "out"
+    args = ["robot", "identify", "touches", *(str(touches / n) for n in ("front", "left", "right"))]
+    args += ["--robot", "panda", "--train", "front,left", "--distance-mm", "50", "--prior", "choose", "--quiet"]
+    assert main([*args, "--out", str(out)]) == 0
+    printed = [line for line in capsys.readouterr().out.splitlines() if line.startswith("setting: ")]
+    assert len(printed) == 1 and printed[0].startswith("setting: stated (stated: the default;")
+    assert "leave-one-place-out over the training places" in printed[0]
+    document = json.loads((out / "identification.json").read_text())
+    choice = document["setting_choice"]
+    assert choice["chosen"] == "stated" and list(choice["scores"]) == ["stated", "evidence", "evidence+tilt"]
+    for name in ("evidence", "evidence+tilt"):
+        mean, se = choice["scores"][name]["vs_previous_choice_mm"]
+        assert not mean < -se
+    assert document["prior"]["joint_translation_sd_mm"] == pytest.approx(0.3)

@@ -432,54 +432,85 @@ def touch_cv_errors(
     accuracy: RobotAccuracy,
     *,
     setting: str = "stated",
+    over: str = "places",
     tip: FloatArray | None = None,
     folds: int = CV_FOLDS,
     progress: Callable[[int], None] | None = None,
 ) -> tuple[FloatArray, np.ndarray]:
-    """Cross-validation of a setting inside ``places`` (the training touches; ``progress``: called
-    with 1 after each fit, :func:`identify_touches`): each point's touches
-    cut into ``folds`` contiguous blocks; fold ``f`` fits the geometry (no compliance: what a URDF
-    holds) on every block but the ``f``-th, and each left-out touch's error is the distance of its
-    tip (forward kinematics on the fold's robot and tip) from its point as the fold fitted it.
+    """Cross-validation of a setting inside ``places`` (the training touches). Each fit is of the
+    geometry (no compliance: what a URDF holds), with the setting's prior (:func:`setting_prior`).
+
+    ``over="places"`` (two places at least): each place is predicted by the fit of the others, as a
+    held-out place is judged: a touch's error is the distance of its tip (forward kinematics on
+    that fit's robot and tip) from the mean tip of its point (MUKCa's figure, per touch).
+    ``over="postures"``: each point's touches cut into ``folds`` contiguous blocks, fold ``f``
+    fitted on all but the ``f``-th; a left-out touch's error is the distance of its tip from its
+    point as the fold fitted it. ``progress``: called with 1 after each fit (:func:`identify_touches`).
 
     Returns:
-        ``(errors_m, block)``: per left-out touch its error (metres) and its block's number (one per
-        place, point and fold): the units of the paired comparison's standard error.
+        ``(errors_m, block)``: per left-out touch its error (metres) and its block's number (per
+        place, point and contiguous ``folds``-th of its touches): the units of the paired
+        comparison's standard error (neighbouring touches are alike: not independent).
 
     Raises:
-        InputError: a point with fewer than ``folds`` + :data:`MIN_FOLD_TOUCHES` touches; a setting
-            not in :data:`TOUCH_SETTINGS`.
+        InputError: fewer than two places over places; a point with fewer than ``folds`` +
+            :data:`MIN_FOLD_TOUCHES` touches; a setting not in :data:`TOUCH_SETTINGS`.
     """
     prior, start = setting_prior(setting, accuracy)
+    if over not in ("places", "postures"):
+        raise InputError(f"unknown cross-validation {over!r} (places, postures)")
+    if over == "places" and len(places) < 2:
+        raise InputError("cross-validation over places needs two training places at least")
     cuts = []
     for place in places:
         for k, Q in enumerate(place.touches):
             if len(Q) < folds + MIN_FOLD_TOUCHES:
                 raise InputError(
                     f"place {place.name!r}: point {k} has {len(Q)} touches; {folds + MIN_FOLD_TOUCHES} "
-                    f"are needed to choose the setting by {folds}-fold cross-validation"
+                    f"are needed to choose the setting by cross-validation"
                 )
             cuts.append(np.array_split(np.arange(len(Q)), folds))
-    errors, blocks = [], []
-    for f in range(folds):
-        at = 0
-        kept = []
-        for place in places:
-            touches = []
+    block = np.concatenate(
+        [
+            np.concatenate(
+                [np.full(len(c), b) for c, b in zip(cut, range(at * folds, at * folds + folds), strict=True)]
+            )
+            for at, cut in enumerate(cuts)
+        ]
+    )
+    errors = []
+    if over == "places":
+        for i, place in enumerate(places):
+            fit = identify_touches(
+                nominal, [p for j, p in enumerate(places) if j != i], flange, start,
+                tip=tip, selection="chain", prior=prior, progress=progress,
+            )  # fmt: skip
+            robot = fit.robot(nominal)
             for Q in place.touches:
-                touches.append(np.delete(Q, cuts[at][f], axis=0))
-                at += 1
-            kept.append(TouchPlace(place.name, tuple(touches), place.distances))
+                p = flange_points(robot, Q, flange, fit.tip).p
+                errors.append(np.linalg.norm(p - p.mean(axis=0), axis=1))
+        return np.concatenate(errors), block
+    held: list[list[FloatArray]] = [[np.zeros(0)] * folds for _ in cuts]
+    for f in range(folds):
+        at, kept = 0, []
+        for place in places:
+            kept.append(
+                TouchPlace(
+                    place.name,
+                    tuple(np.delete(Q, cuts[at + k][f], axis=0) for k, Q in enumerate(place.touches)),
+                    place.distances,
+                )
+            )
+            at += len(place.touches)
         fit = identify_touches(nominal, kept, flange, start, tip=tip, selection="chain", prior=prior, progress=progress)
         robot = fit.robot(nominal)
         at = 0
         for p_index, place in enumerate(places):
             for k, Q in enumerate(place.touches):
                 p = flange_points(robot, Q[cuts[at][f]], flange, fit.tip).p
-                errors.append(np.linalg.norm(p - fit.points[p_index][k], axis=1))
-                blocks.append(np.full(len(p), at * folds + f))
+                held[at][f] = np.linalg.norm(p - fit.points[p_index][k], axis=1)
                 at += 1
-    return np.concatenate(errors), np.concatenate(blocks)
+    return np.concatenate([e for point in held for e in point]), block
 
 
 @dataclass(frozen=True)
@@ -501,18 +532,34 @@ class SettingScore:
 
 @dataclass(frozen=True)
 class SettingChoice:
-    """The setting the training touches chose (:func:`choose_touch_setting`), and why."""
+    """The setting the training touches chose (:func:`choose_touch_setting`), and why.
+
+    Attributes:
+        scores: each setting's cross-validation (none when there was none: one training place).
+        chosen: the setting (:data:`TOUCH_SETTINGS`).
+        reason: why, in words.
+        over: what the cross-validation left out: ``"places"``, ``"postures"``, or ``"none"``.
+    """
 
     scores: tuple[SettingScore, ...]
     chosen: str
     reason: str
-    folds: int
+    over: str
+
+    def rule(self) -> str:
+        if self.over == "none":
+            return "no cross-validation (one training place): the defaults"
+        what = "leave-one-place-out over the training places" if self.over == "places" else (
+            f"{CV_FOLDS}-fold cross-validation over the training touches' postures"
+        )  # fmt: skip
+        return (
+            f"{what}; a setting replaces the one chosen before it only if better by more than the "
+            "standard error of the paired differences"
+        )
 
     def as_json(self) -> dict[str, object]:
         return {
-            "rule": f"{self.folds}-fold cross-validation over the training touches (contiguous blocks per point); "
-            "a setting replaces the one chosen before it only if it is better by more than the standard "
-            "error of the paired difference",
+            "rule": self.rule(),
             "scores": {
                 s.setting: {
                     "cv_error_mm": s.cv_error_mm,
@@ -525,11 +572,8 @@ class SettingChoice:
         }
 
     def summary(self) -> list[str]:
-        lines = [
-            f"setting chosen by {self.folds}-fold cross-validation over the training touches: {self.chosen} "
-            f"({self.reason})"
-        ]
-        lines += [f"  {s.setting:14s} left-out touches {s.cv_error_mm:.4f} mm from their points" for s in self.scores]
+        lines = [f"setting: {self.chosen} ({self.reason}; {self.rule()})"]
+        lines += [f"  {s.setting:14s} cross-validated tip error {s.cv_error_mm:.4f} mm" for s in self.scores]
         return lines
 
 
@@ -541,20 +585,27 @@ def choose_touch_setting(
     *,
     tip: FloatArray | None = None,
     settings: Sequence[str] = TOUCH_SETTINGS,
-    folds: int = CV_FOLDS,
+    over: str | None = None,
     progress: Callable[[int], None] | None = None,
 ) -> SettingChoice:
-    """The setting (:data:`TOUCH_SETTINGS`, the first the default) the training touches ``places``
-    support: each scored by :func:`touch_cv_errors`, and taken in turn in place of the one chosen
-    before it only if its left-out touches are nearer their points by more than the standard error
-    of the paired differences (per block means: touches of one block are not independent). Only
-    the touches given enter; held-out places never do."""
+    """The setting (of ``settings``, the first the default) the training touches ``places``
+    support: each scored by :func:`touch_cv_errors` ``over`` places (the default with two training
+    places or more), and taken in turn in place of the one chosen before it only if its left-out
+    touches' errors are lower by more than the standard error of the paired differences (of the
+    blocks' means: touches of one block are not independent). With one training place (and
+    ``over`` not given) the first setting, unscored: on MUKCa's Pandas, the postures of one place
+    prefer priors that do worse at other places (``benchmarks/mukca.py --choose``). Only the
+    touches given enter; held-out places never do."""
+    if over is None:
+        over = "places" if len(places) >= 2 else "none"
+    if over == "none":
+        reason = f"{settings[0]}: the default; one training place cannot tell how a setting does at other places"
+        return SettingChoice((), settings[0], reason, "none")
     scores: list[SettingScore] = []
     chosen, chosen_e, reasons = "", np.zeros(0), []
-    block = np.zeros(0, dtype=int)
     for setting in settings:
         e, block = touch_cv_errors(
-            nominal, places, flange, accuracy, setting=setting, tip=tip, folds=folds, progress=progress
+            nominal, places, flange, accuracy, setting=setting, over=over, tip=tip, progress=progress
         )
         versus = None
         if not chosen:
@@ -570,7 +621,7 @@ def choose_touch_setting(
             else:
                 reasons.append(f"{setting} not better than {chosen} by more than its SE ({mean:+.4f} ± {se:.4f} mm)")
         scores.append(SettingScore(setting, float(np.mean(e)) * 1e3, versus))
-    return SettingChoice(tuple(scores), chosen, "; ".join(reasons), folds)
+    return SettingChoice(tuple(scores), chosen, "; ".join(reasons), over)
 
 
 @dataclass(frozen=True)
