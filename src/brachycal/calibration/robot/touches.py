@@ -519,7 +519,7 @@ class SettingScore:
 
     Attributes:
         setting: its name (:data:`TOUCH_SETTINGS`).
-        cv_error_mm: the left-out touches' mean distance from their points (mm).
+        cv_error_mm: the left-out touches' mean error (mm; :func:`touch_cv_errors`).
         vs_chosen: against the setting chosen before it, the mean paired difference of the
             left-out touches' distances (mm; negative: better) and its standard error (over the
             blocks); ``None`` for the first.

@@ -34,7 +34,8 @@ state the arm's own figures (a Panda's joints are off their URDF by tenths of a 
 --robot-tilt-deg gives the tilt of the joints' axes a prior of its own (machined bearing seats
 tilt less than encoders are off their zero).
 --prior choose picks the setting (the stated accuracy, the evidence's prior, the evidence's with the
-axes' tilt apart) by cross-validation over the training touches alone, and prints the choice and why.
+axes' tilt apart) by leave-one-place-out over the training places alone (two at least; with one the
+stated accuracy is kept), and prints the choice and why.
 With --dynamics NAME|FILE (the same arm with masses: a bundled arm such as panda, whose URDF has
 them, or a URDF file; refused when its joints or masses do not fit the arm), joint compliance under
 gravity is fitted too; a URDF cannot carry it, so the written URDF is a second fit of the geometry
@@ -88,10 +89,10 @@ def add_options(parser: argparse.ArgumentParser) -> None:
         default="stated",
         help="stated: the stated accuracy is the prior; evidence: the prior's SDs (and the compliance's) "
         "that the training places' own data make most likely, searched from the stated accuracy "
-        "(tens of fits); choose: stated, evidence or evidence with the axes' tilt apart, whichever a "
-        "5-fold cross-validation over the training touches supports (a setting replaces the stated "
-        "accuracy only if better by more than its standard error; hundreds of fits). The held-out "
-        "places are never used",
+        "(tens of fits); choose: stated, evidence or evidence with the axes' tilt apart, whichever "
+        "leave-one-place-out over the training places supports (a setting replaces the stated accuracy "
+        "only if better by more than its standard error; two training places at least, else the stated "
+        "accuracy is kept; hundreds of fits). The held-out places are never used",
     )
     from brachycal.calibration.robot.defaults import TOUCHES_ACCURACY  # lazy: start-up (the command's run only)
 
