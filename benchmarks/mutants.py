@@ -392,8 +392,8 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "touches-cv-place-leak",
         "calibration/robot/touches.py",
-        "nominal, [p for j, p in enumerate(places) if j != i], flange, start,",
-        "nominal, list(places), flange, start,",
+        "others = [p for j, p in enumerate(places) if j != i]",
+        "others = list(places)",
         (TOUCH + "test_cross_validation_over_places_predicts_each_from_the_others_only",),
         "a left-out place predicted by a fit that used it",
     ),

@@ -789,3 +789,22 @@ def test_cli_prior_choose_prints_and_writes_the_choice_and_why(tmp_path, capsys)
         mean, se = choice["scores"][name]["vs_previous_choice_mm"]
         assert not mean < -se
     assert document["prior"]["joint_translation_sd_mm"] == pytest.approx(0.3)
+
+
+def test_cross_validation_over_postures_leaves_out_contiguous_blocks(panda, far_off_arm):
+    """Over postures: each point's touches cut into five contiguous blocks; the first block's
+    errors are those of an independent fit without it, per touch the distance of its tip from its
+    point as that fit placed it."""
+    from brachycal.calibration.robot.touches import touch_cv_errors
+
+    accuracy = RobotAccuracy(3e-4, float(np.radians(0.1)))
+    place = far_off_arm[0]
+    errors, block = touch_cv_errors(panda, [place], FLANGE, accuracy, over="postures", tip=TIP)
+    n = len(place.touches[0])
+    first = np.arange(-(-n // 5))  # numpy's array_split: the first blocks are the longer ones
+    kept = TouchPlace(place.name, tuple(np.delete(Q, first, axis=0) for Q in place.touches), place.distances)
+    fit = identify_touches(panda, [kept], FLANGE, accuracy, tip=TIP, selection="chain")
+    T = fit.robot(panda).fk(FLANGE, place.touches[0][first])
+    expected = np.linalg.norm(T[:, :3, :3] @ fit.tip + T[:, :3, 3] - fit.points[0][0], axis=1)
+    assert errors[: len(first)] == pytest.approx(expected, abs=1e-12)
+    assert list(block[:n]) == [k for k, c in enumerate(np.array_split(np.arange(n), 5)) for _ in c]

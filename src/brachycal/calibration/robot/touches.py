@@ -471,20 +471,15 @@ def touch_cv_errors(
                 )
             cuts.append(np.array_split(np.arange(len(Q)), folds))
     block = np.concatenate(
-        [
-            np.concatenate(
-                [np.full(len(c), b) for c, b in zip(cut, range(at * folds, at * folds + folds), strict=True)]
-            )
-            for at, cut in enumerate(cuts)
-        ]
+        [np.repeat(at * folds + np.arange(folds), [len(c) for c in cut]) for at, cut in enumerate(cuts)]
     )
     errors = []
     if over == "places":
         for i, place in enumerate(places):
+            others = [p for j, p in enumerate(places) if j != i]
             fit = identify_touches(
-                nominal, [p for j, p in enumerate(places) if j != i], flange, start,
-                tip=tip, selection="chain", prior=prior, progress=progress,
-            )  # fmt: skip
+                nominal, others, flange, start, tip=tip, selection="chain", prior=prior, progress=progress
+            )
             robot = fit.robot(nominal)
             for Q in place.touches:
                 p = flange_points(robot, Q, flange, fit.tip).p
@@ -549,9 +544,10 @@ class SettingChoice:
     def rule(self) -> str:
         if self.over == "none":
             return "no cross-validation (one training place): the defaults"
-        what = "leave-one-place-out over the training places" if self.over == "places" else (
-            f"{CV_FOLDS}-fold cross-validation over the training touches' postures"
-        )  # fmt: skip
+        if self.over == "places":
+            what = "leave-one-place-out over the training places"
+        else:
+            what = f"{CV_FOLDS}-fold cross-validation over the training touches' postures"
         return (
             f"{what}; a setting replaces the one chosen before it only if better by more than the "
             "standard error of the paired differences"
