@@ -29,7 +29,16 @@ from pathlib import Path
 import numpy as np
 
 from brachycal.calibration.robot.arm_fit import gravity_moments
-from brachycal.calibration.robot.touches import TouchPlace, identify_touches, read_places, touch_scatter
+from brachycal.calibration.robot.defaults import TOUCHES_ACCURACY
+from brachycal.calibration.robot.touches import (
+    TOUCH_SETTINGS,
+    TouchPlace,
+    choose_touch_setting,
+    identify_touches,
+    read_places,
+    setting_prior,
+    touch_scatter,
+)
 from brachycal.calibration.robot_accuracy import RobotAccuracy
 from brachycal.model.description_file import example_robot_data_share
 from brachycal.model.robot import Robot
@@ -59,7 +68,19 @@ def main(argv: list[str]) -> int:
         "--evidence", action="store_true", help="choose the priors by the training touches' evidence (start: --prior)"
     )
     parser.add_argument("--no-distance", action="store_true", help="do not use the 50 mm between the sockets")
+    parser.add_argument(
+        "--choose",
+        type=int,
+        metavar="K",
+        help="every shared robot, each place in turn with the K - 1 after it the training places: the setting "
+        "chosen by "
+        "cross-validation inside them (K = 1: over the postures; K >= 2: leave one place out) against the "
+        "defaults, on the written URDF (geometry only), judged on the robot's other places",
+    )
+    parser.add_argument("--robots", help="with --choose: these robots only (comma-separated; default all)")
     args = parser.parse_args(argv)
+    if args.choose is not None:
+        return choose_all(args.choose, args.robots.split(",") if args.robots else None)
     train = (args.train or ("front_center" if args.robot == "panda_2_clean" else "frontcenter")).split(",")
     mm, deg, *tilt = (float(v) for v in args.prior.split(","))
     compliant = tuple(
@@ -128,6 +149,66 @@ def main(argv: list[str]) -> int:
         f"held-out mean scatter: nominal {means[0]:.3f}  brachycal {means[1]:.3f}  MUKCa URDF {means[2]:.3f} mm; "
         f"places where brachycal > MUKCa: {', '.join(worse) or 'none'}"
     )
+    return 0
+
+
+def choose_all(k: int, only: list[str] | None = None) -> int:
+    """Per robot, per set of ``k`` training places: the held-out mean scatter of the written URDF
+    (geometry only) with the defaults and with the setting chosen by cross-validation inside the
+    training places (over the postures with one place, over the places with more); then per robot
+    the chosen-minus-defaults difference, its mean over the training sets and that mean's standard
+    error."""
+    robots = sorted(p.name for p in (DATA / "data").iterdir() if p.is_dir()) if (DATA / "data").is_dir() else []
+    robots = [r for r in robots if only is None or r in only]
+    if not robots:
+        print(f"skipped: {DATA / 'data'} is not there (MUKCa's public data)", file=sys.stderr)
+        return 1
+    nominal = Robot.load(DATA / "urdf" / "panda.urdf")
+    tip0 = nominal.transform(FLANGE, "ball_link", np.zeros(nominal.nq))[:3, 3]
+    accuracy = TOUCHES_ACCURACY
+    over = "postures" if k == 1 else "places"
+    print(
+        f"defaults: prior {accuracy.translation_sd_m * 1e3:.3g} mm / {np.degrees(accuracy.rotation_sd_rad):.3g} deg; "
+        f"settings {', '.join(TOUCH_SETTINGS)}; chosen by cross-validation over the training {over}; "
+        "written URDF (geometry only); held-out places' mean scatter, mm"
+    )
+    summary = []
+    for name in robots:
+        folders = sorted(p for p in (DATA / "data" / name).iterdir() if p.is_dir())
+        places = {p.name: p for p in read_places(nominal, FLANGE, folders, {(0, 1): 0.05})}
+        print(f"{name}: {'train':30s} {'defaults':>10s} {'chosen':>10s}  setting chosen")
+        diffs = []
+        names = list(places)
+        # Each place in turn with the k - 1 after it (cyclic, sorted): as many training sets as places.
+        sets = (
+            [tuple(names[(i + j) % len(names)] for j in range(k)) for i in range(len(names))] if k < len(names) else []
+        )
+        for train in sets:
+            start = time.perf_counter()
+            held = [p for n, p in places.items() if n not in train]
+            fit_places = [places[n] for n in train]
+            choice = choose_touch_setting(nominal, fit_places, FLANGE, accuracy, tip=tip0, over=over)
+            figures = {}
+            for setting in dict.fromkeys((TOUCH_SETTINGS[0], choice.chosen)):
+                prior, start_accuracy = setting_prior(setting, accuracy)
+                fit = identify_touches(
+                    nominal, fit_places, FLANGE, start_accuracy, tip=tip0, selection="chain", prior=prior
+                )
+                robot = fit.robot(nominal)
+                scatter = [touch_scatter(robot, p, FLANGE, fit.tip).mean_scatter_m for p in held]
+                figures[setting] = float(np.mean(scatter)) * 1e3
+            diffs.append(figures[choice.chosen] - figures[TOUCH_SETTINGS[0]])
+            print(
+                f"  {','.join(train):36s} {figures[TOUCH_SETTINGS[0]]:10.4f} {figures[choice.chosen]:10.4f}"
+                f"  {choice.chosen} ({time.perf_counter() - start:.0f} s)",
+                flush=True,
+            )
+        d = np.array(diffs)
+        se = float(np.std(d, ddof=1) / np.sqrt(len(d))) if len(d) > 1 else float("nan")
+        summary.append((name, len(d), d.mean(), se))
+    print("robot           training sets  chosen - defaults: mean over the training sets ± its SE, mm")
+    for name, n, mean, se in summary:
+        print(f"{name:16s} {n:13d}  {mean:+.4f} ± {se:.4f}")
     return 0
 
 

@@ -71,6 +71,7 @@ TRACK = "tests/test_tracker_identification.py::"
 EVID = "tests/test_evidence_search.py::"
 HTP = "tests/test_hostile_trus_probe.py::test_stepper_probe_refusals"
 HST = "tests/test_hostile_stepper.py::test_stepper_calibrate_refuses"
+HOSTILE_ROBOT = "tests/test_hostile_robot.py::"
 
 MUTANTS: tuple[Mutant, ...] = (
     # --- tool tips (eqs. 4-6) ---------------------------------------------------------------------
@@ -338,6 +339,65 @@ MUTANTS: tuple[Mutant, ...] = (
         "fit = fit_tracker(data, model, accuracy, selection=selection, prior=prior)",
         (TRACK + "test_leave_one_out_predicts_each_posture_without_it",),
         "a leave-one-out fold fitted with the posture it predicts",
+    ),
+    Mutant(
+        "touch-folder-one-point-twice",
+        "data/formats/touches.py",
+        "        if k in by_number:",
+        "        if False:",
+        (TOUCH + "test_reader_refuses_in_one_line_naming_the_place",),
+        "hole_1.csv and hole_01.csv both read as point 1 (one silently dropped)",
+    ),
+    Mutant(
+        "dynamics-joint-names",
+        "calibration/robot/arm_fit.py",
+        "    if missing:",
+        "    if False:",
+        (
+            TOUCH + "test_dynamics_of_another_arm_are_refused_naming_the_option",
+            HOSTILE_ROBOT + "test_refused_in_one_line_with_nothing_written[dynamics-of-another-arm]",
+        ),
+        "--dynamics of another arm (none of its joints the arm's) taken: no moments, compliance silently dropped",
+    ),
+    Mutant(
+        "dynamics-joint-origins",
+        "calibration/robot/arm_fit.py",
+        "if offset > SAME_ORIGIN_M or turn > SAME_ORIGIN_RAD or axis > SAME_ORIGIN_RAD:",
+        "if False:",
+        (TOUCH + "test_dynamics_with_the_arm_s_joint_names_but_another_geometry_are_refused",),
+        "--dynamics of another arm under the arm's joint names taken: moments in another arm's frames",
+    ),
+    Mutant(
+        "dynamics-masses",
+        "calibration/robot/arm_fit.py",
+        "    if not moved > 0:",
+        "    if False:",
+        (HOSTILE_ROBOT + "test_refused_in_one_line_with_nothing_written[dynamics-without-masses]",),
+        "--dynamics without masses taken: no joint loaded, compliance silently dropped",
+    ),
+    Mutant(
+        "touches-headline-written-urdf",
+        "calibration/robot/touches.py",
+        '"written_urdf_mm": mean(self.geometry_only),',
+        '"written_urdf_mm": mean(self.identified),',
+        (TOUCH + "test_headline_is_the_written_urdf_s_held_out_scatter",),
+        "the headline taken from the compliance fit, which the written URDF cannot hold",
+    ),
+    Mutant(
+        "touches-choice-se-rule",
+        "calibration/robot/touches.py",
+        "            if mean < -se:",
+        "            if True:",
+        (TOUCH + "test_choice_leaves_the_default_only_for_a_setting_better_by_more_than_its_se",),
+        "a setting replaces the one chosen before it whatever its cross-validated error",
+    ),
+    Mutant(
+        "touches-cv-place-leak",
+        "calibration/robot/touches.py",
+        "others = [p for j, p in enumerate(places) if j != i]",
+        "others = list(places)",
+        (TOUCH + "test_cross_validation_over_places_predicts_each_from_the_others_only",),
+        "a left-out place predicted by a fit that used it",
     ),
     Mutant(
         "identification-prior-sd",

@@ -3,6 +3,7 @@ line, exit code 2, nothing written."""
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from pathlib import Path
 
@@ -38,6 +39,13 @@ def _urdf_in_out(tmp: Path) -> None:
 
 GOOD = {"hole_0.csv": ROW * 3, "hole_1.csv": ROW * 3}
 
+
+def _massless(tmp: Path) -> None:
+    """The places, and the Panda's URDF with its masses stripped (every ``<inertial>`` element)."""
+    _places(GOOD)(tmp)
+    (tmp / "massless.urdf").write_text(re.sub(r"<inertial>.*?</inertial>", "", URDF.read_text(), flags=re.S))
+
+
 CASES = [
     Case("missing-folder", RUN, ("a", "not a folder")),
     Case("no-tables", RUN, ("no touch table",), setup=_places({"notes.txt": "x"})),
@@ -46,6 +54,12 @@ CASES = [
         RUN,
         ("hole_1.csv is missing",),
         setup=_places({"hole_0.csv": ROW * 3, "hole_2.csv": ROW * 3}),
+    ),
+    Case(
+        "one-point-twice",
+        RUN,
+        ("hole_01.csv and hole_1.csv", "point 1"),
+        setup=_places({"hole_0.csv": ROW * 3, "hole_1.csv": ROW * 3, "hole_01.csv": ROW * 3}),
     ),
     Case("short-row", RUN, ("hole_0.csv", "row 2", "expected 7"), setup=_places({"hole_0.csv": ROW + "0.1,0.2\n"})),
     Case(
@@ -126,6 +140,18 @@ CASES = [
         [*RUN, "--dynamics", "pandas"],
         ("--dynamics", "unknown robot 'pandas'", "panda"),
         setup=_places(GOOD),
+    ),
+    Case(
+        "dynamics-of-another-arm",
+        [*RUN, "--dynamics", "ur5"],
+        ("--dynamics", "no joint panda_joint1", "same arm"),
+        setup=_places(GOOD),
+    ),
+    Case(
+        "dynamics-without-masses",
+        [*RUN, "--dynamics", "{tmp}/massless.urdf"],
+        ("--dynamics", "massless.urdf", "no mass", "<inertial>"),
+        setup=_massless,
     ),
     Case("dynamics-a-folder", [*RUN, "--dynamics", "{tmp}/a"], ("--dynamics", "is a folder"), setup=_places(GOOD)),
 ]

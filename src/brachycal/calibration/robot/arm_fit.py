@@ -597,6 +597,49 @@ def _identifiability(
     )
 
 
+#: The masses' robot fits the arm when each joint's origin is within these of the arm's (metres,
+#: radians): the same arm's URDF from another source, or the arm after an identification.
+SAME_ORIGIN_M = 0.01
+SAME_ORIGIN_RAD = float(np.radians(1.0))
+
+
+def check_dynamics(dynamics: Robot, robot: Robot, joints: Sequence[str]) -> None:
+    """Refuse masses ``dynamics`` that do not fit the arm's ``joints`` of ``robot``: a joint it has
+    not (another arm's masses), a joint origin or axis more than :data:`SAME_ORIGIN_M` /
+    :data:`SAME_ORIGIN_RAD` off (another arm's geometry: its moments would be in other frames), or
+    no mass on the links those joints move (a URDF without ``<inertial>`` elements).
+
+    Raises:
+        InputError: one line naming what does not fit.
+    """
+    missing = [n for n in joints if n not in dynamics.joint_names]
+    if missing:
+        has = ", ".join(dynamics.joint_names) or "none"
+        raise InputError(
+            f"its robot has no joint {', '.join(missing)} of the arm (it has {has}): the masses must be the same arm's",
+            file=dynamics.source,
+        )
+    for name in joints:
+        A, B = robot.joint_origin(name), dynamics.joint_origin(name)
+        turn = float(np.arccos(np.clip((np.trace(A[:3, :3].T @ B[:3, :3]) - 1) / 2, -1.0, 1.0)))
+        axis = float(np.arccos(np.clip(robot.joint_axis(name) @ dynamics.joint_axis(name), -1.0, 1.0)))
+        offset = float(np.linalg.norm(A[:3, 3] - B[:3, 3]))
+        if offset > SAME_ORIGIN_M or turn > SAME_ORIGIN_RAD or axis > SAME_ORIGIN_RAD:
+            raise InputError(
+                f"joint {name}'s origin is {offset * 1e3:.1f} mm, {np.degrees(turn):.1f} deg and its axis "
+                f"{np.degrees(axis):.1f} deg from the arm's: the masses must be the same arm's",
+                file=dynamics.source,
+            )
+    model = dynamics.model
+    ids = {model.getJointId(n) for n in joints}
+    moved = sum(model.inertias[i].mass for i in range(1, model.njoints) if ids & set(model.supports[i]))
+    if not moved > 0:
+        raise InputError(
+            "no mass on the arm's links (no <inertial> elements): compliance under gravity needs the masses",
+            file=dynamics.source,
+        )
+
+
 def gravity_moments(dynamics: Robot, robot: Robot, Q: FloatArray) -> FloatArray:
     """``(N, robot.nq, 3)`` the moment (N·m) gravity puts through each joint of ``robot`` at
     configurations ``Q`` ``(N, robot.nq)``, in the joint's frame after its turn: its component

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -25,6 +25,7 @@ from brachycal.calibration.robot.arm_fit import (
     ArmFit,
     Evaluation,
     ParameterSelection,
+    check_dynamics,
     deflection_columns,
     fit_arm,
     flange_points,
@@ -402,6 +403,223 @@ def evidence_prior(
     return EvidencePrior(found.accuracy, found.extra[0] if terms else np.inf, found.log_evidence, found.evaluations)
 
 
+#: The settings ``prior="choose"`` scores, the default first (:func:`choose_touch_setting`):
+#: the stated accuracy; the per-joint SDs by the evidence; the same with the axes' tilt apart.
+TOUCH_SETTINGS = ("stated", "evidence", "evidence+tilt")
+#: Folds of the training touches' cross-validation: each point's touches in contiguous blocks
+#: (postures recorded one after the other are alike: a block leaves its neighbours out with it).
+CV_FOLDS = 5
+#: Touches of each point a fold's fit keeps at least (a block of ``N / folds`` left out).
+MIN_FOLD_TOUCHES = 2
+
+
+def setting_prior(setting: str, accuracy: RobotAccuracy) -> tuple[str, RobotAccuracy]:
+    """The prior rule and the (start) accuracy of a :data:`TOUCH_SETTINGS` setting, from the stated ``accuracy``."""
+    if setting == "stated":
+        return "stated", accuracy
+    if setting == "evidence":
+        return "evidence", replace(accuracy, tilt_sd_rad=None)
+    if setting == "evidence+tilt":
+        tilt = accuracy.tilt_sd_rad if accuracy.tilt_sd_rad is not None else accuracy.rotation_sd_rad
+        return "evidence", replace(accuracy, tilt_sd_rad=tilt)
+    raise InputError(f"unknown setting {setting!r} ({', '.join(TOUCH_SETTINGS)})")
+
+
+def touch_cv_errors(
+    nominal: Robot,
+    places: Sequence[TouchPlace],
+    flange: str,
+    accuracy: RobotAccuracy,
+    *,
+    setting: str = "stated",
+    over: str = "places",
+    tip: FloatArray | None = None,
+    folds: int = CV_FOLDS,
+    progress: Callable[[int], None] | None = None,
+) -> tuple[FloatArray, np.ndarray]:
+    """Cross-validation of a setting inside ``places`` (the training touches). Each fit is of the
+    geometry (no compliance: what a URDF holds), with the setting's prior (:func:`setting_prior`).
+
+    ``over="places"`` (two places at least): each place is predicted by the fit of the others, as a
+    held-out place is judged: a touch's error is the distance of its tip (forward kinematics on
+    that fit's robot and tip) from the mean tip of its point (MUKCa's figure, per touch).
+    ``over="postures"``: each point's touches cut into ``folds`` contiguous blocks, fold ``f``
+    fitted on all but the ``f``-th; a left-out touch's error is the distance of its tip from its
+    point as the fold fitted it. ``progress``: called with 1 after each fit (:func:`identify_touches`).
+
+    Returns:
+        ``(errors_m, block)``: per left-out touch its error (metres) and its block's number (per
+        place, point and contiguous ``folds``-th of its touches): the units of the paired
+        comparison's standard error (neighbouring touches are alike: not independent).
+
+    Raises:
+        InputError: fewer than two places over places; a point with fewer than ``folds`` +
+            :data:`MIN_FOLD_TOUCHES` touches; a setting not in :data:`TOUCH_SETTINGS`.
+    """
+    prior, start = setting_prior(setting, accuracy)
+    if over not in ("places", "postures"):
+        raise InputError(f"unknown cross-validation {over!r} (places, postures)")
+    if over == "places" and len(places) < 2:
+        raise InputError("cross-validation over places needs two training places at least")
+    cuts = []
+    for place in places:
+        for k, Q in enumerate(place.touches):
+            if len(Q) < folds + MIN_FOLD_TOUCHES:
+                raise InputError(
+                    f"place {place.name!r}: point {k} has {len(Q)} touches; {folds + MIN_FOLD_TOUCHES} "
+                    f"are needed to choose the setting by cross-validation"
+                )
+            cuts.append(np.array_split(np.arange(len(Q)), folds))
+    block = np.concatenate(
+        [np.repeat(at * folds + np.arange(folds), [len(c) for c in cut]) for at, cut in enumerate(cuts)]
+    )
+    errors = []
+    if over == "places":
+        for i, place in enumerate(places):
+            others = [p for j, p in enumerate(places) if j != i]
+            fit = identify_touches(
+                nominal, others, flange, start, tip=tip, selection="chain", prior=prior, progress=progress
+            )
+            robot = fit.robot(nominal)
+            for Q in place.touches:
+                p = flange_points(robot, Q, flange, fit.tip).p
+                errors.append(np.linalg.norm(p - p.mean(axis=0), axis=1))
+        return np.concatenate(errors), block
+    held: list[list[FloatArray]] = [[np.zeros(0)] * folds for _ in cuts]
+    for f in range(folds):
+        at, kept = 0, []
+        for place in places:
+            kept.append(
+                TouchPlace(
+                    place.name,
+                    tuple(np.delete(Q, cuts[at + k][f], axis=0) for k, Q in enumerate(place.touches)),
+                    place.distances,
+                )
+            )
+            at += len(place.touches)
+        fit = identify_touches(nominal, kept, flange, start, tip=tip, selection="chain", prior=prior, progress=progress)
+        robot = fit.robot(nominal)
+        at = 0
+        for p_index, place in enumerate(places):
+            for k, Q in enumerate(place.touches):
+                p = flange_points(robot, Q[cuts[at][f]], flange, fit.tip).p
+                held[at][f] = np.linalg.norm(p - fit.points[p_index][k], axis=1)
+                at += 1
+    return np.concatenate([e for point in held for e in point]), block
+
+
+@dataclass(frozen=True)
+class SettingScore:
+    """One setting's cross-validation inside the training touches (:func:`touch_cv_errors`).
+
+    Attributes:
+        setting: its name (:data:`TOUCH_SETTINGS`).
+        cv_error_mm: the left-out touches' mean error (mm; :func:`touch_cv_errors`).
+        vs_chosen: against the setting chosen before it, the mean paired difference of the
+            left-out touches' distances (mm; negative: better) and its standard error (over the
+            blocks); ``None`` for the first.
+    """
+
+    setting: str
+    cv_error_mm: float
+    vs_chosen: tuple[float, float] | None = None
+
+
+@dataclass(frozen=True)
+class SettingChoice:
+    """The setting the training touches chose (:func:`choose_touch_setting`), and why.
+
+    Attributes:
+        scores: each setting's cross-validation (none when there was none: one training place).
+        chosen: the setting (:data:`TOUCH_SETTINGS`).
+        reason: why, in words.
+        over: what the cross-validation left out: ``"places"``, ``"postures"``, or ``"none"``.
+    """
+
+    scores: tuple[SettingScore, ...]
+    chosen: str
+    reason: str
+    over: str
+
+    def rule(self) -> str:
+        if self.over == "none":
+            return "no cross-validation (one training place): the defaults"
+        if self.over == "places":
+            what = "leave-one-place-out over the training places"
+        else:
+            what = f"{CV_FOLDS}-fold cross-validation over the training touches' postures"
+        return (
+            f"{what}; a setting replaces the one chosen before it only if better by more than the "
+            "standard error of the paired differences"
+        )
+
+    def as_json(self) -> dict[str, object]:
+        return {
+            "rule": self.rule(),
+            "scores": {
+                s.setting: {
+                    "cv_error_mm": s.cv_error_mm,
+                    "vs_previous_choice_mm": None if s.vs_chosen is None else list(s.vs_chosen),
+                }
+                for s in self.scores
+            },
+            "chosen": self.chosen,
+            "reason": self.reason,
+        }
+
+    def summary(self) -> list[str]:
+        lines = [f"setting: {self.chosen} ({self.reason}; {self.rule()})"]
+        lines += [f"  {s.setting:14s} cross-validated tip error {s.cv_error_mm:.4f} mm" for s in self.scores]
+        return lines
+
+
+def choose_touch_setting(
+    nominal: Robot,
+    places: Sequence[TouchPlace],
+    flange: str,
+    accuracy: RobotAccuracy,
+    *,
+    tip: FloatArray | None = None,
+    settings: Sequence[str] = TOUCH_SETTINGS,
+    over: str | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> SettingChoice:
+    """The setting (of ``settings``, the first the default) the training touches ``places``
+    support: each scored by :func:`touch_cv_errors` ``over`` places (the default with two training
+    places or more), and taken in turn in place of the one chosen before it only if its left-out
+    touches' errors are lower by more than the standard error of the paired differences (of the
+    blocks' means: touches of one block are not independent). With one training place (and
+    ``over`` not given) the first setting, unscored: on MUKCa's Pandas, the postures of one place
+    prefer priors that do worse at other places (``benchmarks/mukca.py --choose``). Only the
+    touches given enter; held-out places never do."""
+    if over is None:
+        over = "places" if len(places) >= 2 else "none"
+    if over == "none":
+        reason = f"{settings[0]}: the default; one training place cannot tell how a setting does at other places"
+        return SettingChoice((), settings[0], reason, "none")
+    scores: list[SettingScore] = []
+    chosen, chosen_e, reasons = "", np.zeros(0), []
+    for setting in settings:
+        e, block = touch_cv_errors(
+            nominal, places, flange, accuracy, setting=setting, over=over, tip=tip, progress=progress
+        )
+        versus = None
+        if not chosen:
+            chosen, chosen_e = setting, e
+            reasons.append(f"{setting}: the default")
+        else:
+            d = np.array([np.mean((e - chosen_e)[block == b]) for b in np.unique(block)]) * 1e3
+            mean, se = float(np.mean(d)), float(np.std(d, ddof=1) / np.sqrt(len(d)))
+            versus = (mean, se)
+            if mean < -se:
+                reasons.append(f"{setting} beats {chosen} by {-mean:.4f} ± {se:.4f} mm")
+                chosen, chosen_e = setting, e
+            else:
+                reasons.append(f"{setting} not better than {chosen} by more than its SE ({mean:+.4f} ± {se:.4f} mm)")
+        scores.append(SettingScore(setting, float(np.mean(e)) * 1e3, versus))
+    return SettingChoice(tuple(scores), chosen, "; ".join(reasons), over)
+
+
 @dataclass(frozen=True)
 class TouchScatter:
     """MUKCa's figures of one place.
@@ -458,6 +676,7 @@ class TouchReport:
         urdf_fit: with compliance, the same identification without it: the best geometry a URDF
             can carry (the compliance fit's geometry has absorbed nothing of what compliance
             explains, so alone it does worse); None without compliance.
+        choice: with ``prior="choose"``, the setting the training touches chose and why.
     """
 
     result: TouchResult
@@ -467,6 +686,7 @@ class TouchReport:
     geometry_only: dict[str, TouchScatter]
     tool_frame: str
     urdf_fit: TouchResult | None = None
+    choice: SettingChoice | None = None
 
     @property
     def urdf_result(self) -> TouchResult:
@@ -476,6 +696,21 @@ class TouchReport:
     @property
     def held_out(self) -> list[str]:
         return [name for name in self.nominal if name not in self.train]
+
+    def headline(self) -> dict[str, float | None]:
+        """The held-out places' mean tip scatter (mm): of the written URDF (the headline: what the
+        user gets), of the nominal URDF, and with compliance (not in the URDF; ``None`` without
+        it). All ``None`` without held-out places."""
+        held = self.held_out
+
+        def mean(scores: dict[str, TouchScatter]) -> float | None:
+            return float(np.mean([scores[n].mean_scatter_m for n in held])) * 1e3 if held else None
+
+        return {
+            "written_urdf_mm": mean(self.geometry_only),
+            "nominal_urdf_mm": mean(self.nominal),
+            "with_compliance_not_in_urdf_mm": mean(self.identified) if self.result.compliant else None,
+        }
 
     def calibrated_robot(self, nominal: Robot) -> Robot:
         """The corrected robot (:attr:`urdf_result`, geometry only) with the identified tip
@@ -500,6 +735,11 @@ class TouchReport:
         fit = self.result.fit
         return {
             "protocol": "touches of fixed points",
+            "headline": {
+                "figure": "the held-out places' mean tip scatter (MUKCa's figure), mm",
+                **self.headline(),
+            },
+            "setting_choice": None if self.choice is None else self.choice.as_json(),
             "train": list(self.train),
             "held_out": list(self.held_out),
             "flange": self.result.flange,
@@ -563,14 +803,17 @@ def identify_touch_folders(
             (each revolute arm joint that gravity loads, about its axis), and the geometry alone
             once more for the URDF (:attr:`TouchReport.urdf_fit`).
         prior: ``"stated"`` (``accuracy``, compliance free) or ``"evidence"``: chosen by the
-            training places' evidence (:func:`evidence_prior`; the held-out places never enter).
+            training places' evidence (:func:`evidence_prior`; the held-out places never enter);
+            ``"choose"``: the setting of :data:`TOUCH_SETTINGS` the training touches' own
+            cross-validation supports (:func:`choose_touch_setting`; :attr:`TouchReport.choice`).
         progress: called with 1 after each fit (:func:`identify_touches`; with the evidence their
             number is not known ahead: tens per search, one search per fit of :attr:`TouchReport.result`
             and :attr:`TouchReport.urdf_fit`).
 
     Raises:
         InputError: a folder the reader refuses, a training place not among them, a tool frame
-            not fixed to a link.
+            not fixed to a link; ``dynamics`` not the same arm or without masses
+            (:func:`~brachycal.calibration.robot.arm_fit.check_dynamics`).
     """
     flange, T_flange_tool = nominal.tool_transform(tool_frame)
     # The tip's link may be several fixed joints from the last moving one: the tip lives in it.
@@ -584,6 +827,7 @@ def identify_touch_folders(
         raise InputError("a training place is named twice")
     compliant: tuple[tuple[int, int], ...] = ()
     if dynamics is not None:
+        check_dynamics(dynamics, nominal, arm_joints(nominal, flange))
         places = [
             TouchPlace(p.name, p.touches, p.distances, tuple(gravity_moments(dynamics, nominal, Q) for Q in p.touches))
             for p in places
@@ -591,6 +835,10 @@ def identify_touch_folders(
         compliant = _loaded_joints(nominal, flange, [p for p in places if p.name in train])
     fit_places = [p for p in places if p.name in train]
     tip0 = T_flange_tool[:3, 3]
+    choice = None
+    if prior == "choose":
+        choice = choose_touch_setting(nominal, fit_places, flange, accuracy, tip=tip0, progress=progress)
+        prior, accuracy = setting_prior(choice.chosen, accuracy)
 
     def identify(terms: tuple[tuple[int, int], ...]) -> TouchResult:
         return identify_touches(
@@ -623,6 +871,7 @@ def identify_touch_folders(
         geometry_only,
         tool_frame,
         urdf_fit,
+        choice,
     )
 
 

@@ -33,9 +33,14 @@ The stated accuracy (--robot-accuracy-mm, --robot-accuracy-deg) is the prior of 
 state the arm's own figures (a Panda's joints are off their URDF by tenths of a millimetre).
 --robot-tilt-deg gives the tilt of the joints' axes a prior of its own (machined bearing seats
 tilt less than encoders are off their zero).
+--prior choose picks the setting (the stated accuracy, the evidence's prior, the evidence's with the
+axes' tilt apart) by leave-one-place-out over the training places alone (two at least; with one the
+stated accuracy is kept), and prints the choice and why.
 With --dynamics NAME|FILE (the same arm with masses: a bundled arm such as panda, whose URDF has
-them, or a URDF file), joint compliance under gravity is fitted too; a URDF cannot carry it, so
-the written URDF is a second fit of the geometry alone (its figures are printed as "URDF only").
+them, or a URDF file; refused when its joints or masses do not fit the arm), joint compliance under
+gravity is fitted too; a URDF cannot carry it, so the written URDF is a second fit of the geometry
+alone. Every figure printed first is the written URDF's; the compliance fit's is beside it,
+labelled "with compliance, not in the URDF".
 
 Writes DIR/robot.urdf (the identified joints, the tip written into the tool frame) and
 DIR/identification.json (corrections, tip, noise level, compliance, figures per place).
@@ -80,11 +85,14 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--prior",
-        choices=("stated", "evidence"),
+        choices=("stated", "evidence", "choose"),
         default="stated",
         help="stated: the stated accuracy is the prior; evidence: the prior's SDs (and the compliance's) "
         "that the training places' own data make most likely, searched from the stated accuracy "
-        "(the held-out places are never used; tens of fits)",
+        "(tens of fits); choose: stated, evidence or evidence with the axes' tilt apart, whichever "
+        "leave-one-place-out over the training places supports (a setting replaces the stated accuracy "
+        "only if better by more than its standard error; two training places at least, else the stated "
+        "accuracy is kept; hundreds of fits). The held-out places are never used",
     )
     from brachycal.calibration.robot.defaults import TOUCHES_ACCURACY  # lazy: start-up (the command's run only)
 
@@ -111,16 +119,23 @@ def tool_frame(args: argparse.Namespace, nominal: Robot) -> str:
     raise InputError("--tool-frame is required: the robot names no single arm with a tool (the touching tip's frame)")
 
 
-def dynamics_robot(name: str) -> Robot:
+def dynamics_robot(name: str, nominal: Robot, tool: str) -> Robot:
     """The robot of --dynamics, resolved as --robot resolves its NAME|FILE (a bundled arm, a
-    description, a URDF file); a refusal names the option."""
-    from brachycal.errors import InputError  # lazy: start-up (the command's run only)
-    from brachycal.model.description import load_robot  # lazy: start-up (the command's run only)
+    description, a URDF file), checked to be ``nominal``'s arm to ``tool`` with its masses
+    (:func:`~brachycal.calibration.robot.arm_fit.check_dynamics`); a refusal names the option."""
+    # lazy: start-up (the command's run only)
+    from brachycal.calibration.robot.arm_fit import check_dynamics
+    from brachycal.calibration.robot.touches import arm_joints
+    from brachycal.errors import InputError
+    from brachycal.model.description import load_robot
 
+    joints = arm_joints(nominal, nominal.tool_transform(tool)[0])  # an unknown tool is --tool-frame's
     try:
-        return load_robot(name)
+        dynamics = load_robot(name)
+        check_dynamics(dynamics, nominal, joints)
     except InputError as exc:
         raise InputError(f"--dynamics: {exc}") from None
+    return dynamics
 
 
 def run(args: argparse.Namespace) -> int:
@@ -145,7 +160,7 @@ def run(args: argparse.Namespace) -> int:
         urdf_path, json_path = claim_outputs(outputs, out)
         nominal = load_robot(args, any_arm=True)
         tool = tool_frame(args, nominal)
-        dynamics = dynamics_robot(args.dynamics) if args.dynamics is not None else None
+        dynamics = dynamics_robot(args.dynamics, nominal, tool) if args.dynamics is not None else None
         train = [name.strip() for name in args.train.split(",")]
         accuracy = robot_accuracy(args, TOUCHES_ACCURACY)
         if args.robot_tilt_deg is not None:
@@ -175,31 +190,32 @@ def run(args: argparse.Namespace) -> int:
 
 
 def print_report(report: TouchReport) -> None:
-    """Held-out places first, then the training places: scatter (and distance error) in mm; then
-    the noise, the tip and the identifiability in short."""
+    """Held-out places first, then the training places: scatter (and distance error) in mm of the
+    nominal and the written URDF (with compliance, its figure beside, labelled not in the URDF);
+    then the setting chosen, the noise, the tip and the identifiability in short."""
     # lazy: start-up (the command's run only)
     from brachycal.cli.robot.report import print_identifiability, print_prior
 
-    fit = report.result.fit
-    urdf_only = bool(report.result.compliant)
+    fit = report.urdf_result.fit
+    compliance = bool(report.result.compliant)
 
     def line(name: str) -> str:
         a, b, c = report.nominal[name], report.identified[name], report.geometry_only[name]
-        text = f"  {name:16s} {a.mean_scatter_m * 1e3:8.3f} -> {b.mean_scatter_m * 1e3:6.3f} mm"
-        if urdf_only:
-            text += f" (URDF only {c.mean_scatter_m * 1e3:6.3f})"
-        for (i, j), e in b.distance_error_m.items():
+        text = f"  {name:16s} {a.mean_scatter_m * 1e3:8.3f} -> {c.mean_scatter_m * 1e3:6.3f} mm"
+        if compliance:
+            text += f" (with compliance, not in the URDF: {b.mean_scatter_m * 1e3:6.3f})"
+        for (i, j), e in c.distance_error_m.items():
             text += f"   distance {i}-{j}: {a.distance_error_m[(i, j)] * 1e3:6.3f} -> {e * 1e3:6.3f} mm"
         return text
 
     held = report.held_out
     if held:
-        mean_a = sum(report.nominal[n].mean_scatter_m for n in held) / len(held) * 1e3
-        mean_b = sum(report.identified[n].mean_scatter_m for n in held) / len(held) * 1e3
-        mean_c = sum(report.geometry_only[n].mean_scatter_m for n in held) / len(held) * 1e3
+        headline = report.headline()
+        beside = headline["with_compliance_not_in_urdf_mm"]
         print(
-            f"held-out places ({len(held)}): tip scatter, nominal URDF -> identified; "
-            f"mean {mean_a:.3f} -> {mean_b:.3f} mm" + (f" (URDF only {mean_c:.3f})" if urdf_only else "")
+            f"held-out places ({len(held)}): tip scatter, nominal URDF -> written URDF; "
+            f"mean {headline['nominal_urdf_mm']:.3f} -> {headline['written_urdf_mm']:.3f} mm"
+            + (f" (with compliance, not in the URDF: {beside:.3f})" if beside is not None else "")
         )
         for name in held:
             print(line(name))
@@ -208,10 +224,13 @@ def print_report(report: TouchReport) -> None:
     print(f"training places ({len(report.train)}):")
     for name in report.train:
         print(line(name))
+    if report.choice is not None:
+        for text in report.choice.summary():
+            print(text)
     print(
         f"touch noise {fit.sigma['touch'] * 1e3:.3f} mm; "
-        f"tip {', '.join(f'{v * 1e3:.3f}' for v in report.result.tip)} mm "
-        f"in {report.result.flange}; {fit.selection.size} corrections free"
+        f"tip {', '.join(f'{v * 1e3:.3f}' for v in report.urdf_result.tip)} mm "
+        f"in {report.urdf_result.flange} (the written URDF's); {fit.selection.size} corrections free"
     )
     if fit.accuracy is not None:
         print_prior(fit.accuracy)

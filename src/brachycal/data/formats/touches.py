@@ -70,7 +70,8 @@ def read_touch_folder(path: str | os.PathLike[str], joints: tuple[str, ...]) -> 
     """One place folder (module docstring): its ``hole_k.csv`` files, ``k = 0, 1, …`` without gaps.
 
     Raises:
-        InputError: not a folder, no ``hole_0.csv``, a gap in the numbering, a bad table.
+        InputError: not a folder, no ``hole_0.csv``, two files of one point (``hole_1.csv`` and
+            ``hole_01.csv``), a gap in the numbering, a bad table.
     """
     folder = Path(path)
     if not folder.is_dir():
@@ -79,7 +80,16 @@ def read_touch_folder(path: str | os.PathLike[str], joints: tuple[str, ...]) -> 
         names = sorted(os.listdir(folder))
     except OSError as exc:
         raise InputError(f"cannot list the folder ({exc.strerror})", file=folder) from None
-    numbers = sorted(int(m.group(1)) for m in map(POINT_FILE.fullmatch, names) if m)
+    by_number: dict[int, str] = {}
+    for name in names:
+        match = POINT_FILE.fullmatch(name)
+        if match is None:
+            continue
+        k = int(match.group(1))
+        if k in by_number:
+            raise InputError(f"{by_number[k]} and {name} both name point {k}: keep one", file=folder)
+        by_number[k] = name
+    numbers = sorted(by_number)
     if not numbers:
         raise InputError("no touch table (hole_0.csv, hole_1.csv, …) in the folder", file=folder)
     if len(numbers) > MAX_POINTS:
@@ -87,6 +97,6 @@ def read_touch_folder(path: str | os.PathLike[str], joints: tuple[str, ...]) -> 
     if numbers != list(range(len(numbers))):
         missing = min(set(range(max(numbers) + 1)) - set(numbers))
         raise InputError(f"hole_{missing}.csv is missing: the tables are numbered from 0 without gaps", file=folder)
-    files = tuple(folder / f"hole_{k}.csv" for k in numbers)
+    files = tuple(folder / by_number[k] for k in numbers)
     tables = tuple(read_touch_table(f, joints) for f in files)
     return TouchFolder(folder.resolve().name, tables, files)
