@@ -402,6 +402,15 @@ MUTANTS: tuple[Mutant, ...] = (
         ("tests/test_verify.py::test_a_part_fit_recovers_the_change_that_made_the_residuals",),
         "the check's remaining chi-square without the part's fitted parameters",
     ),
+    # --- hostile inputs and outputs: each check's break-on-purpose --------------------------------------
+    Mutant(
+        "bag-message-count-unchecked",
+        "data/formats/bag_records.py",
+        "if isinstance(count, bool) or not isinstance(count, int) or count < 0:",
+        "if False:",
+        ("tests/test_hostile_data.py::test_data_refusals[fk-ros2-bag-message-count-negative]",),
+        "a ROS 2 bag's metadata.yaml message_count taken unchecked (inf: a TypeError traceback)",
+    ),
 )
 
 

@@ -197,6 +197,17 @@ def bag_with_a_joint_twice(tmp: Path) -> None:
     write_bag_log(tmp / "log.bag", 1.7e9 + np.arange(3.0), q, names, ros=1)
 
 
+def ros2_bag_with_message_count(count: str):
+    """A ROS 2 bag whose ``metadata.yaml`` states ``message_count: <count>`` for its topic."""
+
+    def setup(tmp: Path) -> None:
+        folder = write_bag_log(tmp / "log_bag", 1.7e9 + np.arange(3.0), np.zeros((3, 15)), robot().joint_names, ros=2)
+        metadata = folder / "metadata.yaml"
+        metadata.write_text(metadata.read_text().replace("message_count: 3", f"message_count: {count}"))
+
+    return setup
+
+
 def session(file: str, row: int, column: str, value: Callable[[float], float]):
     def setup(tmp: Path) -> None:
         shutil.copytree(ROOT / "examples" / "session_exact", tmp / "session")
@@ -576,6 +587,15 @@ CASES = [
         ["fk", "{tmp}/log.bag", "--frames", "needle_tip", "--out", "{tmp}/poses.csv", "--quiet"],
         ("log.bag", "message 1", "'arm_right_joint_2_l' listed twice"),
         bag_with_a_joint_twice,
+    ),
+    *(
+        Case(
+            f"fk-ros2-bag-message-count-{name}",
+            ["fk", "{tmp}/log_bag", "--frames", "needle_tip", "--out", "{tmp}/poses.csv", "--quiet"],
+            ("log_bag/metadata.yaml", "message_count", "'/joint_states'", "not a whole number"),
+            ros2_bag_with_message_count(count),
+        )
+        for name, count in [("inf", "inf"), ("float-inf", ".inf"), ("negative", "-1"), ("fraction", "2.5")]
     ),
     Case(
         "fk-csv-beyond-limit-by-more-than-encoder-noise",
