@@ -411,6 +411,22 @@ MUTANTS: tuple[Mutant, ...] = (
         ("tests/test_hostile_data.py::test_data_refusals[fk-ros2-bag-message-count-negative]",),
         "a ROS 2 bag's metadata.yaml message_count taken unchecked (inf: a TypeError traceback)",
     ),
+    Mutant(
+        "stepper-template-depth-unbounded",
+        "cli/stepper/template.py",
+        'DEPTH_MM = finite_float(low=0.0, high=300.0, unit="mm")',
+        'DEPTH_MM = finite_float(unit="mm")',
+        ("tests/test_hostile_parameters.py::test_parameter_refusals[stepper--depth-huge]",),
+        "an insertion depth of 1e6 mm accepted by stepper template",
+    ),
+    Mutant(
+        "stepper-template-rotation-unbounded",
+        "cli/stepper/template.py",
+        'ROTATION_DEG = finite_float(low=-360.0, high=360.0, unit="deg")',
+        'ROTATION_DEG = finite_float(unit="deg")',
+        ("tests/test_hostile_parameters.py::test_parameter_refusals[stepper--probe-rotation-huge]",),
+        "a probe rotation of 1e308 deg reaches the trigonometry (a math domain error traceback)",
+    ),
 )
 
 
