@@ -427,6 +427,14 @@ MUTANTS: tuple[Mutant, ...] = (
         ("tests/test_hostile_parameters.py::test_parameter_refusals[stepper--probe-rotation-huge]",),
         "a probe rotation of 1e308 deg reaches the trigonometry (a math domain error traceback)",
     ),
+    Mutant(
+        "nwire-segment-poses-fix-unsaid",
+        "imaging/nwire_segmentation.py",
+        '+ (f"; {fix}" if fix else ""),',
+        ',',
+        ("tests/test_hostile_nwire_segment.py::test_refused[tracker-recording-without-poses]",),
+        "a recording without the tracker's transforms refused without naming --images-only",
+    ),
 )
 
 
