@@ -197,6 +197,7 @@ def segment_files(
 
     # lazy: start-up (the command's run only)
     from brachycal.data.formats.plus_segmented_xml import write_segmented_frames
+
     # lazy: start-up (the command's run only)
     from brachycal.imaging.nwire_segmentation import check_pose_fields, segment_sequence
 
