@@ -459,6 +459,30 @@ MUTANTS: tuple[Mutant, ...] = (
         ("tests/test_hostile_outputs.py::test_after_kill_9_during_calibrate_report_no_visible_folder_is_left",),
         "the staging folder a killed writer left is never removed",
     ),
+    Mutant(
+        "csv-blanks-around-fields-kept",
+        "data/formats/csv_log.py",
+        "records.append([field.strip(BLANKS) for field in fields])",
+        "records.append(fields)",
+        ("tests/test_number_text.py::test_a_table_with_blanks_around_its_fields_reads_as_numpy_reads_it",),
+        'a table written with ", " separators (numpy.savetxt, spreadsheets) refused',
+    ),
+    Mutant(
+        "csv-log-cr-only-unsaid",
+        "data/formats/csv_log.py",
+        'if b"\\r" in first.rstrip(b"\\r\\n"):',
+        "if False:",
+        ("tests/test_number_text.py::test_a_log_with_old_mac_line_ends_is_refused_in_one_line_naming_them",),
+        "a joint log with CR-only line ends gets the csv module's words, not a refusal naming them",
+    ),
+    Mutant(
+        "joint-table-cr-only-misread",
+        "data/formats/joint_table.py",
+        '.split("\\r")[0].strip()',
+        ".strip()",
+        ("tests/test_number_text.py::test_a_joint_table_without_header_reads_the_same_from_other_writers",),
+        "a headerless joint table with CR-only line ends taken for a table with a header",
+    ),
 )
 
 

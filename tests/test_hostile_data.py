@@ -320,10 +320,24 @@ CASES = [
         csv_log(set_text(4, "time", "0x10")),
     ),
     Case(
-        "fk-csv-blank-before-a-number",
+        "fk-csv-blank-inside-a-number",
         FK,
-        ("log.csv", "row 3", "arm_left_joint_2_l", "' 0.1' is not a number"),
-        csv_log(set_text(3, "arm_left_joint_2_l", " 0.1")),
+        ("log.csv", "row 3", "arm_left_joint_2_l", "'0 .1' is not a number"),
+        csv_log(set_text(3, "arm_left_joint_2_l", "0 .1")),
+    ),
+    Case(
+        "fk-csv-exponent-without-digits",
+        FK,
+        ("log.csv", "row 3", "arm_left_joint_2_l", "'1e' is not a number"),
+        csv_log(set_text(3, "arm_left_joint_2_l", " 1e ")),
+    ),
+    Case(
+        "fk-csv-old-mac-line-ends",
+        FK,
+        ("log.csv", "carriage return alone", "LF or CRLF"),
+        lambda tmp: (tmp / "log.csv").write_bytes(
+            (ROOT / "examples" / "joint_log.csv").read_bytes().replace(b"\n", b"\r")
+        ),
     ),
     Case(
         "fk-csv-arabic-indic-digit",
