@@ -483,6 +483,14 @@ MUTANTS: tuple[Mutant, ...] = (
         ("tests/test_number_text.py::test_a_joint_table_without_header_reads_the_same_from_other_writers",),
         "a headerless joint table with CR-only line ends taken for a table with a header",
     ),
+    Mutant(
+        "urdfdom-errors-ignored",
+        "model/robot.py",
+        "if errors:  # urdfdom's own words; an element it could not read is dropped, not a model to use",
+        "if False:",
+        ("tests/test_hostile_model.py::test_urdfdom_errors_are_one_line_naming_the_file_not_its_own_printout",),
+        "a URDF whose inertial urdfdom could not read loads without it; its errors not in the refusal",
+    ),
 )
 
 
