@@ -491,6 +491,14 @@ MUTANTS: tuple[Mutant, ...] = (
         ("tests/test_hostile_model.py::test_urdfdom_errors_are_one_line_naming_the_file_not_its_own_printout",),
         "a URDF whose inertial urdfdom could not read loads without it; its errors not in the refusal",
     ),
+    Mutant(
+        "session-copied-row-accepted",
+        "data/session.py",
+        "    if repeats.size:",
+        "    if False:",
+        ("tests/test_hostile_data.py::test_data_refusals[calibrate-session-sample-copied-under-a-new-name]",),
+        "a sample copied under a new name counts twice in the fit",
+    ),
 )
 
 

@@ -305,6 +305,17 @@ def session_text(file: str, change: Callable[[str], str]):
 PIVOT = ["pivot", "{tmp}/poses.csv", "--out", "{tmp}/pivot.json"]
 
 
+def copied_row(line: int, old: str, new: str) -> Callable[[str], str]:
+    """A session file's text with file line ``line`` appended again, its first field ``old`` as ``new``."""
+
+    def change(text: str) -> str:
+        copy = text.splitlines()[line - 1]
+        assert copy.startswith(old)
+        return text + new + copy[len(old) :] + "\n"
+
+    return change
+
+
 CASES = [
     # Numbers that parse but are wrong: one grammar (what CSV writers write), a cut last line refused.
     Case(
@@ -616,6 +627,19 @@ CASES = [
         FK,
         ("log.csv", "row 3", "arm_left_joint_2_l", "outside the joint limits", "0.001 rad"),
         csv_log(beyond_limit(2e-3)),
+    ),
+    # A row copied under a new name (a sample, a trial): it would count twice in the fit.
+    Case(
+        "calibrate-session-sample-copied-under-a-new-name",
+        CALIBRATE,
+        ("samples.csv", "row 66", "sample 's_copy' has the joints and pixel of sample 's004' (row 5)"),
+        session_text("samples.csv", copied_row(5, "s004,", "s_copy,")),
+    ),
+    Case(
+        "calibrate-session-touch-copied-as-another-trial",
+        CALIBRATE,
+        ("touches.csv", "row 20", "needle at rtip2 trial 4 has the joints of needle at rtip2 trial 1"),
+        session_text("touches.csv", copied_row(14, "needle,rtip2,1,", "needle,rtip2,4,")),
     ),
     Case(
         "calibrate-session-beyond-limit-by-more-than-encoder-noise",
