@@ -499,6 +499,22 @@ MUTANTS: tuple[Mutant, ...] = (
         ("tests/test_hostile_data.py::test_data_refusals[calibrate-session-sample-copied-under-a-new-name]",),
         "a sample copied under a new name counts twice in the fit",
     ),
+    Mutant(
+        "number-check-backtracks-per-field",
+        "validate.py",
+        '{NON_FINITE_TEXT})\\n)*+")',
+        '{NON_FINITE_TEXT})\\n)*")',
+        ("tests/test_number_text.py::test_checking_many_fields_at_once_holds_no_memory_per_field",),
+        "the one-pass number check keeps ~800 bytes per field (pivot on a 63 MB pose list: 3.3 GB)",
+    ),
+    Mutant(
+        "pose-list-read-whole",
+        "data/pose_list.py",
+        "in table_blocks(path, COLUMNS):",
+        "in table_blocks(path, COLUMNS, None):",
+        ("tests/test_pivot.py::test_a_long_pose_list_is_read_in_bounded_memory",),
+        "a pose list held whole as Python strings (13 times the file)",
+    ),
 )
 
 

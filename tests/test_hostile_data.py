@@ -628,18 +628,12 @@ CASES = [
         ("log.csv", "row 3", "arm_left_joint_2_l", "outside the joint limits", "0.001 rad"),
         csv_log(beyond_limit(2e-3)),
     ),
-    # A row copied under a new name (a sample, a trial): it would count twice in the fit.
+    # A sample copied under a new name: it would count twice in the fit.
     Case(
         "calibrate-session-sample-copied-under-a-new-name",
         CALIBRATE,
         ("samples.csv", "row 66", "sample 's_copy' has the joints and pixel of sample 's004' (row 5)"),
         session_text("samples.csv", copied_row(5, "s004,", "s_copy,")),
-    ),
-    Case(
-        "calibrate-session-touch-copied-as-another-trial",
-        CALIBRATE,
-        ("touches.csv", "row 20", "needle at rtip2 trial 4 has the joints of needle at rtip2 trial 1"),
-        session_text("touches.csv", copied_row(14, "needle,rtip2,1,", "needle,rtip2,4,")),
     ),
     Case(
         "calibrate-session-beyond-limit-by-more-than-encoder-noise",

@@ -9,6 +9,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+import tracemalloc
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +20,7 @@ from hypothesis import strategies as st
 
 from brachycal.cli.common import output_file
 from brachycal.data import read_times
-from brachycal.data.formats.csv_log import TRUNCATED, csv_log_blocks, read_table, to_float
+from brachycal.data.formats.csv_log import TRUNCATED, csv_log_blocks, read_table, table_blocks, to_float
 from brachycal.data.formats.joint_table import read_joint_table, still_table_kind
 from brachycal.data.pose_list import read_pose_list
 from brachycal.errors import InputError
@@ -348,3 +349,29 @@ def test_an_output_file_named_with_a_trailing_separator_is_refused(text):
     with pytest.raises(argparse.ArgumentTypeError, match="names a folder"):
         output_file(text)
     assert output_file("out/poses.csv") == "out/poses.csv"
+
+
+def test_checking_many_fields_at_once_holds_no_memory_per_field():
+    """A block of a long table is 262,144 fields: the one-pass check holds its joined text only."""
+    fields = [repr(float(x)) for x in np.random.default_rng(2).normal(size=100_000)]
+    tracemalloc.start()
+    try:
+        assert all_number_texts(fields)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    text_bytes = sum(len(f) + 1 for f in fields)
+    assert peak < 2 * text_bytes + 100_000, f"peak {peak / 1e6:.1f} MB for {text_bytes / 1e6:.1f} MB of text"
+
+
+@pytest.mark.parametrize("rows_per_block", [1, 3, 4, 5, None])
+def test_a_table_read_in_blocks_is_the_table_read_whole(tmp_path, rows_per_block):
+    path = table(tmp_path, "a,b\n1,2\n\n3,4\n5,6\n7,8\n")
+    whole = read_table(path, ["a"])
+    blocks = list(table_blocks(path, ["a"], rows_per_block))
+    assert all(header == whole[0] for header, _, _ in blocks)
+    assert [r for _, rows, _ in blocks for r in rows] == whole[1] == [2, 4, 5, 6]
+    assert [f for _, _, records in blocks for f in records] == whole[2]
+    cut = table(tmp_path, "a,b\n1,2\n3,4\n5,6\n7,8", "cut.csv")  # no newline at the end, 4 rows
+    with pytest.raises(InputError, match=rf"cut\.csv, row 5: {TRUNCATED}"):
+        list(table_blocks(cut, ["a"], rows_per_block))

@@ -318,12 +318,6 @@ def _read_touches(path: Path, robot: Robot) -> dict[tuple[str, str], Touches]:
                 f"{key[0]} at {key[1]} trial {key[2]} appears twice (also row {seen[key]})", file=path, row=row
             )
         seen[key] = row
-    for tool in TOUCH_TOOLS:
-        for reference in REFERENCES:
-            at = [i for i, key in enumerate(zip(tools, references, strict=True)) if key == (tool, reference)]
-            refuse_repeated_rows(
-                path, [rows[i] for i in at], q[at], [f"{tool} at {reference} trial {trials[i]:g}" for i in at], "joints"
-            )
     touches: dict[tuple[str, str], Touches] = {}
     for tool in TOUCH_TOOLS:
         for reference in REFERENCES:
@@ -389,8 +383,9 @@ def read_sample_table(path: Path, robot: Robot, size_px: np.ndarray) -> tuple[li
 
 def refuse_repeated_rows(path: Path, rows: list[int], values: FloatArray, names: list[str], what: str) -> None:
     """Refuse a row whose numbers ``values[i]`` are exactly an earlier row's: a row copied under
-    another name (a sample, a trial) would count twice in a fit. Two real holds of a robot differ
-    at least by encoder noise, so only a copy repeats every number.
+    another name (a sample) would count twice in a fit. Two real holds of a robot differ at least
+    by encoder noise, so only a copy repeats every number. (Touches copied as another trial are
+    refused by the estimator, :func:`~brachycal.calibration.sequential.tool_tips.check_distinct_touches`.)
 
     Raises:
         InputError: naming the repeating row, both names and the row it repeats.

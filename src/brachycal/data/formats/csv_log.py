@@ -140,7 +140,27 @@ def read_table(path: Path, required: list[str]) -> tuple[list[str], list[int], l
 
     Returns ``(header, rows, records)``; ``rows[i]`` is the file row of ``records[i]`` (header =
     row 1); blank lines are skipped. Checks the header (no duplicates, ``required`` present) and
-    that every row has as many fields as the header.
+    that every row has as many fields as the header. All the fields at once: a reader of a long
+    table goes through :func:`table_blocks` instead.
+    """
+    ((header, rows, records),) = table_blocks(path, required, None)  # one block: all the rows
+    return header, rows, records
+
+
+#: Rows of a table :func:`table_blocks` hands on at a time: their fields as Python strings are a
+#: few tens of MB, whatever the length of the table.
+TABLE_BLOCK_ROWS = 16_384
+
+
+def table_blocks(
+    path: Path, required: list[str], rows_per_block: int | None = TABLE_BLOCK_ROWS
+) -> Iterator[tuple[list[str], list[int], list[list[str]]]]:
+    """:func:`read_table`'s ``(header, rows, records)``, ``rows_per_block`` records at a time (None:
+    all at once); at least one block, empty for a table of a header only.
+
+    Raises:
+        InputError: as :func:`read_table`, when the block holding the problem is reached (a last
+            line without a newline before its block is handed on).
     """
     with _open(path) as handle:
         lines = _Lines(handle)
@@ -150,10 +170,17 @@ def read_table(path: Path, required: list[str]) -> tuple[list[str], list[int], l
         except (csv.Error, UnicodeDecodeError) as exc:
             raise InputError(f"not a readable CSV file ({exc})", file=path) from None
         header = _check_header(path, header, required)
-        rows, records = _scan_rows(path, reader, header, 0, lines=lines)
-        if _unterminated(lines.last):
-            raise InputError(TRUNCATED, file=path, row=reader.line_num)
-    return header, rows, records
+        first = True
+        while True:
+            rows, records = _scan_rows(path, reader, header, 0, limit=rows_per_block, lines=lines)
+            last = rows_per_block is None or len(records) < rows_per_block
+            if last and _unterminated(lines.last):
+                raise InputError(TRUNCATED, file=path, row=reader.line_num)
+            if records or first:
+                yield header, rows, records
+            first = False
+            if last:
+                return
 
 
 def read_bare_table(path: Path, columns: list[str]) -> tuple[list[int], FloatArray]:
