@@ -33,7 +33,6 @@ import functools
 import io
 import os
 import sys
-import tempfile
 import threading
 import xml.etree.ElementTree as ET
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -582,23 +581,30 @@ def urdfdom_errors() -> Iterator[list[str]]:
 
     urdfdom prints them (``Error:   ...`` and an ``at line N in file.cpp`` line) on the process's
     standard error, ahead of the refusal that names the file; the block's standard error (file
-    descriptor 2) goes to a temporary file instead, and is restored when the block ends. Any other
-    text written there meanwhile (another thread's) is written back.
+    descriptor 2) goes to a pipe instead (no file written: a full disk cannot stop a robot from
+    loading), and is restored when the block ends. Any other text written there meanwhile
+    (another thread's) is written back; past the pipe's buffer (64 KiB) text is dropped, never waited on.
     """
     errors: list[str] = []
-    with _STDERR_LOCK, tempfile.TemporaryFile() as sink:
+    with _STDERR_LOCK:
         with contextlib.suppress(ValueError, OSError):  # a closed or replaced sys.stderr: nothing to flush
             sys.stderr.flush()
+        read_end, write_end = os.pipe()
+        os.set_blocking(write_end, False)
         saved = os.dup(2)
         try:
-            os.dup2(sink.fileno(), 2)
+            try:
+                os.dup2(write_end, 2)
+            finally:
+                os.close(write_end)
             yield errors
         finally:
-            os.dup2(saved, 2)
+            os.dup2(saved, 2)  # the pipe's last writer gone: reading it ends
             os.close(saved)
-            sink.seek(0)
+            with os.fdopen(read_end, "rb") as pipe:
+                said = pipe.read(_MAX_URDFDOM_BYTES)
             others: list[str] = []
-            for line in sink.read(_MAX_URDFDOM_BYTES).decode("utf-8", "replace").splitlines(keepends=True):
+            for line in said.decode("utf-8", "replace").splitlines(keepends=True):
                 if line.startswith("Error:"):
                     errors.append(line.removeprefix("Error:").strip())
                 elif not line.startswith(("Warning:", "Info:", "Debug:", "         at line ")):
