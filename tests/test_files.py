@@ -26,12 +26,13 @@ def test_outputs_appear_together_only_when_the_set_is_committed(tmp_path):
         a = out.claim(tmp_path / "a.csv")
         b = out.claim(tmp_path / "sub" / "b.png", make_parents=True)
         # staged next to the destination (same folder: the final rename is atomic), hidden,
-        # keeping the suffix (matplotlib picks the format from it)
+        # keeping the suffix (matplotlib picks the format from it); a new folder is staged whole
+        # as a hidden sibling, renamed into place at the commit
         assert a.parent == tmp_path and a.name.startswith(".a.csv.") and a.suffix == ".csv"
-        assert b.parent == tmp_path / "sub" and b.suffix == ".png"
+        assert b.parent.parent == tmp_path and b.parent.name.startswith(".sub.brachycal-") and b.suffix == ".png"
         a.write_text("A")
         b.write_text("B")
-        assert not (tmp_path / "a.csv").exists() and not (tmp_path / "sub" / "b.png").exists()
+        assert not (tmp_path / "a.csv").exists() and not (tmp_path / "sub").exists()
     assert (tmp_path / "a.csv").read_text() == "A" and (tmp_path / "sub" / "b.png").read_text() == "B"
     assert out.written == [tmp_path / "a.csv", tmp_path / "sub" / "b.png"]
     assert listing(tmp_path) == ["a.csv", "sub", "sub/b.png"]  # no staging or lock file left
@@ -46,6 +47,41 @@ def test_any_failure_removes_every_staged_file_lock_and_created_folder(tmp_path,
         raise failure
     assert listing(tmp_path) == ["old.csv"]
     assert (tmp_path / "old.csv").read_text() == "keep"
+
+
+def test_a_new_folder_is_never_visible_before_the_commit(tmp_path):
+    """The folders an output needs appear with it: a killed command leaves no visible folder."""
+    with OutputSet() as out:
+        out.claim(tmp_path / "rep" / "report.html", make_parents=True).write_text("<html/>")
+        out.claim(tmp_path / "rep" / "figures" / "a.png", make_parents=True).write_text("png")
+        out.claim(tmp_path / "other" / "b.csv", make_parents=True).write_text("b")
+        assert [p.name for p in tmp_path.iterdir() if not p.name.startswith(".")] == []
+    assert listing(tmp_path) == ["other", "other/b.csv", "rep", "rep/figures", "rep/figures/a.png", "rep/report.html"]
+
+
+def test_a_folder_made_at_the_destination_while_the_command_ran_is_kept(tmp_path):
+    with pytest.raises(OutputError, match=r"rep: already exists \(made while this command ran\)"), OutputSet() as out:
+        out.claim(tmp_path / "a.csv").write_text("ours")
+        out.claim(tmp_path / "rep" / "r.html", make_parents=True).write_text("ours")
+        (tmp_path / "rep").mkdir()
+        (tmp_path / "rep" / "theirs.txt").write_text("someone else's")
+    assert listing(tmp_path) == ["rep", "rep/theirs.txt"]
+
+
+def test_a_disk_too_full_for_the_lock_holders_pid_still_locks_and_leaves_nothing(tmp_path, monkeypatch):
+    """On a full disk the lock file is made (no data block) but its pid cannot be written."""
+    import brachycal.io as io_module
+
+    def full(fd: int, data: bytes) -> int:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(io_module.os, "write", full)
+    with pytest.raises(OutputError, match=r"x/a.urdf: cannot write the outputs \(No space left on device\)"):
+        with OutputSet() as out:
+            out.claim(tmp_path / "x" / "a.urdf", make_parents=True)
+            assert (tmp_path / ".x.brachycal-lock").exists()  # held all the same
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))  # the first write of an output
+    assert listing(tmp_path) == []
 
 
 def test_never_replaces_without_force(tmp_path):

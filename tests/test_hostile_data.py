@@ -197,6 +197,17 @@ def bag_with_a_joint_twice(tmp: Path) -> None:
     write_bag_log(tmp / "log.bag", 1.7e9 + np.arange(3.0), q, names, ros=1)
 
 
+def ros2_bag_with_message_count(count: str):
+    """A ROS 2 bag whose ``metadata.yaml`` states ``message_count: <count>`` for its topic."""
+
+    def setup(tmp: Path) -> None:
+        folder = write_bag_log(tmp / "log_bag", 1.7e9 + np.arange(3.0), np.zeros((3, 15)), robot().joint_names, ros=2)
+        metadata = folder / "metadata.yaml"
+        metadata.write_text(metadata.read_text().replace("message_count: 3", f"message_count: {count}"))
+
+    return setup
+
+
 def session(file: str, row: int, column: str, value: Callable[[float], float]):
     def setup(tmp: Path) -> None:
         shutil.copytree(ROOT / "examples" / "session_exact", tmp / "session")
@@ -294,6 +305,17 @@ def session_text(file: str, change: Callable[[str], str]):
 PIVOT = ["pivot", "{tmp}/poses.csv", "--out", "{tmp}/pivot.json"]
 
 
+def copied_row(line: int, old: str, new: str) -> Callable[[str], str]:
+    """A session file's text with file line ``line`` appended again, its first field ``old`` as ``new``."""
+
+    def change(text: str) -> str:
+        copy = text.splitlines()[line - 1]
+        assert copy.startswith(old)
+        return text + new + copy[len(old) :] + "\n"
+
+    return change
+
+
 CASES = [
     # Numbers that parse but are wrong: one grammar (what CSV writers write), a cut last line refused.
     Case(
@@ -309,10 +331,24 @@ CASES = [
         csv_log(set_text(4, "time", "0x10")),
     ),
     Case(
-        "fk-csv-blank-before-a-number",
+        "fk-csv-blank-inside-a-number",
         FK,
-        ("log.csv", "row 3", "arm_left_joint_2_l", "' 0.1' is not a number"),
-        csv_log(set_text(3, "arm_left_joint_2_l", " 0.1")),
+        ("log.csv", "row 3", "arm_left_joint_2_l", "'0 .1' is not a number"),
+        csv_log(set_text(3, "arm_left_joint_2_l", "0 .1")),
+    ),
+    Case(
+        "fk-csv-exponent-without-digits",
+        FK,
+        ("log.csv", "row 3", "arm_left_joint_2_l", "'1e' is not a number"),
+        csv_log(set_text(3, "arm_left_joint_2_l", " 1e ")),
+    ),
+    Case(
+        "fk-csv-old-mac-line-ends",
+        FK,
+        ("log.csv", "carriage return alone", "LF or CRLF"),
+        lambda tmp: (tmp / "log.csv").write_bytes(
+            (ROOT / "examples" / "joint_log.csv").read_bytes().replace(b"\n", b"\r")
+        ),
     ),
     Case(
         "fk-csv-arabic-indic-digit",
@@ -577,11 +613,27 @@ CASES = [
         ("log.bag", "message 1", "'arm_right_joint_2_l' listed twice"),
         bag_with_a_joint_twice,
     ),
+    *(
+        Case(
+            f"fk-ros2-bag-message-count-{name}",
+            ["fk", "{tmp}/log_bag", "--frames", "needle_tip", "--out", "{tmp}/poses.csv", "--quiet"],
+            ("log_bag/metadata.yaml", "message_count", "'/joint_states'", "not a whole number"),
+            ros2_bag_with_message_count(count),
+        )
+        for name, count in [("inf", "inf"), ("float-inf", ".inf"), ("negative", "-1"), ("fraction", "2.5")]
+    ),
     Case(
         "fk-csv-beyond-limit-by-more-than-encoder-noise",
         FK,
         ("log.csv", "row 3", "arm_left_joint_2_l", "outside the joint limits", "0.001 rad"),
         csv_log(beyond_limit(2e-3)),
+    ),
+    # A sample copied under a new name: it would count twice in the fit.
+    Case(
+        "calibrate-session-sample-copied-under-a-new-name",
+        CALIBRATE,
+        ("samples.csv", "row 66", "sample 's_copy' has the joints and pixel of sample 's004' (row 5)"),
+        session_text("samples.csv", copied_row(5, "s004,", "s_copy,")),
     ),
     Case(
         "calibrate-session-beyond-limit-by-more-than-encoder-noise",

@@ -74,7 +74,9 @@ def all_touches_at_one_configuration(s: Session) -> Session:
 
 
 def samples_at_one_pose(s: Session) -> Session:
-    return replace(s, samples_q=np.repeat(s.samples_q[:1], len(s.samples_q), axis=0))
+    # 1e-9 rad apart (1 nm at the probe), so that no two samples of one pixel are one row copied
+    wobble = 1e-9 * np.random.default_rng(8).standard_normal(s.samples_q.shape)
+    return replace(s, samples_q=np.repeat(s.samples_q[:1], len(s.samples_q), axis=0) + wobble)
 
 
 def samples_on_a_line(s: Session) -> Session:

@@ -204,6 +204,13 @@ CASES = [
         ("cal.mha", "ProbeToStepperHomeTransform", "ProbeToTrackerTransform"),
         files(),
     ),
+    # A B-mode sequence without a tracker's transforms: the refusal names the way to segment it.
+    Case(
+        "tracker-recording-without-poses",
+        SEGMENT,
+        ("cal.mha", "ProbeToTrackerTransform", "transforms: none", "--images-only", "--probe-transform"),
+        files(fields=[{}, {}]),
+    ),
     Case("transform-name-malformed", [*SEGMENT, "--probe-transform", "probe pose"], ("--probe-transform",), files()),
     Case(
         "images-only-with-a-stream",
@@ -222,7 +229,7 @@ CASES = [
             "--probe-transform",
             "ProbeToStepperHome",
         ],
-        ("cal.mha", "ProbeToStepperHomeTransform"),
+        ("cal.mha", "ProbeToStepperHomeTransform", "--reference-transform"),
         files(),
     ),
     Case("config-missing", [*SEGMENT[:5], "{tmp}/none.xml", *SEGMENT[6:]], ("none.xml",), files()),

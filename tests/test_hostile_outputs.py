@@ -540,6 +540,66 @@ def test_after_kill_9_the_next_run_removes_the_stale_staging_file(tmp_path):
     assert hidden(tmp_path) == [] and sorted(p.name for p in tmp_path.iterdir()) == ["log.csv", "poses.csv"]
 
 
+#: ``calibrate --report`` in a child that stops, with its outputs claimed and the result and the
+#: first figure staged, at the report's 3D figure: it prints "staged" and waits to be killed.
+STOPPED_AT_THE_REPORT = """
+import sys
+import brachycal.reporting.html_report as html_report
+from brachycal.cli.main import main
+
+def stop(*args, **kwargs):
+    print("staged", flush=True)
+    sys.stdin.read()
+
+html_report.points_3d = stop
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_after_kill_9_during_calibrate_report_no_visible_folder_is_left(tmp_path):
+    """The report's folder is staged as a hidden sibling: SIGKILL leaves only hidden entries,
+    which the next run of the same command removes."""
+    argv = ["calibrate", str(SESSION), "--out", "r.json", "--report", "rep", "--quiet"]
+    process = subprocess.Popen(
+        [sys.executable, "-c", STOPPED_AT_THE_REPORT, *argv],
+        cwd=tmp_path,
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    assert process.stdout is not None
+    assert "staged\n" in iter(process.stdout.readline, ""), process.communicate()  # the tables print first
+    process.kill()
+    process.communicate()
+    assert [p.name for p in tmp_path.iterdir() if not p.name.startswith(".")] == []
+    assert ".rep.brachycal-lock" in hidden(tmp_path)  # what a hard kill can leave: hidden, stale
+    done = subprocess.run([*CONSOLE, *argv], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert hidden(tmp_path) == [] and sorted(p.name for p in tmp_path.iterdir()) == ["r.json", "rep"]
+    assert hidden(tmp_path / "rep") == [] and (tmp_path / "rep" / "report.html").is_file()
+
+
+def test_export_onto_a_disk_with_no_room_at_all_leaves_nothing(tmp_path, inputs):
+    """No byte can be written (a file-size limit of 0, as a full disk: the lock file is made but
+    its holder's pid cannot be written, nor any output): one line, nothing left, no folder."""
+
+    def no_room() -> None:  # in the child only; Python ignores SIGXFSZ, so write() fails instead
+        resource.setrlimit(resource.RLIMIT_FSIZE, (0, 0))
+
+    done = subprocess.run(
+        [*CONSOLE, "export", str(inputs["result"]), "--out", "x"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        preexec_fn=no_room,
+        timeout=300,
+    )
+    assert done.returncode == 2, done.stderr
+    assert list(tmp_path.iterdir()) == []
+    assert done.stderr == f"brachycal: error: {tmp_path / 'x'}: cannot write the outputs (File too large)\n"
+
+
 def test_a_stale_staging_file_of_another_output_is_left_alone(tmp_path):
     """Only the claimed destination's own staging files are stale for its writer."""
     others = [".q.csv.brachycal-0123abcd.csv", ".poses.csv.brachycal-0123abcd.csv.brachycal-89abcdef.csv"]

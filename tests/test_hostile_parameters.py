@@ -31,6 +31,7 @@ CALIBRATE = ["calibrate", str(SESSION), "--out", "{tmp}/result.json", "--quiet"]
 LOCATE = ["locate", "{result}", str(JOINTS)]
 STUDY = ["study", "--out", "{tmp}/study", "--quiet"]
 DESIGN = ["design", "--out", "{tmp}/design", "--quiet"]
+TEMPLATE = ["stepper", "template", "{result}", "--config", "{tmp}/config.xml", "--hole", "D4", "--probe-position=0"]
 
 
 def numeric(command: list[str], option: str, cases: dict[str, tuple[str, tuple[str, ...]]]) -> list[Case]:
@@ -323,6 +324,28 @@ CASES = [
         },
     ),
     Case("design-unknown-design", [*DESIGN, "--designs", "grid 5x5x5"], ("--designs", "'grid 5x5x5'")),
+    # --- stepper template: what a stepper and a 200 mm needle can reach (a rotation of 1e308 deg
+    # was a "math domain error" traceback, a depth of nan printed np.float64(0.0)) ------------------
+    *numeric(
+        TEMPLATE,
+        "--depth",
+        {"nan": NAN, "inf": INF, "huge": ("1e6", ("[0, 300] mm",)), "negative": ("-5", ("[0, 300] mm",))},
+    ),
+    *numeric(
+        TEMPLATE,
+        "--probe-position",
+        {"nan": NAN, "minus-inf": MINUS_INF, "huge": ("1e308", ("[-300, 300] mm",))},
+    ),
+    *numeric(
+        TEMPLATE,
+        "--probe-rotation",
+        {"nan": NAN, "inf": INF, "huge": ("1e308", ("[-360, 360] deg",))},
+    ),
+    *numeric(
+        TEMPLATE,
+        "--template-position",
+        {"nan": NAN, "inf": INF, "huge": ("-1e6", ("[-300, 300] mm",))},
+    ),
 ]
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+import tracemalloc
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +20,8 @@ from hypothesis import strategies as st
 
 from brachycal.cli.common import output_file
 from brachycal.data import read_times
-from brachycal.data.formats.csv_log import TRUNCATED, csv_log_blocks, read_table, to_float
+from brachycal.data.formats.csv_log import TRUNCATED, csv_log_blocks, read_table, table_blocks, to_float
+from brachycal.data.formats.joint_table import read_joint_table, still_table_kind
 from brachycal.data.pose_list import read_pose_list
 from brachycal.errors import InputError
 from brachycal.validate import (
@@ -156,7 +158,8 @@ def test_a_table_of_written_numbers_reads_as_written(tmp_path):
     ("field", "message"),
     [
         ("0_1", r"row 3, column 'b': '0_1' is not a number"),
-        (" 1", r"row 3, column 'b': ' 1' is not a number"),
+        ("1 5", r"row 3, column 'b': '1 5' is not a number"),  # a blank inside, not around
+        ("\u00a01", r"row 3, column 'b': '\\xa01' is not a number"),  # a no-break space is no blank
         ("infinity", r"row 3, column 'b': 'infinity' is not a number"),
         ("inf", r"row 3, column 'b': value is not a finite number, got 'inf'"),
         ("nan", r"row 3, column 'b': value is not a finite number, got 'nan'"),
@@ -168,6 +171,31 @@ def test_a_field_that_is_not_a_finite_number_is_named(tmp_path, field, message):
     path = table(tmp_path, f"a,b\n1,2\n3,{field}\n")
     with pytest.raises(InputError, match=message):
         floats(path, ["a", "b"])
+
+
+def spreadsheet_and_savetxt_tables(values: np.ndarray, header: list[str]) -> dict[str, str]:
+    """``values`` as other tools write a table: NumPy's ``savetxt(..., delimiter=", ")``, a
+    spreadsheet's export (byte-order mark, CRLF, blanks either side of the separators), old Mac
+    line ends (CR alone)."""
+    saved = io.StringIO()
+    np.savetxt(saved, values, fmt="%.17g", delimiter=", ", header=", ".join(header), comments="")
+    rows = [" , ".join(header)] + [" , ".join(f"{x!r} " for x in row) for row in values.tolist()]
+    return {
+        "savetxt": saved.getvalue(),
+        "spreadsheet": "\ufeff" + "\r\n".join(rows) + "\r\n",
+        "cr-only": "\r".join([",".join(header), *(",".join(repr(x) for x in row) for row in values.tolist())]) + "\r",
+    }
+
+
+@pytest.mark.parametrize("origin", ["savetxt", "spreadsheet", "cr-only"])
+def test_a_table_with_blanks_around_its_fields_reads_as_numpy_reads_it(tmp_path, origin):
+    values = np.random.default_rng(7).normal(size=(6, 3)) * [1.0, 1e-3, 1e3]
+    path = tmp_path / "t.csv"
+    path.write_bytes(spreadsheet_and_savetxt_tables(values, ["a", "b", "c"])[origin].encode())
+    read = floats(path, ["a", "b", "c"])
+    assert np.array_equal(read, values)
+    oracle = np.loadtxt(path, delimiter=",", skiprows=1, encoding="utf-8-sig") if origin != "cr-only" else values
+    assert np.array_equal(read, oracle)
 
 
 @pytest.mark.parametrize("cut", ["a,b\n1,2\n3,4.6", "a,b\n1,2\n3,", "a,b\n1,2\n3", "a,b"])
@@ -221,7 +249,7 @@ def test_a_quoted_log_cut_mid_number_is_refused_by_the_row_scan(tmp_path, robot)
 @pytest.mark.parametrize(
     ("field", "message"),
     [
-        (" 0.5", r"' 0\.5' is not a number"),  # pyarrow trims blanks: its block goes to the row scan
+        ("0 .5", r"'0 \.5' is not a number"),  # a blank inside a field: its block goes to the row scan
         ("0_5", r"'0_5' is not a number"),
         ("inf", r"value is not a finite number, got 'inf'"),  # pyarrow reads it: refused after
         ("1e999", r"value is not a finite number, got '1e999'"),
@@ -237,6 +265,39 @@ def test_a_bad_number_in_a_log_is_named_whatever_the_path(tmp_path, robot, field
     path = table(tmp_path, "\n".join(lines) + "\n", "log.csv")
     with pytest.raises(InputError, match=rf"row 31, column '{names[2]}': {message}"):
         list(csv_log_blocks(path, robot, block_bytes=block_bytes))
+
+
+@pytest.mark.parametrize("origin", ["savetxt", "spreadsheet"])
+@pytest.mark.parametrize("block_bytes", [None, 700])
+def test_a_log_with_blanks_around_its_fields_reads_as_written(tmp_path, robot, origin, block_bytes):
+    """Both paths (pyarrow's blocks and the row scan): the same numbers as the plain log's."""
+    text, names = log_text(robot)
+    plain = table(tmp_path, text, "plain.csv")
+    values = np.loadtxt(plain, delimiter=",", skiprows=1)
+    path = tmp_path / "log.csv"
+    path.write_bytes(spreadsheet_and_savetxt_tables(values, ["time", *names])[origin].encode())
+    blocks = list(csv_log_blocks(path, robot, block_bytes=block_bytes))
+    expected = list(csv_log_blocks(plain, robot, block_bytes=block_bytes))
+    assert np.array_equal(np.concatenate([q for _, q in blocks]), np.concatenate([q for _, q in expected]))
+    assert np.array_equal(np.concatenate([b.time for b, _ in blocks]), values[:, 0])
+
+
+def test_a_log_with_old_mac_line_ends_is_refused_in_one_line_naming_them(tmp_path, robot):
+    text, _ = log_text(robot)
+    path = table(tmp_path, text.replace("\n", "\r"), "log.csv")
+    with pytest.raises(InputError, match=r"log\.csv: its lines end in a carriage return alone"):
+        list(csv_log_blocks(path, robot))
+
+
+@pytest.mark.parametrize("origin", ["savetxt", "spreadsheet", "cr-only"])
+def test_a_joint_table_without_header_reads_the_same_from_other_writers(tmp_path, robot, origin):
+    """``fk``'s headerless tables: told from a log by their first line, whatever the line ends."""
+    q = np.zeros((4, len(robot.joint_names))) + np.arange(4)[:, None] * 1e-3
+    plain = table(tmp_path, "".join(",".join(repr(x) for x in row) + "\n" for row in q.tolist()), "plain.csv")
+    text = spreadsheet_and_savetxt_tables(q, robot.joint_names)[origin]
+    other = table(tmp_path, text.split("\n", 1)[1] if origin == "savetxt" else text.split("\r", 1)[1].lstrip("\n"))
+    assert still_table_kind(other) == "no header"
+    assert np.array_equal(read_joint_table(other, robot).q, read_joint_table(plain, robot).q)
 
 
 # --- the files brachycal ships and reads --------------------------------------------------------------
@@ -288,3 +349,29 @@ def test_an_output_file_named_with_a_trailing_separator_is_refused(text):
     with pytest.raises(argparse.ArgumentTypeError, match="names a folder"):
         output_file(text)
     assert output_file("out/poses.csv") == "out/poses.csv"
+
+
+def test_checking_many_fields_at_once_holds_no_memory_per_field():
+    """A block of a long table is 262,144 fields: the one-pass check holds its joined text only."""
+    fields = [repr(float(x)) for x in np.random.default_rng(2).normal(size=100_000)]
+    tracemalloc.start()
+    try:
+        assert all_number_texts(fields)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    text_bytes = sum(len(f) + 1 for f in fields)
+    assert peak < 2 * text_bytes + 100_000, f"peak {peak / 1e6:.1f} MB for {text_bytes / 1e6:.1f} MB of text"
+
+
+@pytest.mark.parametrize("rows_per_block", [1, 3, 4, 5, None])
+def test_a_table_read_in_blocks_is_the_table_read_whole(tmp_path, rows_per_block):
+    path = table(tmp_path, "a,b\n1,2\n\n3,4\n5,6\n7,8\n")
+    whole = read_table(path, ["a"])
+    blocks = list(table_blocks(path, ["a"], rows_per_block))
+    assert all(header == whole[0] for header, _, _ in blocks)
+    assert [r for _, rows, _ in blocks for r in rows] == whole[1] == [2, 4, 5, 6]
+    assert [f for _, _, records in blocks for f in records] == whole[2]
+    cut = table(tmp_path, "a,b\n1,2\n3,4\n5,6\n7,8", "cut.csv")  # no newline at the end, 4 rows
+    with pytest.raises(InputError, match=rf"cut\.csv, row 5: {TRUNCATED}"):
+        list(table_blocks(cut, ["a"], rows_per_block))

@@ -64,6 +64,7 @@ class _Claim:
     staging: Path
     lock_path: Path | None = None
     lock_fd: int | None = None
+    folder: _Claim | None = None  # the new folder it is staged in (its destination the folder)
 
 
 class OutputSet:
@@ -81,6 +82,8 @@ class OutputSet:
 
     Args:
         force: replace existing regular files (never directories or special files).
+            Folders the outputs need that do not exist yet are never replaced: each is staged
+            whole, as a hidden sibling, and appears with its outputs at the commit.
         inputs: the command's input files (a folder stands for the files in it), declared so
             that an output naming one is refused when claimed, before any work; inputs read
             under the command line are refused anyway, when the set is committed.
@@ -95,7 +98,7 @@ class OutputSet:
         self.force = force
         self._inputs = _declared(inputs)
         self._claims: dict[str, _Claim] = {}  # key: the destination's resolved path
-        self._created_dirs: list[Path] = []
+        self._folders: dict[str, _Claim] = {}  # new folders, staged whole (key: their resolved path)
         self._labels: dict[str, str] = {}
         self._token = secrets.token_hex(4)
         self._closed = False
@@ -107,8 +110,10 @@ class OutputSet:
 
         Args:
             destination: the final path of the output.
-            make_parents: create missing folders (removed again if the set is not committed);
-                otherwise a missing folder is refused.
+            make_parents: stage missing folders with the outputs: the topmost one is written
+                as a hidden sibling (``.<folder>.brachycal-<token>``) and renamed into place at
+                the commit, so a failed or killed command leaves no visible folder; otherwise a
+                missing folder is refused.
             label: what the destination is to the user (``"--out"``), for the error when two
                 outputs of the command share a path.
         """
@@ -125,9 +130,10 @@ class OutputSet:
             )
         _refuse_special(destination)
         _refuse_input(destination, self._inputs)
-        self._ensure_folder(destination.parent, make_parents)
-        claim = _Claim(destination, destination.parent / f".{destination.name}{STAGE_MARK}{self._token}")
-        claim.staging = claim.staging.with_name(claim.staging.name + destination.suffix)
+        new_folder = self._missing_folder(destination.parent, make_parents)
+        if new_folder is not None:
+            return self._claim_in_new_folder(destination, key, new_folder, label)
+        claim = _Claim(destination, _staging_name(destination, self._token))
         self._claims[key] = claim
         self._labels[key] = label
         with _signals_deferred():  # an interrupt between creating the lock file and recording it would leak it
@@ -159,29 +165,65 @@ class OutputSet:
         """The claimed destinations, in the order claimed."""
         return [c.destination for c in self._claims.values()]
 
-    def _ensure_folder(self, folder: Path, make_parents: bool) -> None:
+    def _missing_folder(self, folder: Path, make_parents: bool) -> Path | None:
+        """The topmost missing folder above an output (None: its folder exists).
+
+        Raises:
+            OutputError: a path on the way is not a folder, or a folder is missing without
+                ``make_parents``.
+        """
         folder = folder if str(folder) else Path(".")
         if folder.is_dir():
-            return
+            return None
         if folder.exists() or folder.is_symlink():
             raise OutputError("is not a folder", file=folder)
         if not make_parents:
             raise OutputError("folder does not exist", file=folder)
-        missing = []
-        parent = folder
-        while not parent.exists() and not parent.is_symlink() and parent != parent.parent:
-            missing.append(parent)
-            parent = parent.parent
-        for path in reversed(missing):
+        top = folder
+        while top.parent != top and not top.parent.is_dir():
+            if top.parent.exists() or top.parent.is_symlink():
+                raise OutputError("is not a folder", file=top.parent)
+            top = top.parent
+        return top
+
+    def _claim_in_new_folder(self, destination: Path, key: str, top: Path, label: str) -> Path:
+        """Claim ``destination`` below ``top``, a folder that does not exist: staged in a hidden
+        sibling of ``top`` that this set claims (and locks) as a whole."""
+        folder = self._folders.get(_key(top))
+        if folder is None:
+            folder = self._claim_folder(top)
+            if folder is None:  # another process made ``top`` meanwhile: an ordinary claim now
+                return self.claim(destination, make_parents=True, label=label)
+        staging = folder.staging / destination.relative_to(top)
+        try:
+            staging.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise OutputError(f"cannot create the folder ({exc.strerror})", file=destination.parent) from None
+        claim = _Claim(destination, staging, folder=folder)
+        self._claims[key] = claim
+        self._labels[key] = label
+        _STAGED[str(staging)] = destination
+        return staging
+
+    def _claim_folder(self, top: Path) -> _Claim | None:
+        """Lock the new folder ``top`` and make its hidden staging folder; None if ``top`` exists now."""
+        folder = _Claim(top, _staging_name(top, self._token))
+        with _signals_deferred():  # an interrupt must not leak the lock or the staging folder
+            folder.lock_path, folder.lock_fd, exclusive = _lock(top)
+            self._folders[_key(top)] = folder
+        if exclusive:
+            _remove_stale_staging(top)
+        if os.path.lexists(top):
+            del self._folders[_key(top)]
+            _unlock(folder)
+            return None
+        with _signals_deferred():
             try:
-                path.mkdir()
-            except FileExistsError:
-                if not path.is_dir():
-                    raise OutputError("is not a folder", file=path) from None
-                continue  # another process made it just now: not ours to remove
+                folder.staging.mkdir()
             except OSError as exc:
-                raise OutputError(f"cannot create the folder ({exc.strerror})", file=path) from None
-            self._created_dirs.append(path)
+                raise OutputError(f"cannot create the folder ({exc.strerror})", file=top) from None
+            _STAGED[str(folder.staging)] = top
+        return folder
 
     # --- ending --------------------------------------------------------------------------------
     def commit(self) -> list[Path]:
@@ -189,12 +231,21 @@ class OutputSet:
         if self._closed:
             raise RuntimeError("this OutputSet is closed")
         moved: list[tuple[Path, Path | None]] = []  # (destination, kept old file or None)
+        folders: list[_Claim] = []  # new folders moved into place
         try:
             for claim in self._claims.values():
                 if not claim.staging.exists():
                     raise OutputError("was not written (a brachycal bug; please report it)", file=claim.destination)
-                moved.append((claim.destination, self._move_into_place(claim)))
+            for claim in self._claims.values():
+                if claim.folder is None:
+                    moved.append((claim.destination, self._move_into_place(claim)))
+            for folder in self._folders.values():
+                _move_folder_into_place(folder)
+                folders.append(folder)
         except BaseException:
+            for folder in reversed(folders):
+                with contextlib.suppress(OSError):
+                    os.rename(folder.destination, folder.staging)
             for destination, old in reversed(moved):
                 with contextlib.suppress(OSError):
                     if old is not None:
@@ -206,8 +257,7 @@ class OutputSet:
         for _, old in moved:
             if old is not None:
                 _remove(old)
-        self.written = [destination for destination, _ in moved]
-        self._created_dirs.clear()  # they hold the outputs now
+        self.written = [claim.destination for claim in self._claims.values()]
         self._close()
         return self.written
 
@@ -243,14 +293,12 @@ class OutputSet:
         for claim in self._claims.values():
             with contextlib.suppress(OSError):  # best effort: the error that ended the set is the one to report
                 _remove(claim.staging)
+        for folder in self._folders.values():
+            _remove_tree(folder.staging)
         self._close()
-        for folder in reversed(self._created_dirs):
-            with contextlib.suppress(OSError):  # not empty: someone else wrote there meanwhile
-                folder.rmdir()
-        self._created_dirs.clear()
 
     def _close(self) -> None:
-        for claim in self._claims.values():
+        for claim in [*self._claims.values(), *self._folders.values()]:
             _STAGED.pop(str(claim.staging), None)
             _unlock(claim)
         self._closed = True
@@ -275,13 +323,44 @@ class OutputSet:
             return None
         reason = error.strerror or str(error)
         if error.filename is not None:
-            destination = _STAGED.get(str(error.filename))
+            destination = self._destination_of(str(error.filename))
             return None if destination is None else OutputError(f"cannot write ({reason})", file=destination)
         if error.errno in _WRITE_ERRNOS and self._claims:
             destinations = self.destinations
             where = destinations[0] if len(destinations) == 1 else _common_folder(destinations)
             return OutputError(f"cannot write the outputs ({reason})", file=where)
         return None
+
+    def _destination_of(self, staged: str) -> Path | None:
+        """The final path of a staged file or of a path inside a new folder's staging folder."""
+        destination = _STAGED.get(staged)
+        if destination is not None:
+            return destination
+        for folder in self._folders.values():
+            with contextlib.suppress(ValueError):
+                return folder.destination / Path(staged).relative_to(folder.staging)
+        return None
+
+
+def _staging_name(destination: Path, token: str) -> Path:
+    """``.<name>.brachycal-<token><suffix>`` beside ``destination`` (the suffix kept for writers that go by it)."""
+    return destination.with_name(f".{destination.name}{STAGE_MARK}{token}{destination.suffix}")
+
+
+def _move_folder_into_place(folder: _Claim) -> None:
+    """Rename a new folder's staging folder to the folder (which must still be absent)."""
+    if os.path.lexists(folder.destination):
+        raise OutputError("already exists (made while this command ran)", file=folder.destination)
+    try:
+        os.rename(folder.staging, folder.destination)
+    except OSError as exc:
+        raise OutputError(f"cannot write ({exc.strerror or exc})", file=folder.destination) from None
+
+
+def _remove_tree(path: Path) -> None:
+    """Remove a staging folder this set made, best effort (the error that ended the set is the one to report)."""
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
 
 
 def _key(path: Path) -> str:
@@ -398,16 +477,18 @@ def _lock(destination: Path) -> tuple[Path, int, bool]:
         except FileNotFoundError:
             same = False
         if same:
-            os.ftruncate(fd, 0)
-            os.write(fd, f"{os.getpid()}\n".encode())
+            with contextlib.suppress(OSError):  # a full disk: the lock holds without its holder's pid
+                os.ftruncate(fd, 0)
+                os.write(fd, f"{os.getpid()}\n".encode())
             return lock_path, fd, True
         os.close(fd)
     raise OutputError("cannot take the lock (it keeps changing)", file=destination)  # pragma: no cover
 
 
 def _remove_stale_staging(destination: Path) -> None:
-    """Remove the staging files (``.<name>.brachycal-<token><suffix>``, ``…-old``) a killed writer
-    of ``destination`` left: with the destination's lock held, no live writer has any."""
+    """Remove the staging files (``.<name>.brachycal-<token><suffix>``, ``…-old``) or staging
+    folders a killed writer of ``destination`` left: with the destination's lock held, no live
+    writer has any."""
     prefix = f".{destination.name}{STAGE_MARK}"
     folder = destination.parent if str(destination.parent) else Path(".")
     try:
@@ -418,8 +499,12 @@ def _remove_stale_staging(destination: Path) -> None:
     for name in names:
         if not staging.fullmatch(name[len(prefix) :]):
             continue
+        stale = folder / name
+        if stale.is_dir() and not stale.is_symlink():
+            _remove_tree(stale)
+            continue
         with contextlib.suppress(OSError):
-            (folder / name).unlink()
+            stale.unlink()
 
 
 def _stale_lock_removed(lock_path: Path, destination: Path) -> bool:

@@ -12,8 +12,10 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from brachycal.data.formats.csv_log import read_table, to_float
-from brachycal.se3 import FloatArray
+import numpy as np
+
+from brachycal.data.formats.csv_log import table_blocks, to_float
+from brachycal.se3 import FloatArray, rigidity_error
 from brachycal.validate import MAX_POSITION_M, check_positions, check_transform
 
 COLUMNS = [f"m{i}{j}" for i in range(4) for j in range(4)]
@@ -25,11 +27,29 @@ ORTHONORMAL_TOL = 1e-4
 
 
 def read_pose_list(path: str | os.PathLike[str]) -> tuple[list[str], FloatArray, list[int]]:
-    """``(names (N,), T (N, 4, 4), rows (N,))``; names are the first column's values, or row numbers."""
+    """``(names (N,), T (N, 4, 4), rows (N,))``; names are the first column's values, or row numbers.
+
+    Read a block of rows at a time (:func:`~brachycal.data.formats.csv_log.table_blocks`): memory
+    is the matrices and names, not every field as a Python string.
+    """
     path = Path(path)
-    header, rows, records = read_table(path, COLUMNS)
-    values = to_float(path, header, rows, records, COLUMNS)
-    T = values.reshape(-1, 4, 4)
+    names: list[str] = []
+    rows: list[int] = []
+    blocks: list[FloatArray] = []
+    for header, block_rows, records in table_blocks(path, COLUMNS):
+        T = to_float(path, header, block_rows, records, COLUMNS).reshape(-1, 4, 4)
+        _check_matrices(path, T, block_rows)
+        blocks.append(T)
+        extra = [h for h in header if h not in COLUMNS]
+        key = header.index(extra[0]) if extra else None
+        names += [fields[key] for fields in records] if key is not None else [str(r) for r in block_rows]
+        rows += block_rows
+    return names, np.concatenate(blocks), rows
+
+
+def _check_matrices(path: Path, T: FloatArray, rows: list[int]) -> None:
+    """Refuse the first of the matrices ``T`` (N, 4, 4) that is no pose: a translation beyond
+    any measurable position, or not a rigid transform within :data:`ORTHONORMAL_TOL`, naming its row."""
     # m or mm (the caller says which): beyond MAX_POSITION_M in millimetres is no pose in either.
     check_positions(
         T[:, :3, 3],
@@ -40,8 +60,8 @@ def read_pose_list(path: str | os.PathLike[str]) -> tuple[list[str], FloatArray,
         rows=rows,
         columns=["m03", "m13", "m23"],
     )
-    extra = [h for h in header if h not in COLUMNS]
-    names = [fields[header.index(extra[0])] for fields in records] if extra else [str(r) for r in rows]
-    for row, matrix in zip(rows, T, strict=True):
-        check_transform(matrix, "matrix", file=path, row=row, tolerance=ORTHONORMAL_TOL)
-    return names, T, rows
+    off, det, last_row = rigidity_error(T)  # all at once; the first matrix refused is named by its row
+    bad = np.flatnonzero((off > ORTHONORMAL_TOL) | (np.abs(det - 1.0) > ORTHONORMAL_TOL) | (last_row > ORTHONORMAL_TOL))
+    if bad.size:
+        k = int(bad[0])
+        check_transform(T[k], "matrix", file=path, row=rows[k], tolerance=ORTHONORMAL_TOL)

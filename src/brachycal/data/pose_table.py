@@ -31,7 +31,7 @@ from typing import IO, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
-from brachycal.data.formats.csv_log import read_table, to_float
+from brachycal.data.formats.csv_log import table_blocks, to_float
 from brachycal.errors import InputError
 from brachycal.io import atomic_open
 from brachycal.se3 import FloatArray, make_transform
@@ -353,16 +353,27 @@ def write_pose_table(
 
 def read_pose_table(path: str | os.PathLike[str]) -> tuple[FloatArray, list[str], FloatArray]:
     """Read a pose table back: ``(time (R,), frame (R,), T_base_frame (R, 4, 4))``, one per row
-    (``time`` holds the sample numbers of a table whose first column is ``sample``)."""
+    (``time`` holds the sample numbers of a table whose first column is ``sample``).
+
+    Read a block of rows at a time (:func:`~brachycal.data.formats.csv_log.table_blocks`): memory
+    is the poses and frame names, not every field as a Python string."""
     from scipy.spatial.transform import Rotation  # lazy: start-up (scipy)
 
     path = Path(path)
-    header, rows, records = read_table(path, list(HEADER[1:]))
-    index = "sample" if "sample" in header and "time" not in header else "time"
-    if index not in header:
-        raise InputError("no 'time' (or 'sample') column in the header", file=path, row=1)
-    numbers = to_float(path, header, rows, records, [index, *HEADER[2:]])
-    check_positions(numbers[:, 1:4], "", limit=MAX_POSITION_M, unit="m", file=path, rows=rows, columns=["x", "y", "z"])
-    frames = [fields[header.index("frame")] for fields in records]
-    R = Rotation.from_quat(numbers[:, 4:8]).as_matrix()
-    return numbers[:, 0], frames, make_transform(R, numbers[:, 1:4])
+    times: list[FloatArray] = []
+    frames: list[str] = []
+    poses: list[FloatArray] = []
+    for header, rows, records in table_blocks(path, list(HEADER[1:])):
+        index = "sample" if "sample" in header and "time" not in header else "time"
+        if index not in header:
+            raise InputError("no 'time' (or 'sample') column in the header", file=path, row=1)
+        numbers = to_float(path, header, rows, records, [index, *HEADER[2:]])
+        check_positions(
+            numbers[:, 1:4], "", limit=MAX_POSITION_M, unit="m", file=path, rows=rows, columns=["x", "y", "z"]
+        )
+        k = header.index("frame")
+        frames += [fields[k] for fields in records]
+        times.append(numbers[:, 0])
+        R = Rotation.from_quat(numbers[:, 4:8]).as_matrix() if len(numbers) else np.zeros((0, 3, 3))
+        poses.append(make_transform(R, numbers[:, 1:4]))
+    return np.concatenate(times), frames, np.concatenate(poses)

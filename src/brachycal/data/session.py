@@ -376,7 +376,33 @@ def read_sample_table(path: Path, robot: Robot, size_px: np.ndarray) -> tuple[li
             raise InputError(
                 f"{uv[i, axis]:g} is outside the image (0..{size_px[axis] - 1} px)", file=path, row=rows[i], column=name
             )
-    return ids, table_configurations(path, robot, header, rows, records), uv
+    q = table_configurations(path, robot, header, rows, records)
+    refuse_repeated_rows(path, rows, np.hstack([q, uv]), [f"sample {name!r}" for name in ids], "joints and pixel")
+    return ids, q, uv
+
+
+def refuse_repeated_rows(path: Path, rows: list[int], values: FloatArray, names: list[str], what: str) -> None:
+    """Refuse a row whose numbers ``values[i]`` are exactly an earlier row's: a row copied under
+    another name (a sample) would count twice in a fit. Two real holds of a robot differ at least
+    by encoder noise, so only a copy repeats every number. (Touches copied as another trial are
+    refused by the estimator, :func:`~brachycal.calibration.sequential.tool_tips.check_distinct_touches`.)
+
+    Raises:
+        InputError: naming the repeating row, both names and the row it repeats.
+    """
+    if len(values) < 2:
+        return
+    _, first, inverse = np.unique(values, axis=0, return_index=True, return_inverse=True)
+    earliest = first[inverse.ravel()]
+    repeats = np.flatnonzero(earliest != np.arange(len(values)))
+    if repeats.size:
+        i = int(repeats[0])
+        j = int(earliest[i])
+        raise InputError(
+            f"{names[i]} has the {what} of {names[j]} (row {rows[j]}): a copied row would count twice; remove it",
+            file=path,
+            row=rows[i],
+        )
 
 
 def _read_samples(path: Path, robot: Robot, size_px: np.ndarray) -> tuple[list[str], FloatArray, FloatArray]:

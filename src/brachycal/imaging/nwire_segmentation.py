@@ -101,9 +101,14 @@ class SequenceSegmentation:
         return sum(f.T_tracker_probe is None or f.T_tracker_reference is None for f in self.frames)
 
 
-def check_pose_fields(sequence: ImageSequence, poses: PoseStreams, source: str | os.PathLike[str]) -> None:
+def check_pose_fields(
+    sequence: ImageSequence, poses: PoseStreams, source: str | os.PathLike[str], *, fix: str = ""
+) -> None:
     """Refuse a recording in which no frame has one of the named pose streams (a wrong name, or a
     recording without poses), naming the field and the transforms the recording has.
+
+    Args:
+        fix: what the user can do instead (the command's options), appended to the refusal.
 
     Raises:
         InputError: naming the file and the missing field.
@@ -117,7 +122,9 @@ def check_pose_fields(sequence: ImageSequence, poses: PoseStreams, source: str |
         )
         has = ", ".join(recorded) if recorded else "none"
         raise InputError(
-            f"no frame has the {role} pose {name} (the recording's transforms: {has})", file=source, column=name
+            f"no frame has the {role} pose {name} (the recording's transforms: {has})" + (f"; {fix}" if fix else ""),
+            file=source,
+            column=name,
         )
 
 

@@ -27,12 +27,15 @@ configuration at a time (mimic, planar, floating joints). Both give the same pos
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import functools
 import io
 import os
+import sys
+import threading
 import xml.etree.ElementTree as ET
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -112,11 +115,17 @@ class Robot:
         self._read_origins: dict[str, FloatArray] = {}
         self.base_dir = Path(base_dir)
         self.source = source
-        try:
-            # mimic=True: a mimic joint follows its leader, as the URDF says, instead of becoming an axis of its own.
-            self.model: pin.Model = pin.buildModelFromXML(urdf_xml, mimic=True)
-        except Exception as exc:  # Pinocchio raises plain RuntimeError/ValueError
-            raise InputError(f"Pinocchio cannot load this URDF ({exc})", file=source) from None
+        failure: Exception | None = None
+        with urdfdom_errors() as errors:
+            try:
+                # mimic=True: a mimic joint follows its leader, as the URDF says, not an axis of its own.
+                self.model: pin.Model = pin.buildModelFromXML(urdf_xml, mimic=True)
+            except Exception as exc:  # Pinocchio raises plain RuntimeError/ValueError
+                failure = exc
+        if errors:  # urdfdom's own words; an element it could not read is dropped, not a model to use
+            raise InputError(f"Pinocchio cannot load this URDF (urdfdom: {errors[0]})", file=source)
+        if failure is not None:
+            raise InputError(f"Pinocchio cannot load this URDF ({failure})", file=source)
         try:
             self._coordinates = Coordinates(self.model)
         except UnsupportedJoint as exc:  # unreachable from a URDF today; kept so a new Pinocchio type cannot crash
@@ -558,6 +567,50 @@ class Robot:
 
 #: Mesh formats MuJoCo decodes itself.
 _MUJOCO_MESH_SUFFIXES = (".stl", ".obj", ".msh")
+
+
+_STDERR_LOCK = threading.Lock()
+#: Most of urdfdom's messages kept from one parse (bytes): a few lines per error.
+_MAX_URDFDOM_BYTES = 1 << 16
+
+
+@contextlib.contextmanager
+def urdfdom_errors() -> Iterator[list[str]]:
+    """The errors urdfdom (Pinocchio's URDF parser, C++) reports while the block runs, filled in
+    when it ends: ``["Joint [j] is of type REVOLUTE but it does not specify limits", ...]``.
+
+    urdfdom prints them (``Error:   ...`` and an ``at line N in file.cpp`` line) on the process's
+    standard error, ahead of the refusal that names the file; the block's standard error (file
+    descriptor 2) goes to a pipe instead (no file written: a full disk cannot stop a robot from
+    loading), and is restored when the block ends. Any other text written there meanwhile
+    (another thread's) is written back; past the pipe's buffer (64 KiB) text is dropped, never waited on.
+    """
+    errors: list[str] = []
+    with _STDERR_LOCK:
+        with contextlib.suppress(ValueError, OSError):  # a closed or replaced sys.stderr: nothing to flush
+            sys.stderr.flush()
+        read_end, write_end = os.pipe()
+        os.set_blocking(write_end, False)
+        saved = os.dup(2)
+        try:
+            try:
+                os.dup2(write_end, 2)
+            finally:
+                os.close(write_end)
+            yield errors
+        finally:
+            os.dup2(saved, 2)  # the pipe's last writer gone: reading it ends
+            os.close(saved)
+            with os.fdopen(read_end, "rb") as pipe:
+                said = pipe.read(_MAX_URDFDOM_BYTES)
+            others: list[str] = []
+            for line in said.decode("utf-8", "replace").splitlines(keepends=True):
+                if line.startswith("Error:"):
+                    errors.append(line.removeprefix("Error:").strip())
+                elif not line.startswith(("Warning:", "Info:", "Debug:", "         at line ")):
+                    others.append(line)
+            if others:
+                os.write(2, "".join(others).encode())
 
 
 def _mujoco_mesh(path: Path, k: int, source: str) -> tuple[str, bytes]:

@@ -101,6 +101,11 @@ def add_orientation_option(parser: argparse.ArgumentParser | argparse._ArgumentG
     )
 
 
+STREAM_OPTIONS = "--probe-transform and --reference-transform"
+#: What `nwire segment` offers when a recording lacks the pose streams it reads.
+POSES_FIX = f"give --images-only to segment the images without poses, or name the recorded ones with {STREAM_OPTIONS}"
+
+
 def transform_name(text: str) -> str:
     """A PLUS transform name, ``<From>To<To>`` (``ProbeToStepperHome``); a trailing ``Transform``
     (the frame field's name) is taken off."""
@@ -175,11 +180,13 @@ def segment_files(
     probe_transform: str | None = None,
     reference_transform: str | None = None,
     images_only: bool = False,
+    fix: str = POSES_FIX,
 ) -> list[str]:
     """Segment the sequences and write the XML to ``out`` (a staged path); the summary lines to print.
 
     Every input is read and checked before anything is written. The poses are read from the
-    streams :func:`pose_streams` names; a stream that no frame of a sequence has is refused.
+    streams :func:`pose_streams` names; a stream that no frame of a sequence has is refused,
+    ``fix`` (the command's options that help) appended to the refusal.
     """
     from brachycal.cli.common import progress_bar  # lazy: start-up (the command's run only)
     from brachycal.data.formats.metaimage import read_image_sequence  # lazy: start-up (the command's run only)
@@ -190,7 +197,9 @@ def segment_files(
 
     # lazy: start-up (the command's run only)
     from brachycal.data.formats.plus_segmented_xml import write_segmented_frames
-    from brachycal.imaging.nwire_segmentation import segment_sequence  # lazy: start-up (the command's run only)
+
+    # lazy: start-up (the command's run only)
+    from brachycal.imaging.nwire_segmentation import check_pose_fields, segment_sequence
 
     phantom = read_plus_config(config, require_registration=False)
     params = read_segmentation_parameters(config)
@@ -203,6 +212,9 @@ def segment_files(
         )
         if path is not None
     ]
+    if poses is not None:
+        for _, path, sequence in sequences:
+            check_pose_fields(sequence, poses, path, fix=fix)
     results = {}
     lines = []
     for label, path, sequence in sequences:
@@ -311,6 +323,7 @@ def frames_file(args: argparse.Namespace) -> Iterator[str]:
             probe_transform=getattr(args, "probe_transform", None),
             reference_transform=getattr(args, "reference_transform", None),
             images_only=getattr(args, "images_only", False),
+            fix=f"name the recorded ones with {STREAM_OPTIONS}",
         )
         for line in lines:
             print(line)

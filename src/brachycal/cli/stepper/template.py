@@ -4,6 +4,15 @@ from __future__ import annotations
 
 import argparse
 
+from brachycal.cli.option_types import finite_float
+
+# What a stepper and its needles can reach: a brachytherapy needle is 200 mm long, a stepper's
+# strokes are well under 300 mm either way, and its rotation encoder reads less than a turn.
+# A value beyond these is a typo or a unit slip, not a pose.
+DEPTH_MM = finite_float(low=0.0, high=300.0, unit="mm")
+TRANSLATION_MM = finite_float(low=-300.0, high=300.0, unit="mm")
+ROTATION_DEG = finite_float(low=-360.0, high=360.0, unit="deg")
+
 NAME = "stepper-template"
 HELP = "where a needle through a template hole lands in the image (u, v px) at a stepper pose"
 DESCRIPTION = """\
@@ -42,16 +51,32 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--hole", required=True, action="append", metavar="ID", help="template hole ID, e.g. D4")
     parser.add_argument(
-        "--depth", type=float, action="append", metavar="MM", help="insertion depth past the template, mm (default 0)"
+        "--depth",
+        type=DEPTH_MM,
+        action="append",
+        metavar="MM",
+        help=f"insertion depth past the template, {DEPTH_MM.rule} (default 0)",
     )
     parser.add_argument(
-        "--probe-position", type=float, required=True, metavar="MM", help="probe translation encoder reading, mm"
+        "--probe-position",
+        type=TRANSLATION_MM,
+        required=True,
+        metavar="MM",
+        help=f"probe translation encoder reading, {TRANSLATION_MM.rule}",
     )
     parser.add_argument(
-        "--probe-rotation", type=float, default=0.0, metavar="DEG", help="probe rotation encoder reading, degrees"
+        "--probe-rotation",
+        type=ROTATION_DEG,
+        default=0.0,
+        metavar="DEG",
+        help=f"probe rotation encoder reading, {ROTATION_DEG.rule}",
     )
     parser.add_argument(
-        "--template-position", type=float, default=0.0, metavar="MM", help="template translation reading, mm"
+        "--template-position",
+        type=TRANSLATION_MM,
+        default=0.0,
+        metavar="MM",
+        help=f"template translation reading, {TRANSLATION_MM.rule}",
     )
     parser.set_defaults(run=run)
 

@@ -88,7 +88,7 @@ def raw_batches(path: Any, source: str, topic: str, msgtype: str) -> Iterator[tu
         def deserialise(raw: bytes) -> object:
             return reader.deserialize(raw, msgtype)
 
-        info = TopicInfo(source, bool(reader.is2), sum(c.msgcount for c in connections), deserialise)
+        info = TopicInfo(source, bool(reader.is2), _message_count(connections, path, source), deserialise)
         batches = ros1_batches(reader, connections, source)
         if batches is None:
             batches = mcap_batches(reader, connections, source)
@@ -106,6 +106,26 @@ def raw_batches(path: Any, source: str, topic: str, msgtype: str) -> Iterator[tu
             raise InputError(f"not a readable ROS bag ({exc})", file=source) from None
     finally:
         reader.close()
+
+
+def _message_count(connections: list[Any], path: Any, source: str) -> int:
+    """The messages the bag says its connections hold (a ROS 2 bag's ``metadata.yaml`` states it).
+
+    Raises:
+        InputError: a count that is not a whole number >= 0 (``inf``, ``-1``, ``3.5``), naming
+            ``metadata.yaml`` (or the bag).
+    """
+    total = 0
+    for connection in connections:
+        count = connection.msgcount
+        if isinstance(count, bool) or not isinstance(count, int) or count < 0:
+            folder = Path(path)
+            where = folder / "metadata.yaml" if folder.is_dir() else source
+            raise InputError(
+                f"message_count of topic {connection.topic!r} is {count!r}, not a whole number >= 0", file=where
+            )
+        total += count
+    return total
 
 
 def _batched(messages: Iterator[tuple[Any, int, bytes]]) -> Iterator[RawBatch]:

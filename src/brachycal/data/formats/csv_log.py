@@ -20,6 +20,7 @@ import csv
 import io
 import os
 import queue
+import re
 import threading
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
@@ -52,6 +53,10 @@ def _open_binary(path: Path) -> BinaryIO:
     """A joint log, read in blocks (no cap on its size); :func:`open_csv_log` drops a byte-order mark."""
     return open_input(path)  # type: ignore[return-value]
 
+
+#: The blanks a field may have around it (after a ``", "`` separator, before a line end).
+BLANKS = " \t"
+_BLANKS_AROUND = re.compile(rb"[ \t]*([,\n\r])[ \t]*")
 
 #: The refusal of a file whose last line has no line break: a writer cut off mid-line (a full disk, a
 #: killed logger, a truncated copy) leaves ``1.608151017`` as ``1.60``, a number that parses.
@@ -103,10 +108,12 @@ def _scan_rows(
 ) -> tuple[list[int], list[list[str]]]:
     """The row scan: up to ``limit`` records of ``reader`` (a :func:`csv.reader` of ``lines``) and their file rows.
 
-    ``line_offset`` is the number of file lines before the reader's first line. Blank lines are
-    skipped; a row with another number of fields than the header is refused, naming its row (as
-    :data:`TRUNCATED` when it is the file's last line and has no newline: a row cut short), the
-    message saying ``expected`` before the header's count.
+    ``line_offset`` is the number of file lines before the reader's first line. Blanks around a
+    field are dropped (``1.5, 2.5`` as ``numpy.savetxt(..., delimiter=", ")`` and spreadsheets
+    write it, read as pandas and NumPy read it); blank lines are skipped; a row with another
+    number of fields than the header is refused, naming its row (as :data:`TRUNCATED` when it is
+    the file's last line and has no newline: a row cut short), the message saying ``expected``
+    before the header's count.
     """
     rows: list[int] = []
     records: list[list[str]] = []
@@ -120,7 +127,7 @@ def _scan_rows(
                     raise InputError(TRUNCATED, file=path, row=row)
                 raise InputError(f"has {len(fields)} fields, {expected} {len(header)}", file=path, row=row)
             rows.append(row)
-            records.append(fields)
+            records.append([field.strip(BLANKS) for field in fields])
             if limit is not None and len(records) >= limit:
                 break
     except (csv.Error, UnicodeDecodeError) as exc:
@@ -133,7 +140,27 @@ def read_table(path: Path, required: list[str]) -> tuple[list[str], list[int], l
 
     Returns ``(header, rows, records)``; ``rows[i]`` is the file row of ``records[i]`` (header =
     row 1); blank lines are skipped. Checks the header (no duplicates, ``required`` present) and
-    that every row has as many fields as the header.
+    that every row has as many fields as the header. All the fields at once: a reader of a long
+    table goes through :func:`table_blocks` instead.
+    """
+    ((header, rows, records),) = table_blocks(path, required, None)  # one block: all the rows
+    return header, rows, records
+
+
+#: Rows of a table :func:`table_blocks` hands on at a time: their fields as Python strings are a
+#: few tens of MB, whatever the length of the table.
+TABLE_BLOCK_ROWS = 16_384
+
+
+def table_blocks(
+    path: Path, required: list[str], rows_per_block: int | None = TABLE_BLOCK_ROWS
+) -> Iterator[tuple[list[str], list[int], list[list[str]]]]:
+    """:func:`read_table`'s ``(header, rows, records)``, ``rows_per_block`` records at a time (None:
+    all at once); at least one block, empty for a table of a header only.
+
+    Raises:
+        InputError: as :func:`read_table`, when the block holding the problem is reached (a last
+            line without a newline before its block is handed on).
     """
     with _open(path) as handle:
         lines = _Lines(handle)
@@ -143,10 +170,17 @@ def read_table(path: Path, required: list[str]) -> tuple[list[str], list[int], l
         except (csv.Error, UnicodeDecodeError) as exc:
             raise InputError(f"not a readable CSV file ({exc})", file=path) from None
         header = _check_header(path, header, required)
-        rows, records = _scan_rows(path, reader, header, 0, lines=lines)
-        if _unterminated(lines.last):
-            raise InputError(TRUNCATED, file=path, row=reader.line_num)
-    return header, rows, records
+        first = True
+        while True:
+            rows, records = _scan_rows(path, reader, header, 0, limit=rows_per_block, lines=lines)
+            last = rows_per_block is None or len(records) < rows_per_block
+            if last and _unterminated(lines.last):
+                raise InputError(TRUNCATED, file=path, row=reader.line_num)
+            if records or first:
+                yield header, rows, records
+            first = False
+            if last:
+                return
 
 
 def read_bare_table(path: Path, columns: list[str]) -> tuple[list[int], FloatArray]:
@@ -301,8 +335,10 @@ class CsvLog:
         import pyarrow.csv as pa_csv  # lazy: start-up (pyarrow)
 
         wanted = ["time", *self.joints]
-        if b" " in data or b"\t" in data:  # pyarrow takes ' 1' as 1; the row scan refuses it
-            return None
+        if b" " in data or b"\t" in data:  # blanks around fields dropped, as the row scan drops them
+            data = _BLANKS_AROUND.sub(rb"\1", data).lstrip(b" \t")
+            if b" " in data or b"\t" in data:  # a blank inside a field ("1 5"): the row scan names it
+                return None
         try:
             table = pa_csv.read_csv(
                 pa.py_buffer(data),
@@ -433,6 +469,11 @@ def open_csv_log(path: str | os.PathLike[str], robot: Robot) -> CsvLog:
     handle = _open_binary(path)
     try:
         first = handle.readline(MAX_HEADER_BYTES + 1)
+        if b"\r" in first.rstrip(b"\r\n"):  # csv's own words would be "new-line character seen in unquoted field"
+            raise InputError(
+                "its lines end in a carriage return alone (old Mac line ends); save it with LF or CRLF line ends",
+                file=path,
+            )
         if len(first) > MAX_HEADER_BYTES:  # a file without line breaks is not read whole for its header
             raise InputError(f"header line longer than {MAX_HEADER_BYTES >> 10} KiB: not a CSV joint log", file=path)
         try:

@@ -73,7 +73,7 @@ def still_table_kind(path: str | os.PathLike[str]) -> str | None:
     """
     with open_input(path) as handle:
         for raw in iter(lambda: handle.readline(_FIRST_LINE_BYTES), b""):
-            line = raw.decode("utf-8", "replace").removeprefix("\ufeff").strip()
+            line = raw.decode("utf-8", "replace").removeprefix("\ufeff").split("\r")[0].strip()  # CR-only line ends too
             if line:
                 fields = [field.strip().strip('"') for field in line.split(",")]
                 if all_number_texts([field for field in fields if field]):  # a blank field is a bad number
