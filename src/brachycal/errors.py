@@ -10,7 +10,7 @@ with code 2; library users catch the base class, or the kind they can handle:
   the data must change.
 - :class:`SolverError` — a numerical solver did not reach a solution (IK without a solution,
   a QP the solver rejected). Not the input's fault as such; retries catch only this kind.
-- :class:`OutputError` — an output cannot be written (exists without ``--force``, a special file,
+- :class:`OutputError` — an output cannot be written (exists without ``force``, a special file,
   another process is writing it, an OS error).
 
 Warnings use :class:`BrachycalWarning` (and :class:`ConditioningWarning` for estimates that the
@@ -85,12 +85,28 @@ class SolverError(BrachycalError, RuntimeError):
 
 
 class OutputError(BrachycalError, OSError):
-    """An output cannot be written: exists (no ``--force``), special file, busy, or an OS error."""
+    """An output cannot be written: exists (no ``force``), special file, busy, or an OS error.
+
+    A message may name the option that replaces existing outputs by the placeholder :attr:`FORCE`:
+    ``str(error)`` spells it as a Python caller passes it (``force=True``); a caller with its own
+    spelling asks :meth:`spelled` (the command line: ``--force``).
+    """
+
+    #: Placeholder, in a message, of the option that replaces existing outputs.
+    FORCE = "{force}"
+    #: How a Python caller passes that option.
+    PYTHON_FORCE = "force=True"
 
     def __init__(self, message: str, *, file: str | PathLike[str] | None = None) -> None:
         self.file = None if file is None else str(file)
-        super().__init__(f"{self.file}: {message}" if self.file is not None else message)
-        self.problem = message
+        self._template = message
+        super().__init__(self.spelled(self.PYTHON_FORCE))
+        self.problem = _one_line(message.replace(self.FORCE, self.PYTHON_FORCE))
+
+    def spelled(self, force: str) -> str:
+        """The one-line message with the option that replaces outputs written ``force`` (e.g. ``--force``)."""
+        problem = self._template.replace(self.FORCE, force)
+        return _one_line(f"{self.file}: {problem}" if self.file is not None else problem)
 
 
 class BrachycalWarning(UserWarning):
