@@ -42,7 +42,7 @@ def _mm(T) -> str:
 
 
 def test_a_sequential_result_prints_its_tools_their_table_i_and_each_methods_leave_one_out(calibrated):
-    session, result = calibrated
+    _, result = calibrated
     text = assert_summary(
         result,
         names="SequentialResult",

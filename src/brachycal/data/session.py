@@ -130,7 +130,8 @@ class Session:
             [
                 f"Session: {len(self.sample_ids)} image samples, {trials} touches "
                 f"({len(self.touches)} tool and tip pairs), axes moves of {len(self.axes)} tools",
-                f"  images {int(self.size_px[0])} x {int(self.size_px[1])} px, nominal spacing {s_u:.4f} x {s_v:.4f} mm/px",
+                f"  images {int(self.size_px[0])} x {int(self.size_px[1])} px, "
+                f"nominal spacing {s_u:.4f} x {s_v:.4f} mm/px",
                 f"  {len(self.joint_names)} joints (radians); files: {', '.join(self.inputs) or 'none (in memory)'}",
             ]
         )
