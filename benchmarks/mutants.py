@@ -436,6 +436,14 @@ MUTANTS: tuple[Mutant, ...] = (
         ("tests/test_summaries.py::test_a_calibration_prints_its_method_transforms_spacing_and_source",),
         "print(calibration) shows the needle tip as the probe's",
     ),
+    Mutant(
+        "tracker-spec-key-called-column",
+        "data/formats/tracker_table.py",
+        'raise InputError("unknown key", file=source, key=unknown[0])',
+        'raise InputError("unknown key", file=source, column=unknown[0])',
+        ("tests/test_tracker_identification.py::test_column_spec_refusals_name_the_key",),
+        "a column spec's TOML key named a column in its refusal",
+    ),
 )
 
 
