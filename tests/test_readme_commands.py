@@ -484,9 +484,9 @@ def test_the_readme_tour_runs_twice_after_make_demo_in_a_fresh_clone_and_leaves_
     subprocess.run(["git", "clone", "--quiet", str(ROOT), str(clone)], check=True, capture_output=True)
     home.mkdir()
     bin_dir.mkdir()
-    (bin_dir / "brachycal").write_text(f'#!/bin/sh\nexec "{sys.executable}" -m brachycal.cli.main "$@"\n')
-    (bin_dir / "brachycal").chmod(0o755)
-    (bin_dir / "python").symlink_to(sys.executable)
+    for name, run in (("brachycal", "-m brachycal.cli.main "), ("python", "")):  # this Python, as a venv's
+        (bin_dir / name).write_text(f'#!/bin/sh\nexec "{sys.executable}" {run}"$@"\n')
+        (bin_dir / name).chmod(0o755)
     env = {
         **os.environ,
         "HOME": str(home),
