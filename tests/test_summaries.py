@@ -106,3 +106,18 @@ def test_a_calibrated_folder_prints_its_session_and_result_and_nothing_more(robo
     assert text.splitlines()[0] == "SessionResult of a calibrated session folder"
     assert str(folder.session) in text and str(folder.result) in text
     assert len(text.splitlines()) <= 1 + 3 + 6
+
+
+def test_a_twin_and_a_plan_print_a_summary(robot):
+    from brachycal.planning.plan import PlanSpec
+    from brachycal.simulation.twin import TwinConfig
+
+    twin = brachycal.simulate(robot, TwinConfig(seed=3))
+    text = assert_summary(twin, names="Twin (seed 3): a simulated session", says=["0 gross annotation mistakes"])
+    assert str(twin.session) in "\n".join(line.removeprefix("  ") for line in text.splitlines())
+    plan = brachycal.plan_poses(robot, PlanSpec(points_per_axis=2))
+    assert_summary(
+        plan,
+        names=f"Plan: {len(plan.poses)} feasible sample poses, {len(plan.infeasible)} infeasible",
+        says=[f"least clearance {plan.min_clearance_m * 1e3:.1f} mm", "velocity limits"],
+    )
