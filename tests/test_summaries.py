@@ -121,3 +121,13 @@ def test_a_twin_and_a_plan_print_a_summary(robot):
         names=f"Plan: {len(plan.poses)} feasible sample poses, {len(plan.infeasible)} infeasible",
         says=[f"least clearance {plan.min_clearance_m * 1e3:.1f} mm", "velocity limits"],
     )
+
+
+def test_a_chain_result_prints_its_model_and_leave_one_out(calibrated, robot):
+    session, result = calibrated
+    chain = brachycal.calibrate_chain(session, robot, result)
+    assert_summary(
+        chain,
+        names=f"ChainResult: the whole chain, image model {chain.choice.model!r}",
+        says=[f"leave-one-out RMSE {chain.loocv.rmse_mm:.3f} mm over {chain.loocv.n} samples", "Calibration 'chain'"],
+    )
