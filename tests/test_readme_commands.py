@@ -36,6 +36,7 @@ from pathlib import Path
 import pytest
 from conftest import REFERENCE, ROOT, reference
 
+import brachycal
 from brachycal.cli.main import COMMANDS, build_parser, joined_command, main
 from brachycal.model.description_file import example_robot_data_share
 from brachycal.studies.example_files import TOUCH_PLACES, TOUCH_TOOL_FRAME, TRACKER_NAMES
@@ -441,6 +442,10 @@ def test_a_view_that_cannot_start_is_not_taken_for_serving(argv, tmp_path):
 # --- the README's tour, as a newcomer runs it, twice, in a fresh clone -----------------------------
 
 
+#: The tour's result file and the Python example's (another session's): two files.
+PYTHON_AND_TOUR = ("result.json", "exact_result.json")
+
+
 def fenced_blocks(text: str, language: str) -> list[str]:
     """The bodies of the ````` ```language ````` blocks of a Markdown ``text``, as written."""
     return re.findall(rf"^```{language}\n(.*?)^```", text, flags=re.MULTILINE | re.DOTALL)
@@ -507,4 +512,8 @@ def test_the_readme_tour_runs_twice_after_make_demo_in_a_fresh_clone_and_leaves_
     assert status.stdout == "", f"the clone is not clean after the tour:\n{status.stdout}"
     tour = home / "brachycal-tour"
     assert (tour / "result.json").is_file() and (tour / "sda10f_calibrated.urdf").is_file()
+    assert all((tour / name).is_file() for name in PYTHON_AND_TOUR)
+    # The Python example's result is its own (the exact session's), not the tour's, which it leaves be.
+    tour_inputs, python_inputs = (brachycal.read_result(tour / name).raw["inputs"] for name in PYTHON_AND_TOUR)
+    assert tour_inputs != python_inputs
     assert (tour / "exports").is_dir() and (clone / "demo_output" / "result.json").is_file()
