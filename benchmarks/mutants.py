@@ -668,6 +668,48 @@ MUTANTS: tuple[Mutant, ...] = (
         ("tests/test_pivot.py::test_a_long_pose_list_is_read_in_bounded_memory",),
         "a pose list held whole as Python strings (13 times the file)",
     ),
+    Mutant(
+        "output-error-python-words",
+        "errors.py",
+        "super().__init__(self.spelled(self.PYTHON_FORCE))",
+        'super().__init__(self.spelled("--force"))',
+        ("tests/test_files.py::test_never_replaces_without_force",),
+        "an output refused to a Python caller advises the command line's --force",
+    ),
+    Mutant(
+        "output-error-cli-words",
+        "cli/main.py",
+        "print(f\"brachycal: error: {exc.spelled('--force')}\", file=sys.stderr)",
+        'print(f"brachycal: error: {exc}", file=sys.stderr)',
+        ("tests/test_cli.py::test_fk_refuses_to_overwrite_without_force",),
+        "an output refused on the command line advises Python's force=True",
+    ),
+    Mutant(
+        "summary-table-i-figure",
+        "calibration/sequential/method.py",
+        'f"MAE {tool.validation.mae_mm:.2f} mm over {tool.validation.n} trials"',
+        'f"MAE {tool.validation.rmse_mm:.2f} mm over {tool.validation.n} trials"',
+        (
+            "tests/test_summaries.py::test_a_sequential_result_prints_its_tools_their_table_i_and_each_methods_leave_one_out",
+        ),
+        "print(result) shows Table I's RMSE as its MAE",
+    ),
+    Mutant(
+        "summary-probe-tip",
+        "calibration/result.py",
+        'f"  T_EL_Ptip  probe_tip at {point_mm(self.T_EL_Ptip)} in the probe flange",',
+        'f"  T_EL_Ptip  probe_tip at {point_mm(self.T_ER_Ntip)} in the probe flange",',
+        ("tests/test_summaries.py::test_a_calibration_prints_its_method_transforms_spacing_and_source",),
+        "print(calibration) shows the needle tip as the probe's",
+    ),
+    Mutant(
+        "tracker-spec-key-called-column",
+        "data/formats/tracker_table.py",
+        'raise InputError("unknown key", file=source, key=unknown[0])',
+        'raise InputError("unknown key", file=source, column=unknown[0])',
+        ("tests/test_tracker_identification.py::test_column_spec_refusals_name_the_key",),
+        "a column spec's TOML key named a column in its refusal",
+    ),
 )
 
 

@@ -53,7 +53,8 @@ def test_fk_refuses_to_overwrite_without_force(tmp_path, capsys):
     out = tmp_path / "p.csv"
     out.write_text("keep me")
     assert main(["fk", str(EXAMPLE), "--frames", "needle_tip", "--out", str(out)]) == 2
-    assert "already exists; pass --force" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "already exists; pass --force" in err and "force=True" not in err  # the command line's words
     assert out.read_text() == "keep me"
     assert main(["fk", str(EXAMPLE), "--frames", "needle_tip", "--out", str(out), "--force", "--quiet"]) == 0
     assert out.read_text().startswith("time,frame")
@@ -140,7 +141,7 @@ def test_output_into_a_closed_pipe_ends_quietly(tmp_path, robot):
     joints.write_text(",".join(robot.joint_names) + "\n" + ("0," * 14 + "0\n") * 20000)
     command = f"'{CONSOLE}' locate '{result_file}' '{joints}' --uv 1,2 | head -1"
     result = subprocess.run(command, shell=True, capture_output=True, text=True, check=False)
-    assert result.stdout == "row,x_m,y_m,z_m\n"
+    assert result.stdout == "line,x_m,y_m,z_m\n"
     # Only the line naming the calibration used: no traceback, no broken-pipe message.
     assert len(result.stderr.splitlines()) == 1 and result.stderr.startswith("brachycal locate: method ")
 

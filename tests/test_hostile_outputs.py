@@ -264,37 +264,37 @@ CASES = [
     Case(
         "fk-out-is-its-log-even-with-force",
         ["fk", "{tmp}/log.csv", "--frames", "needle_tip", "--out", "{tmp}/log.csv", "--force", "--quiet"],
-        ("log.csv", "one of this command's inputs", "--force"),
+        ("log.csv", "one of the inputs", "--force"),
         copies({"log.csv": LOG}),
     ),
     Case(
         "fk-out-is-its-log-through-a-symlink",
         ["fk", "{tmp}/link.csv", "--frames", "needle_tip", "--out", "{tmp}/log.csv", "--force", "--quiet"],
-        ("log.csv", "one of this command's inputs", "link.csv"),
+        ("log.csv", "one of the inputs", "link.csv"),
         copies({"log.csv": LOG}, links={"link.csv": "log.csv"}),
     ),
     Case(
         "fk-out-is-its-times-file",
         ["fk", "{log}", "--frames", "needle_tip", "--times", "{tmp}/t.csv", "--out", "{tmp}/t.csv", "--force"],
-        ("t.csv", "one of this command's inputs"),
+        ("t.csv", "one of the inputs"),
         copies({"t.csv": LOG}),
     ),
     Case(
         "calibrate-out-is-its-samples-even-with-force",
         ["calibrate", "{tmp}/s", "--out", "{tmp}/s/samples.csv", "--force", "--quiet"],
-        ("samples.csv", "one of this command's inputs"),
+        ("samples.csv", "one of the inputs"),
         copies({"s": SESSION}),
     ),
     Case(
         "calibrate-report-is-a-hard-link-to-its-touches",
         ["calibrate", "{tmp}/s", "--out", "{tmp}/r.json", "--report", "{tmp}/s", "--force", "--quiet"],
-        ("report.html", "one of this command's inputs", "touches.csv"),
+        ("report.html", "one of the inputs", "touches.csv"),
         copies({"s": SESSION}, hard_links={"s/report.html": "s/touches.csv"}),
     ),
     Case(
         "plan-out-is-its-result-refused-before-planning",
         ["plan", "--result", "{tmp}/r.json", "--out", "{tmp}/r.json", "--force", "--quiet"],
-        ("r.json", "one of this command's inputs"),
+        ("r.json", "one of the inputs"),
         lambda tmp: (tmp / "r.json").write_text("{}\n"),  # never read: refused when claimed
     ),
     Case(
@@ -313,14 +313,14 @@ CASES = [
             "{tmp}/s",
             "--force",
         ],
-        ("session.toml", "one of this command's inputs"),
+        ("session.toml", "one of the inputs"),
         copies({"s": SESSION}),
     ),
     # the command reads the input after claiming its outputs: refused when the set is committed
     Case(
         "pivot-out-is-its-poses",
         ["pivot", "{tmp}/p.csv", "--out", "{tmp}/p.csv", "--force"],
-        ("p.csv", "one of this command's inputs"),
+        ("p.csv", "one of the inputs"),
         copies({"p.csv": ROOT / "examples" / "pivot" / "pointer_pivot.csv"}),
     ),
 ]

@@ -372,7 +372,7 @@ def test_locate_accepts_the_edges_of_the_image(result):
     # The bounds refused above are the image's own: its last pixel's far half is still inside.
     outcome = run_cli([*[str(a).format(result=result) for a in LOCATE], "--uv", "1079.5,719.5"])
     assert outcome.code == 0, outcome.err
-    assert outcome.out.splitlines()[0] == "row,x_m,y_m,z_m"
+    assert outcome.out.splitlines()[0] == "line,x_m,y_m,z_m"
 
 
 def edited_result(result: Path, edit) -> Case:

@@ -21,8 +21,10 @@ from __future__ import annotations
 
 import argparse
 import io
+import os
 import re
 import shlex
+import shutil
 import signal
 import subprocess
 import sys
@@ -34,6 +36,7 @@ from pathlib import Path
 import pytest
 from conftest import REFERENCE, ROOT, reference
 
+import brachycal
 from brachycal.cli.main import COMMANDS, build_parser, joined_command, main
 from brachycal.model.description_file import example_robot_data_share
 from brachycal.studies.example_files import TOUCH_PLACES, TOUCH_TOOL_FRAME, TRACKER_NAMES
@@ -140,6 +143,10 @@ def _not_run(argv: list[str]) -> str | None:
     return next((why for words, why in NOT_RUN.items() if argv[0] == words[0] and set(words) <= set(argv)), None)
 
 
+def _unforced(argv: list[str]) -> list[str]:
+    return [word for word in argv if word != "--force"]
+
+
 def _run(argv: list[str]) -> tuple[int, str]:
     out, err = io.StringIO(), io.StringIO()
     with redirect_stdout(out), redirect_stderr(err):
@@ -176,7 +183,9 @@ def test_every_documented_command_runs_as_written(tmp_path, monkeypatch):
     ran: list[list[str]] = []
     failures: list[str] = []
     for source, argv in commands:
-        if argv in ran or _not_run(argv):
+        # The README's tour passes --force (so that it can run again); the same command without it
+        # later is the same command, its outputs already there.
+        if _unforced(argv) in map(_unforced, ran) or _not_run(argv):
             continue
         ran.append(argv)
         if argv[0] == "view":  # serves until stopped: started in a process of its own and stopped
@@ -428,3 +437,83 @@ def test_a_view_that_cannot_start_is_not_taken_for_serving(argv, tmp_path):
     """The check above can fail: a view that refuses does not print an address."""
     with pytest.raises(AssertionError):
         _serves(argv, tmp_path)
+
+
+# --- the README's tour, as a newcomer runs it, twice, in a fresh clone -----------------------------
+
+
+#: The tour's result file and the Python example's (another session's): two files.
+PYTHON_AND_TOUR = ("result.json", "exact_result.json")
+
+
+def fenced_blocks(text: str, language: str) -> list[str]:
+    """The bodies of the ````` ```language ````` blocks of a Markdown ``text``, as written."""
+    return re.findall(rf"^```{language}\n(.*?)^```", text, flags=re.MULTILINE | re.DOTALL)
+
+
+def tour_blocks(readme: Path) -> tuple[str, str]:
+    """The ```sh and the ```python block of the README's tour section (its ``## `` heading with
+    "tour" to the next ``## ``): what a newcomer types, in the shell and in Python."""
+    sections = re.split(r"^## ", readme.read_text(), flags=re.MULTILINE)
+    tour = next(section for section in sections if section.split("\n", 1)[0].lower().count("tour"))
+    (shell,), (python,) = fenced_blocks(tour, "sh"), fenced_blocks(tour, "python")
+    return shell, python
+
+
+def make_demo_command(makefile: Path) -> list[str]:
+    """The ``brachycal`` command of ``make demo``'s recipe (its first line; ``$(BIN)/`` dropped)."""
+    recipe = re.search(r"^demo:.*\n\t\$\(BIN\)/brachycal (.*)$", makefile.read_text(), flags=re.MULTILINE)
+    assert recipe, "make demo does not run $(BIN)/brachycal first"
+    return shlex.split(recipe.group(1), comments=True)
+
+
+def test_the_tour_is_found_in_the_readme():
+    """The parser finds the tour as the README shows it (a broken parser must not pass by finding nothing)."""
+    shell, python = tour_blocks(ROOT / "README.md")
+    assert shell.splitlines()[0].startswith("mkdir -p ~/") and "brachycal session build" in shell
+    assert "brachycal.write_result(" in python and "force=True" in python
+    assert make_demo_command(ROOT / "Makefile")[0] == "demo"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(shutil.which("git") is None or not (ROOT / ".git").exists(), reason="needs git and a clone")
+def test_the_readme_tour_runs_twice_after_make_demo_in_a_fresh_clone_and_leaves_it_clean(tmp_path):
+    """A fresh clone of HEAD: ``make demo``'s command in its root, then the README's tour (its ```sh
+    block, through bash, ``brachycal`` on PATH) and its Python example, twice in a row, then ``make
+    demo`` again; each exits 0 and the clone holds nothing git does not ignore afterwards.
+
+    brachycal is the installed one with the clone's ``src`` first on ``PYTHONPATH`` (no new venv);
+    ``HOME`` is a folder of the test's, so the tour's ``~/…`` folder is too.
+    """
+    clone, home, bin_dir = tmp_path / "clone", tmp_path / "home", tmp_path / "bin"
+    subprocess.run(["git", "clone", "--quiet", str(ROOT), str(clone)], check=True, capture_output=True)
+    home.mkdir()
+    bin_dir.mkdir()
+    for name, run in (("brachycal", "-m brachycal.cli.main "), ("python", "")):  # this Python, as a venv's
+        (bin_dir / name).write_text(f'#!/bin/sh\nexec "{sys.executable}" {run}"$@"\n')
+        (bin_dir / name).chmod(0o755)
+    env = {
+        **os.environ,
+        "HOME": str(home),
+        "PATH": f"{bin_dir}{os.pathsep}{os.environ.get('PATH', '')}",
+        "PYTHONPATH": str(clone / "src"),
+    }
+    shell, python = tour_blocks(clone / "README.md")
+    # The Python example runs where the tour's commands left the shell (its folder).
+    walk = f"set -e\n{shell}\npython - <<'BRACHYCAL_PYTHON'\n{python}BRACHYCAL_PYTHON\n"
+    demo = ["brachycal", *make_demo_command(clone / "Makefile")]
+    for step, command in [("make demo", demo), ("tour", ["bash", "-c", walk]), ("tour again", ["bash", "-c", walk])]:
+        done = subprocess.run(command, cwd=clone, env=env, capture_output=True, text=True, check=False)
+        assert done.returncode == 0, f"{step}: exit {done.returncode}\n{done.stderr[-3000:]}"
+        assert "Traceback" not in done.stderr, f"{step}:\n{done.stderr[-3000:]}"
+    # make demo after the tour, too: neither collides with the other.
+    assert subprocess.run(demo, cwd=clone, env=env, capture_output=True, check=False).returncode == 0
+    status = subprocess.run(["git", "status", "--porcelain"], cwd=clone, capture_output=True, text=True, check=True)
+    assert status.stdout == "", f"the clone is not clean after the tour:\n{status.stdout}"
+    tour = home / "brachycal-tour"
+    assert (tour / "result.json").is_file() and (tour / "sda10f_calibrated.urdf").is_file()
+    assert all((tour / name).is_file() for name in PYTHON_AND_TOUR)
+    # The Python example's result is its own (the exact session's), not the tour's, which it leaves be.
+    tour_inputs, python_inputs = (brachycal.read_result(tour / name).raw["inputs"] for name in PYTHON_AND_TOUR)
+    assert tour_inputs != python_inputs
+    assert (tour / "exports").is_dir() and (clone / "demo_output" / "result.json").is_file()

@@ -65,7 +65,7 @@ def test_pivot_file_round_trip(tmp_path):
 def test_pivot_reader_refuses_other_files(tmp_path):
     wrong = tmp_path / "wrong.json"
     wrong.write_text(json.dumps({"format": "brachycal-result/1"}))
-    with pytest.raises(InputError, match=r"wrong\.json, column 'format': format is 'brachycal-result/1'"):
+    with pytest.raises(InputError, match=r"wrong\.json, key 'format': format is 'brachycal-result/1'"):
         read_pivot(wrong)
     poses = tmp_path / "poses.csv"
     pose_list(poses)

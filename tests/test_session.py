@@ -199,9 +199,14 @@ def test_locate_cli(session_dir, tmp_path, capsys, robot, truth, exact):
     assert main(["locate", str(out), str(joints), "--uv", "540,300", "--method", "scaled_uv"]) == 0
     printed = capsys.readouterr()
     lines = printed.out.splitlines()
-    assert lines[0] == "row,x_m,y_m,z_m" and len(lines) == 3
+    assert lines[0] == "line,x_m,y_m,z_m" and len(lines) == 3
+    # Each point names its configuration's line in the file (the header is line 1): q[1] is line 3.
+    assert [line.split(",")[0] for line in lines[1:]] == ["2", "3"]
     # Method, frame and unit in one stderr line (stdout stays a plain CSV with the unit in its columns).
-    assert printed.err == f"brachycal locate: method scaled_uv (--method); frame base_link; unit m; result {out}\n"
+    assert printed.err == (
+        f"brachycal locate: method scaled_uv (--method); frame base_link; unit m; result {out}; "
+        f"line: of {joints} (its header is line 1)\n"
+    )
     assert main(["locate", str(out), str(joints), "--uv", "540,300"]) == 0
     assert capsys.readouterr().err.startswith(f"brachycal locate: method {best} (the result's best: ")
     p = np.array([float(x) for x in lines[2].split(",")[1:]])

@@ -436,6 +436,7 @@ def test_reader_refuses_in_one_line_naming_the_field(tmp_path, case, rows, heade
     ("text", "expect"),
     [
         ('format = "other"\n', "format"),
+        (SPEC_HEAD + 'jionts = ["a"]\n', "jionts"),
         ('format = "brachycal-tracker-columns/1"\njoints = ["a"]\n', "position"),
         (
             SPEC_HEAD + POSITION + 'unit = "cm"\n',
@@ -450,8 +451,10 @@ def test_reader_refuses_in_one_line_naming_the_field(tmp_path, case, rows, heade
 def test_column_spec_refusals_name_the_key(tmp_path, text, expect):
     path = tmp_path / "c.toml"
     path.write_text(text)
-    with pytest.raises(InputError, match=expect.replace(".", r"\.")):
+    with pytest.raises(InputError, match=expect.replace(".", r"\.")) as refused:
         read_tracker_columns(path)
+    # A TOML key is called a key, not a column (the table's columns are what the spec names).
+    assert f"key '{expect.split('.')[0]}" in str(refused.value) and "column '" not in str(refused.value)
 
 
 def test_table_placed_on_a_robot_refuses_a_joint_it_lacks_or_beyond_limits(panda, tmp_path):

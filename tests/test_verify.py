@@ -151,6 +151,9 @@ def test_an_unchanged_set_up_passes(calibrated):
     assert outcome.dof == 3 * (DEFAULT_CHECK_POSES + DEFAULT_TOUCH_COUNT)
     assert outcome.statistic <= outcome.threshold
     assert outcome.false_alarm == DEFAULT_FALSE_ALARM
+    # print(outcome): the verdict and its test in one line, not the residual arrays.
+    assert str(outcome).startswith(f"CheckOutcome PASS ({outcome.method!r}): chi-square {outcome.statistic:.1f} on ")
+    assert "\n" not in str(outcome) and "part that moved" not in str(outcome)
 
 
 @pytest.mark.parametrize(
@@ -166,6 +169,7 @@ def test_each_kind_of_change_is_detected_and_named(calibrated, change, part):
     _, outcome = check(calibrated, change)
     assert outcome.verdict == "RECALIBRATE"
     assert outcome.part is not None and outcome.part.part == part
+    assert str(outcome).startswith("CheckOutcome RECALIBRATE") and f"the part that moved: {part};" in str(outcome)
     # Naming it means its fit leaves noise: the remaining chi-square is plausible at the test's level.
     assert outcome.part.p_remaining > outcome.false_alarm
 

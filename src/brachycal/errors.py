@@ -4,13 +4,14 @@ Every failure is a :class:`BrachycalError` whose message is one line. The CLI pr
 with code 2; library users catch the base class, or the kind they can handle:
 
 - :class:`InputError` — bad input: a file, a row, a value or an option. The message names the place
-  (file, row, column) and the problem. Also a ``ValueError``, so ``except ValueError`` keeps working.
+  (file, row, column, or a settings file's key) and the problem. Also a ``ValueError``, so
+  ``except ValueError`` keeps working.
 - :class:`DegenerateDataError` — the input is well formed but cannot determine what is asked
   (all touches at one pose, samples without spread, rotations about one axis). An ``InputError``:
   the data must change.
 - :class:`SolverError` — a numerical solver did not reach a solution (IK without a solution,
   a QP the solver rejected). Not the input's fault as such; retries catch only this kind.
-- :class:`OutputError` — an output cannot be written (exists without ``--force``, a special file,
+- :class:`OutputError` — an output cannot be written (exists without ``force``, a special file,
   another process is writing it, an OS error).
 
 Warnings use :class:`BrachycalWarning` (and :class:`ConditioningWarning` for estimates that the
@@ -48,7 +49,8 @@ class InputError(BrachycalError, ValueError):
     """Bad input: one line naming the place (file, row, column) and the problem.
 
     ``row`` counts lines of a text file from 1 with the header as row 1 (what a spreadsheet
-    shows); for other sources ``row_label`` says what is counted (e.g. ``"message"``).
+    shows); for other sources ``row_label`` says what is counted (e.g. ``"message"``). ``key``
+    names a value of a settings file (TOML, JSON) by its dotted path, ``"image.sector.apex_px"``.
     """
 
     def __init__(
@@ -59,11 +61,13 @@ class InputError(BrachycalError, ValueError):
         row: int | None = None,
         column: str | None = None,
         row_label: str = "row",
+        key: str | None = None,
     ) -> None:
         self.file = None if file is None else str(file)
         self.row = row
         self.row_label = row_label
         self.column = column
+        self.key = key
         where = []
         if self.file is not None:
             where.append(self.file)
@@ -71,6 +75,8 @@ class InputError(BrachycalError, ValueError):
             where.append(f"{row_label} {row}")
         if column is not None:
             where.append(f"column {column!r}")
+        if key is not None:
+            where.append(f"key {key!r}")
         text = ": ".join([", ".join(where), message]) if where else message
         super().__init__(text)
         self.problem = message
@@ -85,12 +91,28 @@ class SolverError(BrachycalError, RuntimeError):
 
 
 class OutputError(BrachycalError, OSError):
-    """An output cannot be written: exists (no ``--force``), special file, busy, or an OS error."""
+    """An output cannot be written: exists (no ``force``), special file, busy, or an OS error.
+
+    A message may name the option that replaces existing outputs by the placeholder :attr:`FORCE`:
+    ``str(error)`` spells it as a Python caller passes it (``force=True``); a caller with its own
+    spelling asks :meth:`spelled` (the command line: ``--force``).
+    """
+
+    #: Placeholder, in a message, of the option that replaces existing outputs.
+    FORCE = "{force}"
+    #: How a Python caller passes that option.
+    PYTHON_FORCE = "force=True"
 
     def __init__(self, message: str, *, file: str | PathLike[str] | None = None) -> None:
         self.file = None if file is None else str(file)
-        super().__init__(f"{self.file}: {message}" if self.file is not None else message)
-        self.problem = message
+        self._template = message
+        super().__init__(self.spelled(self.PYTHON_FORCE))
+        self.problem = _one_line(message.replace(self.FORCE, self.PYTHON_FORCE))
+
+    def spelled(self, force: str) -> str:
+        """The one-line message with the option that replaces outputs written ``force`` (e.g. ``--force``)."""
+        problem = self._template.replace(self.FORCE, force)
+        return _one_line(f"{self.file}: {problem}" if self.file is not None else problem)
 
 
 class BrachycalWarning(UserWarning):

@@ -142,7 +142,7 @@ class OutputSet:
             _remove_stale_staging(destination)
         # Checked with the lock held: a brachycal writer that committed just before us is seen.
         if os.path.lexists(destination) and not self.force:
-            raise OutputError("already exists; pass --force to replace it", file=destination)
+            raise OutputError(f"already exists; pass {OutputError.FORCE} to replace it", file=destination)
         _STAGED[str(claim.staging)] = destination
         return claim.staging
 
@@ -271,7 +271,8 @@ class OutputSet:
                 return None
             if not self.force:
                 raise OutputError(
-                    "already exists (made while this command ran); pass --force to replace it", file=destination
+                    f"already exists (made while it was being written); pass {OutputError.FORCE} to replace it",
+                    file=destination,
                 )
             old = destination.with_name(f".{destination.name}{STAGE_MARK}{self._token}-old")
             _keep_old(destination, old)
@@ -385,7 +386,9 @@ def _refuse_special(destination: Path) -> None:
     if stat.S_ISREG(mode):
         return
     kind = file_kind(mode)
-    raise OutputError(f"is {kind}; an output must be a regular file (refused even with --force)", file=destination)
+    raise OutputError(
+        f"is {kind}; an output must be a regular file (refused even with {OutputError.FORCE})", file=destination
+    )
 
 
 def _declared(inputs: Sequence[str | os.PathLike[str] | None]) -> dict[tuple[int, int], list[str]]:
@@ -418,7 +421,7 @@ def _refuse_input(destination: Path, declared: Mapping[tuple[int, int], list[str
         return
     same = "" if os.path.abspath(source) == os.path.abspath(destination) else f" ({source})"
     raise OutputError(
-        f"is one of this command's inputs{same}; an output never replaces an input (refused even with --force)",
+        f"is one of the inputs{same}; an output never replaces an input (refused even with {OutputError.FORCE})",
         file=destination,
     )
 
@@ -560,7 +563,8 @@ def _link_new(staging: Path, destination: Path, force: bool) -> None:
     except FileExistsError:
         if not force:
             raise OutputError(
-                "already exists (made while this command ran); pass --force to replace it", file=destination
+                f"already exists (made while it was being written); pass {OutputError.FORCE} to replace it",
+                file=destination,
             ) from None
         os.replace(staging, destination)
         return

@@ -64,7 +64,7 @@ class PredictedUncertainty:
         }
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class ImageCalibration:
     """``T_Ptip_I (4, 4)`` (rigid) and the pixel spacing ``(s_u, s_v)`` in metres it goes with.
 
@@ -76,6 +76,9 @@ class ImageCalibration:
     T_Ptip_I: FloatArray
     spacing_m: FloatArray
     uncertainty: PredictedUncertainty | None = None
+
+    def __repr__(self) -> str:
+        return f"ImageCalibration {self.method!r}: T_Ptip_I, {image_summary(self)}"
 
     def image_points(self, uv_px: ArrayLike) -> FloatArray:
         """``p_I (N, 3)``: pixels ``(N, 2)`` as points of the image frame, metres."""
@@ -92,6 +95,18 @@ def calibrated_robot(robot: Robot, T_ER_Ntip: ArrayLike, T_EL_Ptip: ArrayLike, i
     on the probe tip (metres)."""
     out = robot.with_tool_transform(NEEDLE_TIP, T_ER_Ntip).with_tool_transform(PROBE_TIP, T_EL_Ptip)
     return out.with_tool_transform(US_IMAGE, image.T_Ptip_I)
+
+
+def point_mm(T: ArrayLike) -> str:
+    """The translation of a ``(4, 4)`` transform (metres) as ``(x, y, z) mm`` for a summary."""
+    x, y, z = np.asarray(T, dtype=float)[:3, 3] * 1e3
+    return f"({x:.2f}, {y:.2f}, {z:.2f}) mm"
+
+
+def image_summary(image: ImageCalibration) -> str:
+    """One line: the image frame in the probe tip (origin, mm) and the spacing (mm/px)."""
+    s_u, s_v = np.asarray(image.spacing_m, dtype=float) * 1e3
+    return f"image origin (pixel 0, 0) at {point_mm(image.T_Ptip_I)} in probe_tip, spacing {s_u:.4f} x {s_v:.4f} mm/px"
 
 
 def _frozen(mapping: Mapping | None) -> Mapping:
@@ -124,7 +139,7 @@ class Provenance:
         object.__setattr__(self, "inputs", _frozen(self.inputs))
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class Calibration:
     """One calibration of the rig, what every consumer takes (locate, plan, export, verify, view, targeting).
 
@@ -157,6 +172,22 @@ class Calibration:
         object.__setattr__(self, "joint_offsets_rad", _frozen({k: float(v) for k, v in self.joint_offsets_rad.items()}))
         origins = {k: (_matrix(a), _matrix(b)) for k, (a, b) in self.joint_origins.items()}
         object.__setattr__(self, "joint_origins", _frozen(origins))
+
+    def __repr__(self) -> str:
+        """A few lines: the method, each transform's origin in its parent frame (mm), the robot
+        corrections and where it came from (the arrays themselves: the attributes)."""
+        size = "" if self.image_size_px is None else f", images {self.image_size_px[0]} x {self.image_size_px[1]} px"
+        corrected = len(set(self.joint_offsets_rad) | set(self.joint_origins))
+        source = self.provenance.source or "computed in this process"
+        return "\n".join(
+            [
+                f"Calibration {self.method!r} (transforms T_parent_child in metres; shown in mm){size}",
+                f"  T_ER_Ntip  needle_tip at {point_mm(self.T_ER_Ntip)} in the needle flange",
+                f"  T_EL_Ptip  probe_tip at {point_mm(self.T_EL_Ptip)} in the probe flange",
+                f"  T_Ptip_I   {image_summary(self.image)}",
+                f"  robot corrections: {corrected} joint(s); source: {source}",
+            ]
+        )
 
     @property
     def method(self) -> str:

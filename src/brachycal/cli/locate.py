@@ -15,8 +15,9 @@ Computes p_R = T_R_EL(q) @ T_EL_Ptip @ T_Ptip_I @ (u*s_u, v*s_v, 0): the point o
 base frame that pixel (u, v) shows, with the robot at configuration q (EL: the probe arm's flange).
 RESULT is a calibration result file (brachycal calibrate); JOINTS is a CSV file whose header names
 the robot's joints (radians; the SDA10F's 15), one configuration per row (a joint log works; its
-time column is ignored). Prints the header row,x_m,y_m,z_m, then one line per row: the point in
-the robot's base frame, metres; one line on stderr names the method, the frame and the unit.
+time column is ignored). Prints the header line,x_m,y_m,z_m, then one line per configuration: its
+line in JOINTS (the header is line 1, as a text editor counts) and the point in the robot's base
+frame, metres; one line on stderr names the method, the frame and the unit.
 --method defaults to the best image calibration in the result: the whole chain's if present
 (chain+robot, then chain), else the registration with the lowest leave-one-out RMSE (ties in
 Table II's order), as for export.
@@ -59,13 +60,14 @@ def run(args: argparse.Namespace) -> int:
     # Streamed: one block of rows read, located and printed at a time (a joint log may be long).
     # The header is printed with the first block, so a file refused at once prints nothing. The
     # unit is in the column names (a plain CSV header); the method and frame on stderr, one line.
-    header = "row,x_m,y_m,z_m\n"
+    header = "line,x_m,y_m,z_m\n"  # line: of JOINTS, as an editor counts (the header is line 1)
     for rows, Q in configuration_blocks(args.joints, robot):
         P = locate(robot, Q, uv, calibration)
         if header:
             said = method_said(stored, args.method)
             print(
-                f"brachycal locate: method {said}; frame {robot.rig.base}; unit m; result {args.result}",
+                f"brachycal locate: method {said}; frame {robot.rig.base}; unit m; result {args.result}; "
+                f"line: of {args.joints} (its header is line 1)",
                 file=sys.stderr,
             )
         sys.stdout.write(

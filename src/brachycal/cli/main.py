@@ -48,7 +48,7 @@ from brachycal.cli.stepper import calibrate as stepper
 from brachycal.cli.stepper import export as stepper_export
 from brachycal.cli.stepper import image as stepper_image
 from brachycal.cli.stepper import template as stepper_template
-from brachycal.errors import BrachycalError
+from brachycal.errors import BrachycalError, OutputError
 
 DESCRIPTION = """\
 brachycal calibrates an ultrasound-guided dual-arm robot (Yaskawa SDA10F) for prostate
@@ -253,6 +253,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         with _command_environment():
             return int(args.run(args) or 0)
+    except OutputError as exc:  # its advice in the command line's words
+        print(f"brachycal: error: {exc.spelled('--force')}", file=sys.stderr)
+        return 2
     except BrachycalError as exc:
         print(f"brachycal: error: {exc}", file=sys.stderr)
         return 2

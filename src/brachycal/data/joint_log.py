@@ -52,7 +52,7 @@ def limit_tolerance(robot: Robot) -> FloatArray:
 MIMIC_TOLERANCE = 1e-3
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class JointLog:
     """Configurations of a robot over time.
 
@@ -74,6 +74,13 @@ class JointLog:
 
     def __len__(self) -> int:
         return int(self.time.shape[0])
+
+    def __repr__(self) -> str:
+        span = f", {self.time[0]:g} to {self.time[-1]:g} s" if len(self) else ""
+        return (
+            f"JointLog of {self.source or 'no file'}: {len(self)} configurations{span}, "
+            f"{len(self.joint_names)} joints (radians)"
+        )
 
     def interpolate(self, times: ArrayLike) -> FloatArray:
         """``(M, nq)`` configurations at ``times`` ``(M,)`` by linear interpolation per joint.

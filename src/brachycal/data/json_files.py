@@ -167,5 +167,5 @@ def read_format_json(path: str | os.PathLike[str], expected_format: str) -> dict
     raw = read_json(path)
     if not isinstance(raw, dict) or raw.get("format") != expected_format:
         found = raw.get("format") if isinstance(raw, dict) else None
-        raise InputError(f"format is {shown(found)}, expected {expected_format!r}", file=path, column="format")
+        raise InputError(f"format is {shown(found)}, expected {expected_format!r}", file=path, key="format")
     return raw

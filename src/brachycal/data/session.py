@@ -92,7 +92,7 @@ class ImageSector:
         return np.minimum(self.depth_m - r, r * np.sin(half - phi))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class Session:
     """A validated calibration session, SI units.
 
@@ -121,6 +121,20 @@ class Session:
     joint_names: tuple[str, ...]
     inputs: dict[str, str] = field(default_factory=dict)
     sector: ImageSector | None = None
+
+    def __repr__(self) -> str:
+        """A few lines: what it holds, its image and its joints (the arrays themselves: the attributes)."""
+        s_u, s_v = np.asarray(self.spacing_m) * 1e3
+        trials = sum(len(t.q) for t in self.touches.values())
+        return "\n".join(
+            [
+                f"Session: {len(self.sample_ids)} image samples, {trials} touches "
+                f"({len(self.touches)} tool and tip pairs), axes moves of {len(self.axes)} tools",
+                f"  images {int(self.size_px[0])} x {int(self.size_px[1])} px, "
+                f"nominal spacing {s_u:.4f} x {s_v:.4f} mm/px",
+                f"  {len(self.joint_names)} joints (radians); files: {', '.join(self.inputs) or 'none (in memory)'}",
+            ]
+        )
 
 
 #: Largest trial number of a touch: a tip touched ten thousand times is a typo (and a trial near

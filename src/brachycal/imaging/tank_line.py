@@ -170,7 +170,7 @@ def find_tank_line(
     if frames.ndim != 3 or frames.shape[0] == 0:
         raise InputError(f"expected (N, H, W) frames, got shape {frames.shape}")
     if scanlines < min_points or min_points < 2:
-        raise InputError(f"need at least {max(min_points, 2)} scanlines, got {scanlines}", column="--scanlines")
+        raise InputError(f"scanlines={scanlines}: need at least {max(min_points, 2)} scanlines per frame")
     u0, v0, w, h = _clip(frames.shape[1:], clip_origin, clip_size)
     columns = np.round(u0 + np.linspace(0, w - 1, scanlines)).astype(int)
     u_mid, v_centre = u0 + 0.5 * (w - 1), v0 + 0.5 * (h - 1)

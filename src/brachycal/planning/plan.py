@@ -51,7 +51,7 @@ class Infeasible:
     detail: str
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class Plan:
     """Feasible poses in visiting order, the infeasible points with reasons, and timings.
 
@@ -75,6 +75,14 @@ class Plan:
     @property
     def min_clearance_m(self) -> float:
         return min((p.check.clearance_m for p in self.poses), default=float("nan"))
+
+    def __repr__(self) -> str:
+        motion = self.motion_time_s.get("optimised", float("nan"))
+        return (
+            f"Plan: {len(self.poses)} feasible sample poses, {len(self.infeasible)} infeasible; "
+            f"optimised motion {motion:.0f} s at {self.speed_scale:g} of the velocity limits; "
+            f"least clearance {self.min_clearance_m * 1e3:.1f} mm"
+        )
 
 
 def grid_points(spec: PlanSpec) -> list[GridPoint]:

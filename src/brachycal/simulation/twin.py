@@ -177,7 +177,7 @@ class TwinConfig:
         return self.sound_speed_m_s / SCANNER_SOUND_SPEED_M_S if self.sound_speed else 1.0
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class Twin:
     """A simulated session and everything needed to judge a calibration of it.
 
@@ -200,6 +200,16 @@ class Twin:
     true_samples_q: FloatArray
     out_of_plane_m: FloatArray
     outlier: np.ndarray
+
+    def __repr__(self) -> str:
+        outliers = int(np.count_nonzero(self.outlier))
+        return "\n".join(
+            [
+                f"Twin (seed {self.config.seed}): a simulated session with its truth "
+                f"({outliers} gross annotation mistakes)",
+                *("  " + line for line in repr(self.session).splitlines()),
+            ]
+        )
 
 
 def streams(seed: int) -> dict[str, np.random.Generator]:

@@ -31,7 +31,7 @@ import numpy as np
 from brachycal._lazy import renamed
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.parallel import parallel_calls
-from brachycal.calibration.result import Calibration, ImageCalibration, Provenance, best_method
+from brachycal.calibration.result import Calibration, ImageCalibration, Provenance, best_method, point_mm
 from brachycal.calibration.result import locate as result_locate
 from brachycal.calibration.sequential import image_to_probe
 from brachycal.calibration.sequential.image_to_probe import METHODS
@@ -76,7 +76,7 @@ class ToolCalibration:
     tip: TipEstimate | None = None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class SequentialResult:
     """Everything the sequential method estimates and measures (SI units).
 
@@ -107,6 +107,29 @@ class SequentialResult:
     reference_tips: dict[str, TipEstimate] = field(default_factory=dict)
     image_size_px: tuple[int, int] | None = None
     refused: dict[str, str] = field(default_factory=dict)
+
+    def __repr__(self) -> str:
+        """A few lines: samples, each tool's tip and Table I, each method's leave-one-out RMSE (mm)."""
+        rmse = {m: s.rmse_mm for m, s in self.loocv.items()}
+        best = self.calibration().method if self.image else None
+        methods = ", ".join(f"{m} {r:.2f}" + (" (best)" if m == best else "") for m, r in rmse.items())
+        lines = [
+            f"SequentialResult: the sequential calibration of {len(self.sample_ids)} samples "
+            "(transforms T_parent_child in metres; shown in mm)",
+            *(
+                f"  {name}  {tip} at {point_mm(tool.T_E_tool)} in the {arm} flange; Table I at rtip2: "
+                f"MAE {tool.validation.mae_mm:.2f} mm over {tool.validation.n} trials"
+                for name, tip, arm, tool in (
+                    ("T_ER_Ntip", "needle_tip", "needle", self.needle),
+                    ("T_EL_Ptip", "probe_tip", "probe", self.probe),
+                )
+            ),
+            f"  T_Ptip_I   leave-one-out RMSE (mm): {methods or 'none'}",
+        ]
+        lines += [f"  refused    {m}: {why}" for m, why in self.refused.items()]
+        if best is not None:
+            lines.append(f"  .calibration(): the best method's ({best!r}) Calibration; write_result() writes it all")
+        return "\n".join(lines)
 
     @property
     def T_ER_Ntip(self) -> FloatArray:

@@ -26,7 +26,7 @@ from brachycal.errors import DegenerateDataError
 from brachycal.model.robot import Robot
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class SessionResult:
     """A calibrated session folder (SI units throughout).
 
@@ -39,6 +39,10 @@ class SessionResult:
     session: Session
     result: SequentialResult
     chain: ChainResult | None = None
+
+    def __repr__(self) -> str:
+        chain = "" if self.chain is None else f"\n{self.chain!r}"
+        return f"SessionResult of a calibrated session folder\n{self.session!r}\n{self.result!r}{chain}"
 
     def calibration(self, method: str | None = None) -> Calibration:
         """The :class:`~brachycal.calibration.result.Calibration` of ``method``: the whole chain's

@@ -68,7 +68,7 @@ WARN_LANDING_RMS_MM = 0.65
 LANDING_COST_MS = 30.0
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class ChainResult:
     """Everything the chain method measured on a session.
 
@@ -98,6 +98,16 @@ class ChainResult:
     identification: IdentificationResult | None = None
     identification_cv: tuple[ErrorStats, ErrorStats] | None = None
     joint_origins: dict[str, dict[str, FloatArray]] | None = None
+
+    def __repr__(self) -> str:
+        identified = "" if self.identification is None else ", robot identified"
+        return "\n".join(
+            [
+                f"ChainResult: the whole chain, image model {self.choice.model!r}{identified}; "
+                f"leave-one-out RMSE {self.loocv.rmse_mm:.3f} mm over {self.loocv.n} samples",
+                *("  " + line for line in repr(self.calibration()).splitlines()),
+            ]
+        )
 
     def calibration(self) -> Calibration:
         """The chain's :class:`~brachycal.calibration.result.Calibration`, with its robot corrections

@@ -194,7 +194,7 @@ def write_result(
     return write_json(path, payload, force=force)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class ResultFile:
     """What targeting needs from a result file."""
 
@@ -216,6 +216,16 @@ class ResultFile:
     sha256: str = ""
     #: Method → why it was refused at calibration (the ``refused`` block; empty: none was).
     refused: dict[str, str] = field(default_factory=dict)
+
+    def __repr__(self) -> str:
+        """A few lines: the file, its methods (the best marked) and what the best one is."""
+        best = self.best_method() if self.image else None
+        methods = ", ".join(m + (" (best)" if m == best else "") for m in self.image)
+        lines = [f"ResultFile {self.source or '(not read from a file)'}: image methods {methods or 'none'}"]
+        lines += [f"  refused {m}: {why}" for m, why in self.refused.items()]
+        if best is not None:
+            lines += ["  " + line for line in repr(self.calibration()).splitlines()]
+        return "\n".join(lines)
 
     def best_method(self) -> str:
         """The image calibration to use when none is asked for (``locate``, ``export``, ``view``).

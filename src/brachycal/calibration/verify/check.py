@@ -846,7 +846,7 @@ def fit_part(
     ), fitted_samples
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class CheckOutcome:
     """What ``brachycal verify`` decides.
 
@@ -874,6 +874,14 @@ class CheckOutcome:
     sample_ids: list[str]
     touches: list[tuple[str, str, int]]
     residual_rms_mm: float
+
+    def __repr__(self) -> str:
+        part = "" if self.part is None else f"; the part that moved: {self.part.part}"
+        return (
+            f"CheckOutcome {self.verdict} ({self.method!r}): chi-square {self.statistic:.1f} on {self.dof} dof, "
+            f"threshold {self.threshold:.1f}, p = {self.p_value:.3g}{part}; "
+            f"{len(self.sample_ids)} samples, {len(self.touches)} touches, residual RMS {self.residual_rms_mm:.3f} mm"
+        )
 
     @property
     def passed(self) -> bool:

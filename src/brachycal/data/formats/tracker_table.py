@@ -92,7 +92,7 @@ class TrackerColumns:
 
     def __post_init__(self) -> None:
         def refuse(message: str, key: str) -> InputError:
-            return InputError(message, file=self.source, column=key)
+            return InputError(message, file=self.source, key=key)
 
         if not self.joints or not all(isinstance(j, str) and j for j in self.joints):
             raise refuse("expected a non-empty list of joint column names", "joints")
@@ -130,23 +130,23 @@ class TrackerColumns:
         """
         if spec.get("format") != COLUMNS_FORMAT:
             raise InputError(
-                f"format is {spec.get('format')!r}, expected {COLUMNS_FORMAT!r}", file=source, column="format"
+                f"format is {spec.get('format')!r}, expected {COLUMNS_FORMAT!r}", file=source, key="format"
             )
         unknown = sorted(set(spec) - {"format", "joints", "position", "orientation"})
         if unknown:
-            raise InputError(f"unknown key {unknown[0]!r}", file=source, column=unknown[0])
+            raise InputError("unknown key", file=source, key=unknown[0])
 
         def table(key: str, required: bool) -> dict[str, object]:
             value = spec.get(key)
             if value is None and not required:
                 return {}
             if not isinstance(value, dict):
-                raise InputError("expected a table", file=source, column=key)
+                raise InputError("expected a table", file=source, key=key)
             return value
 
         def names(value: object, key: str) -> tuple[str, ...]:
             if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-                raise InputError("expected a list of column names", file=source, column=key)
+                raise InputError("expected a list of column names", file=source, key=key)
             return tuple(value)
 
         position, orientation = table("position", True), table("orientation", False)
