@@ -351,7 +351,7 @@ def _staging_name(destination: Path, token: str) -> Path:
 def _move_folder_into_place(folder: _Claim) -> None:
     """Rename a new folder's staging folder to the folder (which must still be absent)."""
     if os.path.lexists(folder.destination):
-        raise OutputError("already exists (made while this command ran)", file=folder.destination)
+        raise OutputError("already exists (made while it was being written)", file=folder.destination)
     try:
         os.rename(folder.staging, folder.destination)
     except OSError as exc:
