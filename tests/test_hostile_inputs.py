@@ -90,7 +90,8 @@ USES = [
     ),
     (
         "stepper-image-rotation",
-        "stepper image {bad} {tank}/video.mha {tank}/video.mha --config {stepper_config} --out {tmp}/s.json",
+        "stepper image {bad} {tank}/video.mha {tank}/video.mha --config {stepper_config} --recorded-poses "
+        "--out {tmp}/s.json",
     ),
     (
         "stepper-image-config",
