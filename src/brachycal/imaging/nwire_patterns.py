@@ -17,11 +17,9 @@ at the planes' distances. The search follows PLUS's fCal (``PlusFidLineFinder``,
    configuration's Ns in file order; along each line, dots from right (largest u) to left are its
    wires in file order. Images of another orientation (``UF``, ``MN``, ``UN``) are labelled as their
    ``MF`` mirror image would be;
-4. the phantom's geometry (beyond PLUS's checks): each N's middle dot fixes, by its ratio along the
-   N, where the image plane cut the diagonal wire in the phantom (:func:`middle_point_phantom`);
-   one plane cuts all the Ns, so the distances between those points in the phantom are the
-   distances between the middle dots in the image (:func:`phantom_misfit`). Of the labelled sets
-   that fit, the brightest is the frame's pattern.
+4. the phantom's geometry (beyond PLUS's checks): the distances between the Ns' diagonal cuts
+   (:func:`middle_point_phantom`) are those between their middle dots (:func:`phantom_misfit`);
+   of the labelled sets that fit, the brightest is the frame's pattern.
 
 Frames where no pattern passes are reported with the reason, never guessed.
 """
