@@ -60,6 +60,7 @@ class Mutant:
 
 
 COND = "tests/test_conditioning.py::"
+ORIENT = "tests/test_plus_orientation.py::"
 REG = "tests/test_registration.py::"
 PIV = "tests/test_pivot.py::"
 TEMP = "tests/test_temporal.py::"
@@ -709,6 +710,36 @@ MUTANTS: tuple[Mutant, ...] = (
         'raise InputError("unknown key", file=source, column=unknown[0])',
         ("tests/test_tracker_identification.py::test_column_spec_refusals_name_the_key",),
         "a column spec's TOML key named a column in its refusal",
+    ),
+    Mutant(
+        "orientation-ignored",
+        "data/formats/metaimage.py",
+        'pixels=to_mf(pixels.astype(dtype.newbyteorder("="), copy=False), orientation),',
+        'pixels=pixels.astype(dtype.newbyteorder("="), copy=False),',
+        (
+            ORIENT + "test_every_plus_orientation_reads_to_the_mf_frames",
+            ORIENT + "test_stepper_calibrate_is_the_same_in_every_orientation",
+        ),
+        "a sequence's frames kept as stored, whatever its UltrasoundImageOrientation (not PLUS's MF)",
+    ),
+    Mutant(
+        "orientation-wrong-axis",
+        "data/formats/metaimage.py",
+        "pixels = pixels[:, ::-1, :]",
+        "pixels = pixels[:, :, ::-1]",
+        (ORIENT + "test_every_plus_orientation_reads_to_the_mf_frames",),
+        "an N (near) orientation turned to MF by reversing the columns instead of the rows",
+    ),
+    Mutant(
+        "pattern-geometry-unchecked",
+        "imaging/nwire_patterns.py",
+        "if not geometry.patterns or phantom_misfit(points, geometry, params) <= 1.0:",
+        "if True:",
+        (
+            "tests/test_nwire_pattern_geometry.py::test_a_bright_dot_where_the_diagonal_is_not_is_not_taken_for_it",
+            "tests/test_nwire_pattern_geometry.py::test_a_frame_whose_only_pattern_fits_no_plane_is_not_segmented",
+        ),
+        "an N pattern taken for the frame's though no one plane through the phantom fits it",
     ),
 )
 

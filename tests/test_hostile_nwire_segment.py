@@ -102,6 +102,12 @@ CASES = [
         files(raw=mha_with_orientation("XYZ")),
     ),
     Case("orientation-option-unknown", [*SEGMENT, "--orientation", "FM"], ("--orientation",), files()),
+    Case(
+        "orientation-option-on-a-sequence-stored-mn",  # its frames are turned to MF already
+        [*SEGMENT, "--orientation", "UF"],
+        ("cal.mha", "--orientation UF", "stored MN"),
+        files(raw=mha_with_orientation("MND")),
+    ),
     Case("sequence-missing", [*SEGMENT[:3], "{tmp}/nothing.mha", *SEGMENT[4:]], ("nothing.mha",), files()),
     Case("no-segmentation-element", SEGMENT, ("config.xml", "segmentation"), files(config=config_text(""))),
     Case("no-phantom", SEGMENT, ("config.xml", "n-wire"), files(config=config_text(wires=""))),

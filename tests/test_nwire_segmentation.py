@@ -63,21 +63,22 @@ FCAL2_PATTERNS = [
 ]
 
 
-def fcal2_points(offset_u: float = 0.0) -> dict[str, np.ndarray]:
-    """Where fCal 2.0's wires cross an image plane at 0.078 mm/px, the plane across the wires.
+def fcal2_points(offset_u: float = 0.0, y0_m: float = 0.016) -> dict[str, np.ndarray]:
+    """Where fCal 2.0's wires cross the image plane y = ``y0_m`` (across the wires) at 0.078 mm/px.
 
-    The Ns' lines run along u (right to left: first side wire, diagonal, last side wire), one
-    N every 10 mm (128.2 px) down the image; sub-pixel positions so that rounding cannot pass.
+    The Ns' lines run along u (the first side wires on the right, as PLUS's MF images show them,
+    the phantom's x = 30 mm at u = 600.21 + ``offset_u``), one N every 10 mm (128.2 px) down the
+    image; sub-pixel positions so that rounding cannot pass. One plane cuts every N: the pattern
+    fits the phantom's geometry.
     """
     spacing = 0.078e-3
     points = {}
-    for k, (first, diagonal, last) in enumerate(FCAL2_PATTERNS):
+    for k, pattern in enumerate(FCAL2_PATTERNS):
         v = 150.37 + k * 0.010 / spacing
-        right = 600.21 + offset_u
-        side = np.linalg.norm((last.front_m - first.front_m)[:2])
-        middle = 0.4 * side  # the diagonal's dot: somewhere between the sides
-        for name, along_m in ((first.name, 0.0), (diagonal.name, middle), (last.name, side)):
-            points[name] = np.array([right - along_m / spacing, v + 0.013 * along_m / spacing])
+        for wire in pattern:
+            t = (y0_m - wire.front_m[1]) / (wire.back_m[1] - wire.front_m[1])
+            along_m = wire.front_m[0] + t * (wire.back_m[0] - wire.front_m[0]) - 0.030
+            points[wire.name] = np.array([600.21 + offset_u - along_m / spacing, v + 0.013 * along_m / spacing])
     return points
 
 

@@ -70,7 +70,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--frame", default="us_image", help="robot frame whose position is used (default us_image)")
     parser.add_argument("--topic", help="JointState topic in a bag")
     add_robot_option(parser, any_arm=True)
-    parser.add_argument("--clip", type=_clip, metavar="U,V,W,H", help="line search rectangle in pixels")
+    parser.add_argument(
+        "--clip",
+        type=_clip,
+        metavar="U,V,W,H",
+        help="line search rectangle in PLUS's MF image pixels (origin u, v, size)",
+    )
     parser.add_argument(
         "--max-lag-s",
         type=_SECONDS,
@@ -126,6 +131,7 @@ def _robot_route(args: argparse.Namespace) -> TemporalResult:
 
 def run(args: argparse.Namespace) -> int:
     from brachycal.calibration.temporal import lag_from_plus_files  # lazy: start-up (the command's run only)
+    from brachycal.data.formats.metaimage import MF_FRAME_TEXT  # lazy: start-up (the command's run only)
     from brachycal.errors import InputError  # lazy: start-up (the command's run only)
     from brachycal.io import OutputSet, sha256_file, write_json  # lazy: start-up (the command's run only)
 
@@ -159,6 +165,7 @@ def run(args: argparse.Namespace) -> int:
                 "format": "brachycal-temporal/1",
                 "route": "plus" if args.joints is None else "robot",
                 "sign": "lag_s > 0: the pose stream's timestamps are late; video time t is pose time t + lag_s",
+                "pixel_frame": MF_FRAME_TEXT,
                 **estimate.as_dict(),
                 "search": {
                     "max_lag_s": round(float(-estimate.lags_s[0]), 9),
@@ -181,5 +188,6 @@ def run(args: argparse.Namespace) -> int:
         f"  {int(line.detected.sum())} of {len(line)} frames with the tank bottom; probe swing "
         f"{result.swing_m * 1e3:.1f} mm, line swing {result.swing_px:.0f} px"
     )
+    print(f"  pixels: {MF_FRAME_TEXT}")
     print(f"wrote {args.out}")
     return 0

@@ -12,11 +12,14 @@ at the planes' distances. The search follows PLUS's fCal (``PlusFidLineFinder``,
    sum of its dots' scores;
 2. pattern: one line per N, no dot used twice, every two lines parallel within
    ``angle_tolerance_rad``, apart by the N planes' distance (± ``line_pair_distance_error``) and
-   shifted along each other by at most ``max_line_shift_m``; of the sets that pass, the brightest;
+   shifted along each other by at most ``max_line_shift_m``;
 3. labels (as PLUS, for its ``MF`` image orientation): lines from the top of the image down are the
    configuration's Ns in file order; along each line, dots from right (largest u) to left are its
    wires in file order. Images of another orientation (``UF``, ``MN``, ``UN``) are labelled as their
-   ``MF`` mirror image would be.
+   ``MF`` mirror image would be;
+4. the phantom's geometry (beyond PLUS's checks): the distances between the Ns' diagonal cuts
+   (:func:`middle_point_phantom`) are those between their middle dots (:func:`phantom_misfit`);
+   of the labelled sets that fit, the brightest is the frame's pattern.
 
 Frames where no pattern passes are reported with the reason, never guessed.
 """
@@ -29,8 +32,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from brachycal.data.formats.plus_files import Wire
+from brachycal.errors import InputError
 from brachycal.imaging.nwire_dots import Dots
 from brachycal.imaging.nwire_parameters import (
     MIDDLE_DISTANCE_TOLERANCE_M,
@@ -43,6 +48,7 @@ from brachycal.se3 import FloatArray
 TOO_FEW_DOTS = "fewer dots than wires"
 NO_LINES = "fewer N-shaped lines than Ns"
 NO_PATTERN = "no set of lines with the phantom's spacing"
+NO_FIT = "no set of lines fits the phantom's wire layout"
 #: PLUS's ultrasound image orientations (``UltrasoundImageOrientation``, first two letters): u grows
 #: towards the probe's Marked or Unmarked side, v towards the Far side (the transducer at the top)
 #: or the Near side. PLUS's fCal segments MF images; the others are MF mirrored.
@@ -60,6 +66,8 @@ class NWireGeometry:
             the N (PLUS's expected place of the middle dot).
         plane_distance_m: ``(min, max)`` distance between the planes of two Ns (0, 0 for one N).
         plane_angle_rad: ``(min, max)`` angle between the planes of two Ns (0, 0 if parallel).
+        patterns: the Ns' wires (first side, diagonal, second side), phantom frame, metres: what
+            the geometry check (step 4) compares with; empty: no such check.
     """
 
     wire_names: tuple[tuple[str, str, str], ...]
@@ -67,6 +75,7 @@ class NWireGeometry:
     middle_distance_m: tuple[float, ...]
     plane_distance_m: tuple[float, float]
     plane_angle_rad: tuple[float, float]
+    patterns: tuple[tuple[Wire, Wire, Wire], ...] = ()
 
 
 def nwire_geometry(patterns: Sequence[tuple[Wire, Wire, Wire]]) -> NWireGeometry:
@@ -94,7 +103,71 @@ def nwire_geometry(patterns: Sequence[tuple[Wire, Wire, Wire]]) -> NWireGeometry
         tuple(middles),
         (min(distances), max(distances)) if distances else (0.0, 0.0),
         (min(angles), max(angles)) if angles else (0.0, 0.0),
+        tuple((first, diagonal, last) for first, diagonal, last in patterns),
     )
+
+
+def _closest_point_on_first(a0: FloatArray, a1: FloatArray, b0: FloatArray, b1: FloatArray) -> FloatArray:
+    """Point of line a (through a0, a1) closest to line b (through b0, b1)."""
+    u, v, w = a1 - a0, b1 - b0, a0 - b0
+    denominator = (u @ u) * (v @ v) - (u @ v) ** 2
+    if denominator < 1e-24:
+        raise InputError("an N-wire's side wire is parallel to its diagonal: not an N pattern")
+    s = ((u @ v) * (v @ w) - (v @ v) * (u @ w)) / denominator
+    return a0 + s * u
+
+
+def middle_point_phantom(
+    pattern: tuple[Wire, Wire, Wire], p1_px: ArrayLike, p2_px: ArrayLike, p3_px: ArrayLike
+) -> FloatArray:
+    """Where the image plane cuts the diagonal wire, in the phantom frame, metres ``(3,)``.
+
+    Args:
+        pattern: (first side wire, diagonal wire, second side wire).
+        p1_px, p2_px, p3_px: their segmented intersections in the image, pixels ``(2,)``.
+    """
+    w1, w2, w3 = pattern
+    w12 = _closest_point_on_first(w1.front_m, w1.back_m, w2.front_m, w2.back_m)
+    w32 = _closest_point_on_first(w3.front_m, w3.back_m, w2.front_m, w2.back_m)
+    p1, p2, p3 = (np.asarray(p, dtype=float) for p in (p1_px, p2_px, p3_px))
+    span = np.linalg.norm(p3 - p1)
+    if not span > 0.0:  # the ratio would be 0/0: no position along the diagonal wire
+        raise InputError(f"the outer wires {w1.name!r} and {w3.name!r} are segmented at the same pixel")
+    return w12 + (np.linalg.norm(p2 - p1) / span) * (w32 - w12)
+
+
+def phantom_misfit(
+    points_px: dict[str, FloatArray], geometry: NWireGeometry, params: NWireSegmentationParameters
+) -> float:
+    """How far a labelled pattern is from one plane through the phantom: the largest, over pairs of
+    Ns, of ``|d_image − d_phantom| / tolerance`` (1 at the tolerance; 0 with fewer than two Ns).
+
+    ``d_phantom`` is the distance between the two Ns' middle points (:func:`middle_point_phantom`),
+    ``d_image`` that between their middle dots at the approximate spacing. For a true pattern they
+    differ by the spacing's error and by the dots' errors. PLUS bounds the first for distances
+    between Ns by ``line_pair_distance_error`` (a fraction of ``d_phantom``), and a dot's distance
+    from its line by ``collinear_distance_m`` (δ): taken as the bound of each dot's error, it moves
+    ``d_image`` by δ√2 (two dots) and an N's middle point by its diagonal's length ``L`` times the
+    ratio's error, ``δ √(1 + (1 − t)² + t²) / c`` (the ratio ``t = |p1p2| / |p1p3|``, ``c`` the
+    side dots' distance), the dots' errors combined in quadrature. The tolerance is the spacing's
+    part plus the quadrature sum of the dots' parts.
+    """
+    delta = params.collinear_distance_m
+    middles, reach = [], []
+    for pattern, names in zip(geometry.patterns, geometry.wire_names, strict=True):
+        p1, p2, p3 = (np.asarray(points_px[name], dtype=float) for name in names)
+        middles.append((p2, middle_point_phantom(pattern, p1, p2, p3)))
+        t = float(np.linalg.norm(p2 - p1) / np.linalg.norm(p3 - p1))
+        c = float(np.linalg.norm(p3 - p1)) * params.approximate_spacing_m
+        diagonal = float(np.linalg.norm(pattern[1].back_m - pattern[1].front_m))
+        reach.append(diagonal * delta * math.sqrt(1.0 + (1.0 - t) ** 2 + t**2) / c)
+    worst = 0.0
+    for (i, (m_i, M_i)), (j, (m_j, M_j)) in itertools.combinations(enumerate(middles), 2):
+        d_phantom = float(np.linalg.norm(M_i - M_j))
+        d_image = float(np.linalg.norm(m_i - m_j)) * params.approximate_spacing_m
+        dots = math.sqrt(2.0 * delta**2 + reach[i] ** 2 + reach[j] ** 2)
+        worst = max(worst, abs(d_image - d_phantom) / (params.line_pair_distance_error * d_phantom + dots))
+    return worst
 
 
 @dataclass(frozen=True)
@@ -199,27 +272,36 @@ def find_pattern(
         return PatternResult(None, NO_LINES)
     fits = np.array([[_compatible(a, b, geometry, params) for b in lines] for a in lines])
     scores = np.array([line.score for line in lines])
-    best: tuple[float, tuple[int, ...]] | None = None
+    best: tuple[float, dict[str, FloatArray]] | None = None
+    sets = 0
     # sets of `count` pairwise compatible lines (cliques), grown from candidates compatible with all so far
     stack: list[tuple[tuple[int, ...], np.ndarray]] = [((), np.arange(len(lines)))]
     while stack:
         chosen, candidates = stack.pop()
         if len(chosen) == count:
+            sets += 1
             score = float(scores[list(chosen)].sum())
             if best is None or score > best[0]:
-                best = (score, chosen)
+                points = _labelled([lines[k] for k in chosen], dots, geometry, orientation)
+                if not geometry.patterns or phantom_misfit(points, geometry, params) <= 1.0:
+                    best = (score, points)
             continue
         for position, k in enumerate(candidates):
             rest = candidates[position + 1 :]
             stack.append(((*chosen, int(k)), rest[fits[k, rest]]))
     if best is None:
-        return PatternResult(None, NO_PATTERN)
+        return PatternResult(None, NO_FIT if sets else NO_PATTERN)
+    return PatternResult(best[1], None, best[0])
+
+
+def _labelled(chosen: list[_Line], dots: Dots, geometry: NWireGeometry, orientation: str) -> dict[str, FloatArray]:
+    """Wire name → pixel of one line per N (step 3 of the module)."""
     down = 1.0 if orientation[1] == "F" else -1.0  # F: the first N nearest the transducer (top)
     left = 1.0 if orientation[0] == "M" else -1.0  # M: the first wire on the marked side (right)
-    chosen_lines = sorted((lines[k] for k in best[1]), key=lambda line: down * float(line.start[1] + line.end[1]))
+    ordered_lines = sorted(chosen, key=lambda line: down * float(line.start[1] + line.end[1]))
     points: dict[str, FloatArray] = {}
-    for names, line in zip(geometry.wire_names, chosen_lines, strict=True):
+    for names, line in zip(geometry.wire_names, ordered_lines, strict=True):
         ordered = sorted(line.dots, key=lambda k: -left * float(dots.uv_px[k, 0]))
         for name, k in zip(names, ordered, strict=True):
             points[name] = dots.uv_px[k].copy()
-    return PatternResult(points, None, best[0])
+    return points

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from brachycal.data.formats.metaimage import ImageSequence
+from brachycal.data.formats.metaimage import MF, ImageSequence
 from brachycal.data.formats.plus_files import (
     TRANSFORM_NAME,
     PlusConfig,
@@ -33,7 +33,7 @@ from brachycal.data.formats.plus_files import (
 from brachycal.errors import InputError
 from brachycal.imaging.nwire_dots import find_dots
 from brachycal.imaging.nwire_parameters import NWireSegmentationParameters
-from brachycal.imaging.nwire_patterns import ORIENTATIONS, NWireGeometry, PatternResult, find_pattern, nwire_geometry
+from brachycal.imaging.nwire_patterns import NWireGeometry, PatternResult, find_pattern, nwire_geometry
 from brachycal.se3 import FloatArray
 
 #: The default pose streams: a tracker's ``ProbeToTracker`` and ``ReferenceToTracker``.
@@ -48,23 +48,6 @@ def segment_frame(
     ``orientation``: the frame's ultrasound orientation (:data:`~brachycal.imaging.nwire_patterns.ORIENTATIONS`).
     """
     return find_pattern(find_dots(frame, params), geometry, params, orientation=orientation)
-
-
-def sequence_orientation(sequence: ImageSequence, source: str | os.PathLike[str]) -> str:
-    """The sequence's ultrasound orientation: its header's ``UltrasoundImageOrientation`` (first two
-    letters, PLUS writes e.g. ``MFA``), ``MF`` if the header has none.
-
-    Raises:
-        InputError: an orientation that is not one of :data:`~brachycal.imaging.nwire_patterns.ORIENTATIONS`.
-    """
-    text = sequence.fields.get("UltrasoundImageOrientation", "MF").strip().upper()
-    if text[:2] not in ORIENTATIONS:
-        raise InputError(
-            f"expected one of {', '.join(ORIENTATIONS)} (PLUS's orientations), got {text!r}",
-            file=source,
-            column="UltrasoundImageOrientation",
-        )
-    return text[:2]
 
 
 @dataclass(frozen=True)
@@ -148,8 +131,10 @@ def segment_sequence(
         params: segmentation settings (:func:`brachycal.data.formats.plus_segmentation.read_segmentation_parameters`).
         source: the sequence's file, for messages and the frames' ``source``.
         label: what a frame index counts (``"CalibrationData Frame"``), for messages.
-        orientation: the frames' ultrasound orientation (``MF``, ``UF``, ``MN``, ``UN``), which says
-            which dot is which wire; None: the header's (:func:`sequence_orientation`).
+        orientation: label the wires as PLUS would in a frame of this orientation (``MF``, ``UF``,
+            ``MN``, ``UN``; None: ``MF``, PLUS's labels, the frames being in ``MF`` as
+            :func:`~brachycal.data.formats.metaimage.read_image_sequence` returns them). Another
+            value mirrors the labels, for a phantom seen mirrored; the points stay the frames' pixels.
         progress: called with 1 after each frame.
         poses: the pose streams each frame carries (a tracker's by default); None reads no poses.
         require_poses: refuse a recording in which no frame has one of the streams
@@ -166,7 +151,7 @@ def segment_sequence(
         check_pose_fields(sequence, poses, source)
     geometry = nwire_geometry(config.patterns)
     if orientation is None:
-        orientation = sequence_orientation(sequence, source)
+        orientation = MF
     frames: list[SegmentedFrame] = []
     reasons: list[str | None] = []
     for k in range(len(sequence)):

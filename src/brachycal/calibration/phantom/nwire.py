@@ -32,40 +32,12 @@ from numpy.typing import ArrayLike
 from brachycal._lazy import renamed
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.sequential import registration
-from brachycal.data.formats.plus_files import PlusConfig, SegmentedFrame, Wire
+from brachycal.data.formats.plus_files import PlusConfig, SegmentedFrame
 from brachycal.errors import DegenerateDataError, InputError
+from brachycal.imaging.nwire_patterns import middle_point_phantom
 from brachycal.imaging.pixels import image_points
 from brachycal.se3 import FloatArray, inverse, nearest_rotation, transform_points
 from brachycal.validate import check_finite
-
-
-def _closest_point_on_first(a0: FloatArray, a1: FloatArray, b0: FloatArray, b1: FloatArray) -> FloatArray:
-    """Point of line a (through a0, a1) closest to line b (through b0, b1)."""
-    u, v, w = a1 - a0, b1 - b0, a0 - b0
-    denominator = (u @ u) * (v @ v) - (u @ v) ** 2
-    if denominator < 1e-24:
-        raise InputError("an N-wire's side wire is parallel to its diagonal: not an N pattern")
-    s = ((u @ v) * (v @ w) - (v @ v) * (u @ w)) / denominator
-    return a0 + s * u
-
-
-def middle_point_phantom(
-    pattern: tuple[Wire, Wire, Wire], p1_px: ArrayLike, p2_px: ArrayLike, p3_px: ArrayLike
-) -> FloatArray:
-    """Where the image plane cuts the diagonal wire, in the phantom frame, metres ``(3,)``.
-
-    Args:
-        pattern: (first side wire, diagonal wire, second side wire).
-        p1_px, p2_px, p3_px: their segmented intersections in the image, pixels ``(2,)``.
-    """
-    w1, w2, w3 = pattern
-    w12 = _closest_point_on_first(w1.front_m, w1.back_m, w2.front_m, w2.back_m)
-    w32 = _closest_point_on_first(w3.front_m, w3.back_m, w2.front_m, w2.back_m)
-    p1, p2, p3 = (np.asarray(p, dtype=float) for p in (p1_px, p2_px, p3_px))
-    span = np.linalg.norm(p3 - p1)
-    if not span > 0.0:  # the ratio would be 0/0: no position along the diagonal wire
-        raise InputError(f"the outer wires {w1.name!r} and {w3.name!r} are segmented at the same pixel")
-    return w12 + (np.linalg.norm(p2 - p1) / span) * (w32 - w12)
 
 
 def check_wire_names(config: PlusConfig, frame: SegmentedFrame) -> None:

@@ -38,6 +38,7 @@ from brachycal.calibration.phantom.nwire import (
     wire_point_pairs,
 )
 from brachycal.calibration.phantom.nwire_refine import PLUS_NAMES, REFINEMENTS, Refinement, observations, refine_all
+from brachycal.data.formats.metaimage import MF_FRAME_TEXT
 from brachycal.data.formats.plus_files import PlusConfig, SegmentedFrame, read_plus_config, read_segmented_frames
 from brachycal.data.json_schema import (
     Obj,
@@ -141,6 +142,7 @@ class NWireFileResult:
         affine_mm[:3, :] *= 1e3
         return {
             "format": FORMAT,
+            "pixel_frame": MF_FRAME_TEXT,
             "T_Probe_Image": c.T_Ptip_I.tolist(),
             "spacing_mm": (c.spacing_m * 1e3).tolist(),
             "affine_mm": affine_mm.tolist(),

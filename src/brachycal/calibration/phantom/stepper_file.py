@@ -39,7 +39,7 @@ from brachycal.calibration.phantom.stepper import (
     translation_axis,
 )
 from brachycal.calibration.sequential.method import naming_file
-from brachycal.data.formats.metaimage import read_image_sequence, read_sequence_header
+from brachycal.data.formats.metaimage import MF, pixel_frame_text, read_image_sequence, read_sequence_header
 from brachycal.data.formats.plus_files import (
     STEPPER_ENCODER_FIELDS,
     PlusConfig,
@@ -83,12 +83,15 @@ class StepperRecording:
         encoders: ``(K, 3)`` those frames' encoder values: probe position (m), probe rotation
             (rad), template position (m).
         total: frames in the recording.
+        stored: how the file stored its frames (its ``UltrasoundImageOrientation``, None if not
+            stated); the points are in PLUS's ``MF`` image frame whatever it is.
     """
 
     path: str
     frames: list[dict[str, FloatArray]]
     encoders: FloatArray
     total: int
+    stored: str | None = MF
 
 
 @dataclass(frozen=True)
@@ -135,6 +138,7 @@ class StepperFileResult:
                 "all_recordings_m_per_px": self.spacing_all.value.tolist(),
             },
             "centre_of_rotation": {
+                "pixel_frame": pixel_frame_text(self.recordings["rotation"].stored),
                 "value_px": rot.centre_px.tolist(),
                 "sd_px": rot.centre_sd_px.tolist(),
                 "dot_sd_m": rot.dot_sd_m,
@@ -172,7 +176,12 @@ class StepperFileResult:
             },
             "axes": AXES_NOTE,
             "recordings": {
-                name: {"file": Path(r.path).name, "frames": r.total, "segmented": len(r.frames)}
+                name: {
+                    "file": Path(r.path).name,
+                    "frames": r.total,
+                    "segmented": len(r.frames),
+                    "stored_orientation": r.stored,
+                }
                 for name, r in self.recordings.items()
             },
             "inputs": {
@@ -277,7 +286,11 @@ def read_stepper_recording(
             file=path,
         )
     return StepperRecording(
-        str(path), [result.frames[k].points_px for k in kept], encoders[kept].reshape(-1, 3), len(sequence)
+        str(path),
+        [result.frames[k].points_px for k in kept],
+        encoders[kept].reshape(-1, 3),
+        len(sequence),
+        sequence.file_orientation,
     )
 
 
@@ -355,6 +368,7 @@ def summary_lines(result: StepperFileResult) -> list[str]:
     c, csd = rot.centre_px, rot.centre_sd_px
     lines.append(f"pixel spacing: {s[0]:.6f} ± {sd[0]:.6f} x {s[1]:.6f} ± {sd[1]:.6f} mm/px (SD)")
     lines.append(f"centre of rotation: {c[0]:.3f} ± {csd[0]:.3f}, {c[1]:.3f} ± {csd[1]:.3f} px (SD)")
+    lines.append(f"pixels: {pixel_frame_text(result.recordings['rotation'].stored)}")
     if rot.tilt is None:
         lines.append(f"rotation axis tilt: not determined: {rot.tilt_note}")
     else:

@@ -66,6 +66,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np  # lazy: start-up (the command's run only)
 
     from brachycal.calibration import calibrate_nwire_files, write_nwire  # lazy: start-up (the command's run only)
+    from brachycal.data.formats.metaimage import MF_FRAME_TEXT  # lazy: start-up (the command's run only)
     from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
 
     with OutputSet(force=args.force, inputs=command_inputs(args, "config", "frames")) as outputs:
@@ -85,6 +86,7 @@ def run(args: argparse.Namespace) -> int:
         f"rigid {c.spacing_m[0] * 1e3:.5f} x {c.spacing_m[1] * 1e3:.5f} mm/px "
         f"(configuration's approximate spacing {run.start_spacing_m * 1e3:.3f})"
     )
+    print(f"  pixels: {MF_FRAME_TEXT}")
     print(f"  rigid and affine rotations differ by {run.rigid_vs_affine_deg:.3f} deg")
     print("  3D reprojection error on the validation frames (mm), every model:")
     for model, validation in run.models.items():

@@ -26,6 +26,11 @@ Segmentation settings. Writes PLUS's segmented-frames XML (pixels; poses in mm),
 `brachycal nwire CONFIG FRAMES` calibrates from. Frames where the pattern is not found are written
 as Failed and counted by reason.
 
+Every frame is read in PLUS's MF image frame, as PLUS reads it: turned from the orientation the
+sequence states in UltrasoundImageOrientation (UF: columns reversed, MN: rows, UN: both; a sequence
+without the field is read as MF), so the clip rectangle of the device set and every written point
+are MF pixels (u towards the probe's marked side, v away from the transducer).
+
 Segmentation reads the image alone. Each frame's poses are copied from two named streams: by
 default those the device set records: an optical tracker's ProbeToTracker and ReferenceToTracker,
 or, for a TRUS probe on a brachytherapy stepper (a BrachyTracker device, PLUS's iCal set-up), the
@@ -95,9 +100,9 @@ def add_orientation_option(parser: argparse.ArgumentParser | argparse._ArgumentG
         "--orientation",
         choices=ORIENTATIONS,
         default=None,
-        help="the frames' ultrasound orientation, which says which dot is which wire (PLUS's labels are "
-        "for MF: u towards the probe's marked side, v away from the transducer); default: the "
-        "sequence's UltrasoundImageOrientation, else MF",
+        help="label the wires as PLUS would in an image of this orientation, for a phantom seen "
+        "mirrored (the frames are in MF, turned from their UltrasoundImageOrientation when read; the "
+        "points stay MF pixels); default MF, PLUS's labels. Only for sequences stored MF",
     )
 
 
@@ -189,7 +194,9 @@ def segment_files(
     ``fix`` (the command's options that help) appended to the refusal.
     """
     from brachycal.cli.common import progress_bar  # lazy: start-up (the command's run only)
-    from brachycal.data.formats.metaimage import read_image_sequence  # lazy: start-up (the command's run only)
+
+    # lazy: start-up (the command's run only)
+    from brachycal.data.formats.metaimage import pixel_frame_text, read_image_sequence
     from brachycal.data.formats.plus_files import read_plus_config  # lazy: start-up (the command's run only)
 
     # lazy: start-up (the command's run only)
@@ -197,6 +204,7 @@ def segment_files(
 
     # lazy: start-up (the command's run only)
     from brachycal.data.formats.plus_segmented_xml import write_segmented_frames
+    from brachycal.errors import InputError  # lazy: start-up (the command's run only)
 
     # lazy: start-up (the command's run only)
     from brachycal.imaging.nwire_segmentation import check_pose_fields, segment_sequence
@@ -215,6 +223,14 @@ def segment_files(
     if poses is not None:
         for _, path, sequence in sequences:
             check_pose_fields(sequence, poses, path, fix=fix)
+    if orientation not in (None, "MF"):
+        for _, path, sequence in sequences:
+            if sequence.file_orientation not in (None, "MF"):
+                raise InputError(
+                    f"--orientation {orientation} mirrors the labels of MF frames, and this sequence is stored "
+                    f"{sequence.file_orientation} (turned to MF when read: PLUS's labels need no option)",
+                    file=path,
+                )
     results = {}
     lines = []
     for label, path, sequence in sequences:
@@ -243,6 +259,8 @@ def segment_files(
             + (f" (skipped: {skipped})" if skipped else "")
             + f" [{posed}]"
         )
+    frame = pixel_frame_text(sequences[0][2].file_orientation)
+    lines.append(f"pixels: {frame}")
     calibration_result = results["CalibrationData"]
     validation_result = results.get("ValidationData")
     write_segmented_frames(
@@ -251,6 +269,7 @@ def segment_files(
         validation_result.frames if validation_result is not None else [],
         calibration_times_s=calibration_result.timestamps_s,
         validation_times_s=validation_result.timestamps_s if validation_result is not None else None,
+        pixel_frame=frame,
     )
     return lines
 

@@ -100,6 +100,7 @@ def run(args: argparse.Namespace) -> int:
         read_calibrated_axes,
         write_stepper_image,
     )
+    from brachycal.data.formats.metaimage import MF_FRAME_TEXT  # lazy: start-up (the command's run only)
     from brachycal.errors import InputError  # lazy: start-up (the command's run only)
     from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
 
@@ -128,6 +129,7 @@ def run(args: argparse.Namespace) -> int:
         f"{r.centre.value[0]:.2f}, {r.centre.value[1]:.2f} px; "
         f"Phantom->StepperHome translation {t[0]:.3f} {t[1]:.3f} {t[2]:.3f} mm"
     )
+    print(f"pixels: {MF_FRAME_TEXT}")
     a = result.axes.probe_translation
     if args.recorded_poses:
         poses = (

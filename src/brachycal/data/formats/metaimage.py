@@ -10,7 +10,13 @@ a text header plus one (de)compressed block, the per-frame fields PLUS writes ar
 ITK's MetaImage reader anyway, and a 100 MB dependency for ~100 lines is not worth it.
 
 Frames are returned as ``(N, H, W)`` arrays (row ``v`` first, column ``u`` second: the pixel
-``(u, v)`` of the image frame is ``pixels[k, v, u]``).
+``(u, v)`` of the image frame is ``pixels[k, v, u]``) in PLUS's ``MF`` image frame, as PLUS reads
+them: a sequence states how its frames are stored in ``UltrasoundImageOrientation`` (the first
+letter: u towards the probe's Marked or Unmarked side; the second: v towards the Far or Near side
+of the transducer), and every frame is turned to ``MF`` when read (``UF`` has its columns reversed,
+``MN`` its rows, ``UN`` both: PLUS's ``igsioVideoFrame::GetFlipAxes``). So every pixel brachycal
+publishes from a sequence — clip rectangles, segmented dots, centre of rotation — is an ``MF``
+pixel, as PLUS's are.
 """
 
 from __future__ import annotations
@@ -51,6 +57,33 @@ _ELEMENT_TYPES = {
     "MET_DOUBLE": np.float64,
 }
 _TYPE_NAMES = {np.dtype(t): name for name, t in _ELEMENT_TYPES.items()}
+
+#: The header field that states how a sequence's frames are stored (PLUS's).
+ORIENTATION_FIELD = "UltrasoundImageOrientation"
+#: The orientation every frame is turned to when read: PLUS's for B-mode frames (u towards the
+#: probe's marked side, v away from the transducer).
+MF = "MF"
+#: The pixel frame of every point brachycal finds in a sequence's frames, in words (for outputs).
+MF_FRAME_TEXT = (
+    "PLUS's MF image frame (u: columns, towards the probe's marked side; v: rows, away from the "
+    "transducer; origin at the centre of the first pixel)"
+)
+#: The ``UltrasoundImageOrientation`` values PLUS reads 2D B-mode frames from, with the flips
+#: (columns, rows) that turn them to ``MF`` (PLUS's ``GetFlipAxes``; case does not matter). PLUS
+#: writes ``MFA``, ``UFD``, ``MND``, ``UNA`` (the same orientations: its third letter, the elevation
+#: direction, says nothing of a 2D frame); ``MFD`` differs from ``MF`` only in it. ``UFA``, ``MNA``,
+#: ``UND`` and the transposed (RF) ``FM``, ``NM``, ``FU``, ``NU`` PLUS does not turn to ``MF``.
+ORIENTATION_FLIPS: dict[str, tuple[bool, bool]] = {
+    "MF": (False, False),
+    "MFA": (False, False),
+    "MFD": (False, False),
+    "UF": (True, False),
+    "UFD": (True, False),
+    "MN": (False, True),
+    "MND": (False, True),
+    "UN": (True, True),
+    "UNA": (True, True),
+}
 
 
 def _at(path: Path, *, row: int | None = None, row_label: str = "row", column: str | None = None) -> _Fail:
@@ -202,12 +235,16 @@ class ImageSequence:
     """A sequence of 2D frames with their per-frame fields.
 
     Attributes:
-        pixels: ``(N, H, W)`` frames (``pixels[k, v, u]``), the file's element type.
+        pixels: ``(N, H, W)`` frames (``pixels[k, v, u]``) in PLUS's ``MF`` image frame, the
+            file's element type.
         timestamps_s: ``(N,)`` each frame's ``Timestamp`` in seconds (NaN where a frame has none).
         spacing: ``(2,)`` the header's ``ElementSpacing`` along u and v, in the file's unit (PLUS
             writes 1 1 and keeps the real spacing in its device set).
         frame_fields: one dict of ``Seq_FrameNNNN_*`` fields per frame (text).
-        fields: the image header's other fields (text).
+        fields: the image header's other fields (text, as in the file).
+        file_orientation: how the file stored the frames (``MF``, ``UF``, ``MN``, ``UN``: its
+            ``UltrasoundImageOrientation``), None if it does not say (read as ``MF``). ``pixels``
+            are always in ``MF``.
     """
 
     pixels: np.ndarray
@@ -215,9 +252,60 @@ class ImageSequence:
     spacing: FloatArray
     frame_fields: list[dict[str, str]] = field(default_factory=list)
     fields: dict[str, str] = field(default_factory=dict)
+    file_orientation: str | None = MF
 
     def __len__(self) -> int:
         return int(self.pixels.shape[0])
+
+    @property
+    def pixel_frame(self) -> str:
+        """The frame of its pixels, in words, for outputs (:func:`pixel_frame_text`)."""
+        return pixel_frame_text(self.file_orientation)
+
+
+def pixel_frame_text(stored: str | None = MF) -> str:
+    """How an output names the pixel frame of points found in frames stored in ``stored`` (an
+    orientation, None: not stated)."""
+    how = (
+        "stored MF"
+        if stored == MF
+        else f"stored {stored}, turned to MF"
+        if stored is not None
+        else f"no {ORIENTATION_FIELD}: read as MF"
+    )
+    return f"{MF_FRAME_TEXT[:-1]}; {how})"
+
+
+def stored_orientation(fields: Mapping[str, str], path: str | os.PathLike[str]) -> str | None:
+    """The orientation a sequence's frames are stored in (``MF``, ``UF``, ``MN``, ``UN``), from its
+    header's ``UltrasoundImageOrientation``; None if the header has none (the frames are read as
+    ``MF``: PLUS holds and writes B-mode frames in ``MF``, and a plain MetaImage shows row 0 at the top).
+
+    Raises:
+        InputError: a value PLUS does not turn to ``MF`` (naming the file and the field).
+    """
+    text = fields.get(ORIENTATION_FIELD)
+    if text is None:
+        return None
+    name = text.strip().upper()
+    if name not in ORIENTATION_FLIPS:
+        raise InputError(
+            f"expected MF, UF, MN or UN (or PLUS's MFA, UFD, MND, UNA, MFD), got {text.strip()!r}: "
+            "orientations PLUS does not turn to MF are not read",
+            file=path,
+            column=ORIENTATION_FIELD,
+        )
+    return name[:2]
+
+
+def to_mf(pixels: np.ndarray, orientation: str | None) -> np.ndarray:
+    """``(N, H, W)`` frames stored in ``orientation`` turned to ``MF`` (rows and/or columns reversed)."""
+    flip_columns, flip_rows = ORIENTATION_FLIPS[orientation or MF]
+    if flip_columns:
+        pixels = pixels[:, :, ::-1]
+    if flip_rows:
+        pixels = pixels[:, ::-1, :]
+    return np.ascontiguousarray(pixels) if flip_columns or flip_rows else pixels
 
 
 def _timestamps(frames: list[dict[str, str]], path: Path) -> FloatArray:
@@ -236,14 +324,16 @@ def _timestamps(frames: list[dict[str, str]], path: Path) -> FloatArray:
 
 
 def read_image_sequence(path: str | os.PathLike[str]) -> ImageSequence:
-    """Read a MetaImage sequence with its pixel data: ``(N, H, W)`` frames, timestamps, frame fields.
+    """Read a MetaImage sequence with its pixel data: ``(N, H, W)`` frames in PLUS's ``MF`` image
+    frame (turned from the file's ``UltrasoundImageOrientation``, see the module), timestamps, frame fields.
 
     A single 2D image reads as a sequence of one frame. Multi-channel (colour) images are refused:
     B-mode frames are single-channel.
 
     Raises:
         InputError: naming the file (and the field) for every malformed header, an unknown element
-            type, pixel data in another file, cut-short or corrupt compressed data.
+            type, an orientation PLUS does not turn to ``MF``, pixel data in another file,
+            cut-short or corrupt compressed data.
     """
     path = Path(path)
     header = _read_header(path)
@@ -254,6 +344,8 @@ def read_image_sequence(path: str | os.PathLike[str]) -> ImageSequence:
     if _channels(header, path) != 1:
         raise InputError("expected single-channel (B-mode) frames", file=path, column="ElementNumberOfChannels")
     dtype = _dtype(header, path)
+    # PLUS reads the orientation of frames that have pixels only (a tracker buffer is DimSize 0 0 N)
+    orientation = stored_orientation(header.fields, path) if 0 not in header.dims[:2] else MF
     width, height = header.dims[0], header.dims[1]
     count = header.dims[2] if len(header.dims) == 3 else 1
     raw_size = width * height * count * dtype.itemsize
@@ -276,11 +368,12 @@ def read_image_sequence(path: str | os.PathLike[str]) -> ImageSequence:
     if len(frames) != count:
         raise InputError(f"{len(frames)} frames of fields for {count} frames of pixels", file=path)
     return ImageSequence(
-        pixels=pixels.astype(dtype.newbyteorder("="), copy=False),
+        pixels=to_mf(pixels.astype(dtype.newbyteorder("="), copy=False), orientation),
         timestamps_s=_timestamps(frames, path),
         spacing=spacing,
         frame_fields=frames,
         fields=header.fields,
+        file_orientation=orientation,
     )
 
 

@@ -64,6 +64,7 @@ def write_segmented_frames(
     *,
     calibration_times_s: ArrayLike | None = None,
     validation_times_s: ArrayLike | None = None,
+    pixel_frame: str | None = None,
 ) -> None:
     """Write calibration and validation frames as a PLUS segmented-frames XML.
 
@@ -77,8 +78,12 @@ def write_segmented_frames(
         validation: the validation frames, likewise.
         calibration_times_s: ``(N,)`` the calibration frames' times, seconds (``Timestamp``).
         validation_times_s: ``(M,)`` the validation frames' times, seconds.
+        pixel_frame: the points' pixel frame in words, written as a comment (PLUS's format has no
+            field for it; its readers skip comments).
     """
     root = ET.Element("ProbeCalibrationResult", version="2.0")
+    if pixel_frame is not None:
+        root.append(ET.Comment(f" pixels: {pixel_frame} "))
     data = ET.SubElement(root, "Data")
     _frames(ET.SubElement(data, "CalibrationData"), calibration, calibration_times_s)
     _frames(ET.SubElement(data, "ValidationData"), validation, validation_times_s)
