@@ -78,19 +78,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Plan the grid, pick the check's poses, print and write them."""
-    from brachycal.calibration.result import (  # lazy: start-up (the command's run only)
-        Calibration,
-        ImageCalibration,
-    )
     from brachycal.cli.common import progress_bar  # lazy: start-up (the command's run only)
     from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
-    from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE  # lazy: start-up (the command's run only)
     from brachycal.planning import plan_poses, write_plan  # lazy: start-up (the command's run only)
     from brachycal.planning.check_poses import (  # lazy: start-up (the command's run only)
         DEFAULT_CHECK_POSES,
         DEFAULT_TOUCHES,
         SECONDS_PER_SAMPLE,
         SECONDS_PER_TOUCH,
+        nominal_calibration,
         plan_check,
     )
 
@@ -110,8 +106,7 @@ def run(args: argparse.Namespace) -> int:
                 f"{count} the check needs: move or shrink the cube"
             )
         # The robot's tool frames (the result's with --result) and the plan's spacing (--spacing-mm's).
-        frames = [robot.tool_transform(frame)[1] for frame in (NEEDLE_TIP, PROBE_TIP, US_IMAGE)]
-        calibration = Calibration(frames[0], frames[1], ImageCalibration("robot", frames[2], spec.spacing_m))
+        calibration = nominal_calibration(robot, spec.spacing_m)
         touches = args.touches or DEFAULT_TOUCHES
         check = plan_check(full, robot, calibration, count=count, touches=touches)
         write_plan(check.plan, robot, staged, force=args.force)
