@@ -48,6 +48,8 @@ FILES = ("session.toml", "touches.csv", "axes.csv", "samples.csv")
 #: The files of a check session folder (``brachycal verify``'s CHECK_SESSION): the set-up, the
 #: samples at the check's poses and the check's touches (header only when it has none).
 CHECK_FILES = ("session.toml", "samples.csv", "touches.csv")
+#: The tools a check's touches are by (the top-model is not: the result located the reference tips).
+CHECK_TOOLS = ("needle", "probe")
 #: Fewest samples a check reads: 3 points fix the image's 6 degrees of freedom; a check of fewer
 #: has no redundancy against one mislabelled frame. ``plan check`` plans 5 or more.
 MIN_CHECK_SAMPLES = 3

@@ -24,6 +24,7 @@ from brachycal.calibration.result import Calibration
 from brachycal.calibration.robot_accuracy import RobotAccuracy
 from brachycal.data.formats.csv_log import read_table, table_configurations, to_float
 from brachycal.data.session import (
+    CHECK_TOOLS,
     FILES,
     MIN_CHECK_SAMPLES,
     REFERENCES,
@@ -44,7 +45,6 @@ if TYPE_CHECKING:
 #: The parts a check can name, in the order of the report; each with its parameter count
 #: (the robot's is its joint count, set when the robot is known).
 PARTS = ("needle tip", "probe mount", "image transform", "image scale", "robot")
-CHECK_TOOLS = ("needle", "probe")
 #: Default false-alarm rate of the test (the goal: at most 5 % on unchanged set-ups).
 DEFAULT_FALSE_ALARM = 0.05
 #: Central-difference steps: 1 µm and 1 µrad (the residuals are smooth; truncation error ~step²,
