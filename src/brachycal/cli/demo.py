@@ -141,9 +141,7 @@ def run(args: argparse.Namespace) -> int:
         for name in DEMO_REPORT_FILES:
             outputs.claim(out / "report" / name, make_parents=True)
         # The stages of run_demo, the report, and the recording if asked.
-        with progress_bar(
-            len(DEMO_STAGES) + 1 + args.recording + args.check, "demo", args.quiet, unit="stage"
-        ) as bar:
+        with progress_bar(len(DEMO_STAGES) + 1 + args.recording + args.check, "demo", args.quiet, unit="stage") as bar:
             demo = run_demo(
                 robot,
                 out,

@@ -241,7 +241,8 @@ def run_build(args: argparse.Namespace) -> int:
     check = touch_choice(args.touches or DEFAULT_TOUCHES) if args.check else None
     if check and args.marks is None and args.marks_topic is None:
         raise InputError(
-            f"give the check's marks (--marks or --marks-topic): it planned touches of rtip1 by {' and '.join(check)} "
+            "give the check's marks (--marks or --marks-topic): it planned touches of rtip1 by "
+            f"{' and '.join(f'the {tool}' for tool in check)} "
             "(a check planned without touches builds with --touches none)"
         )
     files = (*CHECK_FILES, *REPORT_FILES) if args.check else (*SESSION_FILES, *REPORT_FILES)

@@ -537,6 +537,7 @@ def _check_marks(
     limits: FloatArray,
     units: list[str],
     required: Sequence[str],
+    source: str,
 ) -> tuple[dict[tuple[str, str], Touches], list[BuildEntry]]:
     """A check's marks: touches of the needle and the probe only (any tip, any count, trials in time
     order); each tool of ``required`` must touch ``rtip1``."""
@@ -544,7 +545,7 @@ def _check_marks(
     entries = []
     for mark in sorted(marks, key=lambda m: m.time_s):
         if mark.kind != "touch" or mark.tool not in CHECK_TOOLS:
-            what = "the top-model's touches" if mark.kind == "touch" else "axes moves"
+            what = "top-model touches" if mark.kind == "touch" else "axes moves"
             raise InputError(
                 f"{mark.label}: a check recording has no {what}, only the needle's and the probe's touches "
                 "(a calibration recording? build it without --check)",
@@ -563,12 +564,10 @@ def _check_marks(
         entries.append(_entry(mark.kind, f"{mark.tool} {mark.name} trial {len(trials)}", mark, window, used=True))
     for tool in required:
         if (tool, "rtip1") not in touch_q:
-            where = marks[0].source if marks else ""
             raise InputError(
                 f"no touch mark of {tool} on rtip1: the check's touches ({' and '.join(required)} on rtip1) "
-                f"need one each{'' if marks else ' (give the marks)'}; a check planned without touches builds "
-                "with --touches none",
-                file=where or None,
+                "need one each; a check planned without touches builds with --touches none",
+                file=marks[0].source if marks else source or None,
             )
     touches = {key: Touches(np.arange(1, len(q) + 1), np.array(q)) for key, q in touch_q.items()}
     return touches, entries
@@ -711,6 +710,7 @@ def build_check_session(
     still: StillSettings = StillSettings(),
     lag_s: float = 0.0,
     lag_sd_s: float = 0.0,
+    marks_source: str = "",
 ) -> SessionBuild:
     """Assemble a check session (``brachycal verify``'s CHECK_SESSION) from a check recording: the
     frames at the check's poses and the single touches of a reference tip, as :func:`build_session`
@@ -721,6 +721,7 @@ def build_check_session(
         touches: the tools (``needle``, ``probe``) whose touch of ``rtip1`` the check planned: each
             must have one.
         log, frames, robot, settings, plan, still, lag_s, lag_sd_s: as for :func:`build_session`.
+        marks_source: where the marks were read (a file that holds none is named by a refusal).
 
     Returns:
         the :class:`SessionBuild` (no axes; ``report.kind`` ``check``).
@@ -733,7 +734,9 @@ def build_check_session(
     for tool in touches:
         if tool not in CHECK_TOOLS:
             raise InputError(f"a check's touches are by {' or '.join(CHECK_TOOLS)}, not {tool!r}")
-    return _build(log, marks, frames, robot, settings, plan, still, lag_s, lag_sd_s, check=tuple(touches))
+    return _build(
+        log, marks, frames, robot, settings, plan, still, lag_s, lag_sd_s, check=tuple(touches), source=marks_source
+    )
 
 
 def _build(
@@ -748,6 +751,7 @@ def _build(
     lag_sd_s: float,
     *,
     check: tuple[str, ...] | None,
+    source: str = "",
 ) -> SessionBuild:
     """:func:`build_session` (``check`` None) or :func:`build_check_session` (``check``: its touches)."""
     if tuple(log.joint_names) != tuple(robot.joint_names):
@@ -759,7 +763,7 @@ def _build(
     if check is None:
         touches, axes, mark_entries = _marks(log, marks, still, limits, units)
     else:
-        touches, mark_entries = _check_marks(log, marks, still, limits, units, check)
+        touches, mark_entries = _check_marks(log, marks, still, limits, units, check, source)
     if lag_s != 0.0:
         frames = [replace(frame, time_s=frame.time_s + lag_s) for frame in frames]
     names, samples_q, uv, frame_entries = _frames(log, frames, settings, plan, still, limits, units)
@@ -930,6 +934,7 @@ def build_session_from_files(
             still=still,
             lag_s=lag_s,
             lag_sd_s=lag_sd_s,
+            marks_source=str(marks) if marks is not None else str(log_path),
         )
     inputs = {"log": sha256_file(log_path), "images": sha256_file(Path(images))}
     for name, path in (("marks", marks), ("markups", markups), ("plan", plan)):
