@@ -50,6 +50,7 @@ examples:
   brachycal demo --seed 7 --out demo_seed7         another simulated session
   brachycal demo --example --out demo_example      calibrate the committed examples/twin_session
   brachycal demo --robot baxter --out demo_baxter  the same main job on a Baxter
+  brachycal demo --recording --check --out run --force   the twin's recordings: a session and two checks
 """
 
 

@@ -11,7 +11,9 @@ from brachycal.errors import InputError
 from brachycal.validate import MAX_IMAGE_PX
 
 HELP = "session folders: build one from a lab's recording (joint log, marks, frames), or write blank templates"
-TEMPLATE_HELP = "write blank templates of a lab's session.toml, marks.csv and images.csv, with a README"
+TEMPLATE_HELP = (
+    "write blank templates of a lab's session.toml, marks.csv and images.csv, with a README (--check: a check's)"
+)
 TEMPLATE_DESCRIPTION = """\
 Writes into DIR the blanks a lab fills in for its own session:
 
@@ -23,12 +25,18 @@ Writes into DIR the blanks a lab fills in for its own session:
 
 then `brachycal session build JOINT_LOG --marks DIR/marks.csv --images DIR/images.csv
 --template DIR/session.toml --out SESSION` turns the joint log and these into a session folder.
-All files are written or none; existing files are replaced only with --force.
+--check: the blanks of a check before a procedure (the same files; the README says what a check
+records: the frames at the poses of `brachycal plan check` and its single touches), for
+`brachycal session build --check`. All files are written or none; existing files are replaced
+only with --force.
 
-example:
+examples:
   brachycal session template my_session
+  brachycal session template --check my_check --force
 """
-BUILD_HELP = "build a session folder from a joint log, the operator's marks and the annotated frames"
+BUILD_HELP = (
+    "build a session folder from a joint log, the operator's marks and the annotated frames (--check: a check session)"
+)
 BUILD_DESCRIPTION = """\
 Turns what a lab records during a calibration into a session folder (brachycal-session/1) that
 `brachycal calibrate` reads:
@@ -53,6 +61,13 @@ taken while the robot moved, or whose window is not inside the log, is refused, 
 its time. session.toml comes from --template, each value replaced by --spacing-mm, --size-px,
 --top-model-tip-mm; without a template all three are needed.
 
+--check builds a check session (for `brachycal verify`) from a check recording instead: the
+frames at the poses of `brachycal plan check` (--plan its CSV) and the single touches it planned
+(--touches, as plan check's: probe by default, each must be marked; none: --marks may be left
+out). A check recording has no top-model touches and no axes moves: they are refused, naming the
+mark (a calibration's recording is built without --check), as is a check of fewer than 3 frames.
+It writes session.toml, samples.csv, touches.csv and the build report.
+
 SESSION receives session.toml, touches.csv, axes.csv, samples.csv and the build report
 (build_report.json, build_report.csv: every mark and frame, its still window, readings, joint
 spread and speed, skipped frames and why, planned samples missing), all or nothing; existing
@@ -67,6 +82,10 @@ examples:
       --plan run/recording/plan.csv --spacing-mm 0.19,0.19 --size-px 1080,720 --top-model-tip-mm 0,0,150 \\
       --out run/session_from_bag
   brachycal calibrate run/built_session --out result.json --report report
+  brachycal demo --recording --check --out run --force   (also the twin's check recordings)
+  brachycal session build run/check_recording/joint_log.csv --check --marks run/check_recording/marks.csv \\
+      --images run/check_recording/images.csv --plan run/check_recording/plan.csv \\
+      --template run/check_recording/session.toml --out run/check_session --force
 """
 
 

@@ -123,4 +123,10 @@ def run(args: argparse.Namespace) -> int:
         f"{check.robot_minutes:.1f} min ({(count * SECONDS_PER_SAMPLE + check.motion_s) / 60:.1f} min without touches)"
     )
     print("wrote " + ", ".join(map(str, outputs.written)))
+    touches_option = f" --touches {touches}" if touches != DEFAULT_TOUCHES else ""
+    print(
+        "next: record the check at these poses (`brachycal session template --check DIR` writes the blanks), then\n"
+        f"  brachycal session build JOINT_LOG --check --marks MARKS --images IMAGES --plan {out} "
+        f"--template SESSION_TOML --out CHECK_SESSION{touches_option}"
+    )
     return 0
