@@ -35,7 +35,7 @@ samples and the probe's touch, takes 1.9 minutes. The documentation (The command
 shows the check end to end.
 
 example:
-  brachycal plan check --out check_plan.csv
+  brachycal plan check --out check_plan.csv --force
 """
 
 
