@@ -523,6 +523,7 @@ CHECK_CASES = [
             source="check",
         ),
     ),
+    Case("demo-check-without-recording", ["demo", "--check", "--out", "{tmp}/run"], ("--check", "--recording")),
     Case(
         "touches-without-check",
         [*BUILD, "--touches", "probe"],

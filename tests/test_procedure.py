@@ -17,6 +17,7 @@ import shlex
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -74,28 +75,27 @@ def _is(step: Step, *words: str) -> bool:
     return step.argv[: len(words)] == list(words)
 
 
+#: The day's stages, in the page's order: a name and what its first command is.
+STAGES: tuple[tuple[str, Callable[[Step], bool]], ...] = (
+    ("plan", lambda s: _is(s, "plan", "--out")),
+    ("record", lambda s: _is(s, "demo", "--recording")),
+    ("build", lambda s: _is(s, "session", "build") and "--check" not in s.argv),
+    ("calibrate", lambda s: _is(s, "calibrate")),
+    ("check plan", lambda s: _is(s, "plan", "check")),
+    ("check build", lambda s: _is(s, "session", "build") and "--check" in s.argv),
+    ("check", lambda s: _is(s, "verify")),
+    ("export", lambda s: _is(s, "export")),
+)
+
+
 def test_the_page_walks_the_day_with_its_check():
-    """The page shows plan → record (with the check's recordings) → build → calibrate → verify → the
-    check (its session built from a check recording, one PASS, one RECALIBRATE) → export, in that order."""
+    """The page shows plan → record (with the check's recordings) → build → calibrate → the check (its
+    session built from a check recording, one PASS, one RECALIBRATE) → export, in that order."""
     steps = page_steps(PAGE)
-    first = {
-        name: next(k for k, s in enumerate(steps) if _is(s, *words))
-        for name, words in (
-            ("plan", ("plan", "--out")),
-            ("record", ("demo", "--recording")),
-            ("build", ("session", "build")),
-            ("calibrate", ("calibrate",)),
-            ("check plan", ("plan", "check")),
-            ("check build", ("session", "build")),
-            ("verify", ("verify",)),
-            ("export", ("export",)),
-        )
-        if name != "check build"
-    }
-    first["check build"] = next(k for k, s in enumerate(steps) if _is(s, "session", "build") and "--check" in s.argv)
-    order = ["plan", "record", "build", "calibrate", "check plan", "check build", "verify", "export"]
-    assert [first[name] for name in order] == sorted(first[name] for name in order), first
-    assert "--check" in steps[first["record"]].argv  # the twin records the check too
+    first = [next((k for k, step in enumerate(steps) if found(step)), -1) for _, found in STAGES]
+    named = dict(zip([name for name, _ in STAGES], first, strict=True))
+    assert -1 not in first and first == sorted(first), named
+    assert "--check" in steps[named["record"]].argv  # the twin records the check too
     verifies = [s for s in steps if _is(s, "verify")]
     assert [s for s in verifies if s.code == 0 and not s.shows], "a check that passes, in a ```sh block"
     assert [s for s in verifies if s.code == 1 and s.shows == "RECALIBRATE"], "a check that fails, with its verdict"
@@ -120,7 +120,8 @@ def _run(argv: list[str], folder: Path) -> tuple[int, str, str, float]:
 @pytest.mark.slow
 def test_the_procedure_page_runs_as_written_twice(tmp_path):
     """Every command of the page exits as the page says, in an empty folder, twice; the checks give
-    PASS on the unchanged set-up and RECALIBRATE after the probe holder was remounted."""
+    PASS on the unchanged set-up and RECALIBRATE after the probe holder was remounted; the session
+    commands, the check's plan and a failed check say the next step."""
     steps = page_steps(PAGE)
     assert len(steps) >= 12
     timings: list[str] = []
@@ -133,4 +134,6 @@ def test_the_procedure_page_runs_as_written_twice(tmp_path):
             if _is(step, "verify"):
                 verdict = out.split()[0].rstrip(":") if out.split() else ""
                 assert verdict == (step.shows or "PASS"), said + "\n" + out
+            if _is(step, "session") or _is(step, "plan", "check") or (_is(step, "verify") and step.code):
+                assert "\nnext: " in out, f"{said}: no next step said\n{out}"
     print("\n".join(timings))
