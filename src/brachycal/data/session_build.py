@@ -461,6 +461,16 @@ def _entry(kind: str, what: str, item: Mark | Frame, window: StillWindow | None,
     return BuildEntry(kind, what, item.time_s, item.source, item.row, row_label, **stats, **extra)  # type: ignore[arg-type]
 
 
+def _mark_window(log: JointLog, mark: Mark, still: StillSettings, limits: FloatArray, units: list[str]) -> StillWindow:
+    """The still window of ``mark``; a refusal names the mark, its file and row."""
+    try:
+        return _window(log, mark.time_s, still, limits, units)
+    except InputError as exc:
+        raise InputError(
+            f"{mark.label}: {exc.problem}", file=mark.source, row=mark.row, row_label=mark.row_label
+        ) from None
+
+
 def _marks(
     log: JointLog, marks: Sequence[Mark], still: StillSettings, limits: FloatArray, units: list[str]
 ) -> tuple[dict[tuple[str, str], Touches], dict[str, dict[str, FloatArray]], list[BuildEntry]]:
@@ -472,15 +482,7 @@ def _marks(
     axes_row: dict[tuple[str, str], int] = {}
     entries = []
     for mark in sorted(marks, key=lambda m: m.time_s):
-        try:
-            window = _window(log, mark.time_s, still, limits, units)
-        except InputError as exc:
-            raise InputError(
-                f"{mark.label}: {exc.problem}",
-                file=mark.source,
-                row=mark.row,
-                row_label=mark.row_label,
-            ) from None
+        window = _mark_window(log, mark, still, limits, units)
         if mark.kind == "touch":
             trials = touch_q.setdefault((mark.tool, mark.name), [])
             trials.append(window.q)
@@ -553,12 +555,7 @@ def _check_marks(
                 row=mark.row,
                 row_label=mark.row_label,
             )
-        try:
-            window = _window(log, mark.time_s, still, limits, units)
-        except InputError as exc:
-            raise InputError(
-                f"{mark.label}: {exc.problem}", file=mark.source, row=mark.row, row_label=mark.row_label
-            ) from None
+        window = _mark_window(log, mark, still, limits, units)
         trials = touch_q.setdefault((mark.tool, mark.name), [])
         trials.append(window.q)
         entries.append(_entry(mark.kind, f"{mark.tool} {mark.name} trial {len(trials)}", mark, window, used=True))
