@@ -549,3 +549,23 @@ def test_a_check_template_explains_a_check_recording(tmp_path, capsys):
     assert "no top-model touches and no axes moves" in readme
     out = capsys.readouterr().out
     assert "next:" in out and "--check" in out
+
+
+def test_a_check_planned_without_touches_builds_from_its_frames_alone(check_rec, robot, tmp_path):
+    """``--touches none``: no marks are needed; the check folder's touches.csv holds its header alone (a
+    rebuild never keeps an earlier check's touches), and ``verify`` reads the check without touches."""
+    from brachycal.calibration.verify.check import read_check_session
+
+    folder = write_recording(check_rec, tmp_path / "rec")
+    build = build_session_from_files(
+        folder / "joint_log.csv",
+        robot=robot,
+        images=folder / "images.csv",
+        plan=folder / "plan.csv",
+        settings=session_settings(folder / "session.toml"),
+        check=(),
+    )
+    assert not build.session.touches and len(build.session.sample_ids) == len(check_rec.plan.poses)
+    write_build(build, tmp_path / "check")
+    assert (tmp_path / "check" / "touches.csv").read_text().count("\n") == 1
+    assert read_check_session(tmp_path / "check", robot).touches == []
