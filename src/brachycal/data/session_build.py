@@ -714,10 +714,17 @@ def build_check_session(
     reads them (still windows, clock lag, pairing with ``plan``: ``brachycal plan check``'s).
 
     Args:
+        log: the joint log (its configurations in ``robot``'s joint order).
         marks: touch marks of the needle and the probe only (may be empty when ``touches`` is).
+        frames: captured frames at the check's poses; those without an annotation are skipped.
+        robot: the model the log belongs to.
+        settings: the set-up's image spacing and size and the top-model tip (the calibration's).
         touches: the tools (``needle``, ``probe``) whose touch of ``rtip1`` the check planned: each
             must have one.
-        log, frames, robot, settings, plan, still, lag_s, lag_sd_s: as for :func:`build_session`.
+        plan: the check's planned poses (``brachycal plan check``'s), to name frames.
+        still: what "still" means.
+        lag_s: added to every frame's time (seconds), as for :func:`build_session`.
+        lag_sd_s: the lag's standard deviation (seconds).
         marks_source: where the marks were read (a file that holds none is named by a refusal).
 
     Returns:
