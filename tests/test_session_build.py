@@ -495,6 +495,19 @@ def check_rec(rec, robot):
     return check_recording(rec, robot, CHANGES["unchanged"], 1)
 
 
+def build_check(folder, robot, touches, *, marks=True):
+    """``session build --check`` of the recording in ``folder`` (its marks unless not ``marks``)."""
+    return build_session_from_files(
+        folder / "joint_log.csv",
+        robot=robot,
+        images=folder / "images.csv",
+        marks=folder / "marks.csv" if marks else None,
+        plan=folder / "plan.csv",
+        settings=session_settings(folder / "session.toml"),
+        check=touches,
+    )
+
+
 def test_a_check_recording_builds_the_check_the_twin_recorded(check_rec, robot, tmp_path):
     """``session build --check``: the check recording (the probe's touch of rtip1, a frame at each pose
     of ``plan check``) gives the check session of its stops' true joints, within the encoder noise
@@ -503,16 +516,7 @@ def test_a_check_recording_builds_the_check_the_twin_recorded(check_rec, robot, 
     from brachycal.data.session import CHECK_FILES
     from brachycal.data.session_build import REPORT_FILES
 
-    folder = write_recording(check_rec, tmp_path / "rec")
-    build = build_session_from_files(
-        folder / "joint_log.csv",
-        robot=robot,
-        images=folder / "images.csv",
-        marks=folder / "marks.csv",
-        plan=folder / "plan.csv",
-        settings=session_settings(folder / "session.toml"),
-        check=("probe",),
-    )
+    build = build_check(write_recording(check_rec, tmp_path / "rec"), robot, ("probe",))
     assert build.check and not build.session.axes
     assert build.session.sample_ids == [p.point.name for p in check_rec.plan.poses]
 
@@ -556,15 +560,7 @@ def test_a_check_planned_without_touches_builds_from_its_frames_alone(check_rec,
     rebuild never keeps an earlier check's touches), and ``verify`` reads the check without touches."""
     from brachycal.calibration.verify.check import read_check_session
 
-    folder = write_recording(check_rec, tmp_path / "rec")
-    build = build_session_from_files(
-        folder / "joint_log.csv",
-        robot=robot,
-        images=folder / "images.csv",
-        plan=folder / "plan.csv",
-        settings=session_settings(folder / "session.toml"),
-        check=(),
-    )
+    build = build_check(write_recording(check_rec, tmp_path / "rec"), robot, (), marks=False)
     assert not build.session.touches and len(build.session.sample_ids) == len(check_rec.plan.poses)
     write_build(build, tmp_path / "check")
     assert (tmp_path / "check" / "touches.csv").read_text().count("\n") == 1
