@@ -741,6 +741,38 @@ MUTANTS: tuple[Mutant, ...] = (
         ),
         "an N pattern taken for the frame's though no one plane through the phantom fits it",
     ),
+    Mutant(
+        "check-build-takes-calibration-marks",
+        "data/session_build.py",
+        'if mark.kind != "touch" or mark.tool not in CHECK_TOOLS:',
+        "if False:",
+        ("tests/test_hostile_session.py::test_check_build_refusals[session-recording-given-to-a-check-build]",),
+        "a calibration recording built as a check: top-model touches and axes moves taken as check touches",
+    ),
+    Mutant(
+        "check-build-without-its-touch",
+        "data/session_build.py",
+        'if (tool, "rtip1") not in touch_q:',
+        "if False:",
+        ("tests/test_hostile_session.py::test_check_build_refusals[check-without-its-touch]",),
+        "a check built without the touch it planned: a probe remount then reads as an image change",
+    ),
+    Mutant(
+        "check-build-of-two-frames",
+        "data/session_build.py",
+        "if check is not None and len(names) < MIN_CHECK_SAMPLES:",
+        "if False:",
+        ("tests/test_hostile_session.py::test_check_build_refusals[check-of-two-frames]",),
+        "a check session of fewer frames than any check reads, written for verify to refuse later",
+    ),
+    Mutant(
+        "session-build-takes-a-check-recording",
+        "data/session_build.py",
+        'if not any(tool == "top_model" for tool, _ in touch_q) and not any(axes.values()):',
+        "if False:",
+        ("tests/test_hostile_session.py::test_check_build_refusals[check-recording-given-to-a-session-build]",),
+        "a check recording given to a session build is refused without saying it is a check's (--check)",
+    ),
 )
 
 

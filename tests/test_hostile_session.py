@@ -21,6 +21,7 @@ from hostile import Case, check_refusal
 
 from brachycal.model import Robot
 from brachycal.simulation import RecordingConfig, TwinConfig, record, write_recording
+from brachycal.studies.check_twin import CHANGES, check_recording
 
 BUILD = [
     "session",
@@ -46,17 +47,20 @@ def source(tmp_path_factory):
     robot = Robot.load()
     rec = record(robot, TwinConfig(seed=4), RecordingConfig(rate_hz=25.0, speed_scale=0.5, hold_s=1.6))
     _SOURCE["folder"] = write_recording(rec, tmp_path_factory.mktemp("hostile_session") / "rec")
+    check = check_recording(rec, robot, CHANGES["unchanged"], 1)
+    _SOURCE["check"] = write_recording(check, tmp_path_factory.mktemp("hostile_check") / "rec")
     speed = np.abs(np.diff(rec.q_true, axis=0)).max(axis=1)
     _SOURCE["moving"] = float(rec.time[int(np.argmax(speed))])
     _SOURCE["end"] = float(rec.time[-1])
     return _SOURCE
 
 
-def with_copy(*edits: Callable[[Path], None]):
-    """Copy the recording into the case's folder, then apply ``edits`` to it."""
+def with_copy(*edits: Callable[[Path], None], source: str = "folder"):
+    """Copy the recording (``source="check"``: the check recording) into the case's folder, then
+    apply ``edits`` to it."""
 
     def setup(tmp: Path) -> None:
-        for item in Path(_SOURCE["folder"]).iterdir():  # type: ignore[arg-type]
+        for item in Path(_SOURCE[source]).iterdir():  # type: ignore[arg-type]
             if item.is_file():
                 shutil.copyfile(item, tmp / item.name)
         for edit in edits:
@@ -469,4 +473,74 @@ TEMPLATE_CASES = [
 @pytest.mark.parametrize("case", TEMPLATE_CASES, ids=lambda c: c.id)
 def test_session_template_refusals(case, tmp_path):
     """``session template`` never replaces a lab's files unasked; an unfilled template is refused by the build."""
+    check_refusal(case, tmp_path)
+
+
+CHECK = [*BUILD[:-1], "{tmp}/check_session", "--check"]
+CHECK_CASES = [
+    Case(
+        "check-without-its-touch",
+        CHECK,
+        ("marks.csv", "no touch mark of probe on rtip1", "--touches none"),
+        with_copy(drop_lines("marks.csv", lambda line: ",probe," not in line), source="check"),
+    ),
+    Case(
+        "check-without-the-needles-planned-touch",
+        [*CHECK, "--touches", "both"],
+        ("marks.csv", "no touch mark of needle on rtip1"),
+        with_copy(source="check"),
+    ),
+    Case(
+        "check-without-marks",
+        [*CHECK[:3], *CHECK[5:]],
+        ("give the check's marks", "--marks", "probe"),
+        with_copy(source="check"),
+    ),
+    Case(
+        "check-of-two-frames",
+        CHECK,
+        ("images.csv", "2 annotated frame(s) usable", "a check needs at least 3"),
+        with_copy(edit_csv("images.csv", lambda lines: lines[:3]), source="check"),
+    ),
+    Case(
+        "check-recording-given-to-a-session-build",
+        BUILD,
+        ("marks.csv", "no top-model touches and no axes points", "a check recording", "--check"),
+        with_copy(source="check"),
+    ),
+    Case(
+        "session-recording-given-to-a-check-build",
+        CHECK,
+        ("marks.csv, row 2", "a check recording has no", "without --check"),
+        with_copy(),
+    ),
+    Case(
+        "check-with-an-axes-mark",
+        CHECK,
+        ("marks.csv, row 3", "axes mark needle p1", "a check recording has no axes moves"),
+        with_copy(
+            edit_csv("marks.csv", lambda lines: [*lines, lines[1].replace("touch,probe,rtip1", "axes,needle,p1")]),
+            source="check",
+        ),
+    ),
+    Case("demo-check-without-recording", ["demo", "--check", "--out", "{tmp}/run"], ("--check", "--recording")),
+    Case(
+        "touches-without-check",
+        [*BUILD, "--touches", "probe"],
+        ("--touches", "give --check too"),
+        with_copy(),
+    ),
+    Case(
+        "check-session-exists",
+        CHECK,
+        ("check_session/samples.csv", "already exists", "--force"),
+        with_copy(write("check_session/samples.csv", "an earlier check\n"), source="check"),
+    ),
+]
+
+
+@pytest.mark.parametrize("case", CHECK_CASES, ids=lambda c: c.id)
+def test_check_build_refusals(case, tmp_path):
+    """``session build --check`` takes a check recording and nothing else: the check's planned touches,
+    at least 3 annotated frames, no top-model touch or axes move; a check recording is not a session's."""
     check_refusal(case, tmp_path)

@@ -176,6 +176,8 @@ def inputs(tmp_path_factory) -> dict[str, str]:
     folder = tmp_path_factory.mktemp("inputs") / "demo"
     outcome = run_cli(["verify", "--demo", str(folder)])
     assert outcome.code == 0, outcome.err
+    # it says what to run next, on what it wrote
+    assert f"\nnext: brachycal verify {folder / 'result.json'} {folder / 'check_unchanged'}" in outcome.out
     GOOD.update(
         result=str(folder / "result.json"), check=str(folder / "check_unchanged"), session=str(folder / "session")
     )

@@ -485,3 +485,83 @@ def test_an_unfilled_template_takes_the_values_given_as_options(tmp_path):
         partial = {k: v for k, v in given.items() if k != left_out}
         with pytest.raises(InputError, match=rf"column '{key}': expected a list of"):
             session_settings(template, **partial)
+
+
+@pytest.fixture(scope="module")
+def check_rec(rec, robot):
+    """The twin's check before a procedure (nothing changed), recorded as a lab records it."""
+    from brachycal.studies.check_twin import CHANGES, check_recording
+
+    return check_recording(rec, robot, CHANGES["unchanged"], 1)
+
+
+def build_check(folder, robot, touches, *, marks=True):
+    """``session build --check`` of the recording in ``folder`` (its marks unless not ``marks``)."""
+    return build_session_from_files(
+        folder / "joint_log.csv",
+        robot=robot,
+        images=folder / "images.csv",
+        marks=folder / "marks.csv" if marks else None,
+        plan=folder / "plan.csv",
+        settings=session_settings(folder / "session.toml"),
+        check=touches,
+    )
+
+
+def test_a_check_recording_builds_the_check_the_twin_recorded(check_rec, robot, tmp_path):
+    """``session build --check``: the check recording (the probe's touch of rtip1, a frame at each pose
+    of ``plan check``) gives the check session of its stops' true joints, within the encoder noise
+    averaged over the still window, each frame named by its planned pose; ``verify`` reads it back."""
+    from brachycal.calibration.verify.check import read_check_session
+    from brachycal.data.session import CHECK_FILES
+    from brachycal.data.session_build import REPORT_FILES
+
+    build = build_check(write_recording(check_rec, tmp_path / "rec"), robot, ("probe",))
+    assert build.check and not build.session.axes
+    assert build.session.sample_ids == [p.point.name for p in check_rec.plan.poses]
+
+    def true_q(t: float) -> np.ndarray:
+        return check_rec.q_true[int(np.argmin(np.abs(check_rec.time - t)))]  # a hold repeats its stop's joints
+
+    averaged = SIGMA / np.sqrt(check_rec.recording.rate_hz * build.report.still.window_s)
+    for q, frame in zip(build.session.samples_q, check_rec.frames, strict=True):
+        np.testing.assert_allclose(q, true_q(frame.time_s), rtol=0, atol=6 * averaged)
+    assert list(build.session.touches) == [("probe", "rtip1")]
+    (mark,) = check_rec.marks
+    np.testing.assert_allclose(
+        build.session.touches["probe", "rtip1"].q[0], true_q(mark.time_s), rtol=0, atol=6 * averaged
+    )
+
+    write_build(build, tmp_path / "check")
+    assert sorted(p.name for p in (tmp_path / "check").iterdir()) == sorted((*CHECK_FILES, *REPORT_FILES))
+    assert json.loads((tmp_path / "check" / "build_report.json").read_text())["kind"] == "check"
+    read = read_check_session(tmp_path / "check", robot)
+    assert read.sample_ids == build.session.sample_ids
+    np.testing.assert_array_equal(read.samples_q, build.session.samples_q)
+    assert [(tool, reference, trial) for tool, reference, trial, _ in read.touches] == [("probe", "rtip1", 1)]
+
+
+def test_a_check_template_explains_a_check_recording(tmp_path, capsys):
+    """``session template --check``: the same blanks, a README of what a check records, and the next command."""
+    from brachycal.cli.main import main
+    from brachycal.data.session_template import TEMPLATE_FILES
+
+    assert main(["session", "template", "--check", str(tmp_path / "blank")]) == 0
+    assert sorted(p.name for p in (tmp_path / "blank").iterdir()) == sorted(TEMPLATE_FILES)
+    readme = (tmp_path / "blank" / "README.txt").read_text()
+    assert "session build JOINT_LOG --check" in readme and "brachycal verify RESULT CHECK_SESSION" in readme
+    assert "no top-model touches and no axes moves" in readme
+    out = capsys.readouterr().out
+    assert "next:" in out and "--check" in out
+
+
+def test_a_check_planned_without_touches_builds_from_its_frames_alone(check_rec, robot, tmp_path):
+    """``--touches none``: no marks are needed; the check folder's touches.csv holds its header alone (a
+    rebuild never keeps an earlier check's touches), and ``verify`` reads the check without touches."""
+    from brachycal.calibration.verify.check import read_check_session
+
+    build = build_check(write_recording(check_rec, tmp_path / "rec"), robot, (), marks=False)
+    assert not build.session.touches and len(build.session.sample_ids) == len(check_rec.plan.poses)
+    write_build(build, tmp_path / "check")
+    assert (tmp_path / "check" / "touches.csv").read_text().count("\n") == 1
+    assert read_check_session(tmp_path / "check", robot).touches == []

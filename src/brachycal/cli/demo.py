@@ -50,6 +50,7 @@ examples:
   brachycal demo --seed 7 --out demo_seed7         another simulated session
   brachycal demo --example --out demo_example      calibrate the committed examples/twin_session
   brachycal demo --robot baxter --out demo_baxter  the same main job on a Baxter
+  brachycal demo --recording --check --out run --force   the twin's recordings: a session and two checks
 """
 
 
@@ -88,6 +89,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "images.csv, plan.csv, session.toml, a ROS 2 bag), for `brachycal session build`",
     )
     parser.add_argument(
+        "--check",
+        action="store_true",
+        help="with --recording: also write the twin's check before a procedure as a lab records it, at the poses "
+        "'brachycal plan check' picks from the recording's plan, with the probe's touch of rtip1: "
+        "DIR/check_recording (nothing changed: PASS) and DIR/check_recording_remounted (the probe holder "
+        "remounted by 1 mm / 1 deg: RECALIBRATE), for `brachycal session build --check`",
+    )
+    parser.add_argument(
         "--images",
         action="store_true",
         help="with --recording: also render its frames as B-mode images, DIR/recording/frames.mha (one per row "
@@ -111,10 +120,11 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     from brachycal.studies.demo import check_example_robot  # lazy: start-up (the command's run only)
 
-    if args.images and not args.recording:
-        from brachycal.errors import InputError  # lazy: start-up (the command's run only)
+    for option in ("images", "check"):
+        if getattr(args, option) and not args.recording:
+            from brachycal.errors import InputError  # lazy: start-up (the command's run only)
 
-        raise InputError("--images renders the recording's frames: give --recording too")
+            raise InputError(f"--{option} is part of the twin's recording: give --recording too")
     robot = load_robot(args)  # a bad description is refused before anything is claimed
     if args.table3:
         return _table3(args, robot, start)
@@ -132,7 +142,7 @@ def run(args: argparse.Namespace) -> int:
         for name in DEMO_REPORT_FILES:
             outputs.claim(out / "report" / name, make_parents=True)
         # The stages of run_demo, the report, and the recording if asked.
-        with progress_bar(len(DEMO_STAGES) + 1 + args.recording, "demo", args.quiet, unit="stage") as bar:
+        with progress_bar(len(DEMO_STAGES) + 1 + args.recording + args.check, "demo", args.quiet, unit="stage") as bar:
             demo = run_demo(
                 robot,
                 out,
@@ -151,6 +161,14 @@ def run(args: argparse.Namespace) -> int:
                 images = BModeSettings(seed=args.seed) if args.images else None
                 write_recording(rec, out / "recording", bag="sqlite3", images=images, force=args.force, outputs=outputs)
                 bar.update(1)
+            if args.check:
+                # lazy: start-up (the command's run only)
+                from brachycal.studies.check_twin import CHANGES, CHECK_RECORDINGS, check_recording
+
+                for name, change, check_seed in CHECK_RECORDINGS:
+                    check = check_recording(rec, robot, CHANGES[change], check_seed)
+                    write_recording(check, out / name, force=args.force, outputs=outputs)
+                bar.update(1)
         warn_refused(demo.result.refused)
         print(demo_text(demo))
     report = out / "report"
@@ -166,6 +184,16 @@ def run(args: argparse.Namespace) -> int:
             f"--plan {rec_dir}/plan.csv --template {rec_dir}/session.toml --out {out}/built_session"
             + (f" --robot {args.robot}" if args.robot is not None else "")
         )
+        if args.check:
+            robot_option = f" --robot {args.robot}" if args.robot is not None else ""
+            for name, change, _ in CHECK_RECORDINGS:
+                folder = out / name
+                print(
+                    f"wrote {folder} (the twin's check recording, {change}); build a check session from it with:\n"
+                    f"  brachycal session build {folder}/joint_log.csv --check --marks {folder}/marks.csv "
+                    f"--images {folder}/images.csv --plan {folder}/plan.csv --template {folder}/session.toml "
+                    f"--out {out}/{name.replace('recording', 'session')}{robot_option}"
+                )
         if args.images:
             print(
                 f"its frames as B-mode images: {rec_dir}/frames.mha; propose the tips with:\n  brachycal tips "

@@ -11,7 +11,9 @@ from brachycal.errors import InputError
 from brachycal.validate import MAX_IMAGE_PX
 
 HELP = "session folders: build one from a lab's recording (joint log, marks, frames), or write blank templates"
-TEMPLATE_HELP = "write blank templates of a lab's session.toml, marks.csv and images.csv, with a README"
+TEMPLATE_HELP = (
+    "write blank templates of a lab's session.toml, marks.csv and images.csv, with a README (--check: a check's)"
+)
 TEMPLATE_DESCRIPTION = """\
 Writes into DIR the blanks a lab fills in for its own session:
 
@@ -23,12 +25,18 @@ Writes into DIR the blanks a lab fills in for its own session:
 
 then `brachycal session build JOINT_LOG --marks DIR/marks.csv --images DIR/images.csv
 --template DIR/session.toml --out SESSION` turns the joint log and these into a session folder.
-All files are written or none; existing files are replaced only with --force.
+--check: the blanks of a check before a procedure (the same files; the README says what a check
+records: the frames at the poses of `brachycal plan check` and its single touches), for
+`brachycal session build --check`. All files are written or none; existing files are replaced
+only with --force.
 
-example:
+examples:
   brachycal session template my_session
+  brachycal session template --check my_check --force
 """
-BUILD_HELP = "build a session folder from a joint log, the operator's marks and the annotated frames"
+BUILD_HELP = (
+    "build a session folder from a joint log, the operator's marks and the annotated frames (--check: a check session)"
+)
 BUILD_DESCRIPTION = """\
 Turns what a lab records during a calibration into a session folder (brachycal-session/1) that
 `brachycal calibrate` reads:
@@ -53,6 +61,13 @@ taken while the robot moved, or whose window is not inside the log, is refused, 
 its time. session.toml comes from --template, each value replaced by --spacing-mm, --size-px,
 --top-model-tip-mm; without a template all three are needed.
 
+--check builds a check session (for `brachycal verify`) from a check recording instead: the
+frames at the poses of `brachycal plan check` (--plan its CSV) and the single touches it planned
+(--touches, as plan check's: probe by default, each must be marked; none: --marks may be left
+out). A check recording has no top-model touches and no axes moves: they are refused, naming the
+mark (a calibration's recording is built without --check), as is a check of fewer than 3 frames.
+It writes session.toml, samples.csv, touches.csv and the build report.
+
 SESSION receives session.toml, touches.csv, axes.csv, samples.csv and the build report
 (build_report.json, build_report.csv: every mark and frame, its still window, readings, joint
 spread and speed, skipped frames and why, planned samples missing), all or nothing; existing
@@ -67,6 +82,10 @@ examples:
       --plan run/recording/plan.csv --spacing-mm 0.19,0.19 --size-px 1080,720 --top-model-tip-mm 0,0,150 \\
       --out run/session_from_bag
   brachycal calibrate run/built_session --out result.json --report report
+  brachycal demo --recording --check --out run --force   (also the twin's check recordings)
+  brachycal session build run/check_recording/joint_log.csv --check --marks run/check_recording/marks.csv \\
+      --images run/check_recording/images.csv --plan run/check_recording/plan.csv \\
+      --template run/check_recording/session.toml --out run/check_session --force
 """
 
 
@@ -78,6 +97,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     # lazy: start-up (the command's run only)
     from brachycal.data.session_build import MAX_STILL_SPEED_RAD_S, MAX_WINDOW_S
+    from brachycal.planning.check_poses import DEFAULT_TOUCHES, TOUCH_CHOICES  # lazy: start-up (only this parser)
 
     parser = sub.add_parser("session", help=HELP, description=HELP)
     actions = parser.add_subparsers(title="actions", metavar="ACTION", required=True)
@@ -88,7 +108,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "build", help=BUILD_HELP, description=description, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     build.add_argument("log", metavar="LOG", help="joint log: CSV file, ROS 1 .bag or ROS 2 bag folder")
-    marks = build.add_mutually_exclusive_group(required=True)
+    marks = build.add_mutually_exclusive_group()
     marks.add_argument("--marks", metavar="CSV", help="marks.csv (time,kind,tool,name)")
     marks.add_argument("--marks-topic", metavar="TOPIC", help="read the marks from this std_msgs/String topic of LOG")
     build.add_argument(
@@ -96,6 +116,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=DEFAULT_TOPIC,
         metavar="TOPIC",
         help=f"the sensor_msgs/JointState topic of a bag (default {DEFAULT_TOPIC})",
+    )
+    build.add_argument(
+        "--check",
+        action="store_true",
+        help="build a check session (for brachycal verify) from a check recording: the frames at the poses of "
+        "'brachycal plan check' and single touches of rtip1 (no top-model touches, no axes moves)",
+    )
+    build.add_argument(
+        "--touches",
+        choices=list(TOUCH_CHOICES),
+        help=f"with --check: which tools' touches of rtip1 the check planned, as 'plan check --touches' "
+        f"(default {DEFAULT_TOUCHES}); each must be marked",
     )
     build.add_argument("--images", required=True, metavar="CSV", help="images.csv (time,u_px,v_px[,sample])")
     build.add_argument(
@@ -168,6 +200,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     template.add_argument("folder", metavar="DIR", help="folder to write the templates into (created if needed)")
+    template.add_argument(
+        "--check",
+        action="store_true",
+        help="the blanks of a check recording (before a procedure: brachycal verify) instead of a calibration's",
+    )
     template.add_argument("--force", action="store_true", help="replace existing template files in DIR")
     template.set_defaults(run=run_template)
 
@@ -181,17 +218,26 @@ def run_template(args: argparse.Namespace) -> int:
     with OutputSet(force=args.force) as outputs:
         for name in TEMPLATE_FILES:
             outputs.claim(folder / name, make_parents=True, label="DIR")
-        write_session_template(folder, force=args.force, outputs=outputs)
+        write_session_template(folder, force=args.force, outputs=outputs, check=args.check)
     print(f"wrote {folder}: {', '.join(TEMPLATE_FILES)}")
-    print(f"next: fill in {folder / 'session.toml'}, record, add the rows (see {folder / 'README.txt'}), then")
-    print(
-        f"  brachycal session build JOINT_LOG --marks {folder / 'marks.csv'} --images {folder / 'images.csv'} "
-        f"--template {folder / 'session.toml'} --out SESSION"
-    )
+    marks, images, toml = folder / "marks.csv", folder / "images.csv", folder / "session.toml"
+    if args.check:
+        print(
+            f"next: fill in {toml} (the calibration's), record the check at the poses of "
+            f"'brachycal plan check --out CHECK_PLAN', add the rows (see {folder / 'README.txt'}), then"
+        )
+        print(
+            f"  brachycal session build JOINT_LOG --check --marks {marks} --images {images} --plan CHECK_PLAN "
+            f"--template {toml} --out CHECK_SESSION"
+        )
+        return 0
+    print(f"next: fill in {toml}, record, add the rows (see {folder / 'README.txt'}), then")
+    print(f"  brachycal session build JOINT_LOG --marks {marks} --images {images} --template {toml} --out SESSION")
     return 0
 
 
 def run_build(args: argparse.Namespace) -> int:
+    from brachycal.data.session import CHECK_FILES  # lazy: start-up (the command's run only)
     from brachycal.data.session import FILES as SESSION_FILES  # lazy: start-up (the command's run only)
     from brachycal.data.session_build import (  # lazy: start-up (the command's run only)
         REPORT_FILES,
@@ -201,18 +247,29 @@ def run_build(args: argparse.Namespace) -> int:
         write_build,
     )
     from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
+    from brachycal.planning.check_poses import DEFAULT_TOUCHES, touch_choice  # lazy: start-up (the command's run only)
 
     out = Path(args.out)
+    if args.touches is not None and not args.check:
+        raise InputError("--touches says which touches a check planned: give --check too")
     if args.speed_span_s > args.still_window_s:
         raise InputError(
             f"--speed-span-s {args.speed_span_s:g} s is longer than --still-window-s {args.still_window_s:g} s: "
             "the speed is judged inside the window"
         )
+    check = touch_choice(args.touches or DEFAULT_TOUCHES) if args.check else None
+    if check and args.marks is None and args.marks_topic is None:
+        raise InputError(
+            "give the check's marks (--marks or --marks-topic): it planned touches of rtip1 by "
+            f"{' and '.join(f'the {tool}' for tool in check)} "
+            "(a check planned without touches builds with --touches none)"
+        )
+    files = (*CHECK_FILES, *REPORT_FILES) if args.check else (*SESSION_FILES, *REPORT_FILES)
     still = StillSettings(args.still_window_s, args.speed_span_s, args.max_speed_rad_s)
     with OutputSet(
         force=args.force, inputs=command_inputs(args, "log", "marks", "images", "plan", "template", "markups")
     ) as outputs:
-        for name in (*SESSION_FILES, *REPORT_FILES):
+        for name in files:
             outputs.claim(out / name, make_parents=True, label="--out")
         settings = session_settings(
             args.template, spacing_mm=args.spacing_mm, size_px=args.size_px, top_model_tip_mm=args.top_model_tip_mm
@@ -232,10 +289,17 @@ def run_build(args: argparse.Namespace) -> int:
             still=still,
             lag_s=args.lag_s,
             lag_sd_s=args.lag_sd_s,
+            check=check,
         )
         write_build(build, out, force=args.force, outputs=outputs)
     print(build.report.summary())
-    print(f"\nwrote {out}: {', '.join((*SESSION_FILES, *REPORT_FILES))}")
+    print(f"\nwrote {out}{' (a check session)' if args.check else ''}: {', '.join(files)}")
     robot_option = f" --robot {args.robot}" if args.robot else f" --urdf {args.urdf}" if args.urdf else ""
-    print(f"next: brachycal calibrate {out}{robot_option} --out result.json")
+    if args.check:
+        print(
+            f"next: brachycal verify RESULT {out} --calibration-session SESSION{robot_option} --out check.json   "
+            "(RESULT: the stored calibration; SESSION: the session it was calibrated from)"
+        )
+    else:
+        print(f"next: brachycal calibrate {out}{robot_option} --out result.json")
     return 0

@@ -159,6 +159,15 @@ def run(args: argparse.Namespace) -> int:
             f"confirm it with a new check of fresh samples before use"
         )
     print("wrote " + ", ".join(map(str, outputs.written)))
+    if args.update and check.updated is not None:
+        print(
+            f"next: brachycal verify {args.update} FRESH_CHECK_SESSION --calibration-session SESSION --out check.json"
+        )
+    elif not check.passed:
+        print(
+            "next: recalibrate: record a session, then brachycal session build ... and brachycal calibrate SESSION "
+            "--out result.json" + ("" if args.update else " (or, where one part alone explains the check, --update)")
+        )
     return 0 if check.passed else 1
 
 
@@ -196,4 +205,9 @@ def _demo(args: argparse.Namespace) -> int:
         f"{twin.check_plan.robot_minutes:.1f} robot minutes at 10 s per sample and 30 s per touch)"
     )
     print("wrote " + ", ".join(map(str, outputs.written)))
+    robot_option = f" --robot {args.robot}" if args.robot else f" --urdf {args.urdf}" if args.urdf else ""
+    print(
+        f"next: brachycal verify {folder / 'result.json'} {folder / 'check_unchanged'} --calibration-session "
+        f"{folder / 'session'}{robot_option} --out check.json   (PASS; check_probe_remounted: RECALIBRATE)"
+    )
     return 0

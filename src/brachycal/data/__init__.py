@@ -74,6 +74,7 @@ if TYPE_CHECKING:  # imported on first use: `brachycal <command> --help` and `fk
         read_image_sector,
         read_session,
         read_session_toml,
+        write_check_session,
         write_session,
     )
     from brachycal.data.session_build import (
@@ -82,6 +83,7 @@ if TYPE_CHECKING:  # imported on first use: `brachycal <command> --help` and `fk
         PlannedSamples,
         SessionBuild,
         StillSettings,
+        build_check_session,
         build_session,
         build_session_from_files,
         read_plan,
@@ -136,6 +138,7 @@ __all__ = [
     "Touches",
     "Wire",
     "bag_log_blocks",
+    "build_check_session",
     "build_session",
     "build_session_from_files",
     "csv_log_blocks",
@@ -173,6 +176,7 @@ __all__ = [
     "still_configuration",
     "write_bag_log",
     "write_build",
+    "write_check_session",
     "write_image_sequence",
     "write_pose_table",
     "write_segmented_frames",

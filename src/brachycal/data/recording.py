@@ -301,12 +301,12 @@ def _in_time_order(marks: list[Mark]) -> list[Mark]:
     return sorted(marks, key=lambda m: m.time_s)  # stable: equal times keep the file's order
 
 
-def read_marks(path: str | os.PathLike[str]) -> list[Mark]:
+def read_marks(path: str | os.PathLike[str], *, allow_empty: bool = False) -> list[Mark]:
     """Read ``marks.csv`` (``time,kind,tool,name``), in time order.
 
     Raises:
         InputError: naming the row and column: a time that is not a finite number, an unknown
-            kind, tool or name; or a file without marks.
+            kind, tool or name; or a file without marks (unless ``allow_empty``: a check without touches).
     """
     path = Path(path)
     header, rows, records = read_table(path, ["time", "kind", "tool", "name"])
@@ -324,20 +324,21 @@ def read_marks(path: str | os.PathLike[str]) -> list[Mark]:
         )
         for time, row, fields in zip(times, rows, records, strict=True)
     ]
-    if not marks:
+    if not marks and not allow_empty:
         raise InputError("no marks (expected one row per touch and axes point)", file=path)
     return _in_time_order(marks)
 
 
-def read_bag_marks(path: str | os.PathLike[str], topic: str) -> list[Mark]:
+def read_bag_marks(path: str | os.PathLike[str], topic: str, *, allow_empty: bool = False) -> list[Mark]:
     """Read marks from ``std_msgs/String`` messages ``kind,tool,name`` on ``topic`` of a ROS bag.
 
     A mark's time is the time the bag recorded the message (``String`` carries no header).
     ``path`` is a ROS 1 ``.bag`` file or a ROS 2 bag folder (or its ``.db3``/``.mcap`` file).
 
     Raises:
-        InputError: unreadable bag, no such topic, another message type, or a message that is not
-            three comma-separated fields (naming its number on the topic).
+        InputError: unreadable bag, no such topic, another message type, a message that is not
+            three comma-separated fields (naming its number on the topic), or no marks (unless
+            ``allow_empty``).
     """
     source = str(bag_folder(path))
     marks: list[Mark] = []
@@ -353,7 +354,7 @@ def read_bag_marks(path: str | os.PathLike[str], topic: str) -> list[Mark]:
                 row_label="message",
             )
         marks.append(_mark(bag_time * 1e-9, *fields, source=source, row=number, row_label="message"))
-    if not marks:
+    if not marks and not allow_empty:
         raise InputError(f"topic {topic!r} has no marks", file=source)
     return _in_time_order(marks)
 

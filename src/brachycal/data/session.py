@@ -45,6 +45,14 @@ if TYPE_CHECKING:  # annotations only: reading a file needs no Pinocchio
 
 FORMAT = "brachycal-session/1"
 FILES = ("session.toml", "touches.csv", "axes.csv", "samples.csv")
+#: The files of a check session folder (``brachycal verify``'s CHECK_SESSION): the set-up, the
+#: samples at the check's poses and the check's touches (header only when it has none).
+CHECK_FILES = ("session.toml", "samples.csv", "touches.csv")
+#: The tools a check's touches are by (the top-model is not: the result located the reference tips).
+CHECK_TOOLS = ("needle", "probe")
+#: Fewest samples a check reads: 3 points fix the image's 6 degrees of freedom; a check of fewer
+#: has no redundancy against one mislabelled frame. ``plan check`` plans 5 or more.
+MIN_CHECK_SAMPLES = 3
 TOUCH_TOOLS = ("top_model", "needle", "probe")
 REFERENCES = ("rtip1", "rtip2")
 AXES_TOOLS = ("needle", "probe")
@@ -476,6 +484,35 @@ def _sector_toml(sector: ImageSector | None) -> str:
     )
 
 
+def _write_toml(out: OutputSet, folder: Path, session: Session, force: bool) -> None:
+    su, sv = (float(v) for v in session.spacing_m * 1e3)
+    tip = ", ".join(repr(float(v)) for v in session.p_ER_Mtip * 1e3)
+    with atomic_open(out.path(folder / "session.toml", make_parents=True), force=force) as f:
+        f.write(
+            f'format = "{FORMAT}"\n\n[image]\nspacing_mm = [{su!r}, {sv!r}]     # (s_u, s_v)\n'
+            f"size_px = [{int(session.size_px[0])}, {int(session.size_px[1])}]         # (width, height)\n\n"
+            f"{_sector_toml(session.sector)}"
+            f"[top_model]\ntip_in_flange_mm = [{tip}]   # p_ER_Mtip\n"
+        )
+
+
+def _write_touches(out: OutputSet, folder: Path, session: Session, force: bool) -> None:
+    with atomic_open(out.path(folder / "touches.csv", make_parents=True), force=force) as f:
+        f.write(f"tool,reference,trial,{','.join(session.joint_names)}\n")
+        for (tool, reference), touches in session.touches.items():
+            for trial, q in zip(touches.trials, touches.q, strict=True):
+                f.write(f"{tool},{reference},{int(trial)},{_q_fields(q)}\n")
+
+
+def _write_samples(out: OutputSet, folder: Path, session: Session, force: bool) -> None:
+    for sample in session.sample_ids:  # written as they are: a comma or a quote would break the row
+        check_token(sample, "sample")
+    with atomic_open(out.path(folder / "samples.csv", make_parents=True), force=force) as f:
+        f.write(f"sample,{','.join(session.joint_names)},u_px,v_px\n")
+        for sample, q, (u, v) in zip(session.sample_ids, session.samples_q, session.uv_px, strict=True):
+            f.write(f"{sample},{_q_fields(q)},{float(u)!r},{float(v)!r}\n")
+
+
 def write_session(
     session: Session, folder: str | os.PathLike[str], *, force: bool = False, outputs: OutputSet | None = None
 ) -> Path:
@@ -484,31 +521,27 @@ def write_session(
     With ``outputs`` (a command's :class:`~brachycal.io.OutputSet`) the files join that set.
     """
     folder = Path(folder)
-    for sample in session.sample_ids:  # written as they are: a comma or a quote would break the row
-        check_token(sample, "sample")
-    joints = ",".join(session.joint_names)
-    su, sv = (float(v) for v in session.spacing_m * 1e3)
-    tip = ", ".join(repr(float(v)) for v in session.p_ER_Mtip * 1e3)
     with output_set(outputs, force=force) as out:
-        with atomic_open(out.path(folder / "session.toml", make_parents=True), force=force) as f:
-            f.write(
-                f'format = "{FORMAT}"\n\n[image]\nspacing_mm = [{su!r}, {sv!r}]     # (s_u, s_v)\n'
-                f"size_px = [{int(session.size_px[0])}, {int(session.size_px[1])}]         # (width, height)\n\n"
-                f"{_sector_toml(session.sector)}"
-                f"[top_model]\ntip_in_flange_mm = [{tip}]   # p_ER_Mtip\n"
-            )
-        with atomic_open(out.path(folder / "touches.csv", make_parents=True), force=force) as f:
-            f.write(f"tool,reference,trial,{joints}\n")
-            for (tool, reference), touches in session.touches.items():
-                for trial, q in zip(touches.trials, touches.q, strict=True):
-                    f.write(f"{tool},{reference},{int(trial)},{_q_fields(q)}\n")
+        _write_samples(out, folder, session, force)
+        _write_toml(out, folder, session, force)
+        _write_touches(out, folder, session, force)
         with atomic_open(out.path(folder / "axes.csv", make_parents=True), force=force) as f:
-            f.write(f"tool,point,{joints}\n")
+            f.write(f"tool,point,{','.join(session.joint_names)}\n")
             for tool, points in session.axes.items():
                 for point, q in points.items():
                     f.write(f"{tool},{point},{_q_fields(q)}\n")
-        with atomic_open(out.path(folder / "samples.csv", make_parents=True), force=force) as f:
-            f.write(f"sample,{joints},u_px,v_px\n")
-            for sample, q, (u, v) in zip(session.sample_ids, session.samples_q, session.uv_px, strict=True):
-                f.write(f"{sample},{_q_fields(q)},{float(u)!r},{float(v)!r}\n")
+    return folder
+
+
+def write_check_session(
+    session: Session, folder: str | os.PathLike[str], *, force: bool = False, outputs: OutputSet | None = None
+) -> Path:
+    """Write a check session folder (:data:`CHECK_FILES`, all or nothing): ``session``'s set-up,
+    samples and touches (its axes, if any, are not part of a check). ``touches.csv`` is written even
+    without touches (its header alone), so that a rewritten check never keeps an earlier one's."""
+    folder = Path(folder)
+    with output_set(outputs, force=force) as out:
+        _write_samples(out, folder, session, force)
+        _write_toml(out, folder, session, force)
+        _write_touches(out, folder, session, force)
     return folder

@@ -59,7 +59,17 @@ from brachycal.data.recording import (
     read_slicer_markups,
     still_configuration,
 )
-from brachycal.data.session import ImageSector, Session, Touches, read_image_sector, read_session_toml, write_session
+from brachycal.data.session import (
+    CHECK_TOOLS,
+    MIN_CHECK_SAMPLES,
+    ImageSector,
+    Session,
+    Touches,
+    read_image_sector,
+    read_session_toml,
+    write_check_session,
+    write_session,
+)
 from brachycal.errors import BrachycalWarning, InputError
 from brachycal.io import OutputSet, output_set, sha256_file, write_csv, write_json
 from brachycal.se3 import FloatArray
@@ -78,6 +88,7 @@ __all__ = [
     "PlannedSamples",
     "SessionBuild",
     "StillSettings",
+    "build_check_session",
     "build_session",
     "build_session_from_files",
     "read_plan",
@@ -319,6 +330,7 @@ class BuildReport:
         inputs: input name → SHA-256 (filled by :func:`build_session_from_files`).
         lag_s, lag_sd_s: the frames' clock lag applied (:func:`build_session`) and its SD, seconds.
         lag_sensitive: frames whose still window would not hold at the lag ± :data:`LAG_COVERAGE_SD` SD.
+        kind: ``calibration`` (a calibration session) or ``check`` (a check session, ``brachycal verify``'s).
     """
 
     log: str
@@ -334,6 +346,7 @@ class BuildReport:
     lag_s: float = 0.0
     lag_sd_s: float = 0.0
     lag_sensitive: tuple[str, ...] = ()
+    kind: str = "calibration"
 
     @property
     def marks(self) -> list[BuildEntry]:
@@ -377,6 +390,7 @@ class BuildReport:
     def as_json(self) -> dict[str, object]:
         return {
             "format": FORMAT,
+            "kind": self.kind,
             "log": {
                 "source": self.log,
                 "readings": self.log_readings,
@@ -405,10 +419,15 @@ class BuildReport:
 
 @dataclass(frozen=True)
 class SessionBuild:
-    """A built session and its report."""
+    """A built session and its report; a check session (``report.kind == "check"``) has no axes and
+    only the needle's and the probe's touches."""
 
     session: Session
     report: BuildReport
+
+    @property
+    def check(self) -> bool:
+        return self.report.kind == "check"
 
 
 def _speed_limits(robot: Robot, max_speed_rad_s: float) -> tuple[FloatArray, list[str]]:
@@ -442,6 +461,16 @@ def _entry(kind: str, what: str, item: Mark | Frame, window: StillWindow | None,
     return BuildEntry(kind, what, item.time_s, item.source, item.row, row_label, **stats, **extra)  # type: ignore[arg-type]
 
 
+def _mark_window(log: JointLog, mark: Mark, still: StillSettings, limits: FloatArray, units: list[str]) -> StillWindow:
+    """The still window of ``mark``; a refusal names the mark, its file and row."""
+    try:
+        return _window(log, mark.time_s, still, limits, units)
+    except InputError as exc:
+        raise InputError(
+            f"{mark.label}: {exc.problem}", file=mark.source, row=mark.row, row_label=mark.row_label
+        ) from None
+
+
 def _marks(
     log: JointLog, marks: Sequence[Mark], still: StillSettings, limits: FloatArray, units: list[str]
 ) -> tuple[dict[tuple[str, str], Touches], dict[str, dict[str, FloatArray]], list[BuildEntry]]:
@@ -453,15 +482,7 @@ def _marks(
     axes_row: dict[tuple[str, str], int] = {}
     entries = []
     for mark in sorted(marks, key=lambda m: m.time_s):
-        try:
-            window = _window(log, mark.time_s, still, limits, units)
-        except InputError as exc:
-            raise InputError(
-                f"{mark.label}: {exc.problem}",
-                file=mark.source,
-                row=mark.row,
-                row_label=mark.row_label,
-            ) from None
+        window = _mark_window(log, mark, still, limits, units)
         if mark.kind == "touch":
             trials = touch_q.setdefault((mark.tool, mark.name), [])
             trials.append(window.q)
@@ -479,6 +500,12 @@ def _marks(
             axes_row[mark.tool, mark.name] = mark.row
             what = f"{mark.tool} {mark.name}"
         entries.append(_entry(mark.kind, what, mark, window, used=True))
+    if not any(tool == "top_model" for tool, _ in touch_q) and not any(axes.values()):
+        raise InputError(
+            "no top-model touches and no axes points: a check recording? build it with --check (a calibration "
+            "session needs every tool's touches on rtip1 and rtip2 and the axes moves)",
+            file=source,
+        )
     for tool in TOUCH_TOOLS:
         for reference in REFERENCES:
             if (tool, reference) not in touch_q:
@@ -503,6 +530,44 @@ def _marks(
     }
     axes_sorted = {tool: {point: axes[tool][point] for point in AXES_POINTS} for tool in AXES_TOOLS}
     return touches, axes_sorted, entries
+
+
+def _check_marks(
+    log: JointLog,
+    marks: Sequence[Mark],
+    still: StillSettings,
+    limits: FloatArray,
+    units: list[str],
+    required: Sequence[str],
+    source: str,
+) -> tuple[dict[tuple[str, str], Touches], list[BuildEntry]]:
+    """A check's marks: touches of the needle and the probe only (any tip, any count, trials in time
+    order); each tool of ``required`` must touch ``rtip1``."""
+    touch_q: dict[tuple[str, str], list[FloatArray]] = {}
+    entries = []
+    for mark in sorted(marks, key=lambda m: m.time_s):
+        if mark.kind != "touch" or mark.tool not in CHECK_TOOLS:
+            what = "top-model touches" if mark.kind == "touch" else "axes moves"
+            raise InputError(
+                f"{mark.label}: a check recording has no {what}, only the needle's and the probe's touches "
+                "(a calibration recording? build it without --check)",
+                file=mark.source,
+                row=mark.row,
+                row_label=mark.row_label,
+            )
+        window = _mark_window(log, mark, still, limits, units)
+        trials = touch_q.setdefault((mark.tool, mark.name), [])
+        trials.append(window.q)
+        entries.append(_entry(mark.kind, f"{mark.tool} {mark.name} trial {len(trials)}", mark, window, used=True))
+    for tool in required:
+        if (tool, "rtip1") not in touch_q:
+            raise InputError(
+                f"no touch mark of {tool} on rtip1: the check's touches ({' and '.join(required)} on rtip1) "
+                "need one each; a check planned without touches builds with --touches none",
+                file=marks[0].source if marks else source or None,
+            )
+    touches = {key: Touches(np.arange(1, len(q) + 1), np.array(q)) for key, q in touch_q.items()}
+    return touches, entries
 
 
 def _nearest_planned(q: FloatArray, plan: PlannedSamples) -> tuple[int, float, int, float]:
@@ -624,27 +689,104 @@ def build_session(
         InputError: naming the mark or frame (file, row, time): outside the log, robot moving,
             a pixel outside the image, an axes point marked twice, a frame between two planned
             poses; or naming the file: a tool without touches on a tip, unequal trials, an axes
-            point missing, fewer than 3 annotated frames or frames whose points are collinear.
+            point missing, no top-model touch nor axes point (a check recording), fewer than 3
+            annotated frames or frames whose points are collinear.
     """
+    return _build(log, marks, frames, robot, settings, plan, still, lag_s, lag_sd_s, check=None)
+
+
+def build_check_session(
+    log: JointLog,
+    marks: Sequence[Mark],
+    frames: Sequence[Frame],
+    *,
+    robot: Robot,
+    settings: ImageSettings,
+    touches: Sequence[str],
+    plan: PlannedSamples | None = None,
+    still: StillSettings = StillSettings(),
+    lag_s: float = 0.0,
+    lag_sd_s: float = 0.0,
+    marks_source: str = "",
+) -> SessionBuild:
+    """Assemble a check session (``brachycal verify``'s CHECK_SESSION) from a check recording: the
+    frames at the check's poses and the single touches of a reference tip, as :func:`build_session`
+    reads them (still windows, clock lag, pairing with ``plan``: ``brachycal plan check``'s).
+
+    Args:
+        log: the joint log (its configurations in ``robot``'s joint order).
+        marks: touch marks of the needle and the probe only (may be empty when ``touches`` is).
+        frames: captured frames at the check's poses; those without an annotation are skipped.
+        robot: the model the log belongs to.
+        settings: the set-up's image spacing and size and the top-model tip (the calibration's).
+        touches: the tools (``needle``, ``probe``) whose touch of ``rtip1`` the check planned: each
+            must have one.
+        plan: the check's planned poses (``brachycal plan check``'s), to name frames.
+        still: what "still" means.
+        lag_s: added to every frame's time (seconds), as for :func:`build_session`.
+        lag_sd_s: the lag's standard deviation (seconds).
+        marks_source: where the marks were read (a file that holds none is named by a refusal).
+
+    Returns:
+        the :class:`SessionBuild` (no axes; ``report.kind`` ``check``).
+
+    Raises:
+        InputError: as :func:`build_session` for a mark or frame; naming the mark: a top-model touch
+            or an axes mark (a calibration recording); naming the file: a planned touch missing,
+            fewer than :data:`~brachycal.data.session.MIN_CHECK_SAMPLES` annotated frames.
+    """
+    for tool in touches:
+        if tool not in CHECK_TOOLS:
+            raise InputError(f"a check's touches are by {' or '.join(CHECK_TOOLS)}, not {tool!r}")
+    return _build(
+        log, marks, frames, robot, settings, plan, still, lag_s, lag_sd_s, check=tuple(touches), source=marks_source
+    )
+
+
+def _build(
+    log: JointLog,
+    marks: Sequence[Mark],
+    frames: Sequence[Frame],
+    robot: Robot,
+    settings: ImageSettings,
+    plan: PlannedSamples | None,
+    still: StillSettings,
+    lag_s: float,
+    lag_sd_s: float,
+    *,
+    check: tuple[str, ...] | None,
+    source: str = "",
+) -> SessionBuild:
+    """:func:`build_session` (``check`` None) or :func:`build_check_session` (``check``: its touches)."""
     if tuple(log.joint_names) != tuple(robot.joint_names):
         raise InputError("the joint log's joints are not the robot's", file=log.source)
     lag_s = check_range(lag_s, "--lag-s", unit="s")
     lag_sd_s = check_range(lag_sd_s, "--lag-sd-s", low=0.0, unit="s")
     limits, units = _speed_limits(robot, still.max_speed_rad_s)
-    touches, axes, mark_entries = _marks(log, marks, still, limits, units)
+    axes: dict[str, dict[str, FloatArray]] = {}
+    if check is None:
+        touches, axes, mark_entries = _marks(log, marks, still, limits, units)
+    else:
+        touches, mark_entries = _check_marks(log, marks, still, limits, units, check, source)
     if lag_s != 0.0:
         frames = [replace(frame, time_s=frame.time_s + lag_s) for frame in frames]
     names, samples_q, uv, frame_entries = _frames(log, frames, settings, plan, still, limits, units)
     sensitive = _lag_sensitive(log, frame_entries, lag_s, lag_sd_s, still, limits, units)
     images = frames[0].source if frames else "images"
-    if len(names) < 3:
+    if check is not None and len(names) < MIN_CHECK_SAMPLES:
+        raise InputError(
+            f"{len(names)} annotated frame(s) usable: a check needs at least {MIN_CHECK_SAMPLES} "
+            "(brachycal plan check plans 5 to 16)",
+            file=images,
+        )
+    if check is None and len(names) < 3:
         raise InputError(
             f"{len(names)} annotated frame(s) usable: at least 3 with non-collinear image points are needed",
             file=images,
         )
     centred = uv - uv.mean(axis=0)
     s = np.linalg.svd(centred, compute_uv=False)
-    if s[0] == 0 or s[1] / s[0] < 1e-6:  # the session reader's own test: the image rotation is undetermined
+    if check is None and (s[0] == 0 or s[1] / s[0] < 1e-6):  # the session reader's own test
         raise InputError("the annotated image points are collinear: the image rotation is undetermined", file=images)
     session = Session(
         spacing_m=np.asarray(settings.spacing_m, float).copy(),
@@ -672,6 +814,7 @@ def build_session(
         lag_s=lag_s,
         lag_sd_s=lag_sd_s,
         lag_sensitive=sensitive,
+        kind="calibration" if check is None else "check",
     )
     return SessionBuild(session, report)
 
@@ -729,8 +872,10 @@ def build_session_from_files(
     still: StillSettings = StillSettings(),
     lag_s: float = 0.0,
     lag_sd_s: float = 0.0,
+    check: Sequence[str] | None = None,
 ) -> SessionBuild:
-    """:func:`build_session` from files: everything is read and validated before anything is built.
+    """:func:`build_session` from files (with ``check``, :func:`build_check_session` with those
+    touches): everything is read and validated before anything is built.
 
     Args:
         log_path: the joint log, a CSV file or a ROS bag (:func:`~brachycal.data.read_joint_log`).
@@ -744,18 +889,24 @@ def build_session_from_files(
         still: what "still" means.
         lag_s: the frames' clock lag (:func:`build_session`), seconds.
         lag_sd_s: its standard deviation, seconds.
+        check: build a check session whose touches of ``rtip1`` are by these tools (``()``: none;
+            then the marks may be left out, or hold only their header).
 
     Raises:
-        InputError: marks given both ways or neither, a marks topic on a CSV log, or any refusal
-            of the readers and of :func:`build_session`.
+        InputError: marks given both ways (or neither, for a calibration session), a marks topic on
+            a CSV log, or any refusal of the readers and of the build.
     """
     log_path = Path(log_path)
-    if (marks is None) == (marks_topic is None):
+    if (marks is not None and marks_topic is not None) or (marks is None and marks_topic is None and check is None):
         raise InputError("give the marks either as a file (--marks) or as a topic of the bag (--marks-topic)")
     if marks_topic is not None and not is_bag(log_path):
         raise InputError(f"--marks-topic needs a ROS bag, and {log_path} is not one")
     log = read_joint_log(log_path, robot, joints_topic)
-    mark_list = read_marks(marks) if marks is not None else read_bag_marks(log_path, marks_topic or "")
+    mark_list: list[Mark] = []
+    if marks is not None:
+        mark_list = read_marks(marks, allow_empty=check is not None)
+    elif marks_topic is not None:
+        mark_list = read_bag_marks(log_path, marks_topic, allow_empty=check is not None)
     markup_uv = None
     if markups is not None:
         spacing = settings.spacing_m * 1e3 if markups_spacing_mm is None else markups_spacing_mm
@@ -763,17 +914,32 @@ def build_session_from_files(
         markup_uv = read_slicer_markups(markups, spacing)
     frame_list = read_images(images, markups=markup_uv, markups_source=str(markups) if markups else "")
     planned = read_plan(plan, robot) if plan is not None else None
-    build = build_session(
-        log,
-        mark_list,
-        frame_list,
-        robot=robot,
-        settings=settings,
-        plan=planned,
-        still=still,
-        lag_s=lag_s,
-        lag_sd_s=lag_sd_s,
-    )
+    if check is None:
+        build = build_session(
+            log,
+            mark_list,
+            frame_list,
+            robot=robot,
+            settings=settings,
+            plan=planned,
+            still=still,
+            lag_s=lag_s,
+            lag_sd_s=lag_sd_s,
+        )
+    else:
+        build = build_check_session(
+            log,
+            mark_list,
+            frame_list,
+            robot=robot,
+            settings=settings,
+            touches=check,
+            plan=planned,
+            still=still,
+            lag_s=lag_s,
+            lag_sd_s=lag_sd_s,
+            marks_source=str(marks) if marks is not None else str(log_path),
+        )
     inputs = {"log": sha256_file(log_path), "images": sha256_file(Path(images))}
     for name, path in (("marks", marks), ("markups", markups), ("plan", plan)):
         if path is not None:
@@ -784,13 +950,17 @@ def build_session_from_files(
 def write_build(
     build: SessionBuild, folder: str | os.PathLike[str], *, force: bool = False, outputs: OutputSet | None = None
 ) -> Path:
-    """Write the session folder and the build report in it (:data:`REPORT_FILES`), all or nothing.
+    """Write the session folder (a check session's, :data:`~brachycal.data.session.CHECK_FILES`, for a
+    check) and the build report in it (:data:`REPORT_FILES`), all or nothing.
 
     With ``outputs`` (a command's :class:`~brachycal.io.OutputSet`) the files join that set.
     """
     folder = Path(folder)
     with output_set(outputs, force=force) as out:
-        write_session(build.session, folder, force=force, outputs=out)
+        if build.check:
+            write_check_session(build.session, folder, force=force, outputs=out)
+        else:
+            write_session(build.session, folder, force=force, outputs=out)
         write_json(out.path(folder / "build_report.json", make_parents=True), build.report.as_json(), indent=1)
         write_csv(out.path(folder / "build_report.csv", make_parents=True), [e.as_dict() for e in build.report.entries])
     return folder

@@ -49,34 +49,7 @@ tip_in_flange_mm = []
 MARKS_HEADER = "time,kind,tool,name\n"
 IMAGES_HEADER = "time,u_px,v_px\n"
 
-README = """\
-A blank brachycal session: fill these files in during and after the calibration, then
-
-  brachycal session build JOINT_LOG --marks marks.csv --images images.csv --template session.toml \\
-      --out SESSION
-  brachycal calibrate SESSION --out result.json
-
-session.toml
-  The set-up's values: pixel spacing and size of the frames and the top-model's tip on the
-  needle arm's flange. Each key has a comment; fill in the three empty lists (or give their
-  values to `session build` as --spacing-mm, --size-px and --top-model-tip-mm).
-
-JOINT_LOG (recorded by the robot's controller; not here)
-  The joint states through the whole session: a CSV file with a column `time` (seconds) and one
-  column per joint of the robot (radians, named as in its description), or a ROS 1/2 bag with
-  sensor_msgs/JointState messages. All times below are seconds on this log's clock.
-
-marks.csv: time,kind,tool,name
-  One row per moment the operator marked, the robot held still for about a second around it.
-    time  seconds on the joint log's clock
-    kind  touch: a tool touching a reference tip; axes: a point of a tool's axes moves
-    tool  touch: top_model, needle or probe; axes: needle or probe
-    name  touch: the reference tip, rtip1 (calibration) or rtip2 (validation);
-          axes: the point p1, p2 or p3 (p1 to p2 along the tool's y axis, p1 to p3 along its z axis)
-  Every tool touches both tips equally often (trial k is the k-th touch in time); each axes point
-  of needle and probe is marked once. Example row:
-    12.500000,touch,needle,rtip1
-
+_IMAGES = """\
 images.csv: time,u_px,v_px[,sample]
   One row per captured ultrasound frame with the needle tip in it.
     time    seconds on the joint log's clock (each frame listed once)
@@ -92,17 +65,96 @@ The files hold only their header line: add rows below it, no comment lines (a li
 a row is refused, naming its row).
 """
 
+_JOINT_LOG = """\
+JOINT_LOG (recorded by the robot's controller; not here)
+  The joint states through the whole {what}: a CSV file with a column `time` (seconds) and one
+  column per joint of the robot (radians, named as in its description), or a ROS 1/2 bag with
+  sensor_msgs/JointState messages. All times below are seconds on this log's clock.
+"""
+
+README = (
+    """\
+A blank brachycal session: fill these files in during and after the calibration, then
+
+  brachycal session build JOINT_LOG --marks marks.csv --images images.csv --template session.toml \\
+      --out SESSION
+  brachycal calibrate SESSION --out result.json
+
+session.toml
+  The set-up's values: pixel spacing and size of the frames and the top-model's tip on the
+  needle arm's flange. Each key has a comment; fill in the three empty lists (or give their
+  values to `session build` as --spacing-mm, --size-px and --top-model-tip-mm).
+
+"""
+    + _JOINT_LOG.format(what="session")
+    + """
+marks.csv: time,kind,tool,name
+  One row per moment the operator marked, the robot held still for about a second around it.
+    time  seconds on the joint log's clock
+    kind  touch: a tool touching a reference tip; axes: a point of a tool's axes moves
+    tool  touch: top_model, needle or probe; axes: needle or probe
+    name  touch: the reference tip, rtip1 (calibration) or rtip2 (validation);
+          axes: the point p1, p2 or p3 (p1 to p2 along the tool's y axis, p1 to p3 along its z axis)
+  Every tool touches both tips equally often (trial k is the k-th touch in time); each axes point
+  of needle and probe is marked once. Example row:
+    12.500000,touch,needle,rtip1
+
+"""
+    + _IMAGES
+)
+
+CHECK_README = (
+    """\
+A blank brachycal check: before a procedure, is the stored calibration still good? Plan its
+poses with `brachycal plan check --out check_plan.csv`, record them (a few minutes of robot
+time), fill these files in, then
+
+  brachycal session build JOINT_LOG --check --marks marks.csv --images images.csv \\
+      --plan check_plan.csv --template session.toml --out CHECK_SESSION
+  brachycal verify RESULT CHECK_SESSION --calibration-session SESSION --out check.json
+
+where RESULT is the stored calibration and SESSION the session it was calibrated from.
+
+session.toml
+  The set-up's values, the calibration's: copy its session.toml over this one, or fill in the
+  three empty lists with the same values (each key has a comment).
+
+"""
+    + _JOINT_LOG.format(what="check")
+    + """
+marks.csv: time,kind,tool,name
+  One row per touch of a reference tip, the robot held still for about a second around it. A
+  check has no top-model touches and no axes moves (the stored result located the reference
+  tips and the tools): only the single touches that `brachycal plan check --touches` planned.
+    time  seconds on the joint log's clock
+    kind  touch
+    tool  probe (the default check), and needle too with --touches both
+    name  rtip1
+  Example row:
+    12.500000,touch,probe,rtip1
+  A check planned with --touches none has no marks: leave the header alone and build with
+  --touches none.
+
+"""
+    + _IMAGES.replace(
+        "  One row per captured ultrasound frame with the needle tip in it.",
+        "  One row per captured ultrasound frame with the needle tip in it, one at each pose of the check.",
+    )
+)
+
 
 def write_session_template(
-    folder: str | os.PathLike[str], *, force: bool = False, outputs: OutputSet | None = None
+    folder: str | os.PathLike[str], *, force: bool = False, outputs: OutputSet | None = None, check: bool = False
 ) -> Path:
-    """Write :data:`TEMPLATE_FILES` into ``folder`` (created if needed), all or nothing.
+    """Write :data:`TEMPLATE_FILES` into ``folder`` (created if needed), all or nothing; with ``check``
+    the blanks of a check recording (its README says what a check records).
 
     Existing files are replaced only with ``force``; with ``outputs`` (a command's set) the files
     join it.
     """
     folder = Path(folder)
-    contents = dict(zip(TEMPLATE_FILES, (SESSION_TOML, MARKS_HEADER, IMAGES_HEADER, README), strict=True))
+    readme = CHECK_README if check else README
+    contents = dict(zip(TEMPLATE_FILES, (SESSION_TOML, MARKS_HEADER, IMAGES_HEADER, readme), strict=True))
     with output_set(outputs, force=force) as out:
         for name, text in contents.items():
             with atomic_open(out.path(folder / name, make_parents=True), force=force) as f:

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from brachycal.errors import InputError
+from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
 from brachycal.planning import order as ordering
 from brachycal.planning.robot_time import SECONDS_PER_SAMPLE
 from brachycal.se3 import FloatArray
@@ -161,6 +162,16 @@ def plan_check(
         motion_time_s={"optimised": motion},
     )
     return CheckPlan(plan, chosen, values, float(motion), len(tools), tools)
+
+
+def nominal_calibration(robot: Robot, spacing_m: FloatArray) -> Calibration:
+    """The calibration ``robot`` describes (its needle-tip, probe-tip and image frames) with the pixel
+    spacing ``spacing_m`` ``(2,)`` m/px: what a check is planned about before (or without) a result."""
+    # lazy: start-up (calibration is loaded on first use, as by sensitivities)
+    from brachycal.calibration.result import Calibration, ImageCalibration
+
+    frames = [robot.tool_transform(frame)[1] for frame in (NEEDLE_TIP, PROBE_TIP, US_IMAGE)]
+    return Calibration(frames[0], frames[1], ImageCalibration("robot", frames[2], np.asarray(spacing_m, float)))
 
 
 def touch_choice(touches: str) -> tuple[str, ...]:

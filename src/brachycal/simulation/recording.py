@@ -8,6 +8,7 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -34,8 +35,10 @@ __all__ = [
     "RECORDING_FILES",
     "Recording",
     "RecordingConfig",
+    "Stop",
     "frame_samples",
     "record",
+    "record_stops",
     "write_recording",
     "write_recording_frames",
 ]
@@ -141,6 +144,23 @@ def _min_jerk(s: FloatArray) -> FloatArray:
     return s**3 * (10.0 + s * (-15.0 + 6.0 * s))
 
 
+@dataclass(frozen=True, eq=False)  # holds arrays: compare fields, not objects
+class Stop:
+    """One place a recording holds the robot still, and what is taken there.
+
+    Attributes:
+        q: ``(nq,)`` the true joints held, radians.
+        kind: ``touch`` or ``axes`` (the operator marks it: ``tool``, ``name``) or ``frame`` (an
+            ultrasound frame is captured, its needle tip annotated at ``uv_px``).
+    """
+
+    q: FloatArray
+    kind: str
+    tool: str = ""
+    name: str = ""
+    uv_px: FloatArray | None = None
+
+
 def record(nominal: Robot, config: TwinConfig | None = None, recording: RecordingConfig | None = None) -> Recording:
     """Simulate a session (:func:`~brachycal.simulation.simulate`) and record it.
 
@@ -154,23 +174,48 @@ def record(nominal: Robot, config: TwinConfig | None = None, recording: Recordin
         SolverError: a pose of the set-up is unreachable for the physical robot (as ``simulate``).
     """
     config = TwinConfig() if config is None else config
-    recording = RecordingConfig() if recording is None else recording
     twin = simulate(nominal, replace(config, encoder_noise=False))
     plan = plan_poses(nominal, twin.config.spec)  # the spec the twin used (the robot's workspace by default)
     session = twin.session
-    timing = np.random.default_rng([config.seed, _TIMING])
     # The stops, in the order a lab works: touches (calibration tip, then validation tip), axes, samples.
-    stops: list[tuple[FloatArray, str, tuple]] = []
+    stops: list[Stop] = []
     for reference in REFERENCES:
         for tool in TOUCH_TOOLS:
             for q in session.touches[tool, reference].q:
-                stops.append((q, "touch", (tool, reference)))
+                stops.append(Stop(q, "touch", tool, reference))
     for tool, points in session.axes.items():
         for point in AXES_POINTS:
-            stops.append((points[point], "axes", (tool, point)))
+            stops.append(Stop(points[point], "axes", tool, point))
     for k in range(len(session.sample_ids)):
-        stops.append((session.samples_q[k], "frame", (k,)))
+        stops.append(Stop(session.samples_q[k], "frame", uv_px=session.uv_px[k]))
+    return record_stops(nominal, stops, twin, plan, config, recording)
 
+
+def record_stops(
+    nominal: Robot,
+    stops: Sequence[Stop],
+    twin: Twin,
+    plan: Plan,
+    config: TwinConfig,
+    recording: RecordingConfig | None = None,
+    *,
+    stream: Sequence[int] = (),
+) -> Recording:
+    """Record the robot moving from its ready stance through ``stops`` (minimum-jerk moves, each
+    stop held ``hold_s``), a mark or a frame taken at a random moment of each hold, the joints read
+    at ``rate_hz`` with ``config``'s encoder noise.
+
+    Args:
+        nominal: the model whose joints are logged.
+        stops: where the robot holds still, in order.
+        twin: the twin recorded (its truth and set-up); ``plan`` the poses the frames were planned at.
+        config: the twin's settings (seed, encoder noise).
+        recording: how it is recorded (default ``RecordingConfig()``).
+        stream: more seeds of the recording's random streams after ``config.seed`` (another
+            recording of the same twin draws other moments and other encoder noise).
+    """
+    recording = RecordingConfig() if recording is None else recording
+    timing = np.random.default_rng([config.seed, *stream, _TIMING])
     scale = recording.speed_scale * nominal.velocity_limit
     lo = STILL_WINDOW_S / 2 + recording.margin_s
     hi = recording.hold_s - lo
@@ -183,24 +228,24 @@ def record(nominal: Robot, config: TwinConfig | None = None, recording: Recordin
     t += recording.hold_s
     marks: list[Mark] = []
     frames: list[Frame] = []
-    extra = set(
-        timing.choice(
-            len(session.sample_ids), size=min(recording.unannotated_frames, len(session.sample_ids)), replace=False
-        )
-    )
-    for q, kind, what in stops:
+    n_frames = sum(stop.kind == "frame" for stop in stops)
+    extra = set(timing.choice(n_frames, size=min(recording.unannotated_frames, n_frames), replace=False))
+    k = 0
+    for stop in stops:
+        q = stop.q
         move_s = max(recording.min_move_s, _MIN_JERK_PEAK * float(np.max(np.abs(q - q_prev) / scale)))
         segments.append((t, move_s, q_prev, q))
         t += move_s
         segments.append((t, recording.hold_s, q, q))
         moment = recording.start_time_s + t + timing.uniform(lo, hi)
-        if kind == "frame":
-            (k,) = what
-            frames.append(Frame(moment, session.uv_px[k].copy()))
+        if stop.kind == "frame":
+            assert stop.uv_px is not None
+            frames.append(Frame(moment, np.array(stop.uv_px, dtype=float)))
             if k in extra:
                 frames.append(Frame(recording.start_time_s + t + timing.uniform(lo, hi), None))
+            k += 1
         else:
-            marks.append(Mark(moment, kind, *what))
+            marks.append(Mark(moment, stop.kind, stop.tool, stop.name))
         t += recording.hold_s
         q_prev = q
     segments.append((t, recording.hold_s, q_prev, q_prev))
@@ -215,7 +260,7 @@ def record(nominal: Robot, config: TwinConfig | None = None, recording: Recordin
         mask = which == index
         s = np.clip((clock[mask] - start) / duration, 0.0, 1.0)
         q_true[mask] = q0 + _min_jerk(s)[:, None] * (q1 - q0)
-    noise = np.random.default_rng([config.seed, _ENCODER])
+    noise = np.random.default_rng([config.seed, *stream, _ENCODER])
     q = q_true + noise.normal(scale=config.encoder_sd_rad, size=q_true.shape) if config.encoder_noise else q_true.copy()
     if recording.image_lag_s != 0.0 or recording.image_clock_drift_ppm != 0.0:
         frames = [replace(f, time_s=recording.image_time(f.time_s)) for f in frames]

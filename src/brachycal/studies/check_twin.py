@@ -30,16 +30,24 @@ from brachycal.calibration.robot_accuracy import DEFAULT_ROBOT_ACCURACY, RobotAc
 from brachycal.calibration.session.chain_report import calibrate_chain
 from brachycal.calibration.verify.check import CheckSession, chain_model, check_calibration
 from brachycal.calibration.verify.update import update_refusal, updated_result
-from brachycal.data.session import FORMAT
+from brachycal.data.session import Session, Touches
+from brachycal.data.session import write_check_session as write_check_folder
 from brachycal.imaging.pixels import SCANNER_SOUND_SPEED_M_S, image_points
-from brachycal.io import OutputSet, atomic_open, output_set, write_json
+from brachycal.io import OutputSet, write_json
 from brachycal.model.ik import solve_ik
 from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE
 from brachycal.model.robot import Robot
 from brachycal.planning import plan_poses
-from brachycal.planning.check_poses import DEFAULT_CHECK_POSES, DEFAULT_TOUCHES, plan_check, touch_choice
+from brachycal.planning.check_poses import (
+    DEFAULT_CHECK_POSES,
+    DEFAULT_TOUCHES,
+    nominal_calibration,
+    plan_check,
+    touch_choice,
+)
 from brachycal.se3 import FloatArray, make_transform
 from brachycal.simulation.exact import touch, touch_tools
+from brachycal.simulation.recording import Recording, Stop, record_stops
 from brachycal.simulation.twin import Twin, TwinConfig, simulate
 
 if TYPE_CHECKING:
@@ -464,30 +472,68 @@ def write_check_session(
     force: bool = False,
     outputs: OutputSet | None = None,
 ) -> Path:
-    """Write a check session folder: ``session.toml``, ``samples.csv`` and, if it has touches,
-    ``touches.csv`` (all or nothing; with ``outputs`` they join that set)."""
-    folder = Path(folder)
-    joints = ",".join(robot.joint_names)
-    su, sv = (float(v) for v in session.spacing_m * 1e3)
-    tip = ", ".join(repr(float(v)) for v in template.truth.p_ER_Mtip * 1e3)
-    width, height = (int(v) for v in session.size_px)
+    """Write a check session folder (:func:`~brachycal.data.session.write_check_session`: ``session.toml``
+    with ``template``'s top-model tip, ``samples.csv``, ``touches.csv``; all or nothing, with
+    ``outputs`` they join that set)."""
+    grouped: dict[tuple[str, str], list[tuple[int, FloatArray]]] = {}
+    for tool, reference, trial, q in session.touches:
+        grouped.setdefault((tool, reference), []).append((trial, q))
+    folder_session = Session(
+        spacing_m=session.spacing_m,
+        size_px=session.size_px,
+        p_ER_Mtip=template.truth.p_ER_Mtip,
+        touches={
+            key: Touches(np.array([t for t, _ in rows]), np.array([q for _, q in rows]))
+            for key, rows in grouped.items()
+        },
+        axes={},
+        sample_ids=session.sample_ids,
+        samples_q=session.samples_q,
+        uv_px=session.uv_px,
+        joint_names=tuple(robot.joint_names),
+    )
+    return write_check_folder(folder_session, folder, force=force, outputs=outputs)
 
-    def fields(q: FloatArray) -> str:
-        return ",".join(repr(float(x)) for x in q)
 
-    with output_set(outputs, force=force) as out:
-        with atomic_open(out.path(folder / "session.toml", make_parents=True), force=force) as f:
-            f.write(
-                f'format = "{FORMAT}"\n\n[image]\nspacing_mm = [{su!r}, {sv!r}]\nsize_px = [{width}, {height}]\n\n'
-                f"[top_model]\ntip_in_flange_mm = [{tip}]\n"
-            )
-        with atomic_open(out.path(folder / "samples.csv", make_parents=True), force=force) as f:
-            f.write(f"sample,{joints},u_px,v_px\n")
-            for sample, q, (u, v) in zip(session.sample_ids, session.samples_q, session.uv_px, strict=True):
-                f.write(f"{sample},{fields(q)},{float(u)!r},{float(v)!r}\n")
-        if session.touches:
-            with atomic_open(out.path(folder / "touches.csv", make_parents=True), force=force) as f:
-                f.write(f"tool,reference,trial,{joints}\n")
-                for tool, reference, trial, q in session.touches:
-                    f.write(f"{tool},{reference},{trial},{fields(q)}\n")
-    return folder
+#: The twin's check recordings (``brachycal demo --recording --check``): folder, change, check seed.
+CHECK_RECORDINGS: tuple[tuple[str, str, int], ...] = (
+    ("check_recording", "unchanged", 1),
+    ("check_recording_remounted", "probe remounted 1 mm / 1 deg", 2),
+)
+#: A check recording starts a day after its calibration's (the morning of a procedure), seconds.
+CHECK_RECORDING_LATER_S = 86400.0
+
+
+def check_recording(
+    rec: Recording,
+    robot: Robot,
+    change: Change,
+    check_seed: int,
+    *,
+    count: int = DEFAULT_CHECK_POSES,
+    touches: str = DEFAULT_TOUCHES,
+) -> Recording:
+    """The check before a procedure on the twin that ``rec`` recorded, as a lab records it.
+
+    The poses are those ``brachycal plan check`` picks from the recording's plan (``count`` of them,
+    the robot's nominal tools), the set-up is the twin's after ``change`` (random directions and
+    noise drawn from ``check_seed``, as :meth:`CalibratedTwin.trial` draws them); the robot first
+    touches ``rtip1`` with the tools of ``touches`` (one mark each), then stops at each pose with the
+    probe adjusted until the needle tip shows at its planned pixel (one annotated frame each). The
+    joint log starts a day after ``rec``'s, with ``rec``'s rate, speeds and encoder noise; its plan
+    is the check's."""
+    twin = rec.twin  # its encoder noise is off: record_check gives the true joints, the log adds the noise
+    check = plan_check(
+        rec.plan, robot, nominal_calibration(robot, twin.config.spec.spacing_m), count=count, touches=touches
+    )
+    q_planned = np.array([p.q for p in check.plan.poses])
+    uv_planned = np.array([p.point.uv_px for p in check.plan.poses])
+    rng = np.random.default_rng([twin.config.seed, check_seed, 7])
+    setup = changed_setup(twin, change, rng)
+    session, q_true = record_check(twin, setup, q_planned, uv_planned, rng, touches=touches)
+    stops = [Stop(q, "touch", tool, reference) for tool, reference, _, q in session.touches]
+    stops += [Stop(q, "frame", uv_px=uv) for q, uv in zip(q_true, session.uv_px, strict=True)]
+    settings = replace(
+        rec.recording, unannotated_frames=0, start_time_s=rec.recording.start_time_s + CHECK_RECORDING_LATER_S
+    )
+    return record_stops(robot, stops, twin, check.plan, rec.config, settings, stream=(check_seed,))

@@ -23,7 +23,15 @@ from brachycal.calibration.chain.robot_terms import joint_twists, motion_rows, p
 from brachycal.calibration.result import Calibration
 from brachycal.calibration.robot_accuracy import RobotAccuracy
 from brachycal.data.formats.csv_log import read_table, table_configurations, to_float
-from brachycal.data.session import FILES, REFERENCES, check_robot_columns, read_sample_table, read_session_toml
+from brachycal.data.session import (
+    CHECK_TOOLS,
+    FILES,
+    MIN_CHECK_SAMPLES,
+    REFERENCES,
+    check_robot_columns,
+    read_sample_table,
+    read_session_toml,
+)
 from brachycal.errors import DegenerateDataError, InputError
 from brachycal.io import sha256_file
 from brachycal.se3 import FloatArray, make_transform, transform_points
@@ -37,10 +45,6 @@ if TYPE_CHECKING:
 #: The parts a check can name, in the order of the report; each with its parameter count
 #: (the robot's is its joint count, set when the robot is known).
 PARTS = ("needle tip", "probe mount", "image transform", "image scale", "robot")
-CHECK_TOOLS = ("needle", "probe")
-#: Fewest samples a check reads: 3 points fix the image's 6 degrees of freedom; a check of fewer
-#: has no redundancy against one mislabelled frame. ``plan check`` plans 5 or more.
-MIN_CHECK_SAMPLES = 3
 #: Default false-alarm rate of the test (the goal: at most 5 % on unchanged set-ups).
 DEFAULT_FALSE_ALARM = 0.05
 #: Central-difference steps: 1 µm and 1 µrad (the residuals are smooth; truncation error ~step²,

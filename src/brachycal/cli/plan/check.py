@@ -35,7 +35,7 @@ samples and the probe's touch, takes 1.9 minutes. The documentation (The command
 shows the check end to end.
 
 example:
-  brachycal plan check --out check_plan.csv
+  brachycal plan check --out check_plan.csv --force
 """
 
 
@@ -78,19 +78,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Plan the grid, pick the check's poses, print and write them."""
-    from brachycal.calibration.result import (  # lazy: start-up (the command's run only)
-        Calibration,
-        ImageCalibration,
-    )
     from brachycal.cli.common import progress_bar  # lazy: start-up (the command's run only)
     from brachycal.io import OutputSet  # lazy: start-up (the command's run only)
-    from brachycal.model.names import NEEDLE_TIP, PROBE_TIP, US_IMAGE  # lazy: start-up (the command's run only)
     from brachycal.planning import plan_poses, write_plan  # lazy: start-up (the command's run only)
     from brachycal.planning.check_poses import (  # lazy: start-up (the command's run only)
         DEFAULT_CHECK_POSES,
         DEFAULT_TOUCHES,
         SECONDS_PER_SAMPLE,
         SECONDS_PER_TOUCH,
+        nominal_calibration,
         plan_check,
     )
 
@@ -110,8 +106,7 @@ def run(args: argparse.Namespace) -> int:
                 f"{count} the check needs: move or shrink the cube"
             )
         # The robot's tool frames (the result's with --result) and the plan's spacing (--spacing-mm's).
-        frames = [robot.tool_transform(frame)[1] for frame in (NEEDLE_TIP, PROBE_TIP, US_IMAGE)]
-        calibration = Calibration(frames[0], frames[1], ImageCalibration("robot", frames[2], spec.spacing_m))
+        calibration = nominal_calibration(robot, spec.spacing_m)
         touches = args.touches or DEFAULT_TOUCHES
         check = plan_check(full, robot, calibration, count=count, touches=touches)
         write_plan(check.plan, robot, staged, force=args.force)
@@ -128,4 +123,10 @@ def run(args: argparse.Namespace) -> int:
         f"{check.robot_minutes:.1f} min ({(count * SECONDS_PER_SAMPLE + check.motion_s) / 60:.1f} min without touches)"
     )
     print("wrote " + ", ".join(map(str, outputs.written)))
+    touches_option = f" --touches {touches}" if touches != DEFAULT_TOUCHES else ""
+    print(
+        "next: record the check at these poses (`brachycal session template --check DIR` writes the blanks), then\n"
+        f"  brachycal session build JOINT_LOG --check --marks MARKS --images IMAGES --plan {out} "
+        f"--template SESSION_TOML --out CHECK_SESSION{touches_option}"
+    )
     return 0
