@@ -282,7 +282,7 @@ def validate_document(
     top = Where(path, "")
     if not isinstance(doc, dict) or doc.get("format") != expected_format:
         found = doc.get("format") if isinstance(doc, dict) else None
-        raise top.at("format").refuse(f"format is {shown(found)}, expected {expected_format!r}")
+        raise InputError(f"format is {shown(found)}, expected {expected_format!r}", file=path, key="format")
     schema(doc, top)
     return doc
 

@@ -125,9 +125,9 @@ def dynamics_robot(name: str, nominal: Robot, tool: str) -> Robot:
     (:func:`~brachycal.calibration.robot.arm_fit.check_dynamics`); a refusal names the option."""
     # lazy: start-up (the command's run only)
     from brachycal.calibration.robot.arm_fit import check_dynamics
-    from brachycal.calibration.robot.touches import arm_joints
-    from brachycal.errors import InputError
-    from brachycal.model.description import load_robot
+    from brachycal.calibration.robot.touches import arm_joints  # lazy: start-up (the command's run only)
+    from brachycal.errors import InputError  # lazy: start-up (the command's run only)
+    from brachycal.model.description import load_robot  # lazy: start-up (the command's run only)
 
     joints = arm_joints(nominal, nominal.tool_transform(tool)[0])  # an unknown tool is --tool-frame's
     try:
