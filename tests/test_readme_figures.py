@@ -12,8 +12,8 @@ import brachycal
 
 def test_the_headline_quotes_the_demos_seed_0_needle_then_probe(robot):
     row = next(line for line in (ROOT / "README.md").read_text().splitlines() if "Tables I and II reproduced" in line)
-    assert "Table I MAE needle / probe" in row and "means over seeds 0–5" in row
-    quoted = re.search(r"`brachycal demo` prints seed 0: ([\d.]+) / ([\d.]+) and ([\d.]+)", row)
+    assert "Table I needle / probe" in row and "means of seeds 0–5" in row
+    quoted = re.search(r"`brachycal demo`, seed 0: ([\d.]+) / ([\d.]+), ([\d.]+)", row)
     assert quoted, row
     result = brachycal.calibrate(brachycal.read_session(ROOT / "examples" / "twin_session", robot), robot)
     demo = (result.needle.validation.mae_mm, result.probe.validation.mae_mm, result.loocv["kabsch"].mae_mm)
