@@ -8,13 +8,16 @@ from contextlib import nullcontext
 from pathlib import Path
 
 from brachycal.cli.common import (
+    add_quiet_option,
     add_robot_accuracy_options,
     add_robot_option,
     load_robot,
     method_said,
     output_file,
+    print_next,
     progress_bar,
     robot_accuracy,
+    robot_words,
     spelling_note,
     warn_refused,
 )
@@ -137,7 +140,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     add_robot_option(parser)
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_quiet_option(parser)
     parser.add_argument("--report", metavar="DIR", help="also write a self-contained HTML report (DIR/report.html)")
     parser.set_defaults(run=run)
 
@@ -235,5 +238,11 @@ def _run(args: argparse.Namespace, collecting: bool) -> int:
         print(f"report: {Path(args.report) / 'report.html'}")
     print(f"\nwrote {args.out}")
     # Read back: the rule is the result file's own (locate, export, view, plan use it the same way).
-    print(f"next commands use: {method_said(read_result(args.out), None)}")
+    print(f"the next commands use: {method_said(read_result(args.out), None)}")
+    robot = robot_words(args)
+    print_next(
+        f"brachycal locate {args.out} JOINTS --uv U,V{robot}",
+        f"brachycal export {args.out}{robot} --out DIR",
+        quiet=args.quiet,
+    )
     return 0

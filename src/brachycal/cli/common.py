@@ -119,6 +119,32 @@ def load_robot(args: argparse.Namespace, *, any_arm: bool = False) -> Robot:
     return robot
 
 
+def print_next(*commands: str, quiet: bool = False) -> None:
+    """The ``next:`` line: the command to run next (a whole ``brachycal ...`` command, placeholders in
+    capitals), and each further one (the step after it, or another the user may want) on a line of its
+    own below it, aligned; nothing with --quiet."""
+    if quiet or not commands:
+        return
+    first, *others = commands
+    print(f"next: {first}")
+    for command in others:
+        print(f"      {command}")
+
+
+def robot_words(args: argparse.Namespace) -> str:
+    """The robot options of ``args`` as a next command repeats them (`` --robot NAME``, `` --urdf FILE``
+    or nothing for the default robot), for :func:`print_next`."""
+    robot, urdf = getattr(args, "robot", None), getattr(args, "urdf", None)
+    return f" --robot {robot}" if robot else f" --urdf {urdf}" if urdf else ""
+
+
+def add_quiet_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup, *, progress: bool = True) -> None:
+    """``--quiet``: no progress (bar or stage lines; ``progress``: the command shows some) and no
+    ``next:`` line (:func:`print_next`); the results and what was written are still printed."""
+    what = "no progress and no next: line" if progress else "no next: line"
+    parser.add_argument("--quiet", action="store_true", help=what)
+
+
 def progress_bar(total: int | None, desc: str, quiet: bool, *, unit: str) -> tqdm:
     """A progress bar on stderr counting ``total`` ``unit`` (whole counts: "3/10 twin"; bytes, unit
     ``"B"``, in kB/MB; ``total`` ``None``: a count without an end, for work of unknown size); hidden
