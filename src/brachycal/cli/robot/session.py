@@ -7,6 +7,8 @@ import argparse
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
     from brachycal.calibration.robot.identification import SessionIdentification
     from brachycal.model import Robot
 
@@ -74,13 +76,14 @@ def run(args: argparse.Namespace) -> int:
             result = identify_session(session, nominal, initial, robot_accuracy(args), progress=bar.update)
         result.identification.robot(nominal).write_urdf(urdf_path, force=True)
         write_json(json_path, {"session": str(args.session), **result.as_json()}, force=True)
-    print_report(result, nominal)
+    print_report(result, nominal, urdf=out / "robot.urdf")
     print(f"wrote {out / 'robot.urdf'} and {out / 'identification.json'}")
     return 0
 
 
-def print_report(result: SessionIdentification, nominal: Robot) -> None:
-    """Held-out (K-fold) image error first, then training; the noise; the identifiability in short."""
+def print_report(result: SessionIdentification, nominal: Robot, urdf: Path | None = None) -> None:
+    """Held-out (K-fold) image error first, then training; the noise; the identifiability in short;
+    the verdict (use the identified robot, written to ``urdf``, or keep the URDF) last."""
     from brachycal.cli.robot.report import print_identifiability  # lazy: start-up (the command's run only)
 
     (held_a, held_b), (train_a, train_b) = result.held_out, result.training
@@ -96,3 +99,6 @@ def print_report(result: SessionIdentification, nominal: Robot) -> None:
     noise = ", ".join(f"{g} {n.sd_m * 1e3:.3f}" for g, n in identification.fit.noise.items())
     print(f"{result.model} image model; noise SD per coordinate (mm): {noise}")
     print_identifiability(identification.identifiability, identification.joint_names)
+    verdict = result.verdict
+    where = (urdf or "the identified robot's URDF") if verdict.use else "the URDF it started from"
+    print(f"verdict: {verdict.sentence()} (use {where})")
