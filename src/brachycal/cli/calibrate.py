@@ -19,6 +19,7 @@ from brachycal.cli.common import (
     robot_accuracy,
     robot_words,
     spelling_note,
+    stage_lines,
     warn_refused,
 )
 from brachycal.cli.option_types import bounded_int, name_list
@@ -49,7 +50,11 @@ translation and rotation, zero offsets included) is identified jointly with the 
 same session, the stated accuracy (--robot-accuracy-mm/-deg: state the arm's real figures) as its
 prior; the result carries the corrections, which 'brachycal export' writes into the calibrated
 URDF and 'locate', 'plan' and 'export' apply exactly once. It prints which parameters the session
-cannot identify and why, and the image error at held-out configurations with and without it.
+cannot identify and why, the image error at held-out configurations with and without it, and the
+verdict: use the identified robot (its held-out gain exceeds twice its standard error over the
+folds) or keep the URDF. It refits the chain and the robot nine times (once, then once per held-out
+fold): about 4 s for a 64-sample session on a free core (1 s without it), more on a busy machine; in
+a terminal a line per stage shows the progress (--quiet: none).
 
 The robot is the SDA10F unless --robot names another description (baxter, ur5_pair, or a TOML
 file: docs/robots.md); the session's joint columns must be that robot's. The result records it
@@ -212,6 +217,7 @@ def _run(args: argparse.Namespace, collecting: bool) -> int:
                 progress=None if bar is None else bar.update,
                 robot_accuracy=robot_accuracy(args),
                 identify_robot=args.identify_robot,
+                stage=stage_lines(args.quiet),
             )
         result, chain, session = calibrated.result, calibrated.chain, calibrated.session
         warn_refused(result.refused)

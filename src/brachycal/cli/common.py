@@ -9,8 +9,8 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from collections.abc import Collection, Sequence
-from typing import TYPE_CHECKING
+from collections.abc import Callable, Collection, Sequence
+from typing import TYPE_CHECKING, TextIO
 
 if TYPE_CHECKING:
     from tqdm import tqdm
@@ -160,6 +160,24 @@ def progress_bar(total: int | None, desc: str, quiet: bool, *, unit: str) -> tqd
         file=sys.stderr,
         disable=True if quiet else None,
     )
+
+
+def stage_lines(quiet: bool, stream: TextIO | None = None) -> Callable[[str], None] | None:
+    """Progress as one line per stage of a long computation, on ``stream`` (stderr), each with the
+    seconds since the start (``brachycal: [12 s] held-out configurations: fold 3 of 8``): for work that
+    forks worker processes, where a bar's monitor thread must not run. As the bars: None (nothing
+    shown) with --quiet and when the stream is not a terminal."""
+    import time  # lazy: start-up (the command's run only)
+
+    stream = sys.stderr if stream is None else stream
+    if quiet or not stream.isatty():
+        return None
+    start = time.monotonic()
+
+    def say(line: str) -> None:
+        print(f"brachycal: [{time.monotonic() - start:.0f} s] {line}", file=stream, flush=True)
+
+    return say
 
 
 def add_robot_accuracy_options(
