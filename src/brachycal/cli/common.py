@@ -138,11 +138,13 @@ def robot_words(args: argparse.Namespace) -> str:
     return f" --robot {robot}" if robot else f" --urdf {urdf}" if urdf else ""
 
 
-def add_quiet_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup, *, progress: bool = True) -> None:
-    """``--quiet``: no progress (bar or stage lines; ``progress``: the command shows some) and no
-    ``next:`` line (:func:`print_next`); the results and what was written are still printed."""
-    what = "no progress and no next: line" if progress else "no next: line"
-    parser.add_argument("--quiet", action="store_true", help=what)
+def add_quiet_option(
+    parser: argparse.ArgumentParser | argparse._ArgumentGroup, hides: str = "progress and no next: line"
+) -> None:
+    """``--quiet``, every command's that writes outputs: it shows less (``hides``, what the command then
+    leaves out: its progress, its ``next:`` line (:func:`print_next`), a report); errors, warnings and
+    the files written are still printed."""
+    parser.add_argument("--quiet", action="store_true", help=f"no {hides}")
 
 
 def progress_bar(total: int | None, desc: str, quiet: bool, *, unit: str) -> tqdm:

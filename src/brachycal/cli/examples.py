@@ -6,6 +6,8 @@ import argparse
 import filecmp
 from pathlib import Path
 
+from brachycal.cli.common import add_quiet_option
+
 HELP = "copy the bundled example files (joint log, sessions, pivot, N-wire, phantom, temporal, stepper) into a folder"
 DESCRIPTION = """\
 Copies the example files that ship with brachycal into DIR: a joint log and a few configurations,
@@ -35,6 +37,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("folder", metavar="DIR", help="folder to copy the examples into (created if missing)")
     parser.add_argument("--force", action="store_true", help="replace files in DIR whose content differs")
+    add_quiet_option(parser, "list of the files written or of the commands to try")
     parser.set_defaults(run=run)
 
 
@@ -90,6 +93,8 @@ def run(args: argparse.Namespace) -> int:
     kept = len(files) - len(to_copy)
     replaced = f", {len(differing)} replaced" if differing else ""
     print(f"wrote {len(to_copy)} example files to {folder}{replaced} ({kept} already there, the same)")
+    if args.quiet:
+        return 0
     for name in to_copy:
         print(f"  {folder / name}")
     d = folder.as_posix()

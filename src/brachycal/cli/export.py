@@ -63,7 +63,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     add_robot_option(parser)
     parser.add_argument("--force", action="store_true", help="replace existing files")
-    add_quiet_option(parser, progress=False)
+    add_quiet_option(parser, "next: line")
     parser.set_defaults(run=run)
 
 
@@ -87,7 +87,9 @@ def run(args: argparse.Namespace) -> int:
     for path in outputs.written:
         print(f"wrote {path}")
     # The calibration is in use: before each procedure, a check of a few samples says whether it still holds.
-    print_next(f"brachycal verify {args.result} CHECK_SESSION{robot_words(args)} --out check_record.json", quiet=args.quiet)
+    print_next(
+        f"brachycal verify {args.result} CHECK_SESSION{robot_words(args)} --out check_record.json", quiet=args.quiet
+    )
     return 0
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from brachycal.cli.common import add_robot_option, command_inputs, load_robot
+from brachycal.cli.common import add_quiet_option, add_robot_option, command_inputs, load_robot, print_next, robot_words
 from brachycal.cli.option_types import finite_float, number_list, spacing_mm
 from brachycal.errors import InputError
 from brachycal.validate import MAX_IMAGE_PX
@@ -160,6 +160,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_robot_option(build)
     build.add_argument("--out", required=True, metavar="SESSION", help="session folder to write (created if needed)")
     build.add_argument("--force", action="store_true", help="replace the files of an existing session in SESSION")
+    add_quiet_option(build, "next: line")
     build.set_defaults(run=run_build)
     template = actions.add_parser(
         "template",
@@ -169,6 +170,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     template.add_argument("folder", metavar="DIR", help="folder to write the templates into (created if needed)")
     template.add_argument("--force", action="store_true", help="replace existing template files in DIR")
+    add_quiet_option(template, "next: lines")
     template.set_defaults(run=run_template)
 
 
@@ -183,6 +185,8 @@ def run_template(args: argparse.Namespace) -> int:
             outputs.claim(folder / name, make_parents=True, label="DIR")
         write_session_template(folder, force=args.force, outputs=outputs)
     print(f"wrote {folder}: {', '.join(TEMPLATE_FILES)}")
+    if args.quiet:
+        return 0
     print(f"next: fill in {folder / 'session.toml'}, record, add the rows (see {folder / 'README.txt'}), then")
     print(
         f"  brachycal session build JOINT_LOG --marks {folder / 'marks.csv'} --images {folder / 'images.csv'} "
@@ -236,6 +240,5 @@ def run_build(args: argparse.Namespace) -> int:
         write_build(build, out, force=args.force, outputs=outputs)
     print(build.report.summary())
     print(f"\nwrote {out}: {', '.join((*SESSION_FILES, *REPORT_FILES))}")
-    robot_option = f" --robot {args.robot}" if args.robot else f" --urdf {args.urdf}" if args.urdf else ""
-    print(f"next: brachycal calibrate {out}{robot_option} --out result.json")
+    print_next(f"brachycal calibrate {out}{robot_words(args)} --out result.json", quiet=args.quiet)
     return 0

@@ -95,7 +95,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--report", metavar="HTML", help="HTML page of the verification to write")
     parser.add_argument("--demo", metavar="DIR", help="write a twin's result and two check sessions into DIR")
     parser.add_argument("--force", action="store_true", help="replace existing outputs")
-    add_quiet_option(parser, progress=False)
+    add_quiet_option(parser, "next: line")
     add_robot_option(parser)
     parser.set_defaults(run=run)
 
