@@ -139,3 +139,31 @@ def test_plan_and_plan_check_name_the_next_commands(tmp_path):
     assert lines[-1].strip().startswith("brachycal session build JOINT_LOG ") and f"--plan {plan} " in lines[-1]
     check = _run(["plan", "check", "--out", str(tmp_path / "check.csv")])
     assert check[-1] == "next: brachycal verify RESULT CHECK_SESSION --out check_record.json"
+
+
+def test_examples_says_what_each_folder_is_for():
+    """Every top-level entry of the bundled examples (the scripts as one) has its line."""
+    from brachycal.cli.examples import PURPOSES, bundled_example_files
+
+    _, files = bundled_example_files()
+    tops = {"make_*.py" if f.parts[0].startswith("make_") else f.parts[0] for f in files}
+    assert tops == set(PURPOSES)
+
+
+@pytest.mark.slow
+def test_every_command_examples_says_to_try_runs(tmp_path, monkeypatch):
+    """The "try" list covers each example folder's command (the stepper and robot identification
+    included), and each runs as printed, from the folder the examples were copied into."""
+    monkeypatch.chdir(tmp_path)
+    lines = _run(["examples", "examples"])
+    tried = [line.strip() for line in lines[lines.index("try (from this folder; the documentation shows more):") + 1 :]]
+    for command in (
+        "stepper",
+        "stepper image",
+        "robot identify touches",
+        "robot identify tracker",
+        "robot identify session",
+    ):
+        assert any(line.startswith(f"brachycal {command} examples/") for line in tried), command
+    for line in tried:
+        _run(line.split()[1:])

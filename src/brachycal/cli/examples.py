@@ -27,6 +27,23 @@ example:
   brachycal examples examples
 """
 
+#: What each top-level entry of the examples is for (a folder, a file, or the scripts ``make_*.py``),
+#: printed by the command: the "try" list below runs each.
+PURPOSES = {
+    "joint_log.csv": "a joint log of the SDA10F (fk: tool poses over time)",
+    "joints.csv": "a few SDA10F configurations (locate: where a pixel is)",
+    "session_exact": "a noise-free calibration session, with its truth (calibrate: exact answers)",
+    "twin_session": "the digital twin's calibration session, with its truth (calibrate, robot identify session)",
+    "pivot": "a tracked pointer pivoting (pivot)",
+    "nwire": "PLUS N-wire files: segmented frames and tracked B-mode sequences (nwire, nwire segment)",
+    "phantom": "multi-wedge and arbitrary-wire phantom sessions (phantom wedge|wire)",
+    "temporal": "a water-tank video and tracker pair with a known lag (temporal)",
+    "stepper": "a TRUS probe on a brachytherapy stepper, PLUS iCal recordings (stepper calibrate|image)",
+    "touches": "a Panda's touches of fixed points, with its truth (robot identify touches)",
+    "tracker": "a UR10 seen by a tracker, with its truth (robot identify tracker)",
+    "make_*.py": "the scripts that made them",
+}
+
 #: What the copy leaves out: Python's caches (an installed package may have them next to the scripts).
 _SKIPPED_PARTS = {"__pycache__"}
 
@@ -98,6 +115,10 @@ def run(args: argparse.Namespace) -> int:
     for name in to_copy:
         print(f"  {folder / name}")
     d = folder.as_posix()
+    print("what each is for:")
+    for name, purpose in PURPOSES.items():
+        print(f"  {d}/{name:<16} {purpose}")
+    stepper = f"{d}/stepper/twin_"
     print("try (from this folder; the documentation shows more):")
     for line in (
         f"brachycal fk {d}/joint_log.csv --frames needle_tip,probe_tip --out poses.csv",
@@ -110,6 +131,17 @@ def run(args: argparse.Namespace) -> int:
         f"brachycal temporal {d}/temporal/tank_video.mha {d}/temporal/tank_tracker.mha --out lag.json",
         f"brachycal nwire segment {d}/nwire/twin_calibration.mha {d}/nwire/twin_validation.mha "
         f"--config {d}/nwire/PlusDeviceSet_twin_fCal2.xml --orientation UF --out twin_frames.xml",
+        f"brachycal stepper {stepper}ProbeRotation.igs.mha {stepper}ProbeTranslation.igs.mha "
+        f"{stepper}TemplateTranslation.igs.mha --config {d}/stepper/PlusDeviceSet_twin_iCal.xml --out stepper.json",
+        f"brachycal stepper image {stepper}ProbeRotation.igs.mha {stepper}RandomStepperMotionCalibration.igs.mha "
+        f"{stepper}RandomStepperMotionValidation.igs.mha --config {d}/stepper/PlusDeviceSet_twin_iCal.xml "
+        "--out stepper_image.json",
+        f"brachycal robot identify touches {d}/touches/front {d}/touches/left {d}/touches/right --robot panda "
+        "--tool-frame panda_hand_tcp --train front --distance-mm 50 --robot-accuracy-mm 0.3 --robot-accuracy-deg 0.05 "
+        "--out touches_identified",
+        f"brachycal robot identify tracker {d}/tracker/table.csv --columns {d}/tracker/columns.toml --robot ur10 "
+        "--out tracker_identified",
+        f"brachycal robot identify session {d}/twin_session --out session_identified",
     ):
         print(f"  {line}")
     return 0
