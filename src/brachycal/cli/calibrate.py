@@ -245,10 +245,10 @@ def _run(args: argparse.Namespace, collecting: bool) -> int:
     print(f"\nwrote {args.out}")
     # Read back: the rule is the result file's own (locate, export, view, plan use it the same way).
     print(f"the next commands use: {method_said(read_result(args.out), None)}")
-    robot = robot_words(args)
+    words = robot_words(args)
     print_next(
-        f"brachycal locate {args.out} JOINTS --uv U,V{robot}",
-        f"brachycal export {args.out}{robot} --out DIR",
+        f"brachycal locate {args.out} JOINTS --uv U,V{words}",
+        f"brachycal export {args.out}{words} --out DIR",
         quiet=args.quiet,
     )
     return 0

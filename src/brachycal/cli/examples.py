@@ -116,8 +116,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {folder / name}")
     d = folder.as_posix()
     print("what each is for:")
-    for name, purpose in PURPOSES.items():
-        print(f"  {d}/{name:<16} {purpose}")
+    for entry, purpose in PURPOSES.items():
+        print(f"  {d}/{entry:<16} {purpose}")
     stepper = f"{d}/stepper/twin_"
     print("try (from this folder; the documentation shows more):")
     for line in (

@@ -200,11 +200,11 @@ def _demo(args: argparse.Namespace) -> int:
         f"{twin.check_plan.robot_minutes:.1f} robot minutes at 10 s per sample and 30 s per touch)"
     )
     print("wrote " + ", ".join(map(str, outputs.written)))
-    d, robot = folder.as_posix(), robot_words(args)
+    d, words = folder.as_posix(), robot_words(args)
     print_next(
-        f"brachycal verify {d}/result.json {d}/check_unchanged --calibration-session {d}/session{robot} "
+        f"brachycal verify {d}/result.json {d}/check_unchanged --calibration-session {d}/session{words} "
         "--out check_unchanged.json",
-        f"brachycal verify {d}/result.json {d}/check_probe_remounted --calibration-session {d}/session{robot} "
+        f"brachycal verify {d}/result.json {d}/check_probe_remounted --calibration-session {d}/session{words} "
         "--out check_remounted.json",
         quiet=args.quiet,
     )
