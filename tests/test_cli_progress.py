@@ -13,6 +13,7 @@ from brachycal.calibration import calibrate_folder
 from brachycal.cli.common import stage_lines
 from brachycal.cli.main import main
 from brachycal.model import Robot
+from brachycal.reporting import chain_summary
 
 TWIN = ROOT / "examples" / "twin_session"
 
@@ -26,13 +27,18 @@ class Terminal(io.StringIO):
 
 def test_the_identification_names_each_stage_with_its_counts():
     stages: list[str] = []
-    calibrate_folder(TWIN, Robot.load(), chain=True, identify_robot=True, stage=stages.append)
+    calibrated = calibrate_folder(TWIN, Robot.load(), chain=True, identify_robot=True, stage=stages.append)
     assert stages[0] == "sequential calibration: 5 image methods, leave-one-out over 64 samples"
     assert stages[1].startswith("robot identification: ") and "64 samples" in stages[1]
     folds = [line for line in stages if line.startswith("held-out configurations: fold ")]
     assert [line.split()[3] for line in folds] == [str(k) for k in range(1, 9)]
     assert all(" of 8 " in line for line in folds)
     assert stages[-1].startswith("the chain's leave-one-out over 64 samples")
+    # and the summary calibrate prints ends with the identification's verdict: the example's twin robot is
+    # its URDF, so identification gains nothing beyond chance at held-out configurations
+    summary = chain_summary(calibrated.chain, calibrated.session.sample_ids).splitlines()
+    assert summary[-1].startswith("  verdict: keep the URDF: held-out image error ")
+    assert summary[-1].endswith("; calibrate again without --identify-robot for a result on the URDF")
 
 
 def test_stage_lines_are_shown_on_a_terminal_only_and_not_with_quiet():

@@ -35,7 +35,7 @@ def test_cli_prints_held_out_first_and_writes_the_identified_robot(tmp_path, cap
     verdict = document["held_out"]["verdict"]
     assert verdict["use_identified_robot"] is False
     assert lines[-2].startswith("verdict: keep the URDF: held-out image error ")
-    assert lines[-2].endswith("(use the URDF it started from)")
+    assert lines[-2].endswith("; use the URDF it started from")
     nominal = load_robot("sda10f")
     c = np.array([[row[k] for k in ("vx", "vy", "vz", "wx", "wy", "wz")] for row in document["corrections"].values()])
     assert np.any(c != 0)

@@ -213,11 +213,11 @@ def _identification_lines(report) -> list[str]:
         )
         verdict = identification_verdict(report.identification_cv)
         advice = (
-            "(this result's corrections apply in locate, export and plan)"
+            "this result's corrections apply in locate, export and plan"
             if verdict.use
-            else "(calibrate again without --identify-robot)"
+            else "calibrate again without --identify-robot for a result on the URDF"
         )
-        lines.append(f"  verdict: {verdict.sentence()} {advice}")
+        lines.append(f"  verdict: {verdict.sentence()}; {advice}")
     return lines
 
 

@@ -228,7 +228,7 @@ class IdentificationVerdict:
             return f"use the identified robot: {figures}, better by {self.gain_mm:.4f} mm, more than {limit}"
         if self.gain_mm <= 0:
             return f"keep the URDF: {figures}; identification predicts no better (worse by {-self.gain_mm:.4f} mm)"
-        return f"keep the URDF: {figures}; better by {self.gain_mm:.4f} mm, within {limit} (chance)"
+        return f"keep the URDF: {figures}; better by {self.gain_mm:.4f} mm, within chance ({limit})"
 
     def as_json(self) -> dict[str, object]:
         """The verdict and its figures (mm), with the rule."""

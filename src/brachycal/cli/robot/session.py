@@ -104,4 +104,4 @@ def print_report(result: SessionIdentification, nominal: Robot, urdf: Path | Non
     print_identifiability(identification.identifiability, identification.joint_names)
     verdict = result.verdict
     where = (urdf or "the identified robot's URDF") if verdict.use else "the URDF it started from"
-    print(f"verdict: {verdict.sentence()} (use {where})")
+    print(f"verdict: {verdict.sentence()}; use {where}")
