@@ -773,6 +773,39 @@ MUTANTS: tuple[Mutant, ...] = (
         ("tests/test_hostile_session.py::test_check_build_refusals[check-recording-given-to-a-session-build]",),
         "a check recording given to a session build is refused without saying it is a check's (--check)",
     ),
+    # --- the command line's vocabulary: verdict, progress, next: lines, common options ---------------
+    Mutant(
+        "verdict-no-se",
+        "calibration/robot/identification.py",
+        "use = len(gains) > 1 and gain > VERDICT_STANDARD_ERRORS * se",
+        "use = len(gains) > 1 and gain > 0",
+        ("tests/test_identification_verdict.py::test_a_gain_within_chance_says_keep_the_urdf",),
+        "the identified robot advised for any held-out gain, chance included",
+    ),
+    Mutant(
+        "verdict-pooled",
+        "calibration/robot/identification.py",
+        'se = float(gains.std(ddof=1) / np.sqrt(len(gains))) if len(gains) > 1 else float("inf")',
+        'se = float(gains.std(ddof=1) / len(gains)) if len(gains) > 1 else float("inf")',
+        ("tests/test_identification_verdict.py::test_the_verdict_reads_the_folds_not_the_pooled_samples",),
+        "the gain's standard error too small (over the folds' count, not its root): one lucky fold decides",
+    ),
+    Mutant(
+        "progress-no-folds",
+        "calibration/session/chain_report.py",
+        "            if started[0] <= folds:",
+        "            if started[0] < 0:",
+        ("tests/test_cli_progress.py::test_the_identification_names_each_stage_with_its_counts",),
+        "the held-out folds run without a progress line",
+    ),
+    Mutant(
+        "next-quiet-ignored",
+        "cli/common.py",
+        "    if quiet or not commands:",
+        "    if not commands:",
+        ("tests/test_cli_vocabulary.py::test_calibrate_names_the_next_commands_and_quiet_leaves_them_out",),
+        "--quiet does not leave out the next: line",
+    ),
 )
 
 

@@ -152,10 +152,10 @@ def test_the_earlier_spelling_calibrate_method_chain_solves_the_chain_with_a_not
     new = run_cli(["calibrate", session, "--out", str(tmp_path / "new.json"), "--solve", "chain", "--quiet"])
     note = "brachycal: note: 'calibrate --method chain' is now 'calibrate --solve chain'"
     assert old.code == new.code == 0 and old.err.splitlines()[0].startswith(note) and note not in new.err
-    # The same calibration: the chain solved, and the next commands told they use it.
+    # The same calibration: the chain solved, and the next commands told they use it (--quiet: no next: line).
     assert "chain" in read_result(tmp_path / "old.json").image and "chain" in read_result(tmp_path / "new.json").image
     assert old.out.splitlines()[-1] == new.out.splitlines()[-1]
-    assert new.out.splitlines()[-1].startswith("next commands use: chain (the result's best: the whole chain")
+    assert new.out.splitlines()[-1].startswith("the next commands use: chain (the result's best: the whole chain")
 
 
 def test_the_phantom_kind_is_a_sub_command_and_the_earlier_method_option_runs_it_with_a_note(tmp_path):

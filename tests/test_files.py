@@ -60,7 +60,8 @@ def test_a_new_folder_is_never_visible_before_the_commit(tmp_path):
 
 
 def test_a_folder_made_at_the_destination_while_the_command_ran_is_kept(tmp_path):
-    with pytest.raises(OutputError, match=r"rep: already exists \(made while it was being written\)"), OutputSet() as out:
+    made = r"rep: already exists \(made while it was being written\)"
+    with pytest.raises(OutputError, match=made), OutputSet() as out:
         out.claim(tmp_path / "a.csv").write_text("ours")
         out.claim(tmp_path / "rep" / "r.html", make_parents=True).write_text("ours")
         (tmp_path / "rep").mkdir()

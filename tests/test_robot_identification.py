@@ -16,6 +16,7 @@ from brachycal.calibration.robot.identification import (
     COMPONENTS,
     corrected_robot,
     cross_validate_identification,
+    identification_verdict,
     identify_robot,
 )
 from brachycal.calibration.session.result_file import ResultFile
@@ -126,6 +127,9 @@ def test_identification_does_not_overfit_held_out_configurations(robot, worn):
     twin, sequential, accuracy, _ = worn
     chain_alone, with_robot = cross_validate_identification(twin.session, robot, sequential, "sound_speed", accuracy)
     assert with_robot.rmse_mm < chain_alone.rmse_mm
+    # The worn robot's gain is consistent over the folds: the verdict says to use it.
+    verdict = identification_verdict((chain_alone, with_robot))
+    assert verdict.use, verdict.sentence()
 
 
 def test_unidentifiable_parameters_are_named_with_their_reason(robot, worn):

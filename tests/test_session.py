@@ -187,9 +187,13 @@ def test_locate_cli(session_dir, tmp_path, capsys, robot, truth, exact):
     out = tmp_path / "result.json"
     main(["calibrate", str(session_dir), "--out", str(out)])
     best = read_result(out).best_method()
-    # calibrate ends by naming the calibration the next commands use: the result file's rule.
-    last = capsys.readouterr().out.splitlines()[-1]
-    assert last.startswith(f"next commands use: {best} (the result's best: lowest leave-one-out RMSE, ")
+    # calibrate ends by naming the calibration the next commands use (the result file's rule), then
+    # the next commands themselves.
+    lines = capsys.readouterr().out.splitlines()
+    said, next_line = lines[-3], lines[-2]
+    assert said.startswith(f"the next commands use: {best} (the result's best: lowest leave-one-out RMSE, ")
+    assert next_line == f"next: brachycal locate {out} JOINTS --uv U,V"
+    assert lines[-1].strip() == f"brachycal export {out} --out DIR"
     joints = tmp_path / "q.csv"
     q = exact.samples_q[:2]
     joints.write_text(

@@ -30,6 +30,12 @@ def test_cli_prints_held_out_first_and_writes_the_identified_robot(tmp_path, cap
     assert held["chain_alone"]["samples"] == held["robot_identified"]["samples"] == 64
     # the figures printed are the file's
     assert f"{held['chain_alone']['rmse_mm']:.3f} -> {held['robot_identified']['rmse_mm']:.3f} mm" in lines[0]
+    # The verdict last: the example's twin robot is its URDF (no wear to find), so the identification
+    # gains nothing beyond chance at held-out configurations and the URDF stays.
+    verdict = document["held_out"]["verdict"]
+    assert verdict["use_identified_robot"] is False
+    assert lines[-2].startswith("verdict: keep the URDF: held-out image error ")
+    assert lines[-2].endswith("; use the URDF it started from")
     nominal = load_robot("sda10f")
     c = np.array([[row[k] for k in ("vx", "vy", "vz", "wx", "wy", "wz")] for row in document["corrections"].values()])
     assert np.any(c != 0)

@@ -9,8 +9,8 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from collections.abc import Collection, Sequence
-from typing import TYPE_CHECKING
+from collections.abc import Callable, Collection, Sequence
+from typing import TYPE_CHECKING, TextIO
 
 if TYPE_CHECKING:
     from tqdm import tqdm
@@ -119,6 +119,34 @@ def load_robot(args: argparse.Namespace, *, any_arm: bool = False) -> Robot:
     return robot
 
 
+def print_next(*commands: str, quiet: bool = False) -> None:
+    """The ``next:`` line: the command to run next (a whole ``brachycal ...`` command, placeholders in
+    capitals), and each further one (the step after it, or another the user may want) on a line of its
+    own below it, aligned; nothing with --quiet."""
+    if quiet or not commands:
+        return
+    first, *others = commands
+    print(f"next: {first}")
+    for command in others:
+        print(f"      {command}")
+
+
+def robot_words(args: argparse.Namespace) -> str:
+    """The robot options of ``args`` as a next command repeats them (`` --robot NAME``, `` --urdf FILE``
+    or nothing for the default robot), for :func:`print_next`."""
+    robot, urdf = getattr(args, "robot", None), getattr(args, "urdf", None)
+    return f" --robot {robot}" if robot else f" --urdf {urdf}" if urdf else ""
+
+
+def add_quiet_option(
+    parser: argparse.ArgumentParser | argparse._ArgumentGroup, hides: str = "progress and no next: line"
+) -> None:
+    """``--quiet``, every command's that writes outputs: it shows less (``hides``, what the command then
+    leaves out: its progress, its ``next:`` line (:func:`print_next`), a report); errors, warnings and
+    the files written are still printed."""
+    parser.add_argument("--quiet", action="store_true", help=f"no {hides}")
+
+
 def progress_bar(total: int | None, desc: str, quiet: bool, *, unit: str) -> tqdm:
     """A progress bar on stderr counting ``total`` ``unit`` (whole counts: "3/10 twin"; bytes, unit
     ``"B"``, in kB/MB; ``total`` ``None``: a count without an end, for work of unknown size); hidden
@@ -134,6 +162,24 @@ def progress_bar(total: int | None, desc: str, quiet: bool, *, unit: str) -> tqd
         file=sys.stderr,
         disable=True if quiet else None,
     )
+
+
+def stage_lines(quiet: bool, stream: TextIO | None = None) -> Callable[[str], None] | None:
+    """Progress as one line per stage of a long computation, on ``stream`` (stderr), each with the
+    seconds since the start (``brachycal: [12 s] held-out configurations: fold 3 of 8``): for work that
+    forks worker processes, where a bar's monitor thread must not run. As the bars: None (nothing
+    shown) with --quiet and when the stream is not a terminal."""
+    import time  # lazy: start-up (the command's run only)
+
+    stream = sys.stderr if stream is None else stream
+    if quiet or not stream.isatty():
+        return None
+    start = time.monotonic()
+
+    def say(line: str) -> None:
+        print(f"brachycal: [{time.monotonic() - start:.0f} s] {line}", file=stream, flush=True)
+
+    return say
 
 
 def add_robot_accuracy_options(

@@ -6,6 +6,8 @@ import argparse
 import filecmp
 from pathlib import Path
 
+from brachycal.cli.common import add_quiet_option
+
 HELP = "copy the bundled example files (joint log, sessions, pivot, N-wire, phantom, temporal, stepper) into a folder"
 DESCRIPTION = """\
 Copies the example files that ship with brachycal into DIR: a joint log and a few configurations,
@@ -25,6 +27,23 @@ example:
   brachycal examples examples
 """
 
+#: What each top-level entry of the examples is for (a folder, a file, or the scripts ``make_*.py``),
+#: printed by the command: the "try" list below runs each.
+PURPOSES = {
+    "joint_log.csv": "a joint log of the SDA10F (fk: tool poses over time)",
+    "joints.csv": "a few SDA10F configurations (locate: where a pixel is)",
+    "session_exact": "a noise-free calibration session, with its truth (calibrate: exact answers)",
+    "twin_session": "the digital twin's calibration session, with its truth (calibrate, robot identify session)",
+    "pivot": "a tracked pointer pivoting (pivot)",
+    "nwire": "PLUS N-wire files: segmented frames and tracked B-mode sequences (nwire, nwire segment)",
+    "phantom": "multi-wedge and arbitrary-wire phantom sessions (phantom wedge|wire)",
+    "temporal": "a water-tank video and tracker pair with a known lag (temporal)",
+    "stepper": "a TRUS probe on a brachytherapy stepper, PLUS iCal recordings (stepper calibrate|image)",
+    "touches": "a Panda's touches of fixed points, with its truth (robot identify touches)",
+    "tracker": "a UR10 seen by a tracker, with its truth (robot identify tracker)",
+    "make_*.py": "the scripts that made them",
+}
+
 #: What the copy leaves out: Python's caches (an installed package may have them next to the scripts).
 _SKIPPED_PARTS = {"__pycache__"}
 
@@ -35,6 +54,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("folder", metavar="DIR", help="folder to copy the examples into (created if missing)")
     parser.add_argument("--force", action="store_true", help="replace files in DIR whose content differs")
+    add_quiet_option(parser, "list of the files written or of the commands to try")
     parser.set_defaults(run=run)
 
 
@@ -90,9 +110,15 @@ def run(args: argparse.Namespace) -> int:
     kept = len(files) - len(to_copy)
     replaced = f", {len(differing)} replaced" if differing else ""
     print(f"wrote {len(to_copy)} example files to {folder}{replaced} ({kept} already there, the same)")
+    if args.quiet:
+        return 0
     for name in to_copy:
         print(f"  {folder / name}")
     d = folder.as_posix()
+    print("what each is for:")
+    for entry, purpose in PURPOSES.items():
+        print(f"  {d}/{entry:<16} {purpose}")
+    stepper = f"{d}/stepper/twin_"
     print("try (from this folder; the documentation shows more):")
     for line in (
         f"brachycal fk {d}/joint_log.csv --frames needle_tip,probe_tip --out poses.csv",
@@ -105,6 +131,17 @@ def run(args: argparse.Namespace) -> int:
         f"brachycal temporal {d}/temporal/tank_video.mha {d}/temporal/tank_tracker.mha --out lag.json",
         f"brachycal nwire segment {d}/nwire/twin_calibration.mha {d}/nwire/twin_validation.mha "
         f"--config {d}/nwire/PlusDeviceSet_twin_fCal2.xml --orientation UF --out twin_frames.xml",
+        f"brachycal stepper {stepper}ProbeRotation.igs.mha {stepper}ProbeTranslation.igs.mha "
+        f"{stepper}TemplateTranslation.igs.mha --config {d}/stepper/PlusDeviceSet_twin_iCal.xml --out stepper.json",
+        f"brachycal stepper image {stepper}ProbeRotation.igs.mha {stepper}RandomStepperMotionCalibration.igs.mha "
+        f"{stepper}RandomStepperMotionValidation.igs.mha --config {d}/stepper/PlusDeviceSet_twin_iCal.xml "
+        "--out stepper_image.json",
+        f"brachycal robot identify touches {d}/touches/front {d}/touches/left {d}/touches/right --robot panda "
+        "--tool-frame panda_hand_tcp --train front --distance-mm 50 --robot-accuracy-mm 0.3 --robot-accuracy-deg 0.05 "
+        "--out touches_identified",
+        f"brachycal robot identify tracker {d}/tracker/table.csv --columns {d}/tracker/columns.toml --robot ur10 "
+        "--out tracker_identified",
+        f"brachycal robot identify session {d}/twin_session --out session_identified",
     ):
         print(f"  {line}")
     return 0

@@ -6,7 +6,16 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from brachycal.cli.common import add_method_option, add_robot_option, command_inputs, load_robot, method_said
+from brachycal.cli.common import (
+    add_method_option,
+    add_quiet_option,
+    add_robot_option,
+    command_inputs,
+    load_robot,
+    method_said,
+    print_next,
+    robot_words,
+)
 
 if TYPE_CHECKING:
     from brachycal.io import OutputSet
@@ -54,6 +63,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     add_robot_option(parser)
     parser.add_argument("--force", action="store_true", help="replace existing files")
+    add_quiet_option(parser, "next: line")
     parser.set_defaults(run=run)
 
 
@@ -76,6 +86,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"exported method: {said}")
     for path in outputs.written:
         print(f"wrote {path}")
+    # The calibration is in use: before each procedure, a check of a few samples says whether it still holds.
+    print_next(
+        f"brachycal verify {args.result} CHECK_SESSION{robot_words(args)} --out check_record.json", quiet=args.quiet
+    )
     return 0
 
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 
-from brachycal.cli.common import command_inputs, earlier_spelling, output_file, spelling_note
+from brachycal.cli.common import add_quiet_option, command_inputs, earlier_spelling, output_file, spelling_note
 
 HELP = "tracked-probe calibration with a multi-wedge, arbitrary-wire or N-wire phantom (Table III's phantom routes)"
 #: The phantom kinds, each a sub-command: ``brachycal phantom KIND GEOMETRY OBSERVATIONS``.
@@ -126,6 +126,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         )
         one.add_argument("--out", required=True, type=output_file, metavar="JSON", help="result file to write")
         one.add_argument("--force", action="store_true", help="replace --out if it exists")
+        add_quiet_option(one, "progress bar (as brachycal nwire's)" if nwire else "report (only the file written)")
         one.set_defaults(run=run)
 
 
@@ -165,6 +166,9 @@ def run(args: argparse.Namespace) -> int:
         fit, phantom, _ = calibrate_files(args.geometry, args.observations)
         inputs = {"geometry": sha256_file(args.geometry), "observations": sha256_file(args.observations)}
         write_json(staged, result_payload(fit, inputs), force=args.force)
+    if args.quiet:
+        print(f"wrote {args.out}")
+        return 0
     rms_mm = float((fit.residuals_m**2).mean() ** 0.5 * 1e3)
     print(
         f"{args.kind} phantom calibration ({phantom.geometry.name}): {fit.frames} frames, "
@@ -186,5 +190,6 @@ def _nwire(args: argparse.Namespace) -> int:
 
     parser = argparse.ArgumentParser(prog="brachycal")
     nwire.add_parser(parser.add_subparsers())
-    words = ["nwire", args.geometry, args.observations, "--out", args.out] + (["--force"] if args.force else [])
+    words = ["nwire", args.geometry, args.observations, "--out", args.out]
+    words += [flag for flag, given in (("--force", args.force), ("--quiet", args.quiet)) if given]
     return int(nwire.run(parser.parse_args(words)) or 0)

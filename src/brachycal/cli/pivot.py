@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from brachycal.cli.common import command_inputs, output_file
+from brachycal.cli.common import add_quiet_option, command_inputs, output_file
 
 HELP = "pivot calibration: tool tip and pivot point from poses rotating about a fixed tip"
 DESCRIPTION = """\
@@ -36,6 +36,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--method", choices=tuple(PIVOT_METHODS), default="algebraic")
     parser.add_argument("--units", choices=UNITS, default="m", help="units of the poses' translations (default m)")
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
+    add_quiet_option(parser, "report (only the file written)")
     parser.set_defaults(run=run)
 
 
@@ -47,6 +48,9 @@ def run(args: argparse.Namespace) -> int:
         staged = outputs.claim(args.out, label="--out")
         calibration = calibrate_pivot_files(args.poses, args.method, args.units)
         write_pivot(calibration, staged, force=args.force)
+    if args.quiet:
+        print(f"wrote {args.out}")
+        return 0
     result, u = calibration.result, calibration.units
     fmt = lambda v: "(" + ", ".join(f"{x:.3f}" for x in v) + ")"  # noqa: E731
     print(

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from brachycal.cli.common import add_robot_option, command_inputs, load_robot
+from brachycal.cli.common import add_quiet_option, add_robot_option, command_inputs, load_robot, print_next, robot_words
 from brachycal.cli.option_types import finite_float, number_list, spacing_mm
 from brachycal.errors import InputError
 from brachycal.validate import MAX_IMAGE_PX
@@ -192,6 +192,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_robot_option(build)
     build.add_argument("--out", required=True, metavar="SESSION", help="session folder to write (created if needed)")
     build.add_argument("--force", action="store_true", help="replace the files of an existing session in SESSION")
+    add_quiet_option(build, "next: line")
     build.set_defaults(run=run_build)
     template = actions.add_parser(
         "template",
@@ -206,6 +207,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="the blanks of a check recording (before a procedure: brachycal verify) instead of a calibration's",
     )
     template.add_argument("--force", action="store_true", help="replace existing template files in DIR")
+    add_quiet_option(template, "next: lines")
     template.set_defaults(run=run_template)
 
 
@@ -220,6 +222,8 @@ def run_template(args: argparse.Namespace) -> int:
             outputs.claim(folder / name, make_parents=True, label="DIR")
         write_session_template(folder, force=args.force, outputs=outputs, check=args.check)
     print(f"wrote {folder}: {', '.join(TEMPLATE_FILES)}")
+    if args.quiet:
+        return 0
     marks, images, toml = folder / "marks.csv", folder / "images.csv", folder / "session.toml"
     if args.check:
         print(
@@ -294,12 +298,11 @@ def run_build(args: argparse.Namespace) -> int:
         write_build(build, out, force=args.force, outputs=outputs)
     print(build.report.summary())
     print(f"\nwrote {out}{' (a check session)' if args.check else ''}: {', '.join(files)}")
-    robot_option = f" --robot {args.robot}" if args.robot else f" --urdf {args.urdf}" if args.urdf else ""
     if args.check:
-        print(
-            f"next: brachycal verify RESULT {out} --calibration-session SESSION{robot_option} --out check.json   "
-            "(RESULT: the stored calibration; SESSION: the session it was calibrated from)"
+        print_next(
+            f"brachycal verify RESULT {out} --calibration-session SESSION{robot_words(args)} --out check.json",
+            quiet=args.quiet,
         )
     else:
-        print(f"next: brachycal calibrate {out}{robot_option} --out result.json")
+        print_next(f"brachycal calibrate {out}{robot_words(args)} --out result.json", quiet=args.quiet)
     return 0

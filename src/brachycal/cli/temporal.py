@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING
 
-from brachycal.cli.common import add_robot_option, command_inputs, load_robot, output_file
+from brachycal.cli.common import add_quiet_option, add_robot_option, command_inputs, load_robot, output_file, print_next
 from brachycal.cli.option_types import finite_float
 
 if TYPE_CHECKING:
@@ -90,6 +90,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help=f"search step, {_SECONDS.rule} (default 0.001)",
     )
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
+    add_quiet_option(parser, "next: line")
     parser.set_defaults(run=run)
 
 
@@ -190,4 +191,9 @@ def run(args: argparse.Namespace) -> int:
     )
     print(f"  pixels: {MF_FRAME_TEXT}")
     print(f"wrote {args.out}")
+    print_next(
+        f"brachycal session build JOINT_LOG --marks marks.csv --images images.csv --template session.toml "
+        f"--lag-s {estimate.lag_s:.4f} --out SESSION",
+        quiet=args.quiet,
+    )
     return 0

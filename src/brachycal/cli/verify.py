@@ -7,11 +7,14 @@ from pathlib import Path
 
 from brachycal.cli.common import (
     add_method_option,
+    add_quiet_option,
     add_robot_option,
     command_inputs,
     load_robot,
     method_said,
     output_file,
+    print_next,
+    robot_words,
 )
 from brachycal.cli.option_types import finite_float
 from brachycal.errors import InputError
@@ -92,6 +95,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--report", metavar="HTML", help="HTML page of the verification to write")
     parser.add_argument("--demo", metavar="DIR", help="write a twin's result and two check sessions into DIR")
     parser.add_argument("--force", action="store_true", help="replace existing outputs")
+    add_quiet_option(parser, "next: line")
     add_robot_option(parser)
     parser.set_defaults(run=run)
 
@@ -205,9 +209,12 @@ def _demo(args: argparse.Namespace) -> int:
         f"{twin.check_plan.robot_minutes:.1f} robot minutes at 10 s per sample and 30 s per touch)"
     )
     print("wrote " + ", ".join(map(str, outputs.written)))
-    robot_option = f" --robot {args.robot}" if args.robot else f" --urdf {args.urdf}" if args.urdf else ""
-    print(
-        f"next: brachycal verify {folder / 'result.json'} {folder / 'check_unchanged'} --calibration-session "
-        f"{folder / 'session'}{robot_option} --out check.json   (PASS; check_probe_remounted: RECALIBRATE)"
+    d, words = folder.as_posix(), robot_words(args)
+    print_next(
+        f"brachycal verify {d}/result.json {d}/check_unchanged --calibration-session {d}/session{words} "
+        "--out check_unchanged.json",
+        f"brachycal verify {d}/result.json {d}/check_probe_remounted --calibration-session {d}/session{words} "
+        "--out check_remounted.json",
+        quiet=args.quiet,
     )
     return 0

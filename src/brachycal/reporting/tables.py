@@ -15,6 +15,7 @@ from numpy.typing import ArrayLike
 
 from brachycal.calibration.labels import ALL_LABELS, METHOD_LABELS
 from brachycal.calibration.metrics import ErrorStats
+from brachycal.calibration.robot.identification import identification_verdict
 from brachycal.data.session import ImageSector
 from brachycal.imaging.pixels import SCANNER_SOUND_SPEED_M_S
 from brachycal.planning.robot_time import MECHANICAL_MINUTES, SECONDS_PER_SAMPLE
@@ -210,6 +211,13 @@ def _identification_lines(report) -> list[str]:
             "  image error at held-out configurations (8-fold, RMSE): "
             f"{chain_alone.rmse_mm:.3f} mm without identification, {with_robot.rmse_mm:.3f} mm with it"
         )
+        verdict = identification_verdict(report.identification_cv)
+        advice = (
+            "this result's corrections apply in locate, export and plan"
+            if verdict.use
+            else "calibrate again without --identify-robot for a result on the URDF"
+        )
+        lines.append(f"  verdict: {verdict.sentence()}; {advice}")
     return lines
 
 

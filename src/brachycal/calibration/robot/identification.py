@@ -17,6 +17,7 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import NDArray
 
 from brachycal._lazy import renamed
 from brachycal.calibration.chain import (
@@ -181,6 +182,78 @@ def choose_and_identify(
 #: Folds of :func:`cross_validate_identification`: each refits the chain and the robot (seconds),
 #: so K-fold rather than leave-one-out; 8 folds of 8 configurations each for a 64-sample session.
 IDENTIFICATION_FOLDS = 8
+#: The identified robot is advised when its held-out error is lower by more than this many standard
+#: errors of the difference over the folds (about a one-sided 96 % level with 8 folds): a gain within
+#: that is what a fit of many corrections to one session shows by chance.
+VERDICT_STANDARD_ERRORS = 2.0
+
+
+def identification_folds(n: int, folds: int = IDENTIFICATION_FOLDS, seed: int = 0) -> list[NDArray[np.intp]]:
+    """The held-out samples of each fold of :func:`cross_validate_identification` (indices into the
+    session's ``n`` image samples): a seeded permutation dealt round the ``folds``."""
+    order = np.random.default_rng(seed).permutation(n)
+    return [order[fold::folds] for fold in range(folds)]
+
+
+@dataclass(frozen=True)
+class IdentificationVerdict:
+    """Whether to use the identified robot, from the image error at held-out configurations.
+
+    Attributes:
+        use: the identified robot predicts held-out configurations better than the URDF's, by more
+            than :data:`VERDICT_STANDARD_ERRORS` standard errors of the difference.
+        chain_alone_mm, identified_mm: held-out image error (RMSE, mm), without and with identification.
+        gain_mm: mean over the folds of (fold RMSE without − with identification), mm; positive: better.
+        se_mm: its standard error over the folds (sample SD / sqrt(folds)), mm.
+        folds: the folds.
+    """
+
+    use: bool
+    chain_alone_mm: float
+    identified_mm: float
+    gain_mm: float
+    se_mm: float
+    folds: int
+
+    def sentence(self) -> str:
+        """The verdict in one sentence: which robot to use, and why (the held-out figures)."""
+        figures = (
+            f"held-out image error {self.identified_mm:.3f} mm with identification vs {self.chain_alone_mm:.3f} mm "
+            f"without (RMSE, {self.folds} folds)"
+        )
+        if self.folds < 2:
+            return f"keep the URDF: {figures}; too few folds to tell a gain from chance"
+        limit = f"{VERDICT_STANDARD_ERRORS:g} x its standard error {self.se_mm:.4f} mm"
+        if self.use:
+            return f"use the identified robot: {figures}, better by {self.gain_mm:.4f} mm, more than {limit}"
+        if self.gain_mm <= 0:
+            return f"keep the URDF: {figures}; identification predicts no better (worse by {-self.gain_mm:.4f} mm)"
+        return f"keep the URDF: {figures}; better by {self.gain_mm:.4f} mm, within chance ({limit})"
+
+    def as_json(self) -> dict[str, object]:
+        """The verdict and its figures (mm), with the rule."""
+        return {
+            "use_identified_robot": self.use,
+            "gain_mm": self.gain_mm,
+            "gain_se_mm": self.se_mm,
+            "rule": f"use it when the mean over the folds of the held-out RMSE gain exceeds "
+            f"{VERDICT_STANDARD_ERRORS:g} standard errors",
+        }
+
+
+def identification_verdict(
+    held_out: tuple[ErrorStats, ErrorStats], folds: int = IDENTIFICATION_FOLDS, seed: int = 0
+) -> IdentificationVerdict:
+    """The verdict on the held-out image errors ``(chain alone, with the robot identified)`` of
+    :func:`cross_validate_identification` (same ``folds`` and ``seed``): per fold, the RMSE without
+    minus with identification; their mean against :data:`VERDICT_STANDARD_ERRORS` standard errors."""
+    alone, identified = (np.asarray(s.errors_m, dtype=float) for s in held_out)
+    parts = [p for p in identification_folds(len(alone), folds, seed) if len(p)]
+    gains = np.array([np.sqrt(np.mean(alone[p] ** 2)) - np.sqrt(np.mean(identified[p] ** 2)) for p in parts]) * 1e3
+    gain = float(gains.mean())
+    se = float(gains.std(ddof=1) / np.sqrt(len(gains))) if len(gains) > 1 else float("inf")
+    use = len(gains) > 1 and gain > VERDICT_STANDARD_ERRORS * se
+    return IdentificationVerdict(use, held_out[0].rmse_mm, held_out[1].rmse_mm, gain, se, len(gains))
 
 
 def cross_validate_identification(
@@ -205,11 +278,10 @@ def cross_validate_identification(
         DegenerateDataError: a fold's training samples do not determine the chain.
     """
     n = len(session.uv_px)
-    order = np.random.default_rng(seed).permutation(n)
     errors = np.empty((2, n))
-    for fold in range(folds):
+    for part in identification_folds(n, folds, seed):
         held = np.zeros(n, dtype=bool)
-        held[order[fold::folds]] = True
+        held[part] = True
         chain_alone = chain_start(session, robot, initial, model, ~held, rounds=1)
         errors[0, held] = np.linalg.norm(chain_alone.image_residuals(session, robot)[held], axis=1)
         identified = identify_robot(session, robot, initial, model, accuracy, samples=~held, rounds=1)
@@ -243,6 +315,11 @@ class SessionIdentification:
     training: tuple[ErrorStats, ErrorStats]
     folds: int
 
+    @property
+    def verdict(self) -> IdentificationVerdict:
+        """Use the identified robot or keep the URDF, from :attr:`held_out` (:func:`identification_verdict`)."""
+        return identification_verdict(self.held_out, self.folds)
+
     def as_json(self) -> dict[str, object]:
         """The figures (mm), held out first, and the identification (:meth:`IdentificationResult.as_json`)."""
 
@@ -256,7 +333,11 @@ class SessionIdentification:
         return {
             "protocol": "session",
             "image_model": self.model,
-            "held_out": {"folds": self.folds, "image_error": stats(self.held_out)},
+            "held_out": {
+                "folds": self.folds,
+                "image_error": stats(self.held_out),
+                "verdict": self.verdict.as_json(),
+            },
             "training": {"image_error": stats(self.training)},
             "noise_sd_mm": noise,
             **self.identification.as_json(),

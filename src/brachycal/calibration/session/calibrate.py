@@ -73,6 +73,7 @@ def calibrate_folder(
     progress: Callable[[int], None] | None = None,
     robot_accuracy: RobotAccuracy | None = DEFAULT_ROBOT_ACCURACY,
     identify_robot: bool = False,
+    stage: Callable[[str], None] | None = None,
 ) -> SessionResult:
     """Read the session in ``folder`` and calibrate it.
 
@@ -87,6 +88,8 @@ def calibrate_folder(
         robot_accuracy: for the chain, as ``bootstrap_replicates``.
         identify_robot: with ``chain``, identify the robot's geometry too (``robot_accuracy`` is
             its prior; :mod:`~brachycal.calibration.robot.identification`).
+        stage: called with a line naming each stage as it starts, with its counts (for a progress
+            display: the work of seconds to minutes), e.g. ``"held-out configurations: fold 3 of 8"``.
 
     Raises:
         InputError: the session is malformed (naming file, row and column).
@@ -95,6 +98,10 @@ def calibrate_folder(
             instead); names the session's file inside ``folder``.
     """
     session = read_session(folder, robot)
+    n = len(session.uv_px)
+    if stage is not None:
+        also = ", and the chain's image model choice" if chain and not identify_robot else ""
+        stage(f"sequential calibration: {len(methods)} image methods, leave-one-out over {n} samples{also}")
     choice = None
     try:
         if chain and not identify_robot:
@@ -117,6 +124,7 @@ def calibrate_folder(
             robot_accuracy=robot_accuracy,
             identify=identify_robot,
             choice=choice,
+            stage=stage,
         )
     return SessionResult(session, result, report)
 

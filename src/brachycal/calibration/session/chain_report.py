@@ -168,6 +168,7 @@ def calibrate_chain(
     progress: Callable[[int], None] | None = None,
     identify: bool = False,
     choice: ModelChoice | None = None,
+    stage: Callable[[str], None] | None = None,
 ) -> ChainResult:
     """Run the whole-chain method on a session (see the module docstring).
 
@@ -181,6 +182,9 @@ def calibrate_chain(
     ``choice``: the image model already chosen on this session from ``initial``'s start
     (:class:`~brachycal.calibration.chain.ModelSelection`, e.g. while the sequential method's
     leave-one-out shared the cores); else :func:`~brachycal.calibration.chain.select_model` runs here.
+
+    ``stage``: called with a line naming each stage as it starts, with its counts (for a progress
+    display; the identification's held-out folds one line each).
 
     The leave-one-out's runs of folds and the two predicted landing errors are independent: they
     share the cores (:func:`~brachycal.calibration.parallel.parallel_calls`), each computed as alone.
@@ -200,8 +204,21 @@ def calibrate_chain(
         if robot_accuracy is None:
             raise InputError("robot identification needs the robot's stated accuracy (its prior)")
 
+        n, folds = len(session.uv_px), IDENTIFICATION_FOLDS
+        say = stage if stage is not None else lambda line: None
+        say(f"robot identification: image model choice, then the robot with the chain over {n} samples")
         choice, identification = choose_and_identify(session, robot, initial, robot_accuracy)
-        identification_cv = cross_validate_identification(session, robot, initial, choice.model, robot_accuracy)
+        started = [1]
+
+        def next_fold(count: int) -> None:
+            started[0] += count
+            if started[0] <= folds:
+                say(f"held-out configurations: fold {started[0]} of {folds} (the chain, then the chain and robot)")
+
+        say(f"held-out configurations: fold 1 of {folds} (the chain, then the chain and robot)")
+        identification_cv = cross_validate_identification(
+            session, robot, initial, choice.model, robot_accuracy, folds, progress=next_fold
+        )
         fit, nominal, robot = identification.fit, robot, identification.robot(robot)
         joint_origins = _origins(nominal, robot)
     else:
@@ -216,6 +233,8 @@ def calibrate_chain(
     grid = np.array([(u, v) for v in np.arange(0, height, map_step_px) for u in np.arange(0, width, map_step_px)])
     centre = session.samples_q[np.argmin(np.linalg.norm(session.uv_px - session.uv_px.mean(axis=0), axis=1))]
     runs = FoldRuns.of(session, robot, initial, choice.model, folds=len(session.uv_px), start=fit)
+    if stage is not None:
+        stage(f"the chain's leave-one-out over {len(session.uv_px)} samples and its predicted landing error")
     landings = [(session.samples_q, session.uv_px), (np.repeat(centre[None], len(grid), 0), grid)]
     shared: list[Callable[[], Any]] = [
         *runs.calls(),

@@ -10,7 +10,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from brachycal.cli.common import command_inputs, output_file
+from brachycal.cli.common import add_quiet_option, command_inputs, output_file, print_next
 
 if TYPE_CHECKING:
     from brachycal.data.formats.plus_files import PoseStreams
@@ -86,7 +86,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_orientation_option(parser)
     add_pose_options(parser)
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_quiet_option(parser, "progress bar and no next: line")
     parser.set_defaults(run=run)
 
 
@@ -298,6 +298,8 @@ def run(args: argparse.Namespace) -> int:
     for line in lines:
         print(line)
     print(f"wrote {args.out}")
+    if not args.images_only:
+        print_next(f"brachycal nwire {args.config} {args.out} --out nwire.json", quiet=args.quiet)
     return 0
 
 

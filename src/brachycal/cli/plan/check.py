@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from brachycal.cli.common import command_inputs, output_file
+from brachycal.cli.common import add_quiet_option, command_inputs, output_file, print_next, robot_words
 from brachycal.cli.option_types import bounded_int
 from brachycal.cli.plan.options import (
     add_grid_options,
@@ -72,7 +72,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_tool_options(parser.add_argument_group("tools and safety"))
     o = parser.add_argument_group("output")
     o.add_argument("--force", action="store_true", help="replace existing outputs")
-    o.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_quiet_option(o)
     parser.set_defaults(run=run)
 
 
@@ -124,9 +124,12 @@ def run(args: argparse.Namespace) -> int:
     )
     print("wrote " + ", ".join(map(str, outputs.written)))
     touches_option = f" --touches {touches}" if touches != DEFAULT_TOUCHES else ""
-    print(
-        "next: record the check at these poses (`brachycal session template --check DIR` writes the blanks), then\n"
-        f"  brachycal session build JOINT_LOG --check --marks MARKS --images IMAGES --plan {out} "
-        f"--template SESSION_TOML --out CHECK_SESSION{touches_option}"
+    # Before each procedure the lab records a check at these poses, builds it and verifies it.
+    print_next(
+        f"brachycal session build JOINT_LOG --check --marks MARKS --images IMAGES --plan {out} "
+        f"--template SESSION_TOML --out CHECK_SESSION{touches_option}",
+        f"brachycal verify {args.result or 'RESULT'} CHECK_SESSION --calibration-session SESSION{robot_words(args)} "
+        "--out check_record.json",
+        quiet=args.quiet,
     )
     return 0

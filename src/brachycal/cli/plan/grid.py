@@ -12,7 +12,7 @@ from collections import Counter
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from brachycal.cli.common import command_inputs, output_file, progress_bar
+from brachycal.cli.common import add_quiet_option, command_inputs, output_file, print_next, progress_bar, robot_words
 from brachycal.cli.plan.options import (
     add_grid_options,
     add_imaging_options,
@@ -76,7 +76,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     o.add_argument("--figure", metavar="PNG", help="figure path (default: --out with .png; never --out itself)")
     o.add_argument("--allow-partial", action="store_true", help="write the plan even if some points are infeasible")
     o.add_argument("--force", action="store_true", help="replace existing outputs")
-    o.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_quiet_option(o)
     parser.epilog = EPILOG
     parser.set_defaults(run=run)
 
@@ -87,6 +87,13 @@ def run(args: argparse.Namespace) -> int:
     with OutputSet(force=args.force, inputs=command_inputs(args, "result")) as outputs, _FigureProcess() as drawer:
         _run(args, outputs, drawer)
     print("wrote " + ", ".join(map(str, outputs.written)))
+    # The lab drives the robot through the plan's poses and records; the recording becomes a session.
+    print_next(
+        "brachycal session template DIR",
+        f"brachycal session build JOINT_LOG --marks DIR/marks.csv --images DIR/images.csv "
+        f"--template DIR/session.toml --plan {args.out}{robot_words(args)} --out SESSION",
+        quiet=args.quiet,
+    )
     return 0
 
 

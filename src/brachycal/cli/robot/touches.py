@@ -45,10 +45,16 @@ labelled "with compliance, not in the URDF".
 Writes DIR/robot.urdf (the identified joints, the tip written into the tool frame) and
 DIR/identification.json (corrections, tip, noise level, compliance, figures per place).
 
-On MUKCa's Franka Panda touches (trained on one place, judged on two others), from
-$BRACHYCAL_REFERENCE/mukca_touches:
+The first example runs on the bundled touches (`brachycal examples examples` copies them): a
+Panda off its URDF by 0.3 mm / 0.05 deg per joint-origin axis, its ball tool (panda_hand_tcp)
+touching two sockets 50 mm apart at three places (front, left, right; examples/touches/truth.json
+holds the truth), trained on front and judged on the others. The second runs on MUKCa's real
+Franka Panda touches, from $BRACHYCAL_REFERENCE/mukca_touches.
 
-example:
+examples:
+  brachycal robot identify touches examples/touches/front examples/touches/left examples/touches/right \\
+      --robot panda --tool-frame panda_hand_tcp --train front --distance-mm 50 \\
+      --robot-accuracy-mm 0.3 --robot-accuracy-deg 0.05 --out touches_identified
   brachycal robot identify touches $BRACHYCAL_REFERENCE/mukca_touches/data/panda_2_clean/front_center \\
       $BRACHYCAL_REFERENCE/mukca_touches/data/panda_2_clean/back_left \\
       $BRACHYCAL_REFERENCE/mukca_touches/data/panda_2_clean/mid_right \\

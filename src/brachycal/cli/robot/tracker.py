@@ -34,7 +34,16 @@ then the choice and which combinations of corrections the postures determine.
 The robot: --robot NAME|FILE (a bundled arm: panda, ur5, ur10; a brachycal-robot/1 description;
 a URDF file) or --urdf FILE.
 
-example (FIGAROH's UR10, 6-D poses):
+The first example runs on the bundled tracker table (`brachycal examples examples` copies it): a
+UR10 off its URDF by 0.5 mm / 0.05 deg per joint-origin axis, a 6-D marker on its flange
+(examples/tracker/truth.json holds the truth); the second on FIGAROH's UR10 (6-D poses), its
+table and URDF made from FIGAROH's data as docs/robots.md shows.
+
+example:
+  brachycal robot identify tracker examples/tracker/table.csv --columns examples/tracker/columns.toml \\
+      --robot ur10 --out tracker_identified
+
+on FIGAROH's UR10:
   brachycal robot identify tracker calibration.csv --columns ur10_columns.toml \\
       --robot ur10_robot.urdf --flange wrist_3_link --out ur10
 """

@@ -47,6 +47,12 @@ sub-commands (each with its own --help):
   brachycal stepper [calibrate] ROTATION.mha PROBE_TRANSLATION.mha TEMPLATE_TRANSLATION.mha \\
       --config DEVICE_SET.xml --out stepper.json
       this page: the stepper's axes, pixel spacing and centre of rotation (the default)
+  brachycal stepper image ROTATION.mha CAL.mha VAL.mha --config DEVICE_SET.xml --out stepper_image.json
+      Image -> Probe of the probe on the stepper, from random stepper motion (N-wire phantom)
+  brachycal stepper template RESULT --config DEVICE_SET.xml --hole D4 --depth 100 --probe-position -50
+      where a needle through a template hole lands in the image (u, v px) at a stepper pose
+  brachycal stepper export RESULT --out DIR
+      a stepper result as PLUS CoordinateDefinitions and 3D Slicer/ITK transforms
 """
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from brachycal.cli.common import command_inputs
+from brachycal.cli.common import add_quiet_option, command_inputs
 
 NAME = "stepper-export"
 HELP = "export a stepper Image -> Probe result: PLUS CoordinateDefinitions, 3D Slicer/ITK transforms"
@@ -33,6 +33,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("result", metavar="RESULT", help="`brachycal stepper image` result (JSON)")
     parser.add_argument("--out", required=True, metavar="DIR", help="folder to write")
     parser.add_argument("--force", action="store_true", help="replace existing files")
+    add_quiet_option(parser, "line per file (one line says how many were written where)")
     parser.set_defaults(run=run)
 
 
@@ -47,6 +48,9 @@ def run(args: argparse.Namespace) -> int:
             outputs.claim(Path(args.out) / name, make_parents=True)
         result = read_stepper_image(args.result)
         write_stepper_exports(result, args.out, force=args.force, outputs=outputs)
+    if args.quiet:
+        print(f"wrote {len(outputs.written)} files to {args.out}")
+        return 0
     for path in outputs.written:
         print(f"wrote {path}")
     return 0

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from brachycal.cli.common import command_inputs, output_file
+from brachycal.cli.common import add_quiet_option, command_inputs, output_file, print_next
 from brachycal.cli.nwire.calibrate import MODELS
 
 NAME = "stepper-image"
@@ -88,6 +88,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="the stepper's axes from `brachycal stepper calibrate` (default: the device set's StepperCalibration)",
     )
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
+    add_quiet_option(parser, "next: lines")
     parser.set_defaults(run=run)
 
 
@@ -162,4 +163,9 @@ def run(args: argparse.Namespace) -> int:
         print(line)
     print(f"  chosen: {n.model} ({n.chosen_by})")
     print(f"wrote {args.out}")
+    print_next(
+        f"brachycal stepper export {args.out} --out DIR",
+        f"brachycal stepper template {args.out} --config {args.config} --hole D4 --depth 100 --probe-position -50",
+        quiet=args.quiet,
+    )
     return 0
