@@ -137,8 +137,15 @@ def test_plan_and_plan_check_name_the_next_commands(tmp_path):
     lines = _run(["plan", "--out", str(plan)])
     assert lines[-2] == "next: brachycal session template DIR"
     assert lines[-1].strip().startswith("brachycal session build JOINT_LOG ") and f"--plan {plan} " in lines[-1]
-    check = _run(["plan", "check", "--out", str(tmp_path / "check.csv")])
-    assert check[-1] == "next: brachycal verify RESULT CHECK_SESSION --out check_record.json"
+    check_plan = tmp_path / "check.csv"
+    check = _run(["plan", "check", "--out", str(check_plan)])
+    assert (
+        check[-2].startswith("next: brachycal session build JOINT_LOG --check ")
+        and f"--plan {check_plan} " in check[-2]
+    )
+    assert check[-1].strip() == (
+        "brachycal verify RESULT CHECK_SESSION --calibration-session SESSION --out check_record.json"
+    )
 
 
 def test_examples_says_what_each_folder_is_for():
