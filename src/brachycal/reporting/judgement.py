@@ -1,0 +1,159 @@
+"""What makes a calibration's figures good or bad: each figure beside the threshold brachycal
+itself applies to it (the level at which the calibration warns or refuses) or the paper's own
+figure as a reference, with where the threshold comes from. No clinical limit is stated here: the
+project has none of its own, and a lab sets its own from its treatment plan's margins.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from brachycal.calibration.labels import METHOD_LABELS
+from brachycal.calibration.sequential.image_to_probe import MAX_REACH_SD_M, REACH_M, WARN_REACH_SD_M
+from brachycal.calibration.sequential.method import SequentialResult
+from brachycal.calibration.sequential.tool_rotation import MAX_ANGLE_SIGMAS, WARN_ANGLE_SIGMAS
+from brachycal.calibration.sequential.tool_tips import TIP_SD_WARN_M
+from brachycal.calibration.session.chain_report import WARN_LANDING_RMS_MM
+from brachycal.data.session import ImageSector
+
+if TYPE_CHECKING:  # types only
+    from brachycal.calibration.session.chain_report import ChainResult
+
+#: The paper's Table I MAE of the needle and of the probe tip (validation at the second reference tip), mm.
+PAPER_TABLE_I_MAE_MM = 0.19
+#: The paper's Table II leave-one-out MAE of Kabsch's registration, mm (its rigid methods' figure).
+PAPER_TABLE_II_KABSCH_MAE_MM = 0.65
+
+#: Where the thresholds come from, as the page says it.
+_TIP_SOURCE = (
+    "brachycal warns above it (the paper's Table I reports tips known to about 0.2 mm; a tip known only to "
+    "0.5 mm spoils every later step)"
+)
+_ANGLE_SOURCE = (
+    "brachycal warns beyond it and refuses beyond {refuse:g} SDs (the moves were not made along the tool's axes)"
+)
+_REACH_SOURCE = (
+    "brachycal warns above it and refuses the method above {refuse:g} mm (the needle is targeted within about "
+    "{reach:g} mm of the image's centre)"
+)
+_PAPER_SOURCE = "the paper's {table}: a reference for a careful set-up, not a limit"
+_LANDING_SOURCE = "brachycal warns above it: the paper's Table II MAE of its rigid methods"
+
+
+@dataclass(frozen=True)
+class Judged:
+    """One figure judged: what it is, its value here, the rule (``good_if``), the verdict and the
+    rule's source (all text, units in them)."""
+
+    figure: str
+    value: str
+    good_if: str
+    verdict: str
+    source: str
+
+
+def _below(value: float, limit: float, over: str = "warned") -> str:
+    return "good" if value <= limit else f"above: {over}"
+
+
+def judgements(
+    result: SequentialResult,
+    chain: ChainResult | None = None,
+    *,
+    sector: ImageSector | None = None,
+    spacing_m: np.ndarray | None = None,
+) -> list[Judged]:
+    """The calibration's figures beside their thresholds, in the order the report shows them."""
+    rows: list[Judged] = []
+    tip_limit = TIP_SD_WARN_M * 1e3
+    for name, tool in (("needle", result.needle), ("probe", result.probe)):
+        if tool.tip is not None:
+            sd = tool.tip.sd_m * 1e3
+            rows.append(
+                Judged(f"{name} tip, predicted SD (3D)", f"{sd:.3f} mm", f"≤ {tip_limit:.1f} mm", _below(sd, tip_limit), _TIP_SOURCE)
+            )
+    for name, tool in (("needle", result.needle), ("probe", result.probe)):
+        rotation = tool.rotation
+        off = abs(rotation.axes_angle_deg - 90.0)
+        limit = WARN_ANGLE_SIGMAS * rotation.axes_angle_sd_deg
+        rows.append(
+            Judged(
+                f"{name} axes angle, off 90°",
+                f"{off:.2f}° ({rotation.axes_angle_deg:.2f}°)",
+                f"≤ {WARN_ANGLE_SIGMAS:g} predicted SDs = {limit:.2f}°",
+                _below(off, limit),
+                _ANGLE_SOURCE.format(refuse=MAX_ANGLE_SIGMAS),
+            )
+        )
+    for method, calibration in result.image.items():
+        u = calibration.uncertainty
+        if u is None:
+            continue
+        reach = u.reach_sd_m * 1e3
+        rows.append(
+            Judged(
+                f"{METHOD_LABELS[method]}: predicted SD at {REACH_M * 1e3:g} mm",
+                f"{reach:.3f} mm",
+                f"≤ {WARN_REACH_SD_M * 1e3:g} mm",
+                _below(reach, WARN_REACH_SD_M * 1e3),
+                _REACH_SOURCE.format(refuse=MAX_REACH_SD_M * 1e3, reach=REACH_M * 1e3),
+            )
+        )
+    for name, tool in (("needle", result.needle), ("probe", result.probe)):
+        mae = tool.validation.mae_mm
+        rows.append(
+            Judged(
+                f"Table I: {name} tip MAE",
+                f"{mae:.2f} mm",
+                f"about the paper's {PAPER_TABLE_I_MAE_MM:.2f} mm or less",
+                "at or below the paper's" if mae <= PAPER_TABLE_I_MAE_MM + 0.005 else "above the paper's",
+                _PAPER_SOURCE.format(table="Table I"),
+            )
+        )
+    if "kabsch" in result.loocv:
+        mae = result.loocv["kabsch"].mae_mm
+        rows.append(
+            Judged(
+                "Table II: Kabsch leave-one-out MAE",
+                f"{mae:.2f} mm",
+                f"about the paper's {PAPER_TABLE_II_KABSCH_MAE_MM:.2f} mm or less",
+                "at or below the paper's" if mae <= PAPER_TABLE_II_KABSCH_MAE_MM + 0.005 else "above the paper's",
+                _PAPER_SOURCE.format(table="Table II"),
+            )
+        )
+    if chain is not None:
+        fov = chain.predicted_fov_mm
+        where = "the image"
+        if sector is not None and spacing_m is not None:
+            inside = fov[sector.margin_to_edge(chain.fov_px, spacing_m) >= 0]
+            if len(inside):
+                fov, where = inside, "the imaging sector"
+        worst = max(float(fov.max()), float(chain.predicted_cube_mm.max()))
+        rows.append(
+            Judged(
+                f"whole chain: largest predicted landing error (RMS) over {where} and the sample poses",
+                f"{worst:.3f} mm",
+                f"≤ {WARN_LANDING_RMS_MM:g} mm",
+                _below(worst, WARN_LANDING_RMS_MM),
+                _LANDING_SOURCE,
+            )
+        )
+        if chain.identification_cv is not None:
+            alone, identified = (s.rmse_mm for s in chain.identification_cv)
+            rows.append(
+                Judged(
+                    "robot identified: image error at held-out configurations (RMSE)",
+                    f"{identified:.3f} mm with it, {alone:.3f} mm without",
+                    "lower with it than without",
+                    "lower with it"
+                    if identified < alone - 0.0005
+                    else "the same to 0.001 mm"
+                    if identified < alone + 0.0005
+                    else "higher with it",
+                    "the identification's own 8-fold cross-validation (each fold identifies the robot again)",
+                )
+            )
+    return rows
