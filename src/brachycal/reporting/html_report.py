@@ -18,16 +18,16 @@ from typing import TYPE_CHECKING
 
 import jinja2
 
-from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.labels import METHODS
+from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.result import best_method, best_reason
 from brachycal.calibration.sequential.image_to_probe import METHOD_LABELS
 from brachycal.calibration.sequential.method import SequentialResult, loo_points
+from brachycal.calibration.session.chain_report import WARN_LANDING_RMS_MM
 from brachycal.data.session import Session
 from brachycal.io import OutputSet, atomic_open, output_set, staged_destination
 from brachycal.model.robot import Robot
 from brachycal.reporting.figures import error_histogram, landing_map, points_3d, residuals_per_sample
-from brachycal.calibration.session.chain_report import WARN_LANDING_RMS_MM
 from brachycal.reporting.judgement import PAPER_TABLE_II_KABSCH_MAE_MM, judgements
 from brachycal.reporting.tables import (
     STATS_COLUMNS,
@@ -47,7 +47,7 @@ pre{background:#f6f6f6;padding:1em;overflow-x:auto}img{max-width:100%}td,th{padd
 table{border-collapse:collapse;margin:0.5em 0}thead th{border-bottom:1px solid #999}
 caption{text-align:left;font-weight:600;padding:4px 0}td.number{text-align:right;font-variant-numeric:tabular-nums}
 tr.refused td{color:#b3261e}figure{margin:1em 0}figcaption{font-size:0.9em;color:#444}
-tr.bad td{color:#b3261e}p.best{font-size:1.1em}
+tr.bad td{color:#b3261e}p.best{font-size:1.1em}th[scope=col],td.figure{white-space:nowrap}
 h1{font-size:1.5em}h2{font-size:1.2em;margin-top:2em}"""
 REPORT_FILES = ("report.html", "loo_histogram.png", "loo_per_sample.png", "points_3d.png")
 """The files :func:`write_report` writes into its folder."""
@@ -123,7 +123,7 @@ def figure_captions(result: SequentialResult, chain: ChainResult | None) -> dict
         captions["landing_map.png"] = (
             "Predicted landing error of the whole chain (RMS, mm, colour) at each pixel of the image (u "
             "to the right, v downward, px), probe at the central sample pose, the session's noise and the "
-            "stated robot accuracy included; outside the imaging sector masked. brachycal warns above "
+            "stated robot accuracy included; outside the imaging sector masked; brachycal warns above "
             f"{WARN_LANDING_RMS_MM:g} mm (the paper's Table II MAE of its rigid methods)."
         )
     return captions
