@@ -72,6 +72,7 @@ EVID = "tests/test_evidence_search.py::"
 HTP = "tests/test_hostile_trus_probe.py::test_stepper_probe_refusals"
 HST = "tests/test_hostile_stepper.py::test_stepper_calibrate_refuses"
 HOSTILE_ROBOT = "tests/test_hostile_robot.py::"
+HTML = "tests/test_html_report.py::"
 
 MUTANTS: tuple[Mutant, ...] = (
     # --- tool tips (eqs. 4-6) ---------------------------------------------------------------------
@@ -709,6 +710,47 @@ MUTANTS: tuple[Mutant, ...] = (
         'raise InputError("unknown key", file=source, column=unknown[0])',
         ("tests/test_tracker_identification.py::test_column_spec_refusals_name_the_key",),
         "a column spec's TOML key named a column in its refusal",
+    ),
+    # --- the HTML report holds what the terminal shows, captioned and judged ------------------------
+    Mutant(
+        "report-no-uncertainty-lines",
+        "reporting/templates/report.html.j2",
+        "{%- for line in uncertainty.lines %}",
+        "{%- for line in uncertainty.lines[:0] %}",
+        (HTML + "test_every_line_the_terminal_prints_is_a_line_of_the_report",),
+        "the report leaves out the predicted uncertainty of the tips and rotations that the terminal prints",
+    ),
+    Mutant(
+        "report-best-sequential-for-chain",
+        "reporting/html_report.py",
+        'method = "chain+robot" if chain.identification is not None else "chain"',
+        "method = sequential_best(result)",
+        (HTML + "test_the_report_names_the_method_the_results_commands_use_and_why",),
+        "the report names the lowest-RMSE registration as the best where the result's commands use the chain",
+    ),
+    Mutant(
+        "report-figures-uncaptioned",
+        "reporting/html_report.py",
+        'figures=[_figure(f, captions.get((staged_destination(f) or f).name, "")) for f in figures],',
+        "figures=[_figure(f) for f in figures],",
+        (HTML + "test_every_figure_has_a_caption_with_its_units",),
+        "figures embedded without their captions",
+    ),
+    Mutant(
+        "report-judged-always-good",
+        "reporting/judgement.py",
+        'return Judged(figure, value, good_if, "good" if inside else "beyond: brachycal warns", source, not inside)',
+        'return Judged(figure, value, good_if, "good", source, False)',
+        (HTML + "test_a_figure_beyond_its_threshold_is_judged_bad",),
+        "every figure judged good whatever its value",
+    ),
+    Mutant(
+        "report-landing-judged-over-whole-image",
+        "reporting/judgement.py",
+        'fov, where = inside, "the imaging sector"',
+        'where = "the imaging sector"',
+        (HTML + "test_a_figure_beyond_its_threshold_is_judged_bad",),
+        "the landing error judged over the whole image while the page says over the imaging sector",
     ),
 )
 
