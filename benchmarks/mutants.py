@@ -713,12 +713,12 @@ MUTANTS: tuple[Mutant, ...] = (
     ),
     # --- the HTML report holds what the terminal shows, captioned and judged ------------------------
     Mutant(
-        "report-no-uncertainty-lines",
-        "reporting/templates/report.html.j2",
-        "{%- for line in uncertainty.lines %}",
-        "{%- for line in uncertainty.lines[:0] %}",
+        "report-uncertainty-column-left-out",
+        "reporting/html_report.py",
+        "uncertainty_columns=UNCERTAINTY_COLUMNS,",
+        "uncertainty_columns=UNCERTAINTY_COLUMNS[:-1],",
         (HTML + "test_every_line_the_terminal_prints_is_a_line_of_the_report",),
-        "the report leaves out the predicted uncertainty of the tips and rotations that the terminal prints",
+        "the report's predicted-uncertainty table heads one column fewer than the terminal prints",
     ),
     Mutant(
         "report-best-sequential-for-chain",
