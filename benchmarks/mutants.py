@@ -723,8 +723,8 @@ MUTANTS: tuple[Mutant, ...] = (
     Mutant(
         "report-best-sequential-for-chain",
         "reporting/html_report.py",
-        'method = "chain+robot" if chain.identification is not None else "chain"',
-        "method = sequential_best(result)",
+        'method, rmse = "chain", chain.loocv.rmse_mm',
+        "method, rmse = sequential_best(result), None",
         (HTML + "test_the_report_names_the_method_the_results_commands_use_and_why",),
         "the report names the lowest-RMSE registration as the best where the result's commands use the chain",
     ),

@@ -218,12 +218,16 @@ def _terminal_lines(stdout: str) -> list[str]:
     return [" ".join(line.split()) for line in stdout.splitlines() if line.strip() and not line.startswith(skip)]
 
 
-@pytest.fixture(scope="module", params=["sequential", "chain"])
+SOLVES = {"sequential": [], "chain": ["--solve", "chain"], "identify": ["--solve", "chain", "--identify-robot"]}
+
+
+@pytest.fixture(scope="module", params=list(SOLVES))
 def both_reports(request, tmp_path_factory) -> tuple[str, Lines, Path]:
-    """``calibrate --report`` on the twin's session, sequential and whole chain: stdout, the page's lines."""
+    """``calibrate --report`` on the twin's session, sequential, whole chain, and whole chain with
+    the robot identified: stdout, the page's lines, the result file."""
     out = tmp_path_factory.mktemp(request.param)
     outcome = run_cli(
-        ["calibrate", str(TWIN), "--out", str(out / "r.json"), "--solve", request.param, "--report", str(out / "rep")]
+        ["calibrate", str(TWIN), "--out", str(out / "r.json"), *SOLVES[request.param], "--report", str(out / "rep")]
     )
     assert outcome.code == 0, outcome.err
     return outcome.out, Lines((out / "rep" / "report.html").read_text()), out / "r.json"
@@ -272,6 +276,9 @@ def test_what_is_good_or_bad_judges_each_figure_by_a_stated_threshold_and_its_so
     )
     if "chain" in read_result(result).image:
         assert any(line.startswith("whole chain: largest predicted landing error") for line in rows)
+    if "robot_identification" in read_result(result).raw.get("chain", {}):
+        (held_out,) = [line for line in rows if line.startswith("robot identified: image error at held-out")]
+        assert "mm with it," in held_out and "lower with it than without" in held_out
 
 
 @pytest.fixture(scope="module")

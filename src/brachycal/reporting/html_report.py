@@ -86,9 +86,9 @@ def _figure(path: Path, caption: str = "") -> _Figure:
 def best_statement(result: SequentialResult, chain: ChainResult | None) -> str:
     """Which image calibration the result's commands use when none is asked for, and why (the
     rule of :func:`~brachycal.calibration.result.best_method`, in the words ``calibrate`` prints)."""
-    if chain is not None:
-        method = "chain+robot" if chain.identification is not None else "chain"
-        rmse: float | None = chain.loocv.rmse_mm
+    rmse: float | None
+    if chain is not None:  # a result file names its chain "chain", any robot corrections beside it
+        method, rmse = "chain", chain.loocv.rmse_mm
     else:
         order = [m for m in METHODS if m in result.image] + [m for m in result.image if m not in METHODS]
         method = best_method(order, {m: s.rmse_mm for m, s in result.loocv.items()})
