@@ -278,7 +278,8 @@ def test_what_is_good_or_bad_judges_each_figure_by_a_stated_threshold_and_its_so
         assert any(line.startswith("whole chain: largest predicted landing error") for line in rows)
     if "robot_identification" in read_result(result).raw.get("chain", {}):
         (held_out,) = [line for line in rows if line.startswith("robot identified: image error at held-out")]
-        assert "mm with it," in held_out and "lower with it than without" in held_out
+        held = read_result(result).raw["chain"]["robot_identification"]["held_out_configurations"]["image_rmse_mm"]
+        assert f"{held['chain_and_robot']:.3f} / {held['chain']:.3f} mm lower with it (first) than without" in held_out
 
 
 @pytest.fixture(scope="module")
