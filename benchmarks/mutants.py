@@ -745,6 +745,14 @@ MUTANTS: tuple[Mutant, ...] = (
         "every figure judged good whatever its value",
     ),
     Mutant(
+        "report-spacing-change-not-judged",
+        "reporting/judgement.py",
+        "change <= WARN_SPACING_CHANGE * 100,",
+        "True,",
+        (HTML + "test_a_figure_beyond_its_threshold_is_judged_bad",),
+        "a fitted pixel spacing far off the session's judged good",
+    ),
+    Mutant(
         "report-landing-judged-over-whole-image",
         "reporting/judgement.py",
         'fov, where = inside, "the imaging sector"',

@@ -310,6 +310,15 @@ def test_a_figure_beyond_its_threshold_is_judged_bad(twin_chain):
         if j.figure.startswith("whole chain")
     ]
     assert "over the imaging sector" in sector.figure and float(sector.value.split()[0]) < float(good.value.split()[0])
+
+    def spacing(nominal_m) -> Judged:
+        (row,) = [
+            j for j in judgements(result, spacing_m=nominal_m) if j.figure.startswith("Scaled u/v (2 scales): fitted")
+        ]
+        return row
+
+    assert spacing(session.spacing_m).verdict == "good"  # 0.3 % and 4.3 % off the stated 0.19 mm/px
+    assert spacing(session.spacing_m * 0.8).bad  # 25 % off a wrongly stated spacing
     tip = replace(result.needle.tip, cov=np.eye(3) * (TIP_SD_WARN_M * 1.1) ** 2)
     worse_tip = replace(result, needle=replace(result.needle, tip=tip))
     (row,) = [j for j in judgements(worse_tip) if j.figure == "needle tip, predicted SD (3D)"]

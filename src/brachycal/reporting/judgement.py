@@ -12,7 +12,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from brachycal.calibration.labels import METHOD_LABELS
-from brachycal.calibration.sequential.image_to_probe import MAX_REACH_SD_M, REACH_M, WARN_REACH_SD_M
+from brachycal.calibration.sequential.image_to_probe import (
+    MAX_REACH_SD_M,
+    MAX_SPACING_FACTOR,
+    REACH_M,
+    SCALE_MODEL,
+    WARN_REACH_SD_M,
+    WARN_SPACING_CHANGE,
+)
 from brachycal.calibration.sequential.method import SequentialResult
 from brachycal.calibration.sequential.tool_rotation import MAX_ANGLE_SIGMAS, WARN_ANGLE_SIGMAS
 from brachycal.calibration.sequential.tool_tips import TIP_SD_WARN_M
@@ -31,6 +38,7 @@ PAPER_TABLE_II_KABSCH_MAE_MM = 0.65
 _TIP_SOURCE = "brachycal warns above it: the paper's tips are known to about 0.2 mm"
 _ANGLE_SOURCE = "brachycal warns beyond it, refuses beyond {refuse:g} SDs"
 _REACH_SOURCE = "brachycal warns above it, refuses the method above {refuse:g} mm"
+_SPACING_SOURCE = "brachycal warns above it (more than the speed of sound explains), refuses beyond a factor {factor:g}"
 _PAPER_SOURCE = "the paper's {table}: a reference, not a limit"
 _LANDING_SOURCE = "brachycal warns above it: the paper's Table II MAE of its rigid methods"
 
@@ -69,7 +77,10 @@ def judgements(
     sector: ImageSector | None = None,
     spacing_m: np.ndarray | None = None,
 ) -> list[Judged]:
-    """The calibration's figures beside their thresholds, in the order the report shows them."""
+    """The calibration's figures beside their thresholds, in the order the report shows them.
+
+    ``sector`` and ``spacing_m`` (the session's imaging sector and stated pixel spacing, metres per
+    pixel) add the fitted spacings' change and judge the landing error over the sector."""
     rows: list[Judged] = []
     tip_limit = TIP_SD_WARN_M * 1e3
     for name, tool in (("needle", result.needle), ("probe", result.probe)):
@@ -111,6 +122,18 @@ def judgements(
                 _REACH_SOURCE.format(refuse=MAX_REACH_SD_M * 1e3),
             )
         )
+        if spacing_m is not None and SCALE_MODEL.get(method, "rigid") != "rigid":
+            change = float(np.abs(calibration.spacing_m / np.asarray(spacing_m) - 1).max()) * 100
+            fitted = calibration.spacing_m * 1e3
+            rows.append(
+                _within(
+                    f"{METHOD_LABELS[method]}: fitted pixel spacing off the session's",
+                    f"{change:.1f} % ({fitted[0]:.4f} x {fitted[1]:.4f} mm/px)",
+                    f"≤ {WARN_SPACING_CHANGE * 100:g} %",
+                    change <= WARN_SPACING_CHANGE * 100,
+                    _SPACING_SOURCE.format(factor=MAX_SPACING_FACTOR),
+                )
+            )
     for name, tool in (("needle", result.needle), ("probe", result.probe)):
         rows.append(_paper(f"Table I: {name} tip MAE", tool.validation.mae_mm, PAPER_TABLE_I_MAE_MM, "Table I"))
     if "kabsch" in result.loocv:
