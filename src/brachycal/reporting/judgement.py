@@ -159,13 +159,13 @@ def judgements(
         if chain.identification_cv is not None:
             # as printed, to 0.001 mm; whether the difference matters is the identification's verdict
             alone, identified = (round(s.rmse_mm, 3) for s in chain.identification_cv)
-            change = "lower" if identified < alone else "the same" if identified == alone else "higher"
+            held_out = "lower" if identified < alone else "the same" if identified == alone else "higher"
             rows.append(
                 Judged(
                     "robot identified: image error at held-out configurations (RMSE)",
                     f"{identified:.3f} / {alone:.3f} mm",
                     "lower with it (first) than without",
-                    f"{change} with it" + (f" by {abs(alone - identified):.3f} mm" if change != "the same" else ""),
+                    f"{held_out} with it" + (f" by {abs(alone - identified):.3f} mm" if held_out != "the same" else ""),
                     "the identification's own 8-fold cross-validation (each fold identifies the robot again)",
                 )
             )
