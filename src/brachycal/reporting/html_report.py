@@ -105,8 +105,8 @@ def figure_captions(result: SequentialResult, chain: ChainResult | None) -> dict
             f"Leave-one-out errors of {label}, the sequential method with the lowest leave-one-out RMSE: "
             "how many samples (vertical) have each 3D distance (horizontal, mm) between the needle tip "
             "the robot puts there and the tip the image predicts with the sample left out of the fit; "
-            "dashed: MAE, dotted: RMSE (Table II's row). Good: near the paper's "
-            f"{PAPER_TABLE_II_KABSCH_MAE_MM:.2f} mm (its Kabsch MAE) or less, without a long tail."
+            "dashed: MAE, dotted: RMSE (Table II's row). For comparison, the paper's Kabsch MAE is "
+            f"{PAPER_TABLE_II_KABSCH_MAE_MM:.2f} mm; a long tail points at a few bad samples (next figure)."
         ),
         "loo_per_sample.png": (
             "Leave-one-out error of each sample (mm, 3D distance) for every registration method, samples "
