@@ -73,6 +73,7 @@ EVID = "tests/test_evidence_search.py::"
 HTP = "tests/test_hostile_trus_probe.py::test_stepper_probe_refusals"
 HST = "tests/test_hostile_stepper.py::test_stepper_calibrate_refuses"
 HOSTILE_ROBOT = "tests/test_hostile_robot.py::"
+HTML = "tests/test_html_report.py::"
 
 MUTANTS: tuple[Mutant, ...] = (
     # --- tool tips (eqs. 4-6) ---------------------------------------------------------------------
@@ -805,6 +806,55 @@ MUTANTS: tuple[Mutant, ...] = (
         "    if not commands:",
         ("tests/test_cli_vocabulary.py::test_calibrate_names_the_next_commands_and_quiet_leaves_them_out",),
         "--quiet does not leave out the next: line",
+    ),
+    # --- the HTML report holds what the terminal shows, captioned and judged ------------------------
+    Mutant(
+        "report-uncertainty-column-left-out",
+        "reporting/html_report.py",
+        "uncertainty_columns=UNCERTAINTY_COLUMNS,",
+        "uncertainty_columns=UNCERTAINTY_COLUMNS[:-1],",
+        (HTML + "test_every_line_the_terminal_prints_is_a_line_of_the_report",),
+        "the report's predicted-uncertainty table heads one column fewer than the terminal prints",
+    ),
+    Mutant(
+        "report-best-sequential-for-chain",
+        "reporting/html_report.py",
+        'method, rmse = "chain", chain.loocv.rmse_mm',
+        "method, rmse = sequential_best(result), None",
+        (HTML + "test_the_report_names_the_method_the_results_commands_use_and_why",),
+        "the report names the lowest-RMSE registration as the best where the result's commands use the chain",
+    ),
+    Mutant(
+        "report-figures-uncaptioned",
+        "reporting/html_report.py",
+        'figures=[_figure(f, captions.get((staged_destination(f) or f).name, "")) for f in figures],',
+        "figures=[_figure(f) for f in figures],",
+        (HTML + "test_every_figure_has_a_caption_with_its_units",),
+        "figures embedded without their captions",
+    ),
+    Mutant(
+        "report-judged-always-good",
+        "reporting/judgement.py",
+        'return Judged(figure, value, good_if, "good" if inside else "beyond: brachycal warns", source, not inside)',
+        'return Judged(figure, value, good_if, "good", source, False)',
+        (HTML + "test_a_figure_beyond_its_threshold_is_judged_bad",),
+        "every figure judged good whatever its value",
+    ),
+    Mutant(
+        "report-spacing-change-not-judged",
+        "reporting/judgement.py",
+        "change <= WARN_SPACING_CHANGE * 100,",
+        "True,",
+        (HTML + "test_a_figure_beyond_its_threshold_is_judged_bad",),
+        "a fitted pixel spacing far off the session's judged good",
+    ),
+    Mutant(
+        "report-landing-judged-over-whole-image",
+        "reporting/judgement.py",
+        'fov, where = inside, "the imaging sector"',
+        'where = "the imaging sector"',
+        (HTML + "test_a_figure_beyond_its_threshold_is_judged_bad",),
+        "the landing error judged over the whole image while the page says over the imaging sector",
     ),
 )
 

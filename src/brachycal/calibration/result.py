@@ -266,6 +266,15 @@ def best_method(methods: Sequence[str], rmse_mm: Mapping[str, object]) -> str:
     return next(m for m in methods if rmse(m) <= best * (1 + TIE_RELATIVE))
 
 
+def best_reason(method: str, rmse_mm: object = None) -> str:
+    """Why :func:`best_method` chose ``method``, in words (``rmse_mm``: its leave-one-out RMSE, mm)."""
+    if method == "chain+robot":
+        return "the whole chain with the robot's geometry, solved over all the data"
+    if method == "chain":
+        return "the whole chain, solved over all the data"
+    return "lowest leave-one-out RMSE" + (f", {rmse_mm:.3f} mm" if isinstance(rmse_mm, int | float) else "")
+
+
 def calibration_args(function: str, first: Calibration | ArrayLike, rest: tuple[Any, ...]) -> tuple[Calibration, tuple]:
     """``(calibration, the remaining positional arguments)`` of a function that takes one
     :class:`~brachycal.calibration.result.Calibration`, or the loose ``T_ER_Ntip, T_EL_Ptip, image``

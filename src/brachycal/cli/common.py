@@ -277,15 +277,11 @@ def method_said(stored: ResultFile, asked: str | None) -> str:
     method = stored.method(asked)
     if asked is not None:
         return f"{method} (--method)"
-    if method == "chain+robot":
-        why = "the whole chain with the robot's geometry, solved over all the data"
-    elif method == "chain":
-        why = "the whole chain, solved over all the data"
-    else:
-        loocv = stored.raw.get("loocv")
-        entry = loocv.get(method) if isinstance(loocv, dict) else None
-        rmse = entry.get("rmse_mm") if isinstance(entry, dict) else None
-        why = "lowest leave-one-out RMSE" + (f", {rmse:.3f} mm" if isinstance(rmse, int | float) else "")
+    from brachycal.calibration.result import best_reason  # lazy: start-up (the command's run only)
+
+    loocv = stored.raw.get("loocv")
+    entry = loocv.get(method) if isinstance(loocv, dict) else None
+    why = best_reason(method, entry.get("rmse_mm") if isinstance(entry, dict) else None)
     return f"{method} (the result's best: {why}; another with --method)"
 
 

@@ -18,14 +18,25 @@ from typing import TYPE_CHECKING
 
 import jinja2
 
+from brachycal.calibration.labels import METHODS
 from brachycal.calibration.metrics import ErrorStats
+from brachycal.calibration.result import best_method, best_reason
 from brachycal.calibration.sequential.image_to_probe import METHOD_LABELS
 from brachycal.calibration.sequential.method import SequentialResult, loo_points
+from brachycal.calibration.session.chain_report import WARN_LANDING_RMS_MM
 from brachycal.data.session import Session
 from brachycal.io import OutputSet, atomic_open, output_set, staged_destination
 from brachycal.model.robot import Robot
 from brachycal.reporting.figures import error_histogram, landing_map, points_3d, residuals_per_sample
-from brachycal.reporting.tables import STATS_COLUMNS, chain_summary, table_i_data, table_ii_data
+from brachycal.reporting.judgement import PAPER_TABLE_II_KABSCH_MAE_MM, judgements
+from brachycal.reporting.tables import (
+    STATS_COLUMNS,
+    UNCERTAINTY_COLUMNS,
+    chain_summary,
+    table_i_data,
+    table_ii_data,
+    uncertainty_table_data,
+)
 from brachycal.se3 import FloatArray
 
 if TYPE_CHECKING:  # types only
@@ -35,7 +46,8 @@ STYLE = """body{font-family:system-ui,sans-serif;max-width:980px;margin:2em auto
 pre{background:#f6f6f6;padding:1em;overflow-x:auto}img{max-width:100%}td,th{padding:2px 8px;text-align:left}
 table{border-collapse:collapse;margin:0.5em 0}thead th{border-bottom:1px solid #999}
 caption{text-align:left;font-weight:600;padding:4px 0}td.number{text-align:right;font-variant-numeric:tabular-nums}
-tr.refused td{color:#b3261e}figure{margin:1em 0}
+tr.refused td{color:#b3261e}figure{margin:1em 0}figcaption{font-size:0.9em;color:#444}
+tr.bad td{color:#b3261e}p.best{font-size:1.1em}th[scope=col],td.figure{white-space:nowrap}
 h1{font-size:1.5em}h2{font-size:1.2em;margin-top:2em}"""
 REPORT_FILES = ("report.html", "loo_histogram.png", "loo_per_sample.png", "points_3d.png")
 """The files :func:`write_report` writes into its folder."""
@@ -47,6 +59,7 @@ CHAIN_REPORT_FILES = ("landing_map.png",)
 class _Figure:
     name: str
     data: str
+    caption: str = ""
 
 
 @dataclass(frozen=True)
@@ -65,9 +78,60 @@ def _templates() -> jinja2.Environment:
     )
 
 
-def _figure(path: Path) -> _Figure:
+def _figure(path: Path, caption: str = "") -> _Figure:
     name = staged_destination(path) or path  # the figure's own name, not its staging file's
-    return _Figure(name.stem, base64.b64encode(path.read_bytes()).decode())
+    return _Figure(name.stem, base64.b64encode(path.read_bytes()).decode(), caption)
+
+
+def best_statement(result: SequentialResult, chain: ChainResult | None) -> str:
+    """Which image calibration the result's commands use when none is asked for, and why (the
+    rule of :func:`~brachycal.calibration.result.best_method`, in the words ``calibrate`` prints)."""
+    rmse: float | None
+    if chain is not None:  # a result file names its chain "chain", any robot corrections beside it
+        method, rmse = "chain", chain.loocv.rmse_mm
+    else:
+        order = [m for m in METHODS if m in result.image] + [m for m in result.image if m not in METHODS]
+        method = best_method(order, {m: s.rmse_mm for m, s in result.loocv.items()})
+        rmse = result.loocv[method].rmse_mm if method in result.loocv else None
+    return f"{method} (the result's best: {best_reason(method, rmse)}; another with --method)"
+
+
+def figure_captions(result: SequentialResult, chain: ChainResult | None) -> dict[str, str]:
+    """The caption of each figure of :func:`report_files` (what it shows, frame, units, and the
+    threshold that makes it good or bad where brachycal has one)."""
+    label = METHOD_LABELS[sequential_best(result)]
+    captions = {
+        "loo_histogram.png": (
+            f"Leave-one-out errors of {label}, the sequential method with the lowest leave-one-out RMSE: "
+            "how many samples (vertical) have each 3D distance (horizontal, mm) between the needle tip "
+            "the robot puts there and the tip the image predicts with the sample left out of the fit; "
+            "dashed: MAE, dotted: RMSE (Table II's row). For comparison, the paper's Kabsch MAE is "
+            f"{PAPER_TABLE_II_KABSCH_MAE_MM:.2f} mm; a long tail points at a few bad samples (next figure)."
+        ),
+        "loo_per_sample.png": (
+            "Leave-one-out error of each sample (mm, 3D distance) for every registration method, samples "
+            "in the session's order: a sample far above the others in every method is worth checking "
+            "(its annotation or its joints)."
+        ),
+        "points_3d.png": (
+            f"Needle tips as the robot puts them (real, circles) and as the image predicts them ({label}, "
+            "leave-one-out, triangles), in the robot's base frame (base_link), mm; a grey line joins each "
+            "pair. The lines' lengths are the leave-one-out errors."
+        ),
+    }
+    if chain is not None:
+        captions["landing_map.png"] = (
+            "Predicted landing error of the whole chain (RMS, mm, colour) at each pixel of the image (u "
+            "to the right, v downward, px), probe at the central sample pose, the session's noise and the "
+            "stated robot accuracy included; outside the imaging sector masked; brachycal warns above "
+            f"{WARN_LANDING_RMS_MM:g} mm (the paper's Table II MAE of its rigid methods)."
+        )
+    return captions
+
+
+def sequential_best(result: SequentialResult) -> str:
+    """The sequential method with the lowest leave-one-out RMSE (the report's figures draw it)."""
+    return min(result.loocv, key=lambda m: result.loocv[m].rmse_mm)
 
 
 def _matrix(name: str, T: FloatArray) -> _Matrix:
@@ -115,7 +179,9 @@ def report_page(
     chain: ChainResult | None,
     figures: list[Path],
 ) -> str:
-    """The report's HTML text, the PNG ``figures`` embedded in their order."""
+    """The report's HTML text, the PNG ``figures`` embedded in their order, each with its caption
+    (:func:`figure_captions`, by the figure's file name)."""
+    captions = figure_captions(result, chain)
     return (
         _templates()
         .get_template("report.html.j2")
@@ -127,12 +193,16 @@ def report_page(
             columns=STATS_COLUMNS,
             table_i=table_i_data(result),
             table_ii=table_ii_data(result, chain.loocv if chain else None),
+            uncertainty=uncertainty_table_data(result),
+            uncertainty_columns=UNCERTAINTY_COLUMNS,
+            best=best_statement(result, chain),
+            judged=judgements(result, chain, sector=session.sector, spacing_m=session.spacing_m),
             chain_lines=[]
             if chain is None
             else chain_summary(
                 chain, session.sample_ids, sector=session.sector, spacing_m=session.spacing_m
             ).splitlines(),
-            figures=[_figure(f) for f in figures],
+            figures=[_figure(f, captions.get((staged_destination(f) or f).name, "")) for f in figures],
             transforms=[_matrix("ER_T_Ntip", result.T_ER_Ntip), _matrix("EL_T_Ptip", result.T_EL_Ptip)],
             inputs=list(result.inputs.items()),
         )
@@ -148,7 +218,7 @@ def _write_report(
     chain: ChainResult | None,
     force: bool,
 ) -> None:
-    best = min(result.loocv, key=lambda m: result.loocv[m].rmse_mm)
+    best = sequential_best(result)
     p_real, p_cal = loo_points(session, robot, result, best)
     label = METHOD_LABELS[best]
     figures = [

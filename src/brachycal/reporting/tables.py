@@ -244,12 +244,50 @@ def table_iii(stats: dict[str, ErrorStats], n_targets: int) -> str:
     return "\n".join(lines)
 
 
-def uncertainty_table(result: SequentialResult) -> str:
+#: The columns of the predicted uncertainty's registration rows, units in the heads.
+UNCERTAINTY_COLUMNS = ("noise (mm)", "rot. (deg)", "origin (mm)", "samples (mm)", "at 50 mm")
+_UNCERTAINTY_WIDTHS = (10, 10, 11, 12, 9)
+
+
+@dataclass(frozen=True)
+class UncertaintyRow:
+    """One registration's predicted uncertainty: its label, the figures as printed (one per
+    :data:`UNCERTAINTY_COLUMNS`) and a note (a scaled method's spacing SD)."""
+
+    label: str
+    cells: tuple[str, ...]
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class UncertaintyTable:
+    """The predicted uncertainties (1 SD): a title, lines on the tips and rotations, one row per
+    registration (:data:`UNCERTAINTY_COLUMNS`) and the refused methods' rows (their reasons)."""
+
+    title: str
+    lines: tuple[str, ...]
+    first: str
+    rows: tuple[UncertaintyRow, ...]
+    refused: tuple[StatsRow, ...]
+
+    def text(self, width: int = 26) -> str:
+        """The table as printed text, the first column ``width`` characters wide."""
+        head = f"{self.first:<{width}} " + " ".join(
+            f"{c:>{w}}" for c, w in zip(UNCERTAINTY_COLUMNS, _UNCERTAINTY_WIDTHS, strict=True)
+        )
+        rows = [
+            f"{row.label:<{width}} "
+            + " ".join(f"{c:>{w}}" for c, w in zip(row.cells, _UNCERTAINTY_WIDTHS, strict=True))
+            + (f"   {row.note}" if row.note else "")
+            for row in self.rows
+        ]
+        return "\n".join([self.title, *self.lines, head, *rows, *(row.line(width) for row in self.refused)])
+
+
+def uncertainty_table_data(result: SequentialResult) -> UncertaintyTable:
     """Predicted uncertainties (1 SD) of the sequential estimates, as the conditioning checks computed them."""
     lines = [
-        "PREDICTED UNCERTAINTY (1 SD; tips from the trials' spread, rotations from the moves' lengths at "
-        f"{result.needle.rotation.point_sd_m * 1e3:.2g} mm positioning noise, registrations from their residual)",
-        "reference tips: " + ", ".join(f"{ref} {tip.sd_m * 1e3:.3f} mm" for ref, tip in result.reference_tips.items()),
+        "reference tips: " + ", ".join(f"{ref} {tip.sd_m * 1e3:.3f} mm" for ref, tip in result.reference_tips.items())
     ]
     for name, tool in (("needle", result.needle), ("probe", result.probe)):
         tip = f"tip {tool.tip.sd_m * 1e3:.3f} mm, " if tool.tip is not None else ""
@@ -258,24 +296,31 @@ def uncertainty_table(result: SequentialResult) -> str:
             f"{name}: {tip}rotation {rotation.rotation_sd_deg:.2f} deg, axes angle "
             f"{rotation.axes_angle_deg:.2f} +- {rotation.axes_angle_sd_deg:.2f} deg"
         )
-    width = 26
-    lines.append(
-        f"{'Registration algorithms':<{width}} {'noise (mm)':>10} {'rot. (deg)':>10} {'origin (mm)':>11} "
-        f"{'samples (mm)':>12} {'at 50 mm':>9}"
-    )
+    rows = []
     for method, calibration in result.image.items():
         u = calibration.uncertainty
         if u is None:
             continue
-        row = (
-            f"{METHOD_LABELS[method]:<{width}} {u.noise_sd_m * 1e3:10.3f} {u.rotation_sd_deg:10.3f} "
-            f"{u.origin_sd_m * 1e3:11.3f} {u.samples_sd_m * 1e3:12.3f} {u.reach_sd_m * 1e3:9.3f}"
+        figures = (u.noise_sd_m * 1e3, u.rotation_sd_deg, u.origin_sd_m * 1e3, u.samples_sd_m * 1e3, u.reach_sd_m * 1e3)
+        note = (
+            f"spacing SD {u.spacing_sd_m[0] * 1e3:.5f} x {u.spacing_sd_m[1] * 1e3:.5f} mm/px"
+            if np.any(u.spacing_sd_m > 0)
+            else ""
         )
-        if np.any(u.spacing_sd_m > 0):
-            row += f"   spacing SD {u.spacing_sd_m[0] * 1e3:.5f} x {u.spacing_sd_m[1] * 1e3:.5f} mm/px"
-        lines.append(row)
-    lines += refused_rows(result, width)
-    return "\n".join(lines)
+        rows.append(UncertaintyRow(METHOD_LABELS[method], tuple(f"{x:.3f}" for x in figures), note))
+    return UncertaintyTable(
+        "PREDICTED UNCERTAINTY (1 SD; tips from the trials' spread, rotations from the moves' lengths at "
+        f"{result.needle.rotation.point_sd_m * 1e3:.2g} mm positioning noise, registrations from their residual)",
+        tuple(lines),
+        "Registration algorithms",
+        tuple(rows),
+        tuple(_refused(result)),
+    )
+
+
+def uncertainty_table(result: SequentialResult) -> str:
+    """Predicted uncertainties as text (:func:`uncertainty_table_data`)."""
+    return uncertainty_table_data(result).text()
 
 
 def design_table(rows: Sequence[Mapping[str, object]]) -> str:
