@@ -4,7 +4,7 @@ Every failure is a :class:`BrachycalError` whose message is one line. The CLI pr
 with code 2; library users catch the base class, or the kind they can handle:
 
 - :class:`InputError` — bad input: a file, a row, a value or an option. The message names the place
-  (file, row, column) and the problem. Also a ``ValueError``, so ``except ValueError`` keeps working.
+  (file, row, column, or a settings file's key) and the problem. Also a ``ValueError``, so ``except ValueError`` keeps working.
 - :class:`DegenerateDataError` — the input is well formed but cannot determine what is asked
   (all touches at one pose, samples without spread, rotations about one axis). An ``InputError``:
   the data must change.
@@ -48,7 +48,8 @@ class InputError(BrachycalError, ValueError):
     """Bad input: one line naming the place (file, row, column) and the problem.
 
     ``row`` counts lines of a text file from 1 with the header as row 1 (what a spreadsheet
-    shows); for other sources ``row_label`` says what is counted (e.g. ``"message"``).
+    shows); for other sources ``row_label`` says what is counted (e.g. ``"message"``). ``key``
+    names a value of a settings file (TOML, JSON) by its dotted path, ``"image.sector.apex_px"``.
     """
 
     def __init__(
@@ -59,11 +60,13 @@ class InputError(BrachycalError, ValueError):
         row: int | None = None,
         column: str | None = None,
         row_label: str = "row",
+        key: str | None = None,
     ) -> None:
         self.file = None if file is None else str(file)
         self.row = row
         self.row_label = row_label
         self.column = column
+        self.key = key
         where = []
         if self.file is not None:
             where.append(self.file)
@@ -71,6 +74,8 @@ class InputError(BrachycalError, ValueError):
             where.append(f"{row_label} {row}")
         if column is not None:
             where.append(f"column {column!r}")
+        if key is not None:
+            where.append(f"key {key!r}")
         text = ": ".join([", ".join(where), message]) if where else message
         super().__init__(text)
         self.problem = message
