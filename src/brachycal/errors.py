@@ -4,7 +4,8 @@ Every failure is a :class:`BrachycalError` whose message is one line. The CLI pr
 with code 2; library users catch the base class, or the kind they can handle:
 
 - :class:`InputError` — bad input: a file, a row, a value or an option. The message names the place
-  (file, row, column, or a settings file's key) and the problem. Also a ``ValueError``, so ``except ValueError`` keeps working.
+  (file, row, column, or a settings file's key) and the problem. Also a ``ValueError``, so
+  ``except ValueError`` keeps working.
 - :class:`DegenerateDataError` — the input is well formed but cannot determine what is asked
   (all touches at one pose, samples without spread, rotations about one axis). An ``InputError``:
   the data must change.
