@@ -404,6 +404,14 @@ MUTANTS: tuple[Mutant, ...] = (
         "the predicted landing error counts the robot's error twice (in the parameters' and its own term)",
     ),
     Mutant(
+        "landing-prior-only",
+        "calibration/chain/uncertainty.py",
+        "if fit.robot_posterior is None or fit.robot_mean is None:",
+        "if True:",
+        (LANDING,),
+        "the predicted landing error from the stated accuracy alone, blind to what the residuals show of the robot",
+    ),
+    Mutant(
         "landing-encoder-noise",
         "calibration/chain/uncertainty.py",
         "C = C + fit.robot_accuracy.encoder_sd_rad**2 * L_q @ np.swapaxes(L_q, 1, 2)",
