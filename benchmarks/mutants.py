@@ -67,6 +67,7 @@ TEMP = "tests/test_temporal.py::"
 ROBOT = "tests/test_robot_identification.py::"
 CHAIN = "tests/test_chain.py::"
 ARM = "tests/test_arm_fit_noise.py::"
+LANDING = "tests/test_landing_prediction.py::test_the_predicted_landing_error_is_honest_on_non_default_twins"
 TOUCH = "tests/test_touch_identification.py::"
 TRACK = "tests/test_tracker_identification.py::"
 EVID = "tests/test_evidence_search.py::"
@@ -457,6 +458,38 @@ MUTANTS: tuple[Mutant, ...] = (
         "return d2 <= chi2.ppf(level, 2)",
         (CHAIN + "test_ellipsoids_hold_their_level",),
         "the 3D ellipsoid's quantile on 2 degrees of freedom",
+    ),
+    Mutant(
+        "landing-robot-twice",
+        "calibration/chain/uncertainty.py",
+        "C = G @ fit.noise_covariance @ np.swapaxes(G, 1, 2)",
+        "C = G @ fit.covariance @ np.swapaxes(G, 1, 2)",
+        (LANDING,),
+        "the predicted landing error counts the robot's error twice (in the parameters' and its own term)",
+    ),
+    Mutant(
+        "landing-prior-only",
+        "calibration/chain/uncertainty.py",
+        "if fit.robot_posterior is None or fit.robot_mean is None:",
+        "if True:",
+        (LANDING,),
+        "the predicted landing error from the stated accuracy alone, blind to what the residuals show of the robot",
+    ),
+    Mutant(
+        "landing-encoder-noise",
+        "calibration/chain/uncertainty.py",
+        "C = C + fit.robot_accuracy.encoder_sd_rad**2 * L_q @ np.swapaxes(L_q, 1, 2)",
+        "C = C + 0.0 * L_q @ np.swapaxes(L_q, 1, 2)",
+        (LANDING,),
+        "the predicted landing error without the joint readings' noise when aiming",
+    ),
+    Mutant(
+        "session-sector-holds-none",
+        "data/session.py",
+        "    if outside.all():",
+        "    if False:",
+        ("tests/test_session_sector.py::test_a_sector_that_holds_none_of_the_tips_is_refused_naming_the_file_and_key",),
+        "a session's imaging sector that holds none of its samples accepted",
     ),
     Mutant(
         "check-part-dof",

@@ -417,7 +417,7 @@ CASES = [
     Case(
         "template-wrong-format",
         BUILD,
-        ("session.toml", "column 'format'", "brachycal-session/1"),
+        ("session.toml", "key 'format'", "brachycal-session/1"),
         with_copy(edit_csv("session.toml", lambda lines: ['format = "brachycal-session/9"', *lines[1:]])),
     ),
     Case(
@@ -464,7 +464,7 @@ TEMPLATE_CASES = [
             "--out",
             "{tmp}/session",
         ],
-        ("blank/session.toml", "column 'image.spacing_mm'", "expected a list of 2 numbers"),
+        ("blank/session.toml", "key 'image.spacing_mm'", "expected a list of 2 numbers"),
         _blank,
     ),
 ]

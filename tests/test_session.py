@@ -32,15 +32,15 @@ def test_a_stated_imaging_sector_is_read_in_si_units_and_written_back_as_stated(
     from brachycal.data.session import write_session
 
     toml = session_dir / "session.toml"
-    sector = "[image.sector]\napex_px = [540, -20.5]\ndepth_mm = 70\nangle_deg = 120\n\n"
+    sector = "[image.sector]\napex_px = [540, -20.5]\ndepth_mm = 140\nangle_deg = 120\n\n"
     toml.write_text(toml.read_text().replace("[top_model]", sector + "[top_model]"))
     read = read_session(session_dir, robot).sector
     assert read is not None
-    assert read.apex_px == (540.0, -20.5) and read.depth_m == pytest.approx(0.070, rel=1e-15)
+    assert read.apex_px == (540.0, -20.5) and read.depth_m == pytest.approx(0.140, rel=1e-15)
     assert read.angle_rad == pytest.approx(2 * np.pi / 3, rel=1e-15)
     written = write_session(replace(exact, sector=read), tmp_path / "again")
     text = (written / "session.toml").read_text()
-    assert "apex_px = [540, -20.5]" in text and "depth_mm = 70\n" in text and "angle_deg = 120 " in text
+    assert "apex_px = [540, -20.5]" in text and "depth_mm = 140\n" in text and "angle_deg = 120 " in text
     assert read_session(written, robot).sector == read
 
 
@@ -147,7 +147,7 @@ def test_bad_toml(session_dir, robot):
     toml.write_text(toml.read_text().replace("brachycal-session/1", "brachycal-session/9"))
     assert "format is 'brachycal-session/9'" in refused(session_dir, robot)
     toml.write_text(toml.read_text().replace("brachycal-session/9", "brachycal-session/1").replace("0.19,", "-0.19,"))
-    assert "column 'image.spacing_mm': expected positive finite numbers" in refused(session_dir, robot)
+    assert "key 'image.spacing_mm': expected positive finite numbers" in refused(session_dir, robot)
     toml.write_text("format = ")
     assert "not valid TOML" in refused(session_dir, robot)
 

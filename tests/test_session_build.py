@@ -411,7 +411,7 @@ def test_a_filled_in_template_builds_the_recordings_session(short, robot, tmp_pa
     blank = tmp_path / "blank"
     assert main(["session", "template", str(blank)]) == 0
     assert sorted(p.name for p in blank.iterdir()) == sorted(TEMPLATE_FILES)
-    with pytest.raises(InputError, match=r"column 'image.spacing_mm': expected a list of 2 numbers"):
+    with pytest.raises(InputError, match=r"key 'image.spacing_mm': expected a list of 2 numbers"):
         session_settings(blank / "session.toml")
     # The documented edit: fill in the three lists (here with the recording's own values).
     known = session_settings(rec / "session.toml")
@@ -483,7 +483,7 @@ def test_an_unfilled_template_takes_the_values_given_as_options(tmp_path):
         ("top_model_tip_mm", "top_model.tip_in_flange_mm"),
     ):
         partial = {k: v for k, v in given.items() if k != left_out}
-        with pytest.raises(InputError, match=rf"column '{key}': expected a list of"):
+        with pytest.raises(InputError, match=rf"key '{key}': expected a list of"):
             session_settings(template, **partial)
 
 

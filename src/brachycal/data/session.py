@@ -18,7 +18,9 @@ from __future__ import annotations
 
 import os
 import tomllib
-from collections.abc import Collection, Mapping
+import warnings
+from collections.abc import Collection, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -27,7 +29,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from brachycal.data.formats.csv_log import read_table, table_configurations, to_float, unique_names
-from brachycal.errors import InputError
+from brachycal.data.json_files import shown
+from brachycal.errors import BrachycalWarning, InputError
 from brachycal.inputs import MAX_DOCUMENT_BYTES, read_input_text
 from brachycal.io import OutputSet, atomic_open, output_set, sha256_file
 from brachycal.se3 import FloatArray
@@ -158,7 +161,7 @@ def _read_toml(
     except (tomllib.TOMLDecodeError, UnicodeDecodeError, RecursionError) as exc:
         raise InputError(f"not valid TOML ({exc})", file=path) from None
     if config.get("format") != FORMAT:
-        raise InputError(f"format is {config.get('format')!r}, expected {FORMAT!r}", file=path, column="format")
+        raise InputError(f"format is {shown(config.get('format'))}, expected {FORMAT!r}", file=path, key="format")
 
     def numbers(table: str, key: str, count: int, positive: bool) -> FloatArray:
         value = config.get(table, {}).get(key) if isinstance(config.get(table), dict) else None
@@ -166,46 +169,60 @@ def _read_toml(
         if value == [] and name in blank_ok:  # a template's blank, given by the caller instead
             return np.full(count, np.nan)
         if not isinstance(value, list) or len(value) != count:
-            raise InputError(f"expected a list of {count} numbers", file=path, column=name)
-        if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value):
-            raise InputError(f"expected numbers, got {value!r}", file=path, column=name)
-        array = np.array(value, dtype=float)
+            raise InputError(f"expected a list of {count} numbers", file=path, key=name)
+        array = _floats(value, path, name)
         if not np.all(np.isfinite(array)) or (positive and np.any(array <= 0)):
             raise InputError(
-                f"expected {'positive ' if positive else ''}finite numbers, got {value!r}", file=path, column=name
+                f"expected {'positive ' if positive else ''}finite numbers, got {shown(value)}", file=path, key=name
             )
         return array
 
     spacing_mm = numbers("image", "spacing_mm", 2, True)
     # Plausible for ultrasound (0.005..2 mm/px): a spacing in metres typed as mm is named so.
-    spacing_m = (
-        spacing_mm
-        if np.isnan(spacing_mm).all()
-        else check_spacing_mm(spacing_mm, "pixel spacing", file=path, column="image.spacing_mm") * 1e-3
-    )
+    if not np.isnan(spacing_mm).all():
+        with _at_key(path, "image.spacing_mm"):
+            spacing_mm = check_spacing_mm(spacing_mm, "pixel spacing")
+    spacing_m = spacing_mm * 1e-3
     size = numbers("image", "size_px", 2, True)
     if np.isnan(size).all():
         size = np.zeros(2)  # blank, given by the caller
     elif np.any(size != np.round(size)):
-        raise InputError("image size must be whole pixels", file=path, column="image.size_px")
+        raise InputError("image size must be whole pixels", file=path, key="image.size_px")
     if np.any(size > MAX_IMAGE_PX):
         raise InputError(
-            f"image size {size.tolist()!r} px: at most {MAX_IMAGE_PX} px a side", file=path, column="image.size_px"
+            f"image size {size.tolist()!r} px: at most {MAX_IMAGE_PX} px a side", file=path, key="image.size_px"
         )
     image = config.get("image")
     sector = _read_sector(image.get("sector") if isinstance(image, dict) else None, path)
     tip_mm = numbers("top_model", "tip_in_flange_mm", 3, False)
     if np.isnan(tip_mm).all():
         return spacing_m, size.astype(int), tip_mm, sector  # blank, given by the caller
-    tip_m = check_positions(
-        tip_mm * 1e-3,
-        "the tip",
-        limit=TOOL_LENGTH_M_RANGE[1],
-        unit="m",
-        file=path,
-        columns=["top_model.tip_in_flange_mm"] * 3,
-    )
+    with _at_key(path, "top_model.tip_in_flange_mm"):
+        tip_m = check_positions(tip_mm * 1e-3, "the tip", limit=TOOL_LENGTH_M_RANGE[1], unit="m")
     return spacing_m, size.astype(int), tip_m, sector
+
+
+@contextmanager
+def _at_key(path: Path, key: str) -> Iterator[None]:
+    """A check's refusal placed at ``key`` of the settings file ``path``."""
+    try:
+        yield
+    except InputError as exc:
+        raise InputError(exc.problem, file=path, key=key) from None
+
+
+def _floats(value: list, path: Path, key: str) -> FloatArray:
+    """A TOML list's numbers as floats; an integer beyond the float range is infinite (refused as not
+    finite by the caller), anything else than a number refused here."""
+    out = []
+    for v in value:
+        if not isinstance(v, int | float) or isinstance(v, bool):
+            raise InputError(f"expected numbers, got {shown(value)}", file=path, key=key)
+        try:
+            out.append(float(v))
+        except OverflowError:  # TOML's integers are unbounded: 10**400
+            out.append(float(np.sign(v)) * np.inf)
+    return np.array(out)
 
 
 def _read_sector(table: object, path: Path) -> ImageSector | None:
@@ -213,17 +230,17 @@ def _read_sector(table: object, path: Path) -> ImageSector | None:
     if table is None:
         return None
     if not isinstance(table, dict):
-        raise InputError("expected a table (apex_px, depth_mm, angle_deg)", file=path, column="image.sector")
-    values: dict[str, list[float]] = {}
+        raise InputError("expected a table (apex_px, depth_mm, angle_deg)", file=path, key="image.sector")
+    values: dict[str, FloatArray] = {}
     for key, count in (("apex_px", 2), ("depth_mm", 1), ("angle_deg", 1)):
         value = table.get(key)
         items = value if isinstance(value, list) else [value]
-        numbers = [float(v) for v in items if isinstance(v, int | float) and not isinstance(v, bool)]
-        if len(items) != count or len(numbers) != count:
+        if len(items) != count or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in items):
             what = "a list of 2 numbers" if count == 2 else "a number"
-            raise InputError(f"expected {what}, got {value!r}", file=path, column=f"image.sector.{key}")
+            raise InputError(f"expected {what}, got {shown(value)}", file=path, key=f"image.sector.{key}")
+        numbers = _floats(items, path, f"image.sector.{key}")
         if not all(np.isfinite(numbers)):
-            raise InputError(f"expected finite numbers, got {value!r}", file=path, column=f"image.sector.{key}")
+            raise InputError(f"expected finite numbers, got {shown(value)}", file=path, key=f"image.sector.{key}")
         values[key] = numbers
     rules = (
         ("apex_px", -MAX_IMAGE_PX, MAX_IMAGE_PX, False, "px"),
@@ -232,11 +249,52 @@ def _read_sector(table: object, path: Path) -> ImageSector | None:
     )
     for key, low, high, low_open, unit in rules:
         for v in values[key]:
-            check_range(
-                v, "", low=low, high=high, low_open=low_open, unit=unit, file=path, column=f"image.sector.{key}"
-            )
-    u, v = values["apex_px"]
-    return ImageSector((u, v), values["depth_mm"][0] * 1e-3, float(np.radians(values["angle_deg"][0])))
+            with _at_key(path, f"image.sector.{key}"):
+                check_range(v, "", low=low, high=high, low_open=low_open, unit=unit)
+    u, v = (float(x) for x in values["apex_px"])
+    return ImageSector((u, v), float(values["depth_mm"][0]) * 1e-3, float(np.radians(values["angle_deg"][0])))
+
+
+#: How far outside the stated imaging sector an annotated needle tip may lie, metres: annotation
+#: noise of a few pixels and a sector's figures rounded to the millimetre and degree put a tip at the
+#: sector's edge up to about this far out; beyond it the pixel shows the scanner's black, not tissue.
+SECTOR_TOLERANCE_M = 1e-3
+
+
+def check_sector_holds_samples(
+    sector: ImageSector, spacing_m: ArrayLike, sample_ids: list[str], uv_px: ArrayLike, path: Path
+) -> None:
+    """Refuse an imaging sector (of ``session.toml`` at ``path``) that holds none of the annotated
+    needle tips ``uv_px (N, 2)``: its apex, depth or angle is misstated (pixels outside a sector show
+    no tissue, so no needle). Some tips outside it (by more than :data:`SECTOR_TOLERANCE_M`) give a
+    :class:`~brachycal.errors.BrachycalWarning` naming the farthest: a misstated sector or a
+    mis-annotated tip (the whole chain's outlier rule judges the tips; the sector only bounds the
+    predicted landing error's map).
+
+    Raises:
+        InputError: no tip inside the sector (naming ``path`` and the key ``image.sector``).
+    """
+    margin = sector.margin_to_edge(uv_px, spacing_m)
+    outside = margin < -SECTOR_TOLERANCE_M
+    if not outside.any():
+        return
+    far = int(np.argmin(margin))
+    u, v = (float(x) for x in np.asarray(uv_px, float)[far])
+    nearest = float(-margin.max()) * 1e3
+    if outside.all():
+        raise InputError(
+            f"the imaging sector holds none of the {len(margin)} annotated needle tips (the nearest "
+            f"{nearest:.1f} mm outside it): its apex_px, depth_mm or angle_deg is misstated",
+            file=path,
+            key="image.sector",
+        )
+    warnings.warn(
+        f"{path}: {int(outside.sum())} of {len(margin)} annotated needle tips lie outside the imaging sector "
+        f"[image.sector] (farthest: sample {sample_ids[far]!r} at ({u:.0f}, {v:.0f}) px, "
+        f"{-float(margin[far]) * 1e3:.1f} mm out): the sector or those annotations are misstated",
+        BrachycalWarning,
+        stacklevel=3,
+    )
 
 
 def read_session_toml(
@@ -450,6 +508,8 @@ def read_session(folder: str | os.PathLike[str], robot: Robot) -> Session:
     touches = _read_touches(folder / "touches.csv", robot)
     axes = _read_axes(folder / "axes.csv", robot)
     ids, samples_q, uv = _read_samples(folder / "samples.csv", robot, size_px)
+    if sector is not None:
+        check_sector_holds_samples(sector, spacing_m, ids, uv, folder / "session.toml")
     return Session(
         spacing_m=spacing_m,
         size_px=size_px,

@@ -31,6 +31,8 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from brachycal.calibration.chain import ChainFit
+from brachycal.calibration.chain.uncertainty import inside_ellipsoid, landing_covariance
 from brachycal.calibration.metrics import ErrorStats
 from brachycal.calibration.result import Calibration, calibration_args
 from brachycal.calibration.sequential.image_to_probe import predict_base
@@ -177,3 +179,41 @@ class _Aim:
         q_seen = q_read.copy()
         q_seen[arm] = q_command[arm]
         return twin.physical.fk(NEEDLE_TIP, q_executed)[:3, 3], uv, q_seen
+
+
+@dataclass(frozen=True)
+class LandingCheck:
+    """A whole-chain fit's landing error on the twin against its own prediction (mm, ``base_link``).
+
+    Attributes:
+        actual_rms_mm: RMS over the targets of where the needle landed minus the target.
+        predicted_rms_mm: RMS over the same targets of the predicted landing error
+            (:func:`~brachycal.calibration.chain.uncertainty.landing_covariance` at each target's pixel
+            and read joints: the session's noise, the stated robot accuracy and the joint readings'
+            noise when aiming).
+        inside: ``(M,)`` whether each target's error lies inside its predicted ``level`` ellipsoid.
+    """
+
+    actual_rms_mm: float
+    predicted_rms_mm: float
+    inside: np.ndarray
+
+    @property
+    def ratio(self) -> float:
+        """Actual over predicted RMS landing error: 1 when the prediction is honest."""
+        return self.actual_rms_mm / self.predicted_rms_mm
+
+
+def landing_check(
+    twin: Twin, fit: ChainFit, n_targets: int = 20, *, software: Robot | None = None, level: float = 0.95
+) -> LandingCheck:
+    """Aim at ``n_targets`` targets with ``fit``'s calibration (:func:`targeting_error`; ``software``
+    the robot model it commands with, default the nominal URDF: an identified fit passes its corrected
+    robot) and compare the landing errors with the fit's predicted covariance there."""
+    robot = software or twin.nominal
+    hit = targeting_error(twin, fit.calibration(), n_targets, software=robot)
+    C = landing_covariance(fit, robot, twin.session.spacing_m, hit.q_read, hit.uv_px)
+    error = hit.landed_m - hit.targets_m
+    actual = float(np.sqrt(np.mean(np.sum(error**2, axis=1))))
+    predicted = float(np.sqrt(np.mean(np.trace(C, axis1=1, axis2=2))))
+    return LandingCheck(actual * 1e3, predicted * 1e3, inside_ellipsoid(error, C, level))

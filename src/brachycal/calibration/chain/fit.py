@@ -30,6 +30,7 @@ from brachycal.calibration.chain.noise import (
     image_axis_levels,
     noise_levels,
     noise_share,
+    robot_posterior,
 )
 from brachycal.calibration.chain.problem import ChainProblem, Reweighted
 from brachycal.calibration.chain.result import ChainFit
@@ -87,6 +88,8 @@ class CovarianceTerms:
     sensitivity: FloatArray | None = None
     robot_covariance: FloatArray | None = None
     share: dict[str, float] | None = None
+    robot_mean: FloatArray | None = None
+    robot_posterior: FloatArray | None = None
 
 
 def offset_joints(
@@ -204,7 +207,11 @@ def covariance_terms(problem: ChainProblem, final: FinalStage, robot_accuracy: R
     # stated accuracy); the noise part uses each group's noise alone, the robot's part apart.
     noise_covariance = noise_covariance @ (J.T * rows) @ J @ noise_covariance
     covariance = noise_covariance + sensitivity @ robot_covariance @ sensitivity.T
-    return CovarianceTerms(conditioning, covariance, noise_covariance, sensitivity, robot_covariance, share)
+    # What the residuals show of the robot's error: its posterior, for the predicted landing error.
+    mean, posterior = robot_posterior(r, J, J_c, robot_covariance)
+    return CovarianceTerms(
+        conditioning, covariance, noise_covariance, sensitivity, robot_covariance, share, mean, posterior
+    )
 
 
 def assemble(
@@ -243,6 +250,8 @@ def assemble(
         noise_covariance=terms.noise_covariance,
         robot_sensitivity=terms.sensitivity,
         robot_covariance=terms.robot_covariance,
+        robot_mean=terms.robot_mean,
+        robot_posterior=terms.robot_posterior,
         robot_accuracy=robot_accuracy,
         noise_share=terms.share or {},
         robust_x=robust_x,

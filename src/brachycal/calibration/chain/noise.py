@@ -192,3 +192,30 @@ def noise_share(
         keep = noise[g].source == "residuals" and rss > 0
         out[g] = max(0.0, 1.0 - float(robot_rows[part].sum()) / rss) if keep else 1.0
     return out
+
+
+def robot_posterior(
+    normalised: FloatArray, J: FloatArray, J_c: FloatArray, robot_covariance: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """The joints' origin errors ``c`` given the fit's residuals: mean ``(6 nq,)`` and covariance
+    ``(6 nq, 6 nq)`` (metres, radians).
+
+    The stated accuracy is ``c``'s prior ``N(0, Σ_c)``. The weighted residuals are
+    ``(I − H)(n + J_c c)``: in the residuals' own space (orthonormal basis ``Q`` of the complement of
+    ``J``'s columns) ``Qᵀr = M c + Qᵀn`` with ``M = Qᵀ J_c``, the noise's covariance ``I`` in the
+    fit's weights (each group's level whole: it holds some of the robot's scatter too, so the
+    posterior leans to the prior; with :func:`noise_share` taken out, a group the stated accuracy
+    explains in full would be noise-free and its noise read as the robot's error). Then
+    ``K = Σ_c Mᵀ (M Σ_c Mᵀ + I)⁻¹``, mean ``K Qᵀr``, covariance ``Σ_c − K M Σ_c``: what the residuals
+    show of the robot's error in this session (less than stated, or more) enters the predicted
+    landing error through them.
+    """
+    norms = np.linalg.norm(J, axis=0)
+    live = norms > 0
+    U, s, _ = np.linalg.svd(J[:, live] / norms[live], full_matrices=True)
+    rank = int(np.sum(s > s[0] * RCOND_LIMIT)) if s.size and s[0] > 0 else 0
+    Q = U[:, rank:]
+    M = Q.T @ J_c
+    K = np.linalg.solve(M @ robot_covariance @ M.T + np.eye(len(M)), M @ robot_covariance).T
+    posterior = robot_covariance - K @ M @ robot_covariance
+    return K @ (Q.T @ normalised), 0.5 * (posterior + posterior.T)

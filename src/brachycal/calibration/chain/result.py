@@ -41,6 +41,10 @@ class ChainFit:
         robot_sensitivity: ``(P, 6 nq)`` ``S = ∂x̂/∂c``: how the estimate moves with the physical
             joints' origin errors ``c`` (None without a stated robot accuracy).
         robot_covariance: ``(6 nq, 6 nq)`` ``Σ_c`` of the stated accuracy (None without one).
+        robot_mean / robot_posterior: ``(6 nq,)`` and ``(6 nq, 6 nq)``: ``c`` given the fit's residuals
+            (:func:`~brachycal.calibration.chain.noise.robot_posterior`), what the predicted landing
+            error uses; None where ``robot_covariance`` is already a posterior (an identified robot)
+            or without a stated accuracy.
         robot_accuracy: the stated accuracy (None: the robot term was not computed).
         noise_share: per group, the fraction of its residual variance left to the session's noise
             once the stated robot accuracy's expected part is taken out
@@ -71,6 +75,8 @@ class ChainFit:
     robot_sensitivity: FloatArray | None = None
     robot_covariance: FloatArray | None = None
     robot_accuracy: RobotAccuracy | None = None
+    robot_mean: FloatArray | None = field(default=None, repr=False)
+    robot_posterior: FloatArray | None = field(default=None, repr=False)
     noise_share: dict[str, float] = field(default_factory=dict)
     robust_x: FloatArray | None = field(default=None, repr=False)
     image_axes_noise: dict[str, NoiseLevel] = field(default_factory=dict)

@@ -58,9 +58,11 @@ def landing_covariance(
 ) -> FloatArray:
     """``(M, 3, 3)`` covariance (m²) of the landing error at pixels ``(M, 2)`` seen with joints ``(M, nq)``.
 
-    The session's noise, and with the fit's stated robot accuracy the robot model's error and (if
-    ``encoder_noise``) the joint readings' noise when aiming (see the module docstring). The
-    needle arm's orientation is taken from ``q`` (its needle-arm joints, ``robot.rig``).
+    The session's noise, and with the fit's stated robot accuracy the robot model's error (given
+    what the fit's residuals show of it: ``fit.robot_mean`` and ``fit.robot_posterior``, the
+    landing error's mean ``A c̄`` included as a second moment) and (if ``encoder_noise``) the joint
+    readings' noise when aiming (see the module docstring). The needle arm's orientation is taken
+    from ``q`` (its needle-arm joints, ``robot.rig``).
     """
     G = landing_jacobian(fit, robot, nominal_spacing, q, uv_px)
     if fit.robot_accuracy is None:
@@ -70,7 +72,10 @@ def landing_covariance(
     C = G @ fit.noise_covariance @ np.swapaxes(G, 1, 2)
     L_c, L_q = landing_robot_jacobians(fit, robot, nominal_spacing, q, uv_px)
     A = G @ fit.robot_sensitivity + L_c
-    C = C + A @ fit.robot_covariance @ np.swapaxes(A, 1, 2)
+    if fit.robot_posterior is None or fit.robot_mean is None:  # already a posterior (an identified robot)
+        C = C + A @ fit.robot_covariance @ np.swapaxes(A, 1, 2)
+    else:  # given the residuals: the landing error's mean A c̄ (left in: nothing corrects it) and spread
+        C = C + A @ (fit.robot_posterior + np.outer(fit.robot_mean, fit.robot_mean)) @ np.swapaxes(A, 1, 2)
     if encoder_noise:
         C = C + fit.robot_accuracy.encoder_sd_rad**2 * L_q @ np.swapaxes(L_q, 1, 2)
     return C

@@ -974,7 +974,7 @@ def check_calibration(
             f"image spacing {_mm(session.spacing_m)} mm differs from the calibrated session's {_mm(calibrated)} mm: "
             "another scanner setting (depth/zoom) needs its own calibration",
             file=Path(session.folder) / "session.toml",
-            column="image.spacing_mm",
+            key="image.spacing_mm",
         )
     x0 = np.zeros(model.size)
     samples, touches = model.residuals(x0, session)
