@@ -53,7 +53,7 @@ URDF and 'locate', 'plan' and 'export' apply exactly once. It prints which param
 cannot identify and why, the image error at held-out configurations with and without it, and the
 verdict: use the identified robot (its held-out gain exceeds twice its standard error over the
 folds) or keep the URDF. It refits the chain and the robot nine times (once, then once per held-out
-fold): about 4 s for a 64-sample session on a free core (1 s without it), more on a busy machine; in
+fold): about 4 s for a 64-sample session on a free core (1 s without it), more while other programs run; in
 a terminal a line per stage shows the progress (--quiet: none).
 
 The robot is the SDA10F unless --robot names another description (baxter, ur5_pair, or a TOML

@@ -26,7 +26,7 @@ Printed: the held-out image error first (chain alone -> robot identified), the t
 second, then which combinations of corrections the session determines, and last the verdict: use
 the identified robot (its held-out gain exceeds twice its standard error over the folds) or keep
 the URDF. It refits the chain and the robot nine times (about 4 s for a 64-sample session on a free
-core, more on a busy machine); a progress bar counts them in a terminal.
+core, more while other programs run); a progress bar counts them in a terminal.
 
 The robot: --robot NAME|FILE, a dual-arm rig (bundled: sda10f, baxter, ur5_pair; or a
 brachycal-robot/1 description), or --urdf FILE (an SDA10F URDF); default the bundled SDA10F.
