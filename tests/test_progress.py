@@ -321,3 +321,41 @@ def test_tips_and_demo_bars_on_a_terminal(tmp_path):
     assert "tips:" in terminal and "frame/s" in terminal, terminal
     code, _, terminal = run_on_a_terminal(["tips", frames, "--out", "again.csv", "--quiet"], tmp_path)
     assert code == 0 and terminal == "", terminal
+
+
+def test_stepper_image_counts_one_per_frame_of_each_recording():
+    """``stepper image``'s segmentation reports each recording's frames, one by one, and the result is
+    the same with and without the callback."""
+    from contextlib import contextmanager
+
+    from brachycal.calibration.phantom.stepper_probe import calibrate_stepper_image_files
+    from brachycal.data.formats.metaimage import read_sequence_header
+
+    folder = ROOT / "examples" / "stepper"
+    files = [
+        folder / f"twin_{name}.igs.mha"
+        for name in ("ProbeRotation", "RandomStepperMotionCalibration", "RandomStepperMotionValidation")
+    ]
+    counts: dict[str, list[int]] = {}
+
+    class Counter:
+        def __init__(self, name: str) -> None:
+            self.name = name
+
+        def update(self, n: int) -> None:
+            counts[self.name].append(n)
+
+    @contextmanager
+    def progress(name: str, frames: int):
+        counts[name] = [frames]
+        yield Counter(name)
+
+    config = folder / "PlusDeviceSet_twin_iCal.xml"
+    with_bar = calibrate_stepper_image_files(config, *files, progress=progress)
+    without = calibrate_stepper_image_files(config, *files)
+    assert set(counts) == {f.name for f in files}
+    for f in files:
+        total, *steps = counts[f.name]
+        assert total == int(read_sequence_header(f)[0]["DimSize"].split()[2])
+        assert steps == [1] * total
+    assert with_bar.to_json() == without.to_json()

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping, Sequence
+from contextlib import nullcontext
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -40,6 +41,7 @@ from brachycal.calibration.phantom.stepper_file import FORMAT as STEPPER_FORMAT
 from brachycal.calibration.phantom.stepper_file import (
     MIN_ROTATION_FRAMES,
     STEPPER_DOCUMENT,
+    Progress,
     check_recording,
     read_stepper_recording,
 )
@@ -277,6 +279,7 @@ def calibrate_stepper_image_files(
     model: str | None = None,
     correct_axes: bool = True,
     axes: StepperAxes | None = None,
+    progress: Progress | None = None,
 ) -> StepperImageResult:
     """Image → Probe of a TRUS probe on a stepper from PLUS files, validated as PLUS does.
 
@@ -294,6 +297,8 @@ def calibrate_stepper_image_files(
         correct_axes: rebuild the poses along the calibrated axes (False: as recorded).
         axes: the stepper's axes to rebuild them along; None: the device set's ``StepperCalibration``
             (refused when it has none: the poses as recorded are asked for with ``correct_axes=False``).
+        progress: ``progress(name, frames)``, a context whose value's ``update(1)`` is called after
+            each frame segmented (a progress bar per recording), or None.
 
     Raises:
         InputError: unreadable or malformed files, a device set without a stepper, or without a
@@ -328,19 +333,26 @@ def calibrate_stepper_image_files(
     if validation_path is None:
         calibration, validation = read_segmented_frames(calibration_path, poses=streams.fields)
     else:
-        calibration, validation = (
-            segment_sequence(
-                read_image_sequence(path),
-                config,
-                params,
-                source=path,
-                label=f"{label} Frame",
-                poses=streams,
-                require_poses=True,
-            ).frames
-            for label, path in (("CalibrationData", calibration_path), ("ValidationData", validation_path))
-        )
-    rotation = read_stepper_recording(rotation_path, encoders, config, params, minimum=MIN_ROTATION_FRAMES)
+
+        def segmented(label: str, path: str | os.PathLike[str]) -> list[SegmentedFrame]:
+            sequence = read_image_sequence(path)
+            with progress(Path(path).name, len(sequence)) if progress is not None else nullcontext() as bar:
+                return segment_sequence(
+                    sequence,
+                    config,
+                    params,
+                    source=path,
+                    label=f"{label} Frame",
+                    poses=streams,
+                    require_poses=True,
+                    progress=None if bar is None else bar.update,
+                ).frames
+
+        calibration = segmented("CalibrationData", calibration_path)
+        validation = segmented("ValidationData", validation_path)
+    rotation = read_stepper_recording(
+        rotation_path, encoders, config, params, minimum=MIN_ROTATION_FRAMES, progress=progress
+    )
     plus_registration = register_phantom(rotation.frames, config.patterns)
     paths = [p for p in (config_path, rotation_path, calibration_path, validation_path) if p is not None]
     inputs = {Path(p).name: sha256_file(p) for p in paths}

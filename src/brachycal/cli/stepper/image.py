@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from brachycal.cli.common import add_quiet_option, command_inputs, output_file, print_next
+from brachycal.cli.common import add_quiet_option, command_inputs, output_file, print_next, progress_bar
 from brachycal.cli.nwire.calibrate import MODELS
 
 NAME = "stepper-image"
@@ -88,7 +88,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="the stepper's axes from `brachycal stepper calibrate` (default: the device set's StepperCalibration)",
     )
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
-    add_quiet_option(parser, "next: lines")
+    add_quiet_option(parser, "the progress bars and next: lines")
     parser.set_defaults(run=run)
 
 
@@ -120,6 +120,7 @@ def run(args: argparse.Namespace) -> int:
             model=args.model,
             correct_axes=not args.recorded_poses,
             axes=axes,
+            progress=lambda name, frames: progress_bar(frames, name, args.quiet, unit="frame"),
         )
         write_stepper_image(result, staged, force=args.force)
     r = result.registration
