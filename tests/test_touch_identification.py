@@ -396,9 +396,11 @@ def test_with_compliance_the_written_urdf_is_the_geometry_only_fit(tmp_path, cap
     assert "(with compliance, not in the URDF:" in capsys.readouterr().out
     geometry = json.loads((tmp_path / "geometry" / "identification.json").read_text())
     compliance = json.loads((tmp_path / "compliance" / "identification.json").read_text())
-    assert compliance["compliance_rad_per_nm"] and not geometry["compliance_rad_per_nm"]
-    for joint, components in geometry["corrections"].items():
-        assert compliance["urdf_fit"]["corrections"][joint] == pytest.approx(components, abs=1e-12)
+    assert compliance["with_compliance"]["compliance_rad_per_nm"] and geometry["with_compliance"] is None
+    for joint, components in geometry["corrections"].items():  # the file's figures are robot.urdf's
+        assert compliance["corrections"][joint] == pytest.approx(components, abs=1e-12)
+    assert compliance["tip_m"] == pytest.approx(geometry["tip_m"], abs=1e-12)
+    assert compliance["with_compliance"]["tip_m"] != pytest.approx(geometry["tip_m"], abs=1e-9)
     written = Robot.load(tmp_path / "compliance" / "robot.urdf")
     for name in ("back_left", "mid-high"):
         expected = geometry["identified"][name]["scatter_mm"]
@@ -510,12 +512,10 @@ def test_dynamics_by_name_is_the_bundled_arm_s_urdf(panda, tmp_path):
     assert main([*common, "--dynamics", "panda", "--out", str(tmp_path / "name")]) == 0
     assert main([*common, "--dynamics", str(urdf), "--out", str(tmp_path / "file")]) == 0
     by_name, by_file = (json.loads((tmp_path / d / "identification.json").read_text()) for d in ("name", "file"))
-    assert (
-        by_name["compliance_rad_per_nm"]
-        and by_name["compliance_rad_per_nm"].keys() == by_file["compliance_rad_per_nm"].keys()
-    )
-    for term, k in by_file["compliance_rad_per_nm"].items():
-        assert by_name["compliance_rad_per_nm"][term] == pytest.approx(k, rel=1e-6, abs=1e-12)
+    name_k, file_k = (d["with_compliance"]["compliance_rad_per_nm"] for d in (by_name, by_file))
+    assert name_k and name_k.keys() == file_k.keys()
+    for term, k in file_k.items():
+        assert name_k[term] == pytest.approx(k, rel=1e-6, abs=1e-12)
     for figures in ("identified", "urdf_only"):
         for place, values in by_file[figures].items():
             assert by_name[figures][place]["scatter_mm"] == pytest.approx(values["scatter_mm"], rel=1e-6)

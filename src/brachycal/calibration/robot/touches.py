@@ -732,7 +732,15 @@ class TouchReport:
                 for name, s in scores.items()
             }
 
-        fit = self.result.fit
+        def corrections(fit: ArmFit) -> dict[str, dict[str, float]]:
+            return {
+                name: dict(zip(COMPONENTS, map(float, c), strict=True))
+                for name, c in zip(fit.joint_names, fit.corrections, strict=True)
+            }
+
+        written = self.urdf_result  # what robot.urdf carries: every top-level figure is its
+        fit = written.fit
+        compliant = None if self.urdf_fit is None else self.result
         return {
             "protocol": "touches of fixed points",
             "headline": {
@@ -742,38 +750,36 @@ class TouchReport:
             "setting_choice": None if self.choice is None else self.choice.as_json(),
             "train": list(self.train),
             "held_out": list(self.held_out),
-            "flange": self.result.flange,
+            "flange": written.flange,
             "tool_frame": self.tool_frame,
-            "tip_m": self.result.tip.tolist(),
+            "tip_m": written.tip.tolist(),
             "tip_sd_m": np.sqrt(np.diag(fit.y_covariance())[:3]).tolist(),
             "touch_noise_sd_m": fit.sigma["touch"],
-            "corrections": {
-                name: dict(zip(COMPONENTS, map(float, c), strict=True))
-                for name, c in zip(fit.joint_names, fit.corrections, strict=True)
-            },
+            "corrections": corrections(fit),
             "parameterisation": "per joint origin: T_parent_joint <- T_parent_joint @ T(exp(w), v); metres, radians",
             "free_corrections": fit.selection.names,
-            "compliance_rad_per_nm": {
-                f"{fit.joint_names[j]}.{'xyz'[a]}": float(k)
-                for (j, a), k in zip(self.result.compliant, self.result.compliance, strict=True)
-            },
             "prior": fit.accuracy.as_json() if fit.accuracy is not None else None,
-            "compliance_prior_sd_rad_per_nm": [float(v) if np.isfinite(v) else None for v in self.result.compliance_sd],
             "log_evidence": fit.log_evidence,
             "identified_combinations": fit.identifiability.identified,
             "structural_rank": fit.identifiability.structural_rank,
             "nominal": figures(self.nominal),
             "identified": figures(self.identified),
             "urdf_only": figures(self.geometry_only),
-            "urdf_fit": None
-            if self.urdf_fit is None
+            "with_compliance": None
+            if compliant is None
             else {
-                "tip_m": self.urdf_fit.tip.tolist(),
-                "touch_noise_sd_m": self.urdf_fit.fit.sigma["touch"],
-                "corrections": {
-                    name: dict(zip(COMPONENTS, map(float, c), strict=True))
-                    for name, c in zip(self.urdf_fit.fit.joint_names, self.urdf_fit.fit.corrections, strict=True)
+                "note": "joint compliance under gravity: no URDF holds it; robot.urdf is the fit above",
+                "tip_m": compliant.tip.tolist(),
+                "touch_noise_sd_m": compliant.fit.sigma["touch"],
+                "corrections": corrections(compliant.fit),
+                "compliance_rad_per_nm": {
+                    f"{compliant.fit.joint_names[j]}.{'xyz'[a]}": float(k)
+                    for (j, a), k in zip(compliant.compliant, compliant.compliance, strict=True)
                 },
+                "compliance_prior_sd_rad_per_nm": [
+                    float(v) if np.isfinite(v) else None for v in compliant.compliance_sd
+                ],
+                "log_evidence": compliant.fit.log_evidence,
             },
         }
 
