@@ -25,23 +25,11 @@ from brachycal.data.formats.plus_segmentation import NWireSegmentationParameters
 from brachycal.imaging.nwire_dots import Dots
 from brachycal.imaging.nwire_patterns import NO_FIT, find_pattern, nwire_geometry, phantom_misfit
 from brachycal.imaging.nwire_segmentation import segment_sequence
+from brachycal.studies.nwire_twin import FCAL2_WIRES_MM
 
 #: fCal 2.0's three Ns (PLUS's phantom definition), millimetres in the phantom frame: the wires run
 #: along y, the Ns lie in the planes z = 20, 10, 0.
-FCAL2_MM = (
-    (
-        ("7:G1_g1", (30, 0, 20), (30, 40, 20)),
-        ("8:L1_h1", (55, 0, 20), (35, 40, 20)),
-        ("9:M1_m1", (60, 0, 20), (60, 40, 20)),
-    ),
-    (
-        ("4:G3_g3", (30, 0, 10), (30, 40, 10)),
-        ("5:H3_l3", (35, 0, 10), (55, 40, 10)),
-        ("6:M3_m3", (60, 0, 10), (60, 40, 10)),
-    ),
-    (("1:H5_h5", (35, 0, 0), (35, 40, 0)), ("2:L5_i5", (55, 0, 0), (40, 40, 0)), ("3:M5_m5", (60, 0, 0), (60, 40, 0))),
-)
-PATTERNS = [tuple(Wire(n, np.array(f) * 1e-3, np.array(b) * 1e-3) for n, f, b in pattern) for pattern in FCAL2_MM]
+PATTERNS = [tuple(Wire(n, np.array(f) * 1e-3, np.array(b) * 1e-3) for n, f, b in pattern) for pattern in FCAL2_WIRES_MM]
 PARAMS = NWireSegmentationParameters()  # PLUS's defaults: 0.078 mm/px, 0.6 mm collinearity, 10 %
 SPACING = PARAMS.approximate_spacing_m
 
